@@ -1,0 +1,430 @@
+"""The one model protocol that every model source produces.
+
+A :class:`Model` is an immutable description of a mechanical system in n dependent coordinates:
+
+    M(q) qdd + C(q, qd) qd = f_g(q) + f_p(t, q, qd) + B(q) u + f_c,     A_act(t, q) qd + φ_t = 0
+
+* ``M`` inertia (symmetric, positive definite on N(A); may be singular, e.g. quaternions),
+* ``C`` the Christoffel-symbol Coriolis matrix (``dM/dt − 2C`` skew),
+* ``f_g = −∂V/∂q`` all conservative forces (gravity and springs), ``V`` the potential energy,
+* ``f_p`` passive non-conservative forces (dampers, friction); zero by default,
+* ``B`` the input matrix, one column per named actuator (``f = B u``),
+* named constraints (:class:`ConstraintSpec`): holonomic ``φ(q) = 0``, rheonomic
+  ``φ(q, t) = 0``, nonholonomic ``A(q) qd = 0`` and unilateral ``gap(q) ≥ 0``.
+
+Which constraints are active is *data* — a ``frozenset`` of constraint names passed to every
+evaluation — so switching topology never changes n and never rebuilds the model.
+Rows of the stacked constraint arrays follow the declaration order of ``model.constraints``,
+restricted to the active names (:meth:`Model.row_slices`).
+
+Acceleration-level form used everywhere: ``A qdd + γ = 0`` with
+``γ = Ȧ qd + 2 φ_tq qd + φ_tt`` (``γ = Ȧ qd`` for scleronomic constraints; Pinocchio's γ).
+Velocity residual: ``A qd + φ_t``; position residual: ``φ`` (zero rows for nonholonomic).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from abc import ABC, abstractmethod
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Literal, NamedTuple, get_args
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import InputError, ShapeError, UnknownNameError
+
+FloatArray = NDArray[np.float64]
+
+ConstraintKind = Literal["holonomic", "rheonomic", "nonholonomic", "unilateral"]
+CONSTRAINT_KINDS: tuple[str, ...] = get_args(ConstraintKind)
+
+__all__ = [
+    "CONSTRAINT_KINDS",
+    "ConstraintKind",
+    "ConstraintSpec",
+    "ConstraintTerms",
+    "Geometry",
+    "Model",
+    "ModelTerms",
+    "State",
+]
+
+
+@dataclass(frozen=True)
+class ConstraintSpec:
+    """Name, kind and number of rows of one constraint of a model.
+
+    Attributes
+    ----------
+    name : str
+        Unique name within the model (used in active sets, events and transitions).
+    kind : {"holonomic", "rheonomic", "nonholonomic", "unilateral"}
+        ``holonomic``: ``φ(q) = 0``, ``A = ∂φ/∂q``; ``rheonomic``: ``φ(q, t) = 0`` (driving
+        constraints); ``nonholonomic``: ``A(q) qd = 0`` with no position-level φ;
+        ``unilateral``: ``gap(q) ≥ 0`` (contact), an equality ``gap = 0`` while active.
+    dim : int
+        Number of scalar rows (≥ 1).
+    description : str
+        Free text (joint type, bodies it connects, ...).
+    """
+
+    name: str
+    kind: ConstraintKind
+    dim: int
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise InputError(f"constraint name must be a non-empty string, got {self.name!r}")
+        if self.kind not in CONSTRAINT_KINDS:
+            raise InputError(
+                f"constraint {self.name!r}: kind must be one of {CONSTRAINT_KINDS}, got {self.kind!r}"
+            )
+        if not isinstance(self.dim, int | np.integer) or self.dim < 1:
+            raise InputError(f"constraint {self.name!r}: dim must be an integer ≥ 1, got {self.dim!r}")
+
+    @property
+    def has_position_level(self) -> bool:
+        """True when the constraint has a position-level residual φ (all but nonholonomic)."""
+        return self.kind != "nonholonomic"
+
+
+class ConstraintTerms(NamedTuple):
+    """Stacked constraint quantities of the active constraints at one state.
+
+    Attributes
+    ----------
+    A : ndarray, shape (m, n)
+        Constraint matrix (``∂φ/∂q`` for holonomic rows).
+    gamma : ndarray, shape (m,)
+        Acceleration bias: ``A qdd + γ = 0`` (``γ = Ȧ qd`` for scleronomic rows).
+    phi : ndarray, shape (m,)
+        Position residual φ (gap for unilateral rows; 0 for nonholonomic rows).
+    velocity : ndarray, shape (m,)
+        Velocity residual ``A qd + φ_t``.
+    holonomic : ndarray of bool, shape (m,)
+        Rows that have a position-level residual.
+    """
+
+    A: FloatArray
+    gamma: FloatArray
+    phi: FloatArray
+    velocity: FloatArray
+    holonomic: NDArray[np.bool_]
+
+
+class ModelTerms(NamedTuple):
+    """Everything the core kernels need at one state ``(t, q, qd, active)``.
+
+    Attributes
+    ----------
+    M : ndarray, shape (n, n)
+    h : ndarray, shape (n,)
+        ``f_g − C qd`` (paper's h).
+    f_passive : ndarray, shape (n,)
+        Dampers and other passive non-conservative forces.
+    B : ndarray, shape (n, k)
+    constraints : ConstraintTerms
+    """
+
+    M: FloatArray
+    h: FloatArray
+    f_passive: FloatArray
+    B: FloatArray
+    constraints: ConstraintTerms
+
+
+@dataclass(frozen=True)
+class State:
+    """Explicit state of a (hybrid) mechanical system: time, coordinates, velocities, mode.
+
+    Attributes
+    ----------
+    t : float
+    q : ndarray, shape (n,)
+    qd : ndarray, shape (n,)
+    active : frozenset of str
+        Names of the active constraints.
+    """
+
+    t: float
+    q: FloatArray
+    qd: FloatArray
+    active: frozenset[str]
+
+    def replace(self, **changes: Any) -> State:
+        """Return a copy with some fields replaced."""
+        return dataclasses.replace(self, **changes)
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Mesh-free geometry of a configuration, for plots and animations.
+
+    Attributes
+    ----------
+    dim : int
+        2 (planar) or 3 (spatial).
+    segments : ndarray, shape (s, 2, dim)
+        Line segments (links), drawn as bars.
+    points : ndarray, shape (p, dim)
+        Points (joints, masses, contact points).
+    frames : ndarray, shape (f, dim + 1, dim)
+        Optional body frames: origin followed by the dim axis unit vectors (3D only used).
+    labels : tuple of str
+        Optional labels of the points.
+    """
+
+    dim: int
+    segments: FloatArray
+    points: FloatArray = field(default_factory=lambda: np.zeros((0, 2)))
+    frames: FloatArray = field(default_factory=lambda: np.zeros((0, 3, 2)))
+    labels: tuple[str, ...] = ()
+
+
+def _as_vector(x: ArrayLike, name: str, n: int) -> FloatArray:
+    arr = np.asarray(x, dtype=np.float64)
+    if arr.shape != (n,):
+        raise ShapeError(f"{name} must have shape ({n},), got shape {arr.shape}")
+    return arr
+
+
+class Model(ABC):
+    """Abstract base of every model source (planar, spatial, SymPy, functions, Pinocchio, MuJoCo).
+
+    Subclasses are frozen dataclasses (so :meth:`replace` works) and implement the abstract
+    methods for a *single* state (``q`` shape ``(n,)``). Everything else has a default that
+    subclasses may override for speed (notably :meth:`evaluate`).
+
+    Required attributes (dataclass fields or properties)
+    -----------------------------------------------------
+    name : str
+    coordinate_names : tuple of str, length n
+    constraints : tuple of ConstraintSpec
+    actuator_names : tuple of str, length k
+    default_active : frozenset of str
+        The constraints active in the model's nominal mode (unilateral ones usually not).
+    """
+
+    name: str
+    coordinate_names: tuple[str, ...]
+    constraints: tuple[ConstraintSpec, ...]
+    actuator_names: tuple[str, ...]
+    default_active: frozenset[str]
+
+    #: Whether outputs(...) is meaningful; set by sources with named outputs.
+    has_outputs: ClassVar[bool] = False
+
+    # ------------------------------------------------------------------ sizes and names
+    @property
+    def n(self) -> int:
+        """Number of dependent coordinates."""
+        return len(self.coordinate_names)
+
+    @property
+    def k(self) -> int:
+        """Number of actuators (columns of B)."""
+        return len(self.actuator_names)
+
+    @property
+    def constraint_names(self) -> tuple[str, ...]:
+        """Names of all constraints, in row order."""
+        return tuple(c.name for c in self.constraints)
+
+    def constraint(self, name: str) -> ConstraintSpec:
+        """The :class:`ConstraintSpec` called ``name``."""
+        for c in self.constraints:
+            if c.name == name:
+                return c
+        raise UnknownNameError(
+            f"model {self.name!r} has no constraint {name!r}; known: {list(self.constraint_names)}"
+        )
+
+    def resolve_active(self, active: Iterable[str] | str | None) -> frozenset[str]:
+        """Validate an active set; ``None`` means :attr:`default_active`.
+
+        Raises
+        ------
+        UnknownNameError
+            If a name is not a constraint of the model.
+        """
+        if active is None:
+            return frozenset(self.default_active)
+        if isinstance(active, str):
+            active = (active,)
+        names = frozenset(active)
+        unknown = names.difference(self.constraint_names)
+        if unknown:
+            raise UnknownNameError(
+                f"active: unknown constraint name(s) {sorted(unknown)} for model {self.name!r}; "
+                f"known: {list(self.constraint_names)}"
+            )
+        return names
+
+    def row_slices(self, active: Iterable[str] | None = None) -> dict[str, slice]:
+        """Row range of each active constraint in the stacked arrays."""
+        act = self.resolve_active(active)
+        out: dict[str, slice] = {}
+        i = 0
+        for c in self.constraints:
+            if c.name in act:
+                out[c.name] = slice(i, i + c.dim)
+                i += c.dim
+        return out
+
+    def num_rows(self, active: Iterable[str] | None = None) -> int:
+        """Number of stacked constraint rows m for an active set."""
+        act = self.resolve_active(active)
+        return sum(c.dim for c in self.constraints if c.name in act)
+
+    # ------------------------------------------------------------------ dynamics (abstract)
+    @abstractmethod
+    def mass_matrix(self, q: ArrayLike) -> FloatArray:
+        """Inertia matrix ``M(q)``, shape (n, n)."""
+
+    @abstractmethod
+    def coriolis_matrix(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
+        """Christoffel-symbol Coriolis matrix ``C(q, qd)``, shape (n, n)."""
+
+    @abstractmethod
+    def conservative_force(self, q: ArrayLike) -> FloatArray:
+        """``f_g(q) = −∂V/∂q`` (gravity and springs), shape (n,)."""
+
+    @abstractmethod
+    def potential_energy(self, q: ArrayLike) -> float:
+        """Potential energy ``V(q)`` (gravity and springs)."""
+
+    @abstractmethod
+    def constraint_terms(
+        self,
+        t: float,
+        q: ArrayLike,
+        qd: ArrayLike,
+        active: Iterable[str] | None = None,
+    ) -> ConstraintTerms:
+        """Stacked A, γ, φ, velocity residual of the active constraints (declaration order)."""
+
+    # ------------------------------------------------------------------ dynamics (defaults)
+    def coriolis_force(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
+        """``C(q, qd) qd``, shape (n,)."""
+        return self.coriolis_matrix(q, qd) @ np.asarray(qd, dtype=float)
+
+    def passive_force(self, t: float, q: ArrayLike, qd: ArrayLike) -> FloatArray:
+        """Passive non-conservative forces (dampers), shape (n,); zero by default."""
+        return np.zeros(self.n)
+
+    def input_matrix(self, q: ArrayLike) -> FloatArray:
+        """Input matrix ``B(q)``, shape (n, k); empty by default."""
+        return np.zeros((self.n, self.k))
+
+    def kinetic_energy(self, q: ArrayLike, qd: ArrayLike) -> float:
+        """``T = ½ qdᵀ M qd``."""
+        v = np.asarray(qd, dtype=float)
+        return 0.5 * float(v @ self.mass_matrix(q) @ v)
+
+    def energy(self, q: ArrayLike, qd: ArrayLike) -> float:
+        """Total mechanical energy ``T + V``."""
+        return self.kinetic_energy(q, qd) + self.potential_energy(q)
+
+    def constraint_jacobian(self, t: float, q: ArrayLike, active: Iterable[str] | None = None) -> FloatArray:
+        """Stacked constraint matrix A of the active constraints, shape (m, n)."""
+        return self.constraint_terms(t, q, np.zeros(self.n), active).A
+
+    def constraint_bias(
+        self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
+    ) -> FloatArray:
+        """``γ`` with ``A qdd + γ = 0`` (``Ȧ qd`` when scleronomic), shape (m,)."""
+        return self.constraint_terms(t, q, qd, active).gamma
+
+    def constraint_residual(self, t: float, q: ArrayLike, active: Iterable[str] | None = None) -> FloatArray:
+        """Position residual φ (gap for unilateral rows, 0 for nonholonomic), shape (m,)."""
+        return self.constraint_terms(t, q, np.zeros(self.n), active).phi
+
+    def constraint_jacobian_dot(
+        self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
+    ) -> FloatArray:
+        """The matrix ``Ȧ = dA/dt`` along ``qd``, shape (m, n).
+
+        Default: exact for models whose ``γ`` is linear in ``Ȧ``: column j is
+        ``(γ(qd + e_j) − γ(qd − e_j))/2`` evaluated at *fixed* q is not available in general,
+        so the default differentiates A along qd with a central difference of step
+        ``1e-6·(1 + ‖q‖)/‖qd‖`` (accuracy ~1e-9). Sources override it with the exact matrix.
+        """
+        qv = _as_vector(q, "q", self.n)
+        v = _as_vector(qd, "qd", self.n)
+        nv = float(np.linalg.norm(v))
+        if nv == 0.0:
+            return np.zeros((self.num_rows(active), self.n))
+        eps = 1e-6 * (1.0 + float(np.linalg.norm(qv))) / nv
+        Ap = self.constraint_jacobian(t + eps, qv + eps * v, active)
+        Am = self.constraint_jacobian(t - eps, qv - eps * v, active)
+        return (Ap - Am) / (2.0 * eps)
+
+    def evaluate(
+        self,
+        t: float,
+        q: ArrayLike,
+        qd: ArrayLike,
+        active: Iterable[str] | None = None,
+    ) -> ModelTerms:
+        """All terms the core needs at one state, in one call (override to share work)."""
+        qv = _as_vector(q, "q", self.n)
+        v = _as_vector(qd, "qd", self.n)
+        M = self.mass_matrix(qv)
+        h = self.conservative_force(qv) - self.coriolis_force(qv, v)
+        return ModelTerms(
+            M=M,
+            h=h,
+            f_passive=self.passive_force(t, qv, v),
+            B=self.input_matrix(qv),
+            constraints=self.constraint_terms(t, qv, v, active),
+        )
+
+    # ------------------------------------------------------------------ extras
+    def outputs(self, t: float, q: ArrayLike, qd: ArrayLike) -> dict[str, FloatArray]:
+        """Named output quantities (e.g. what a benchmark asks for); empty by default."""
+        return {}
+
+    def geometry(self, q: ArrayLike) -> Geometry | None:
+        """Mesh-free geometry for plots and animations; None if the source has none."""
+        return None
+
+    def replace(self, **changes: Any) -> Model:
+        """A copy with some fields replaced (parameter variants). Sources are frozen dataclasses."""
+        if not dataclasses.is_dataclass(self):
+            raise TypeError(f"{type(self).__name__} does not support replace()")
+        return dataclasses.replace(self, **changes)  # type: ignore[type-var]
+
+    def state(
+        self,
+        q: ArrayLike,
+        qd: ArrayLike | None = None,
+        *,
+        t: float = 0.0,
+        active: Iterable[str] | None = None,
+    ) -> State:
+        """Build a validated :class:`State` (no assembly; see :func:`nonmin.model.assemble`)."""
+        qv = _as_vector(q, "q", self.n).copy()
+        v = np.zeros(self.n) if qd is None else _as_vector(qd, "qd", self.n).copy()
+        if not (np.isfinite(qv).all() and np.isfinite(v).all()):
+            from ..errors import NonFiniteError
+
+            raise NonFiniteError("q and qd must be finite")
+        return State(t=float(t), q=qv, qd=v, active=self.resolve_active(active))
+
+    def describe(self) -> Mapping[str, Any]:
+        """A plain summary (sizes, names, constraints) for printing and metadata."""
+        return {
+            "name": self.name,
+            "type": type(self).__name__,
+            "n": self.n,
+            "coordinates": list(self.coordinate_names),
+            "actuators": list(self.actuator_names),
+            "constraints": [
+                {"name": c.name, "kind": c.kind, "dim": c.dim, "description": c.description}
+                for c in self.constraints
+            ],
+            "default_active": sorted(self.default_active),
+        }
