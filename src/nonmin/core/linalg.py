@@ -31,7 +31,6 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.linalg import lapack
 
 from ..errors import NotPositiveDefiniteError
 
@@ -177,13 +176,10 @@ def cholesky(Mbar: FloatArray, name: str = "Mbar") -> FloatArray:
         If any matrix is not numerically positive definite (Cholesky fails, or a pivot is
         below ``SPD_RTOL`` relative to the largest diagonal entry).
     """
+    # One arithmetic for single and batched calls (NumPy's LAPACK, same routine per matrix), so
+    # that a single call and the same state inside a batch agree bitwise.
     try:
-        if Mbar.ndim == 2:
-            L, info = lapack.dpotrf(Mbar, lower=1, clean=1)
-            if info != 0:
-                raise np.linalg.LinAlgError
-        else:
-            L = np.linalg.cholesky(Mbar)
+        L = np.linalg.cholesky(Mbar)
     except np.linalg.LinAlgError:
         raise NotPositiveDefiniteError(
             f"{name} = PMP + μQ is not positive definite: the inertia matrix M is not positive "
@@ -202,10 +198,10 @@ def cholesky(Mbar: FloatArray, name: str = "Mbar") -> FloatArray:
 
 
 def cho_solve(L: FloatArray, b: FloatArray) -> FloatArray:
-    """Solve ``L Lᵀ x = b`` for a batch; L shape (..., n, n), b shape (..., n)."""
-    if L.ndim == 2 and b.ndim == 1:
-        x, info = lapack.dpotrs(L, b, lower=1)
-        return np.asarray(x)
+    """Solve ``L Lᵀ x = b`` for a batch; L shape (..., n, n), b shape (..., n).
+
+    Single and batched calls run the same substitution, so they agree bitwise.
+    """
     n = L.shape[-1]
     shape = np.broadcast_shapes(L.shape[:-2], b.shape[:-1])
     L = np.broadcast_to(L, shape + (n, n))
