@@ -54,7 +54,7 @@ def _writer(path: Path, fps: float) -> Any:
 
     suffix = path.suffix.lower()
     if suffix == ".gif":
-        return animation.PillowWriter(fps=fps)
+        return animation.PillowWriter(fps=int(round(fps)))
     if suffix == ".mp4":
         import matplotlib as mpl
 
@@ -63,7 +63,9 @@ def _writer(path: Path, fps: float) -> Any:
         except ImportError:
             raise missing_dependency("imageio-ffmpeg", "video", "Writing MP4 animations") from None
         mpl.rcParams["animation.ffmpeg_path"] = imageio_ffmpeg.get_ffmpeg_exe()
-        return animation.FFMpegWriter(fps=fps, codec="libx264", extra_args=["-pix_fmt", "yuv420p"])
+        return animation.FFMpegWriter(
+            fps=int(round(fps)), codec="libx264", extra_args=["-pix_fmt", "yuv420p"]
+        )
     raise InputError(f"animation file must end in .gif or .mp4, got {path.name!r}")
 
 
