@@ -121,7 +121,11 @@ def actuation_projectors(
     if s.shape[-1] == 0:
         keep = np.zeros(s.shape, dtype=bool)
     else:
-        keep = s > tol * np.maximum(s[..., :1], np.finfo(float).tiny)
+        # Cutoff relative to the actuators' own scale (largest column norm of B), not to
+        # s_max(PB): when P annihilates B up to round-off, PB is noise and its rank is 0.
+        bscale = np.sqrt(np.max(np.einsum("...ij,...ij->...j", Bm, Bm), axis=-1))
+        ref = np.maximum(np.maximum(s[..., 0], bscale), np.finfo(float).tiny)
+        keep = s > tol * ref[..., None]
     rank_pb = np.count_nonzero(keep, axis=-1)
     dof = np.rint(np.trace(Pm, axis1=-2, axis2=-1)).astype(int)
     if np.any(rank_pb < dof):
