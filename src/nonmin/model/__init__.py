@@ -5,6 +5,8 @@ coordinates, spatial multibody with unit quaternions, SymPy expressions, URDF/MJ
 (Pinocchio, MuJoCo). All produce :class:`Model` instances.
 """
 
+from ._check import ModelReport as ModelReport
+from ._check import check_model as check_model
 from ._function import FunctionConstraint as FunctionConstraint
 from ._function import FunctionModel as FunctionModel
 from ._protocol import CONSTRAINT_KINDS as CONSTRAINT_KINDS
@@ -23,6 +25,8 @@ __all__ = [
     "FunctionModel",
     "Geometry",
     "Model",
+    "ModelReport",
     "ModelTerms",
     "State",
+    "check_model",
 ]

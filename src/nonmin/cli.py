@@ -1,0 +1,326 @@
+"""The ``nonmin`` command line: parse → load → call the public API → write files.
+
+Exit codes
+----------
+0  success
+1  the work ran but failed: a simulation ended with status failed, ``check`` found a failing
+   check, ``validate`` found a benchmark off target
+2  usage error, malformed scenario file, unknown model or file, invalid input
+3  a missing optional dependency (the message names the extra to install)
+4  an unexpected internal error (a bug: please report it with the traceback)
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+import traceback
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from . import __version__
+from .errors import InputError, MissingDependencyError, NonminError, ScenarioError
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_MISSING_DEP, EXIT_INTERNAL = 0, 1, 2, 3, 4
+
+DEMO_SCENARIOS = ("n_four_bar", "crossed_four_bar", "arm_wall")
+
+
+def _scenario_dir() -> Path:
+    return Path(__file__).resolve().parent / "data" / "scenarios"
+
+
+def _status_name(traj: Any) -> str:
+    st = getattr(traj, "status", "")
+    return str(getattr(st, "name", st)).lower()
+
+
+def _summary_row(name: str, traj: Any, wall: float) -> dict[str, Any]:
+    import numpy as np
+
+    e = np.asarray(getattr(traj, "energy", [np.nan]))
+    phi = np.asarray(getattr(traj, "phi_norm", [np.nan]))
+    vel = np.asarray(getattr(traj, "velocity_residual_norm", [np.nan]))
+    rank = np.asarray(getattr(traj, "rank", [0]))
+    return {
+        "scenario": name,
+        "status": _status_name(traj),
+        "t_end": float(np.asarray(traj.t)[-1]),
+        "energy_drift": float(np.max(np.abs(e - e[0]))) if e.size else float("nan"),
+        "max_phi": float(np.max(phi)) if phi.size else float("nan"),
+        "max_Aqd": float(np.max(vel)) if vel.size else float("nan"),
+        "rank": f"{int(rank.min())}..{int(rank.max())}" if rank.size else "-",
+        "events": len(getattr(traj, "events", ()) or ()),
+        "wall_s": wall,
+    }
+
+
+def _format_rows(rows: Sequence[dict[str, Any]]) -> str:
+    head = f"{'scenario':18s} {'status':16s} {'t_end':>7s} {'|ΔE| max':>10s} {'‖φ‖ max':>10s} {'‖Aqd‖ max':>10s} {'rank A':>7s} {'events':>6s} {'wall':>7s}"
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        lines.append(
+            f"{r['scenario']:18s} {r['status']:16s} {r['t_end']:7.3g} {r['energy_drift']:10.2e} "
+            f"{r['max_phi']:10.2e} {r['max_Aqd']:10.2e} {r['rank']:>7s} {r['events']:6d} {r['wall_s']:6.1f}s"
+        )
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------- verbs
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    from .io import load_scenario, run_scenario
+
+    out = Path(args.out)
+    rows = []
+    failed = False
+    for name in args.only or DEMO_SCENARIOS:
+        path = _scenario_dir() / f"{name}.toml"
+        sc = load_scenario(path)
+        print(f"[nonmin demo] {sc.name}: {sc.data.get('description', '')}", flush=True)
+        t0 = time.perf_counter()
+        res = run_scenario(sc, out / name, progress=args.progress)
+        wall = time.perf_counter() - t0
+        rows.append(_summary_row(name, res.trajectory, wall))
+        failed |= _status_name(res.trajectory) == "failed"
+        for kind, f in res.files.items():
+            print(f"    {kind:11s} {f}")
+    print()
+    print(_format_rows(rows))
+    (out / "summary.txt").write_text(_format_rows(rows) + "\n")
+    print(f"\nplots, animations and trajectories written to {out.resolve()}")
+    return EXIT_FAILED if failed else EXIT_OK
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from .io import load_scenario, run_scenario
+
+    sc = load_scenario(args.scenario)
+    t0 = time.perf_counter()
+    res = run_scenario(sc, args.out, progress=args.progress)
+    wall = time.perf_counter() - t0
+    traj = res.trajectory
+    print(_format_rows([_summary_row(sc.name, traj, wall)]))
+    for kind, f in res.files.items():
+        print(f"{kind:11s} {f}")
+    if _status_name(traj) == "failed":
+        print(f"simulation failed: {traj.message}", file=sys.stderr)
+        return EXIT_FAILED
+    return EXIT_OK
+
+
+def _load_model_arg(spec: str) -> tuple[Any, Any]:
+    """MODEL argument: a library name or a scenario file."""
+    p = Path(spec)
+    if p.suffix == ".toml":
+        from .io import load_scenario
+
+        sc = load_scenario(p)
+        model, default = sc.build_model()
+        return model, sc.initial_state(model, default)
+    from . import library
+
+    mech = library.get(spec)
+    return mech.model, mech.state
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from .model import check_model
+
+    model, state = _load_model_arg(args.model)
+    report = check_model(model, state, duration=args.duration, samples=args.samples)
+    print(report.format())
+    return EXIT_OK if report.passed else EXIT_FAILED
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from . import validation
+
+    records = validation.run_all(quick=not args.full)
+    print(validation.format_table(records))
+    if args.report:
+        validation.write_report(records, args.report)
+        print(f"report written to {args.report}")
+    ok = all(getattr(r, "passed", True) for r in records)
+    return EXIT_OK if ok else EXIT_FAILED
+
+
+def _load_result(path: str) -> Any:
+    from .sim import load_trajectory
+
+    return load_trajectory(path)
+
+
+def _model_for_result(traj: Any) -> Any:
+    """Rebuild the model a saved trajectory came from (its metadata names the source)."""
+    meta = getattr(traj, "metadata", {}) or {}
+    src = meta.get("source") or {}
+    if isinstance(src, dict) and src.get("scenario"):
+        from .io import load_scenario
+
+        sc = load_scenario(src["scenario"])
+        return sc.build_model()[0]
+    if isinstance(src, dict) and src.get("library"):
+        from . import library
+
+        return library.get(src["library"], **dict(src.get("params", {}))).model
+    raise InputError(
+        "the trajectory file does not say which model it came from (metadata 'source'); "
+        "animate results written by `nonmin run`/`nonmin demo` or saved with source metadata"
+    )
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from .viz import plot_trajectory, save_figure
+
+    traj = _load_result(args.result)
+    try:
+        model = _model_for_result(traj)
+    except NonminError:
+        model = None
+    out = Path(args.output or Path(args.result).with_suffix(".png"))
+    save_figure(plot_trajectory(traj, model), out)
+    print(out)
+    return EXIT_OK
+
+
+def cmd_animate(args: argparse.Namespace) -> int:
+    from .viz import animate
+
+    traj = _load_result(args.result)
+    model = _model_for_result(traj)
+    out = animate(traj, model, args.output, fps=args.fps, speed=args.speed)
+    print(out)
+    return EXIT_OK
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    from . import control, library, sim
+
+    print("models (nonmin.library):")
+    for name in library.names():
+        print(f"  {name}")
+    print("integrators (simulate(method=...)):")
+    for name in sim.integrator_names():
+        print(f"  {name}")
+    print("stabilizers (simulate(stabilization=...)):")
+    for name in sim.stabilization_names():
+        print(f"  {name}")
+    print("controllers ([controller] type = ...):")
+    for name in control.names():
+        print(f"  {name}")
+    print("demo scenarios (nonmin demo --only ...):")
+    for name in DEMO_SCENARIOS:
+        print(f"  {name}")
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------------------- parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="nonmin",
+        description="Dynamics, simulation and control of constrained mechanical systems "
+        "through singular, redundant and switching constraints.",
+        epilog="exit codes: 0 ok, 1 run/check/validation failed, 2 usage or input error, "
+        "3 missing optional dependency, 4 internal error",
+    )
+    p.add_argument("--version", action="version", version=f"nonmin {__version__}")
+    sub = p.add_subparsers(dest="verb", required=True, metavar="VERB")
+
+    def progress_flags(sp: argparse.ArgumentParser) -> None:
+        g = sp.add_mutually_exclusive_group()
+        g.add_argument(
+            "--progress",
+            dest="progress",
+            action="store_true",
+            default=None,
+            help="always show progress",
+        )
+        g.add_argument(
+            "--no-progress", dest="progress", action="store_false", help="never show progress"
+        )
+
+    sp = sub.add_parser(
+        "demo", help="run the built-in scenarios; write plots, animations and a summary"
+    )
+    sp.add_argument("--out", default="nonmin-demo", help="output folder (default ./nonmin-demo)")
+    sp.add_argument("--only", nargs="+", choices=DEMO_SCENARIOS, help="run only these scenarios")
+    progress_flags(sp)
+    sp.set_defaults(func=cmd_demo)
+
+    sp = sub.add_parser("run", help="simulate a scenario file")
+    sp.add_argument("scenario", help="SCENARIO.toml")
+    sp.add_argument(
+        "--out", default=None, help="output folder (default: [output] dir or SCENARIO-out)"
+    )
+    progress_flags(sp)
+    sp.set_defaults(func=cmd_run)
+
+    sp = sub.add_parser("check", help="verify a model (library name or scenario file)")
+    sp.add_argument("model", help="library model name (see `nonmin list`) or SCENARIO.toml")
+    sp.add_argument(
+        "--duration", type=float, default=1.0, help="length of the diagnostic trajectory [s]"
+    )
+    sp.add_argument("--samples", type=int, default=200)
+    sp.set_defaults(func=cmd_check)
+
+    sp = sub.add_parser(
+        "validate", help="run the external benchmark suite and print the comparison table"
+    )
+    sp.add_argument(
+        "--full", action="store_true", help="full horizons (slow) instead of the quick versions"
+    )
+    sp.add_argument("--report", default=None, help="also write a Markdown report to this file")
+    sp.set_defaults(func=cmd_validate)
+
+    sp = sub.add_parser("plot", help="plot a saved trajectory")
+    sp.add_argument("result", help="trajectory file (.npz) written by run/demo")
+    sp.add_argument("-o", "--output", default=None, help="image file (default RESULT.png)")
+    sp.set_defaults(func=cmd_plot)
+
+    sp = sub.add_parser("animate", help="animate a saved trajectory")
+    sp.add_argument("result", help="trajectory file (.npz) written by run/demo")
+    sp.add_argument("-o", "--output", required=True, help="FILE.gif or FILE.mp4")
+    sp.add_argument("--fps", type=float, default=25.0)
+    sp.add_argument("--speed", type=float, default=1.0, help="playback speed factor")
+    sp.set_defaults(func=cmd_animate)
+
+    sp = sub.add_parser("list", help="list models, integrators, stabilizers and controllers")
+    sp.set_defaults(func=cmd_list)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``nonmin`` command; returns the exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except MissingDependencyError as exc:
+        print(f"nonmin: {exc}", file=sys.stderr)
+        return EXIT_MISSING_DEP
+    except (ScenarioError, InputError, FileNotFoundError) as exc:
+        print(f"nonmin: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except NonminError as exc:
+        print(f"nonmin: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return EXIT_FAILED
+    except KeyboardInterrupt:
+        print("nonmin: interrupted", file=sys.stderr)
+        return 130
+    except Exception:
+        traceback.print_exc()
+        print(
+            "nonmin: internal error (a bug); please report it with the traceback above",
+            file=sys.stderr,
+        )
+        return EXIT_INTERNAL
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
