@@ -1,0 +1,732 @@
+"""Side-by-side simulation benchmark: nonmin against Exudyn, MuJoCo and Pinocchio.
+
+Mechanisms (planar chains of uniform bars joined by revolute joints, closed loops):
+
+* ``crossed_four_bar``: crank 1 m, coupler 2 m, rocker 1 m, ground 2 m (Grashof change point),
+  started on the anti-parallelogram branch; its two branches cross at every collinear
+  configuration.
+* ``A02_N2`` / ``A02_N40``: IFToMM A02 N four-bar (N = 2, 10 s; N = 40, 20 s); the motion must
+  stay in the parallelogram mode through every horizontal (singular) configuration.
+
+Every engine builds its *own* model of the same mechanism from one neutral description
+(:class:`BarMechanism`): bar lengths, masses, inertias, which end of which bar hangs on which
+ground pivot or bar end, the loop closures, and the consistent initial state. Each run returns
+the bar poses and rates (centre of mass, angle) sampled every ``SAMPLE_DT``; closure error,
+energy drift and the branch test are then computed by the same code for every engine:
+
+* closure error: the largest distance between two bar ends that a joint should keep together,
+* energy drift: ``max_t |E(t) − E(0)|`` with ``E = Σ ½ m |v_c|² + ½ I ω² + m g y_c``,
+* branch: the largest distance (rad) of the sampled configuration from the intended assembly
+  branch (anti-parallelogram / parallelogram mode); "stays on branch" means < ``BRANCH_TOL``
+  at every sample and no non-finite value,
+* wall time per simulated second: median over ``--repeat`` timed runs after one warm-up run,
+  setup (model building, compilation) excluded.
+
+Peers and their settings:
+
+* Exudyn: its own maximal-coordinate model (``NodeRigidBody2D`` + ``RevoluteJoint2D``),
+  implicit generalized-α (default spectral radius 0.9) with fixed step ``dt``.
+* MuJoCo: a kinematic tree of hinges, loops closed with ``<equality connect>``; ``default`` uses
+  MuJoCo's default solver parameters, ``stiff`` sets ``solref = (2 dt, 1)`` and
+  ``solimp = (0.99, 0.999, 0.001)``; semi-implicit Euler (MuJoCo's default integrator).
+* Pinocchio: the same tree with ``JointModelRZ``, loops closed with ``RigidConstraintModel``
+  (``CONTACT_3D``) and Baumgarte correction, proximal ``constraintDynamics``, semi-implicit
+  Euler in a Python loop.
+* nonmin: ``nonmin.sim.simulate`` on the library mechanism (see ``run_nonmin``).
+
+Run ``python benchmarks/sim_bench.py`` (``--quick`` for a smoke run); results go to
+``benchmarks/results/sim_bench.json`` and the table to ``benchmarks/SIM.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import statistics
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+G = 9.81
+SAMPLE_DT = 0.01
+BRANCH_TOL = 0.05  # rad
+HERE = Path(__file__).resolve().parent
+
+
+# ---------------------------------------------------------------------------------------------
+# neutral mechanism description
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BarMechanism:
+    """A planar mechanism of uniform bars joined by revolute joints.
+
+    Bar ``i`` runs from its *start* point ``s_i`` to its *end* point ``s_i + L_i u(α_i)``
+    (``u(α) = (cos α, sin α)``); its centre of mass is the midpoint. ``parents[i]`` says where
+    its start is pinned: ``("ground", k)`` at ``ground[k]`` or ``("bar", j)`` at the end of bar
+    ``j < i`` (a spanning tree). ``closures`` lists pairs ``(i, j)`` whose *ends* are pinned
+    together (the loop-closing joints).
+    """
+
+    name: str
+    lengths: np.ndarray
+    masses: np.ndarray
+    inertias: np.ndarray  # about the centre of mass
+    ground: np.ndarray  # (k, 2)
+    parents: tuple[tuple[str, int], ...]
+    closures: tuple[tuple[int, int], ...]
+    angles0: np.ndarray  # (nb,) absolute bar angles at t = 0
+    rates0: np.ndarray  # (nb,) absolute angular velocities at t = 0
+    t_final: float
+    branch_distance: Callable[[np.ndarray], np.ndarray]  # angles (T, nb) -> (T,) [rad]
+    notes: str = ""
+
+    @property
+    def nb(self) -> int:
+        return len(self.lengths)
+
+    def starts(self, angles: np.ndarray) -> np.ndarray:
+        """Start points (…, nb, 2) of the bars from their absolute angles along the tree."""
+        angles = np.asarray(angles, dtype=float)
+        out = np.zeros((*angles.shape, 2))
+        for i, (kind, k) in enumerate(self.parents):
+            if kind == "ground":
+                out[..., i, :] = self.ground[k]
+            else:
+                out[..., i, :] = out[..., k, :] + self.lengths[k] * _u(angles[..., k])
+        return out
+
+    def start_rates(self, angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
+        angles = np.asarray(angles, dtype=float)
+        rates = np.asarray(rates, dtype=float)
+        out = np.zeros((*angles.shape, 2))
+        for i, (kind, k) in enumerate(self.parents):
+            if kind == "bar":
+                out[..., i, :] = out[..., k, :] + self.lengths[k] * rates[..., k, None] * _up(
+                    angles[..., k]
+                )
+        return out
+
+    def com_state(self, angles: np.ndarray, rates: np.ndarray) -> np.ndarray:
+        """Per-bar (x_c, y_c, α, vx_c, vy_c, ω), shape (…, nb, 6)."""
+        s = self.starts(angles)
+        sd = self.start_rates(angles, rates)
+        half = 0.5 * self.lengths
+        c = s + half[:, None] * _u(angles)
+        cd = sd + (half * rates)[..., None] * _up(angles)
+        return np.concatenate([c, np.asarray(angles)[..., None], cd, np.asarray(rates)[..., None]],
+                              axis=-1)
+
+
+def _u(a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, dtype=float)
+    return np.stack([np.cos(a), np.sin(a)], axis=-1)
+
+
+def _up(a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, dtype=float)
+    return np.stack([-np.sin(a), np.cos(a)], axis=-1)
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def _complete_rates(mech_lengths: np.ndarray, parents: Sequence[tuple[str, int]],
+                    closures: Sequence[tuple[int, int]], angles: np.ndarray, driver: int,
+                    driver_rate: float, ground: np.ndarray) -> np.ndarray:
+    """Absolute bar rates satisfying the loop closures' velocity equations with one bar driven."""
+    nb = len(mech_lengths)
+    # end point of bar i as a linear function of the rates: d e_i / d α̇ (2, nb)
+    jac = np.zeros((nb, 2, nb))
+    for i, (kind, k) in enumerate(parents):
+        if kind == "bar":
+            jac[i] += jac[k]
+        jac[i][:, i] += mech_lengths[i] * _up(angles[i])
+    rows = [jac[i] - jac[j] for i, j in closures]
+    a = np.vstack(rows)
+    free = [i for i in range(nb) if i != driver]
+    rhs = -a[:, driver] * driver_rate
+    sol, *_ = np.linalg.lstsq(a[:, free], rhs, rcond=None)
+    rates = np.zeros(nb)
+    rates[driver] = driver_rate
+    rates[free] = sol
+    res = a @ rates
+    if np.max(np.abs(res)) > 1e-12:
+        raise RuntimeError(f"inconsistent initial velocity (residual {np.max(np.abs(res)):.2e})")
+    return rates
+
+
+def a02_mechanism(n: int, t_final: float | None = None) -> BarMechanism:
+    """IFToMM A02: N+1 cranks (vertical at t = 0) and N couplers (horizontal), 1 m, 1 kg each."""
+    nb = 2 * n + 1
+    lengths = np.ones(nb)
+    masses = np.ones(nb)
+    inertias = np.full(nb, 1.0 / 12.0)
+    ground = np.array([[float(i), 0.0] for i in range(n + 1)])
+    # bars 0..n: cranks (start at A_i); bars n+1..2n: couplers B_{i-1} -> B_i
+    parents: list[tuple[str, int]] = [("ground", i) for i in range(n + 1)]
+    parents += [("bar", i - 1) for i in range(1, n + 1)]
+    closures = tuple((n + i, i) for i in range(1, n + 1))
+    angles0 = np.array([np.pi / 2] * (n + 1) + [0.0] * n)
+    rates0 = np.array([-1.0] * (n + 1) + [0.0] * n)
+
+    def branch(angles: np.ndarray) -> np.ndarray:
+        cr = angles[..., : n + 1]
+        co = angles[..., n + 1 :]
+        d1 = np.max(np.abs(_wrap(cr - cr[..., :1])), axis=-1)
+        d2 = np.max(np.abs(_wrap(co)), axis=-1)
+        return np.maximum(d1, d2)
+
+    return BarMechanism(
+        name=f"A02_N{n}", lengths=lengths, masses=masses, inertias=inertias, ground=ground,
+        parents=tuple(parents), closures=closures, angles0=angles0, rates0=rates0,
+        t_final=(10.0 if n == 2 else 20.0) if t_final is None else t_final,
+        branch_distance=branch,
+        notes="branch distance: max |crank_i − crank_0| and max |coupler angle| (rad)",
+    )
+
+
+def crossed_anti_rocker(theta: np.ndarray, a: float = 1.0, b: float = 2.0, c: float = 1.0,
+                        g: float = 2.0) -> np.ndarray:
+    """Rocker angle on the anti-parallelogram branch for crank angle θ (a = c, b = g only).
+
+    The two assemblies are mirror images across the line B–D; the parallelogram one has the
+    rocker parallel to the crank (ψ = θ), so the other is its reflection.
+    """
+    if not (math.isclose(a, c) and math.isclose(b, g)):
+        raise ValueError("crossed_anti_rocker needs crank = rocker and coupler = ground")
+    theta = np.asarray(theta, dtype=float)
+    bx, by = a * np.cos(theta), a * np.sin(theta)
+    dx, dy = g, 0.0
+    cx, cy = dx + c * np.cos(theta), dy + c * np.sin(theta)  # parallelogram C
+    ex, ey = dx - bx, dy - by
+    nrm2 = ex * ex + ey * ey
+    t = ((cx - bx) * ex + (cy - by) * ey) / nrm2
+    px, py = bx + t * ex, by + t * ey
+    rx, ry = 2 * px - cx, 2 * py - cy
+    return np.arctan2(ry - dy, rx - dx)
+
+
+@dataclass(frozen=True)
+class FourBarParams:
+    crank: float = 1.0
+    coupler: float = 2.0
+    rocker: float = 1.0
+    ground: float = 2.0
+    masses: tuple[float, float, float] = (1.0, 2.0, 1.0)
+    inertias: tuple[float, float, float] | None = None  # default: uniform bars m L²/12
+    theta0: float = math.pi / 3
+    omega0: float = 10.0
+    t_final: float = 10.0
+
+
+def crossed_four_bar_mechanism(p: FourBarParams | None = None) -> BarMechanism:
+    """Crossed (anti-parallelogram) four-bar: A = (0, 0), D = (ground, 0); bars crank A→B,
+    coupler B→C, rocker D→C."""
+    p = FourBarParams() if p is None else p
+    lengths = np.array([p.crank, p.coupler, p.rocker])
+    masses = np.array(p.masses, dtype=float)
+    inertias = (masses * lengths**2 / 12.0 if p.inertias is None
+                else np.array(p.inertias, dtype=float))
+    ground = np.array([[0.0, 0.0], [p.ground, 0.0]])
+    parents = (("ground", 0), ("bar", 0), ("ground", 1))
+    closures = ((1, 2),)
+    th = p.theta0
+    psi = float(crossed_anti_rocker(th, p.crank, p.coupler, p.rocker, p.ground))
+    b = np.array([p.crank * math.cos(th), p.crank * math.sin(th)])
+    cpt = np.array([p.ground + p.rocker * math.cos(psi), p.rocker * math.sin(psi)])
+    beta = math.atan2(cpt[1] - b[1], cpt[0] - b[0])
+    angles0 = np.array([th, beta, psi])
+    rates0 = _complete_rates(lengths, parents, closures, angles0, 0, p.omega0, ground)
+
+    def branch(angles: np.ndarray) -> np.ndarray:
+        return np.abs(_wrap(angles[..., 2] - crossed_anti_rocker(angles[..., 0], p.crank,
+                                                                  p.coupler, p.rocker, p.ground)))
+
+    return BarMechanism(
+        name="crossed_four_bar", lengths=lengths, masses=masses, inertias=inertias, ground=ground,
+        parents=parents, closures=closures, angles0=angles0, rates0=rates0, t_final=p.t_final,
+        branch_distance=branch,
+        notes="branch distance: |ψ − ψ_anti(θ)| (rad), ψ rocker angle, θ crank angle",
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# common metrics
+# ---------------------------------------------------------------------------------------------
+def energy(mech: BarMechanism, com: np.ndarray) -> np.ndarray:
+    """Total energy of COM states (T, nb, 6)."""
+    v2 = com[..., 3] ** 2 + com[..., 4] ** 2
+    kin = 0.5 * mech.masses * v2 + 0.5 * mech.inertias * com[..., 5] ** 2
+    pot = mech.masses * G * com[..., 1]
+    return np.sum(kin + pot, axis=-1)
+
+
+def joint_errors(mech: BarMechanism, com: np.ndarray) -> np.ndarray:
+    """Largest joint separation per sample (T,) from COM states (T, nb, 6)."""
+    half = 0.5 * mech.lengths
+    c = com[..., 0:2]
+    u = _u(com[..., 2])
+    start = c - half[:, None] * u
+    end = c + half[:, None] * u
+    errs = []
+    for i, (kind, k) in enumerate(mech.parents):
+        target = mech.ground[k] if kind == "ground" else end[..., k, :]
+        errs.append(np.linalg.norm(start[..., i, :] - target, axis=-1))
+    for i, j in mech.closures:
+        errs.append(np.linalg.norm(end[..., i, :] - end[..., j, :], axis=-1))
+    return np.max(np.stack(errs, axis=-1), axis=-1)
+
+
+@dataclass
+class RunResult:
+    engine: str
+    setting: str
+    mechanism: str
+    dt: float | None
+    t: np.ndarray
+    com: np.ndarray  # (T, nb, 6)
+    wall: list[float] = field(default_factory=list)
+    status: str = "ok"
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def summarize(mech: BarMechanism, r: RunResult, reference: Callable[[np.ndarray], np.ndarray]
+              | None = None) -> dict[str, Any]:
+    com = r.com
+    finite = bool(np.all(np.isfinite(com)))
+    row: dict[str, Any] = {
+        "engine": r.engine, "setting": r.setting, "mechanism": mech.name, "dt": r.dt,
+        "t_final": float(r.t[-1]) if len(r.t) else 0.0, "status": r.status, "finite": finite,
+    }
+    if finite and len(r.t):
+        e = energy(mech, com)
+        br = mech.branch_distance(com[..., 2])
+        row["closure_max"] = float(np.max(joint_errors(mech, com)))
+        row["energy_drift"] = float(np.max(np.abs(e - e[0])))
+        row["branch_distance_max"] = float(np.max(br))
+        reached = abs(float(r.t[-1]) - mech.t_final) < 1e-6
+        row["on_branch"] = bool(reached and row["branch_distance_max"] < BRANCH_TOL)
+        if reference is not None:
+            ref = reference(r.t)
+            row["error_vs_reference_max"] = float(np.max(np.abs(ref - _output_point(mech, com))))
+            row["error_vs_reference_final"] = float(
+                np.max(np.abs(ref[-1] - _output_point(mech, com)[-1])))
+    else:
+        row.update(closure_max=math.inf, energy_drift=math.inf, branch_distance_max=math.inf,
+                   on_branch=False)
+    if r.wall:
+        med = statistics.median(r.wall)
+        row["wall_median_s"] = med
+        row["wall_runs_s"] = r.wall
+        row["wall_per_sim_s"] = med / mech.t_final
+    row.update(r.extra)
+    return row
+
+
+def _output_point(mech: BarMechanism, com: np.ndarray) -> np.ndarray:
+    """End point of bar 0 (B0 for A02, B for the four-bar), (T, 2)."""
+    return com[..., 0, 0:2] + 0.5 * mech.lengths[0] * _u(com[..., 0, 2])
+
+
+def sample_times(t_final: float) -> np.ndarray:
+    n = round(t_final / SAMPLE_DT)
+    return np.linspace(0.0, t_final, n + 1)
+
+
+# ---------------------------------------------------------------------------------------------
+# reference solutions (1-DOF reductions integrated to tight tolerance)
+# ---------------------------------------------------------------------------------------------
+def a02_reference(n: int) -> Callable[[np.ndarray], np.ndarray]:
+    from scipy.integrate import solve_ivp
+
+    inertia = (n + 1) / 3.0 + n
+    cg = (n + 1) / 2.0 + n
+
+    def rhs(t: float, y: np.ndarray) -> list[float]:
+        return [y[1], -G * cg * math.cos(y[0]) / inertia]
+
+    def ref(t: np.ndarray) -> np.ndarray:
+        sol = solve_ivp(rhs, (0.0, float(t[-1])), [math.pi / 2, -1.0], method="DOP853",
+                        rtol=1e-13, atol=1e-13, t_eval=t)
+        return _u(sol.y[0])
+
+    return ref
+
+
+def reduced_reference(mech: BarMechanism) -> Callable[[np.ndarray], np.ndarray]:
+    """Exact 1-DOF reduction along the crossed four-bar's anti-parallelogram branch.
+
+    Bar angles are a function of the crank angle θ on the branch (rocker by reflection, coupler
+    from B and C); with the reduced inertia m(θ) (kinetic energy at unit crank rate, branch
+    tangent by a 4th-order central difference of the analytic geometry, error ~1e-13) and the
+    potential V(θ), energy conservation ``½ m(θ) θ̇² + V(θ) = E`` gives
+    ``θ̇ = ±sqrt(2 (E − V) / m)``, integrated with DOP853 at rtol = atol = 1e-12. Valid while
+    the crank rate keeps its sign (full-turn motion), which the integration checks.
+    """
+    lengths = mech.lengths
+
+    def angles_of(theta: np.ndarray) -> np.ndarray:
+        theta = np.asarray(theta, dtype=float)
+        psi = crossed_anti_rocker(theta, *lengths, mech.ground[1, 0])
+        b = lengths[0] * _u(theta)
+        c = mech.ground[1] + lengths[2] * _u(psi)
+        beta = np.arctan2(c[..., 1] - b[..., 1], c[..., 0] - b[..., 0])
+        return np.stack([theta, beta, psi], axis=-1)
+
+    def reduced(theta: float) -> tuple[float, float]:
+        # m(θ) from the branch tangent dα/dθ (unit crank rate)
+        ang = angles_of(np.array(theta))
+        h = 1e-3  # 4th-order central difference of the (analytic) branch geometry
+        d1 = _wrap(angles_of(np.array(theta + h)) - angles_of(np.array(theta - h)))
+        d2 = _wrap(angles_of(np.array(theta + 2 * h)) - angles_of(np.array(theta - 2 * h)))
+        rates = (8.0 * d1 - d2) / (12.0 * h)
+        com = mech.com_state(ang, rates)
+        mth = float(np.sum(mech.masses * (com[:, 3] ** 2 + com[:, 4] ** 2)
+                           + mech.inertias * rates**2))
+        v = float(np.sum(mech.masses * G * com[:, 1]))
+        return mth, v
+
+    # The crank rate never vanishes for a full-turn motion (checked below), so θ̇ keeps its
+    # sign and θ(t) is the solution of dθ/dt = s sqrt(2 (E − V(θ)) / m(θ)).
+    m0, v0 = reduced(mech.angles0[0])
+    e_total = 0.5 * m0 * mech.rates0[0] ** 2 + v0
+    sgn = math.copysign(1.0, mech.rates0[0])
+
+    def rhs(t: float, y: np.ndarray) -> list[float]:
+        m, v = reduced(float(y[0]))
+        k = 2.0 * (e_total - v) / m
+        if k <= 0.0:
+            raise RuntimeError("crossed four-bar reference: crank rate reaches zero")
+        return [sgn * math.sqrt(k)]
+
+    def ref(t: np.ndarray) -> np.ndarray:
+        from scipy.integrate import solve_ivp
+
+        sol = solve_ivp(rhs, (0.0, float(t[-1])), [mech.angles0[0]], method="DOP853",
+                        rtol=1e-12, atol=1e-12, t_eval=t)
+        return lengths[0] * _u(sol.y[0])
+
+    return ref
+
+
+# ---------------------------------------------------------------------------------------------
+# peers
+# ---------------------------------------------------------------------------------------------
+def run_exudyn(mech: BarMechanism, dt: float, *, spectral_radius: float = 0.9,
+               repeat: int = 3) -> RunResult:
+    import exudyn as exu
+    from exudyn.itemInterface import (
+        LoadMassProportional,
+        MarkerBodyMass,
+        MarkerBodyPosition,
+        NodeRigidBody2D,
+        ObjectGround,
+        ObjectJointRevolute2D,
+        ObjectRigidBody2D,
+        SensorNode,
+    )
+
+    com0 = mech.com_state(mech.angles0, mech.rates0)
+
+    def build() -> tuple[Any, Any, list[Any], list[Any], Any]:
+        sc = exu.SystemContainer()
+        mbs = sc.AddSystem()
+        nodes, bodies, starts, ends = [], [], [], []
+        for i in range(mech.nb):
+            x, y, a, vx, vy, w = com0[i]
+            nd = mbs.AddNode(NodeRigidBody2D(referenceCoordinates=[x, y, a],
+                                             initialVelocities=[vx, vy, w]))
+            ob = mbs.AddObject(ObjectRigidBody2D(nodeNumber=nd, physicsMass=mech.masses[i],
+                                                 physicsInertia=mech.inertias[i]))
+            mm = mbs.AddMarker(MarkerBodyMass(bodyNumber=ob))
+            mbs.AddLoad(LoadMassProportional(markerNumber=mm, loadVector=[0.0, -G, 0.0]))
+            half = 0.5 * mech.lengths[i]
+            starts.append(mbs.AddMarker(MarkerBodyPosition(bodyNumber=ob,
+                                                           localPosition=[-half, 0.0, 0.0])))
+            ends.append(mbs.AddMarker(MarkerBodyPosition(bodyNumber=ob,
+                                                         localPosition=[half, 0.0, 0.0])))
+            nodes.append(nd)
+            bodies.append(ob)
+        gnd = mbs.AddObject(ObjectGround())
+        gm = [mbs.AddMarker(MarkerBodyPosition(bodyNumber=gnd, localPosition=[px, py, 0.0]))
+              for px, py in mech.ground]
+        for i, (kind, k) in enumerate(mech.parents):
+            other = gm[k] if kind == "ground" else ends[k]
+            mbs.AddObject(ObjectJointRevolute2D(markerNumbers=[other, starts[i]]))
+        for i, j in mech.closures:
+            mbs.AddObject(ObjectJointRevolute2D(markerNumbers=[ends[i], ends[j]]))
+        sens_q = [mbs.AddSensor(SensorNode(nodeNumber=nd, storeInternal=True,
+                                           outputVariableType=exu.OutputVariableType.Coordinates))
+                  for nd in nodes]
+        sens_v = [mbs.AddSensor(SensorNode(nodeNumber=nd, storeInternal=True,
+                                           outputVariableType=exu.OutputVariableType.Coordinates_t))
+                  for nd in nodes]
+        mbs.Assemble()
+        s = exu.SimulationSettings()
+        s.timeIntegration.numberOfSteps = round(mech.t_final / dt)
+        s.timeIntegration.endTime = mech.t_final
+        s.timeIntegration.verboseMode = 0
+        s.timeIntegration.generalizedAlpha.spectralRadius = spectral_radius
+        s.timeIntegration.generalizedAlpha.computeInitialAccelerations = True
+        s.solutionSettings.writeSolutionToFile = False
+        s.solutionSettings.sensorsWritePeriod = SAMPLE_DT
+        s.displayStatistics = False
+        s.displayComputationTime = False
+        return sc, mbs, sens_q, sens_v, s
+
+    walls = []
+    status = "ok"
+    mbs = sens_q = sens_v = None
+    for rep in range(repeat + 1):
+        sc, mbs, sens_q, sens_v, s = build()
+        t0 = time.perf_counter()
+        try:
+            ok = mbs.SolveDynamic(s)
+        except Exception as exc:  # Exudyn raises on Newton failure
+            ok = False
+            status = f"failed: {type(exc).__name__}: {str(exc).splitlines()[0][:80]}"
+        t1 = time.perf_counter()
+        if ok is False and status == "ok":
+            status = "failed: SolveDynamic returned False"
+        if rep > 0:
+            walls.append(t1 - t0)
+        if status != "ok":
+            break
+    assert mbs is not None and sens_q is not None and sens_v is not None
+    qs = [np.asarray(mbs.GetSensorStoredData(sq)) for sq in sens_q]
+    vs = [np.asarray(mbs.GetSensorStoredData(sv)) for sv in sens_v]
+    nt = min(len(x) for x in qs + vs)
+    t = qs[0][:nt, 0]
+    com = np.zeros((nt, mech.nb, 6))
+    for i in range(mech.nb):
+        com[:, i, 0:3] = com0[i, 0:3] + qs[i][:nt, 1:4]
+        com[:, i, 3:6] = vs[i][:nt, 1:4]
+    return RunResult("exudyn", f"gen-alpha rho={spectral_radius}", mech.name, dt, t, com,
+                     walls if status == "ok" else [], status)
+
+
+def _tree_to_absolute(mech: BarMechanism, rel: np.ndarray, rel_rate: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Absolute bar angles and rates from hinge values of a tree whose zero is the t = 0 pose.
+
+    Poses follow the tree, so tree joints are exact and the loop-closure error is what
+    :func:`joint_errors` measures.
+    """
+    angles = np.zeros_like(rel)
+    rates = np.zeros_like(rel)
+    for i, (kind, kk) in enumerate(mech.parents):
+        if kind == "bar":
+            angles[:, i] = angles[:, kk] + (mech.angles0[i] - mech.angles0[kk]) + rel[:, i]
+            rates[:, i] = rates[:, kk] + rel_rate[:, i]
+        else:
+            angles[:, i] = mech.angles0[i] + rel[:, i]
+            rates[:, i] = rel_rate[:, i]
+    return angles, rates
+
+
+def mjcf(mech: BarMechanism, dt: float, setting: str) -> str:
+    """MJCF of the mechanism as a hinge tree with <equality connect> loop closures."""
+    children: dict[int, list[int]] = {}
+    roots = []
+    for i, (kind, k) in enumerate(mech.parents):
+        if kind == "ground":
+            roots.append(i)
+        else:
+            children.setdefault(k, []).append(i)
+
+    def body(i: int, pos: np.ndarray, rel_angle: float) -> str:
+        m, inertia, length = mech.masses[i], mech.inertias[i], mech.lengths[i]
+        axial = max(inertia * 1e-3, 1e-9)
+        inner = "".join(body(j, np.array([length, 0.0]), mech.angles0[j] - mech.angles0[i])
+                        for j in children.get(i, []))
+        return (f'<body name="b{i}" pos="{float(pos[0])!r} {float(pos[1])!r} 0" '
+                f'euler="0 0 {float(rel_angle)!r}">'
+                f'<joint name="j{i}" type="hinge" axis="0 0 1" pos="0 0 0" damping="0"/>'
+                f'<inertial pos="{float(0.5 * length)!r} 0 0" mass="{float(m)!r}" '
+                f'diaginertia="{float(axial)!r} {float(inertia)!r} {float(inertia)!r}"/>'
+                f"{inner}</body>")
+
+    tree = "".join(body(i, mech.ground[mech.parents[i][1]], mech.angles0[i]) for i in roots)
+    if setting == "default":
+        eq_attr = ""
+    elif setting == "stiff":
+        eq_attr = f' solref="{float(2 * dt)!r} 1" solimp="0.99 0.999 0.001"'
+    else:
+        raise ValueError(setting)
+    eqs = "".join(
+        f'<connect body1="b{i}" body2="b{j}" anchor="{float(mech.lengths[i])!r} 0 0"{eq_attr}/>'
+        for i, j in mech.closures)
+    return (
+        '<mujoco model="bench"><compiler angle="radian" autolimits="true"/>'
+        f'<option timestep="{float(dt)!r}" gravity="0 {float(-G)!r} 0" integrator="Euler">'
+        '<flag contact="disable"/></option>'
+        f"<worldbody>{tree}</worldbody><equality>{eqs}</equality></mujoco>"
+    )
+
+
+def run_mujoco(mech: BarMechanism, dt: float, setting: str, *, repeat: int = 3) -> RunResult:
+    import mujoco
+
+    model = mujoco.MjModel.from_xml_string(mjcf(mech, dt, setting))
+    data = mujoco.MjData(model)
+    nsteps = round(mech.t_final / dt)
+    every = max(1, round(SAMPLE_DT / dt))
+    # initial joint rates = relative angular velocities along the tree
+    qvel0 = np.array([mech.rates0[i] - (mech.rates0[k] if kind == "bar" else 0.0)
+                      for i, (kind, k) in enumerate(mech.parents)])
+    body_ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"b{i}")
+                for i in range(mech.nb)]
+    jnt_adr = [model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"j{i}")]
+               for i in range(mech.nb)]
+    dof_adr = [model.jnt_dofadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"j{i}")]
+               for i in range(mech.nb)]
+    qvel_init = np.zeros(model.nv)
+    qvel_init[dof_adr] = qvel0
+    nsamp = nsteps // every + 1
+    qpos_hist = np.zeros((nsamp, model.nq))
+    qvel_hist = np.zeros((nsamp, model.nv))
+    walls = []
+    status = "ok"
+    for rep in range(repeat + 1):
+        mujoco.mj_resetData(model, data)
+        data.qvel[:] = qvel_init
+        mujoco.mj_forward(model, data)
+        qpos_hist[0] = data.qpos
+        qvel_hist[0] = data.qvel
+        t0 = time.perf_counter()
+        step = mujoco.mj_step
+        k = 0
+        for n in range(1, nsteps + 1):
+            step(model, data)
+            if n % every == 0:
+                k += 1
+                qpos_hist[k] = data.qpos
+                qvel_hist[k] = data.qvel
+        t1 = time.perf_counter()
+        if rep > 0:
+            walls.append(t1 - t0)
+        if not np.all(np.isfinite(data.qpos)):
+            status = "diverged"
+            break
+    t = np.arange(nsamp) * every * dt
+    # absolute angles and rates along the tree from the joint values (planar hinges about z)
+    rel = qpos_hist[:, jnt_adr]
+    rel_rate = qvel_hist[:, dof_adr]
+    angles, rates = _tree_to_absolute(mech, rel, rel_rate)
+    del body_ids
+    com = mech.com_state(angles, rates)
+    return RunResult("mujoco", setting, mech.name, dt, t, com, walls if status == "ok" else [],
+                     status)
+
+
+def run_pinocchio(mech: BarMechanism, dt: float, *, kp: float = 100.0, mu: float = 1e-8,
+                  repeat: int = 3) -> RunResult:
+    import pinocchio as pin
+
+    model = pin.Model()
+    model.gravity.linear = np.array([0.0, -G, 0.0])
+    jid: list[int] = []
+    for i, (kind, k) in enumerate(mech.parents):
+        if kind == "ground":
+            px, py = mech.ground[k]
+            placement = pin.SE3(pin.utils.rotate("z", mech.angles0[i]), np.array([px, py, 0.0]))
+            parent = 0
+        else:
+            placement = pin.SE3(pin.utils.rotate("z", mech.angles0[i] - mech.angles0[k]),
+                                np.array([mech.lengths[k], 0.0, 0.0]))
+            parent = jid[k]
+        j = model.addJoint(parent, pin.JointModelRZ(), placement, f"j{i}")
+        inertia = np.diag([max(mech.inertias[i] * 1e-3, 1e-9), mech.inertias[i],
+                           mech.inertias[i]])
+        model.appendBodyToJoint(
+            j, pin.Inertia(mech.masses[i], np.array([0.5 * mech.lengths[i], 0.0, 0.0]), inertia),
+            pin.SE3.Identity())
+        jid.append(j)
+    data = model.createData()
+    cms = []
+    for i, j in mech.closures:
+        cm = pin.RigidConstraintModel(
+            pin.ContactType.CONTACT_3D, model, jid[i],
+            pin.SE3(np.eye(3), np.array([mech.lengths[i], 0.0, 0.0])), jid[j],
+            pin.SE3(np.eye(3), np.array([mech.lengths[j], 0.0, 0.0])),
+            pin.ReferenceFrame.LOCAL)
+        cm.m_baumgarte_parameters.Kp = kp
+        cm.m_baumgarte_parameters.Kd = 2.0 * math.sqrt(kp)
+        cms.append(cm)
+    cdatas = [cm.createData() for cm in cms]
+    prox = pin.ProximalSettings(1e-12, mu, 50)
+    pin.initConstraintDynamics(model, data, cms, cdatas)
+    q0 = np.zeros(model.nq)
+    v0 = np.array([mech.rates0[i] - (mech.rates0[k] if kind == "bar" else 0.0)
+                   for i, (kind, k) in enumerate(mech.parents)])
+    tau = np.zeros(model.nv)
+    nsteps = round(mech.t_final / dt)
+    every = max(1, round(SAMPLE_DT / dt))
+    nsamp = nsteps // every + 1
+    qh = np.zeros((nsamp, model.nq))
+    vh = np.zeros((nsamp, model.nv))
+    walls = []
+    status = "ok"
+    for rep in range(repeat + 1):
+        q = q0.copy()
+        v = v0.copy()
+        qh[0] = q
+        vh[0] = v
+        k = 0
+        t0 = time.perf_counter()
+        for n in range(1, nsteps + 1):
+            a = pin.constraintDynamics(model, data, q, v, tau, cms, cdatas, prox)
+            v = v + dt * a
+            q = q + dt * v  # RZ joints: configuration space is R^n
+            if n % every == 0:
+                k += 1
+                qh[k] = q
+                vh[k] = v
+        t1 = time.perf_counter()
+        if rep > 0:
+            walls.append(t1 - t0)
+        if not np.all(np.isfinite(q)):
+            status = "diverged"
+            break
+    t = np.arange(nsamp) * every * dt
+    angles, rates = _tree_to_absolute(mech, qh, vh)
+    com = mech.com_state(angles, rates)
+    return RunResult("pinocchio", f"prox-constraintDynamics Kp={kp:g}", mech.name, dt, t, com,
+                     walls if status == "ok" else [], status)
+
+
+# ---------------------------------------------------------------------------------------------
+# machine info
+# ---------------------------------------------------------------------------------------------
+def machine_info() -> dict[str, Any]:
+    cpu = ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    versions = {"python": platform.python_version(), "numpy": np.__version__}
+    for mod in ("scipy", "exudyn", "mujoco", "pinocchio"):
+        try:
+            versions[mod] = __import__(mod).__version__
+        except Exception:
+            versions[mod] = "not installed"
+    try:
+        import nonmin
+
+        versions["nonmin"] = nonmin.__version__
+    except Exception:
+        versions["nonmin"] = "not importable"
+    return {"platform": platform.platform(), "cpu": cpu, "cpu_count": os.cpu_count(),
+            "versions": versions}
