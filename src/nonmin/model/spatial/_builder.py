@@ -1,0 +1,409 @@
+"""Builder of :class:`SpatialModel`: bodies, joints, springs, actuators, output points.
+
+Joints, springs and output points are given in **world coordinates at the reference
+configuration** (the body poses passed to :meth:`SpatialBuilder.add_body`); the builder
+converts them into body-frame offsets and directions once. Every joint is therefore satisfied
+at the reference configuration, which :meth:`SpatialModel.reference_configuration` returns.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ...errors import InputError, ModelError, UnknownNameError
+from .._protocol import FloatArray
+from ._model import (
+    GROUND,
+    Actuator,
+    Body,
+    Joint,
+    JointKind,
+    OutputPoint,
+    SpatialModel,
+    Spring,
+)
+from ._quaternion import rotation_matrix
+
+__all__ = ["SpatialBuilder", "check_inertia"]
+
+#: Relative tolerance of the inertia checks (symmetry, triangle inequality).
+INERTIA_RTOL = 1e-9
+
+
+def _vec3(x: ArrayLike, name: str) -> FloatArray:
+    try:
+        v = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a 3-vector of numbers, got {x!r}") from None
+    if v.shape != (3,):
+        raise InputError(f"{name} must have shape (3,), got shape {v.shape}")
+    if not np.isfinite(v).all():
+        raise InputError(f"{name} must be finite, got {v.tolist()}")
+    return v
+
+
+def _unit(x: ArrayLike, name: str) -> FloatArray:
+    v = _vec3(x, name)
+    nv = float(np.linalg.norm(v))
+    if nv == 0.0:
+        raise ModelError(f"{name} must be a non-zero direction, got a zero-length vector {v.tolist()}")
+    return v / nv
+
+
+def _perpendicular_pair(u: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Unit vectors f, g with (u, f, g) right-handed orthonormal."""
+    trial = np.eye(3)[int(np.argmin(np.abs(u)))]
+    f = trial - (trial @ u) * u
+    f /= np.linalg.norm(f)
+    return f, np.cross(u, f)
+
+
+def check_inertia(inertia: ArrayLike, name: str = "inertia") -> FloatArray:
+    """Validate a rigid-body inertia tensor about the centre of mass.
+
+    It must be a finite symmetric 3 × 3 matrix with positive principal moments that satisfy
+    the triangle inequality ``I_i + I_j ≥ I_k`` (every physical mass distribution does).
+    A 3-vector is read as the diagonal.
+
+    Raises
+    ------
+    ModelError
+        If the tensor is not physical.
+    """
+    try:
+        J = np.asarray(inertia, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelError(f"{name} must be a 3×3 matrix or 3-vector, got {inertia!r}") from None
+    if J.shape == (3,):
+        J = np.diag(J)
+    if J.shape != (3, 3):
+        raise ModelError(f"{name} must have shape (3, 3) or (3,), got shape {J.shape}")
+    if not np.isfinite(J).all():
+        raise ModelError(f"{name} must be finite, got {J.tolist()}")
+    scale = float(np.max(np.abs(J))) or 1.0
+    if np.max(np.abs(J - J.T)) > INERTIA_RTOL * scale:
+        raise ModelError(f"{name} must be symmetric, got {J.tolist()}")
+    J = 0.5 * (J + J.T)
+    lam = np.linalg.eigvalsh(J)
+    if lam[0] <= 0.0:
+        raise ModelError(
+            f"{name} must be positive definite (principal moments > 0), got principal moments "
+            f"{lam.tolist()}"
+        )
+    if lam[0] + lam[1] < lam[2] * (1.0 - INERTIA_RTOL):
+        raise ModelError(
+            f"{name} violates the triangle inequality I1 + I2 ≥ I3 of a physical body: "
+            f"principal moments {lam.tolist()}"
+        )
+    return J
+
+
+class SpatialBuilder:
+    """Assemble a :class:`SpatialModel` step by step (the builder is mutable, the model is not).
+
+    Parameters
+    ----------
+    name : str
+        Model name.
+    gravity : array_like, shape (3,)
+        Gravitational acceleration in the world frame (default ``(0, 0, −9.81)``).
+
+    Examples
+    --------
+    A heavy body hanging from a spherical joint at the origin:
+
+    >>> from nonmin.model.spatial import SpatialBuilder
+    >>> b = SpatialBuilder("pendulum")
+    >>> _ = b.add_body("bob", mass=1.0, inertia=[0.01, 0.01, 0.01], position=[0, 0, -1])
+    >>> _ = b.add_spherical("pivot", "ground", "bob", point=[0, 0, 0])
+    >>> model = b.build()
+    >>> model.n, model.constraint_names
+    (7, ('bob.norm', 'pivot'))
+    """
+
+    def __init__(self, name: str, *, gravity: ArrayLike = (0.0, 0.0, -9.81)) -> None:
+        self.name = str(name)
+        g = _vec3(gravity, "gravity")
+        self.gravity: tuple[float, float, float] = (float(g[0]), float(g[1]), float(g[2]))
+        self._bodies: dict[str, Body] = {}
+        self._joints: list[Joint] = []
+        self._springs: list[Spring] = []
+        self._actuators: list[Actuator] = []
+        self._outputs: list[OutputPoint] = []
+
+    # ------------------------------------------------------------------ bodies
+    def add_body(
+        self,
+        name: str,
+        *,
+        mass: float,
+        inertia: ArrayLike,
+        position: ArrayLike = (0.0, 0.0, 0.0),
+        quaternion: ArrayLike = (1.0, 0.0, 0.0, 0.0),
+    ) -> SpatialBuilder:
+        """Add a rigid body.
+
+        Parameters
+        ----------
+        name : str
+            Unique name (not ``"ground"``).
+        mass : float
+            Mass, > 0.
+        inertia : array_like, shape (3, 3) or (3,)
+            Inertia about the centre of mass in the body frame (a 3-vector is the diagonal).
+        position : array_like, shape (3,)
+            Reference position of the centre of mass (world frame).
+        quaternion : array_like, shape (4,)
+            Reference orientation ``(w, x, y, z)``; normalized.
+
+        Raises
+        ------
+        ModelError
+            Duplicate or reserved name, non-positive mass, non-physical inertia, zero quaternion.
+        """
+        if not isinstance(name, str) or not name:
+            raise InputError(f"body name must be a non-empty string, got {name!r}")
+        if name == GROUND:
+            raise ModelError(f"body name {GROUND!r} is reserved for the fixed world frame")
+        if name in self._bodies:
+            raise ModelError(f"duplicate body name {name!r}")
+        m = float(mass)
+        if not np.isfinite(m) or m <= 0.0:
+            raise ModelError(f"body {name!r}: mass must be a finite number > 0, got {mass!r}")
+        J = check_inertia(inertia, f"body {name!r}: inertia")
+        e = np.asarray(quaternion, dtype=float)
+        if e.shape != (4,) or not np.isfinite(e).all() or np.linalg.norm(e) == 0.0:
+            raise ModelError(
+                f"body {name!r}: quaternion must be a finite non-zero 4-vector (w, x, y, z), "
+                f"got {quaternion!r}"
+            )
+        self._bodies[name] = Body(
+            name=name,
+            mass=m,
+            inertia=J,
+            position=_vec3(position, f"body {name!r}: position"),
+            quaternion=e / np.linalg.norm(e),
+        )
+        return self
+
+    def _ref(self, body: str) -> tuple[FloatArray, FloatArray]:
+        """Reference (position, rotation) of a body; ground is the identity."""
+        if body == GROUND:
+            return np.zeros(3), np.eye(3)
+        try:
+            b = self._bodies[body]
+        except KeyError:
+            raise UnknownNameError(
+                f"unknown body {body!r}; known: {[GROUND, *self._bodies]}"
+            ) from None
+        return b.position, rotation_matrix(b.quaternion)
+
+    def _local_point(self, body: str, point: FloatArray) -> FloatArray:
+        r, R = self._ref(body)
+        return R.T @ (point - r)
+
+    def _local_vecs(self, body: str, vecs: list[FloatArray]) -> FloatArray:
+        _, R = self._ref(body)
+        return np.array([R.T @ v for v in vecs]).reshape(-1, 3)
+
+    def _check_name(self, name: str) -> None:
+        if not isinstance(name, str) or not name:
+            raise InputError(f"name must be a non-empty string, got {name!r}")
+        taken = {j.name for j in self._joints} | {s.name for s in self._springs}
+        taken |= {f"{b}.norm" for b in self._bodies}
+        if name in taken:
+            raise ModelError(f"duplicate joint/spring name {name!r}")
+
+    def _add_joint(
+        self,
+        kind: JointKind,
+        name: str,
+        body_a: str,
+        body_b: str,
+        point: ArrayLike,
+        vecs_a: list[FloatArray],
+        vecs_b: list[FloatArray],
+        axis: FloatArray,
+    ) -> SpatialBuilder:
+        self._check_name(name)
+        self._ref(body_a)
+        self._ref(body_b)
+        if body_a == body_b:
+            raise ModelError(f"joint {name!r} connects body {body_a!r} to itself")
+        p = _vec3(point, f"joint {name!r}: point")
+        self._joints.append(
+            Joint(
+                name=name,
+                kind=kind,
+                body_a=body_a,
+                body_b=body_b,
+                point_a=self._local_point(body_a, p),
+                point_b=self._local_point(body_b, p),
+                vectors_a=self._local_vecs(body_a, vecs_a),
+                vectors_b=self._local_vecs(body_b, vecs_b),
+                point=p,
+                axis=axis,
+            )
+        )
+        return self
+
+    # ------------------------------------------------------------------ joints
+    def add_spherical(self, name: str, body_a: str, body_b: str, *, point: ArrayLike) -> SpatialBuilder:
+        """Ball joint: the point of a and the point of b coincide (3 rows)."""
+        return self._add_joint("spherical", name, body_a, body_b, point, [], [], np.zeros(3))
+
+    def add_revolute(
+        self, name: str, body_a: str, body_b: str, *, point: ArrayLike, axis: ArrayLike
+    ) -> SpatialBuilder:
+        """Hinge about ``axis`` through ``point`` (5 rows: points coincide, axes parallel)."""
+        u = _unit(axis, f"joint {name!r}: axis")
+        f, g = _perpendicular_pair(u)
+        return self._add_joint("revolute", name, body_a, body_b, point, [u, f, g], [u, f, g], u)
+
+    def add_cylindrical(
+        self, name: str, body_a: str, body_b: str, *, point: ArrayLike, axis: ArrayLike
+    ) -> SpatialBuilder:
+        """Slide along and turn about ``axis`` (4 rows: axes parallel, b's point on a's axis)."""
+        u = _unit(axis, f"joint {name!r}: axis")
+        f, g = _perpendicular_pair(u)
+        return self._add_joint("cylindrical", name, body_a, body_b, point, [u, f, g], [u, f, g], u)
+
+    def add_prismatic(
+        self, name: str, body_a: str, body_b: str, *, point: ArrayLike, axis: ArrayLike
+    ) -> SpatialBuilder:
+        """Slide along ``axis`` without relative rotation (5 rows)."""
+        u = _unit(axis, f"joint {name!r}: axis")
+        f, g = _perpendicular_pair(u)
+        return self._add_joint("prismatic", name, body_a, body_b, point, [u, f, g], [u, f, g], u)
+
+    def add_universal(
+        self,
+        name: str,
+        body_a: str,
+        body_b: str,
+        *,
+        point: ArrayLike,
+        axis_a: ArrayLike,
+        axis_b: ArrayLike,
+    ) -> SpatialBuilder:
+        """Hooke joint: points coincide, ``axis_a`` (on a) stays ⊥ ``axis_b`` (on b) (4 rows).
+
+        Raises
+        ------
+        ModelError
+            Zero-length axes, or axes not perpendicular at the reference configuration.
+        """
+        ua = _unit(axis_a, f"joint {name!r}: axis_a")
+        ub = _unit(axis_b, f"joint {name!r}: axis_b")
+        if abs(float(ua @ ub)) > 1e-9:
+            raise ModelError(
+                f"joint {name!r}: axis_a and axis_b must be perpendicular, got cos = {ua @ ub:.3g}"
+            )
+        return self._add_joint("universal", name, body_a, body_b, point, [ua], [ub], ua)
+
+    def add_weld(self, name: str, body_a: str, body_b: str, *, point: ArrayLike) -> SpatialBuilder:
+        """Rigid connection (6 rows)."""
+        E = list(np.eye(3))
+        return self._add_joint("weld", name, body_a, body_b, point, E, E, np.zeros(3))
+
+    def add_point_on_plane(
+        self, name: str, body_a: str, body_b: str, *, point: ArrayLike, normal: ArrayLike
+    ) -> SpatialBuilder:
+        """b's point (``point`` at the reference) stays in the plane of a through ``point``
+        with normal ``normal`` (1 row)."""
+        nvec = _unit(normal, f"joint {name!r}: normal")
+        return self._add_joint("point_on_plane", name, body_a, body_b, point, [nvec], [], nvec)
+
+    # ------------------------------------------------------------------ forces, outputs
+    def add_spring(
+        self,
+        name: str,
+        body_a: str,
+        point_a: ArrayLike,
+        body_b: str,
+        point_b: ArrayLike,
+        *,
+        stiffness: float,
+        rest_length: float | None = None,
+        damping: float = 0.0,
+    ) -> SpatialBuilder:
+        """Point-to-point spring(-damper) between world points given at the reference.
+
+        ``rest_length`` defaults to the reference distance.
+        """
+        self._check_name(name)
+        pa = _vec3(point_a, f"spring {name!r}: point_a")
+        pb = _vec3(point_b, f"spring {name!r}: point_b")
+        self._ref(body_a)
+        self._ref(body_b)
+        k = float(stiffness)
+        c = float(damping)
+        L = float(np.linalg.norm(pb - pa)) if rest_length is None else float(rest_length)
+        for val, what in ((k, "stiffness"), (c, "damping"), (L, "rest_length")):
+            if not np.isfinite(val) or val < 0.0:
+                raise ModelError(f"spring {name!r}: {what} must be finite and ≥ 0, got {val!r}")
+        self._springs.append(
+            Spring(
+                name=name,
+                body_a=body_a,
+                point_a=self._local_point(body_a, pa),
+                body_b=body_b,
+                point_b=self._local_point(body_b, pb),
+                stiffness=k,
+                rest_length=L,
+                damping=c,
+            )
+        )
+        return self
+
+    def add_actuator(
+        self, name: str, joint: str, *, dof: Literal["rotation", "translation"] = "rotation"
+    ) -> SpatialBuilder:
+        """A joint torque (``dof="rotation"``) or force (``"translation"``): one column of B.
+
+        Raises
+        ------
+        UnknownNameError
+            If the joint does not exist.
+        ModelError
+            If the joint has no such degree of freedom.
+        """
+        kinds = {j.name: j.kind for j in self._joints}
+        if joint not in kinds:
+            raise UnknownNameError(f"actuator {name!r}: unknown joint {joint!r}; known: {list(kinds)}")
+        ok = {"rotation": ("revolute", "cylindrical"), "translation": ("prismatic", "cylindrical")}
+        if dof not in ok:
+            raise InputError(f"actuator {name!r}: dof must be 'rotation' or 'translation', got {dof!r}")
+        if kinds[joint] not in ok[dof]:
+            raise ModelError(
+                f"actuator {name!r}: a {kinds[joint]} joint has no actuated {dof}; "
+                f"{dof} actuators need one of {ok[dof]}"
+            )
+        if name in {a.name for a in self._actuators}:
+            raise ModelError(f"duplicate actuator name {name!r}")
+        self._actuators.append(Actuator(name=name, joint=joint, dof=dof))
+        return self
+
+    def add_output_point(self, name: str, body: str, *, point: ArrayLike) -> SpatialBuilder:
+        """Report the position (``name``) and velocity (``name + "_velocity"``) of a point."""
+        p = _vec3(point, f"output {name!r}: point")
+        self._ref(body)
+        if name in {o.name for o in self._outputs}:
+            raise ModelError(f"duplicate output name {name!r}")
+        self._outputs.append(OutputPoint(name=name, body=body, point=self._local_point(body, p)))
+        return self
+
+    def build(self) -> SpatialModel:
+        """The immutable :class:`SpatialModel`."""
+        return SpatialModel(
+            name=self.name,
+            bodies=tuple(self._bodies.values()),
+            joints=tuple(self._joints),
+            springs=tuple(self._springs),
+            actuators=tuple(self._actuators),
+            output_points=tuple(self._outputs),
+            gravity=self.gravity,
+        )

@@ -1,0 +1,653 @@
+"""Spatial multibody model in absolute coordinates with unit quaternions.
+
+Coordinates: 7 per body, ``q_i = (x, y, z, e0, e1, e2, e3)``: the world position of the centre
+of mass and the quaternion ``ε`` (scalar first) that rotates body-frame vectors into the world
+frame (see :mod:`nonmin.model.spatial._quaternion` for the convention). Every body has a
+holonomic norm constraint ``"<body>.norm"``: ``φ = ½(εᵀε − 1)``, ``A = [0, εᵀ]``,
+``γ = ε̇ᵀε̇``.
+
+Dynamics (per body, block-diagonal)::
+
+    M = blockdiag(m I₃, 4 Gᵀ J G),    C = blockdiag(0, 4 G(ε̇)ᵀ J G + 4 H(J G ε̇)),
+    f_g = (m g, 0),                    V = −m gᵀ r,
+
+plus point-to-point springs (``V = ½ k (ℓ − ℓ₀)²``) and their dampers (passive force).
+``M`` is singular along ``ε`` (``M_ε ε = 0``), which is harmless: the norm constraint removes
+that direction, so ``M̄ = PMP + μQ`` is positive definite.
+
+Joints are built from three primitives with closed-form ``A``, ``Ȧ`` and ``γ = Ȧ q̇``:
+coincident points (3 rows), perpendicular body vectors ``(R_a u)·(R_b v) = 0`` and a body
+vector perpendicular to the joint offset ``(R_a u)·(p_b − p_a) = 0``. For a point with local
+offset ``s``, ``p = r + R(ε) s = r + [εᵀQ_a(s)ε]_a``, ``∂p/∂ε = 2 Q(s) ε`` and
+``d/dt ∂p/∂ε = 2 Q(s) ε̇`` exactly.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any, Literal, NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ...errors import ModelError, UnknownNameError
+from .._protocol import (
+    ConstraintSpec,
+    ConstraintTerms,
+    FloatArray,
+    Geometry,
+    Model,
+    _as_vector,
+)
+from ._quaternion import E_matrix, G_matrix, H_matrix, point_tensor, rotation_matrix
+
+__all__ = [
+    "GROUND",
+    "JOINT_KINDS",
+    "Actuator",
+    "Body",
+    "Joint",
+    "JointKind",
+    "OutputPoint",
+    "SpatialModel",
+    "Spring",
+]
+
+#: Reserved body name of the fixed world frame.
+GROUND = "ground"
+
+JointKind = Literal[
+    "spherical", "revolute", "prismatic", "cylindrical", "universal", "weld", "point_on_plane"
+]
+JOINT_KINDS: tuple[str, ...] = (
+    "spherical", "revolute", "prismatic", "cylindrical", "universal", "weld", "point_on_plane"
+)
+_JOINT_ROWS = {
+    "spherical": 3,
+    "revolute": 5,
+    "prismatic": 5,
+    "cylindrical": 4,
+    "universal": 4,
+    "weld": 6,
+    "point_on_plane": 1,
+}
+
+
+@dataclass(frozen=True, eq=False)
+class Body:
+    """A rigid body.
+
+    Attributes
+    ----------
+    name : str
+    mass : float
+        Mass (> 0).
+    inertia : ndarray, shape (3, 3)
+        Inertia tensor about the centre of mass in the body frame (SPD, triangle inequality).
+    position : ndarray, shape (3,)
+        Reference (initial) position of the centre of mass in the world frame.
+    quaternion : ndarray, shape (4,)
+        Reference (initial) orientation, unit quaternion ``(w, x, y, z)``.
+    """
+
+    name: str
+    mass: float
+    inertia: FloatArray
+    position: FloatArray
+    quaternion: FloatArray
+
+
+@dataclass(frozen=True, eq=False)
+class Joint:
+    """A joint between bodies ``body_a`` and ``body_b`` (either may be :data:`GROUND`).
+
+    Build joints with :class:`~nonmin.model.spatial.SpatialBuilder`, which converts the
+    world-frame point and axes given at the reference configuration into the body-frame
+    quantities stored here.
+
+    Attributes
+    ----------
+    name : str
+    kind : str
+        One of :data:`JOINT_KINDS`.
+    body_a, body_b : str
+    point_a, point_b : ndarray, shape (3,)
+        The joint point in the frame of a and of b (world frame for ground), relative to the
+        centre of mass.
+    vectors_a, vectors_b : ndarray, shape (k, 3)
+        Body-frame unit vectors used by the joint's rows (world frame for ground):
+        revolute/prismatic/cylindrical ``(u, f, g)`` with axis u and ``f, g ⊥ u``;
+        universal ``(u_a,)`` / ``(u_b,)``; weld the world basis; point-on-plane the normal
+        on a.
+    point, axis : ndarray, shape (3,)
+        World-frame point and (unit) axis at the reference configuration (for descriptions).
+    """
+
+    name: str
+    kind: JointKind
+    body_a: str
+    body_b: str
+    point_a: FloatArray
+    point_b: FloatArray
+    vectors_a: FloatArray
+    vectors_b: FloatArray
+    point: FloatArray
+    axis: FloatArray
+
+    @property
+    def dim(self) -> int:
+        """Number of constraint rows."""
+        return _JOINT_ROWS[self.kind]
+
+
+@dataclass(frozen=True, eq=False)
+class Spring:
+    """A point-to-point spring-damper: ``V = ½ k (ℓ − ℓ₀)²``, force ``−c ℓ̇`` along the line.
+
+    Attributes
+    ----------
+    name : str
+    body_a, body_b : str
+    point_a, point_b : ndarray, shape (3,)
+        Attachment points in the body frames (world frame for ground), relative to the COM.
+    stiffness, rest_length, damping : float
+    """
+
+    name: str
+    body_a: str
+    point_a: FloatArray
+    body_b: str
+    point_b: FloatArray
+    stiffness: float
+    rest_length: float
+    damping: float = 0.0
+
+
+@dataclass(frozen=True)
+class Actuator:
+    """A joint actuator (one column of B): a torque about, or a force along, a joint's axis.
+
+    ``dof="rotation"`` (revolute, cylindrical): torque ``u`` on b about the axis, ``−u`` on a.
+    ``dof="translation"`` (prismatic, cylindrical): force ``u`` along the axis; the column is
+    the gradient of the slide ``s = (R_a u)·(p_b − p_a)``, so its power is ``u ṡ``.
+    """
+
+    name: str
+    joint: str
+    dof: Literal["rotation", "translation"]
+
+
+@dataclass(frozen=True, eq=False)
+class OutputPoint:
+    """A named body point reported by :meth:`SpatialModel.outputs` (position and velocity)."""
+
+    name: str
+    body: str
+    point: FloatArray
+
+
+class _Kin(NamedTuple):
+    """A world-frame 3-vector quantity x(q): value, Jacobian ∂x/∂q and its time derivative."""
+
+    val: FloatArray  # (3,)
+    J: FloatArray  # (3, n)
+    Jd: FloatArray  # (3, n)
+
+
+def _diff(x: _Kin, y: _Kin) -> _Kin:
+    return _Kin(x.val - y.val, x.J - y.J, x.Jd - y.Jd)
+
+
+def _dot(x: _Kin, y: _Kin, qd: FloatArray) -> tuple[float, FloatArray, FloatArray]:
+    """φ = x·y, A = ∂φ/∂q and Ȧ (exact)."""
+    xd = x.J @ qd
+    yd = y.J @ qd
+    A = y.val @ x.J + x.val @ y.J
+    Ad = yd @ x.J + y.val @ x.Jd + xd @ y.J + x.val @ y.Jd
+    return float(x.val @ y.val), A, Ad
+
+
+@dataclass(frozen=True, eq=False)
+class SpatialModel(Model):
+    """Spatial multibody model with unit quaternions (build it with ``SpatialBuilder``).
+
+    Parameters
+    ----------
+    name : str
+    bodies : tuple of Body
+    joints : tuple of Joint
+    springs : tuple of Spring
+    actuators : tuple of Actuator
+    output_points : tuple of OutputPoint
+    gravity : tuple of 3 floats
+        Gravitational acceleration in the world frame.
+    default_active_names : frozenset of str or None
+        Active set of the nominal mode; None means every constraint.
+
+    Notes
+    -----
+    Coordinate order: body by body, ``(x, y, z, e0, e1, e2, e3)``, named ``"<body>.x"``,
+    ``"<body>.e0"`` ... Constraint order: the norm constraints ``"<body>.norm"`` (one row per
+    body), then the joints in declaration order (all holonomic).
+    """
+
+    name: str
+    bodies: tuple[Body, ...]
+    joints: tuple[Joint, ...] = ()
+    springs: tuple[Spring, ...] = ()
+    actuators: tuple[Actuator, ...] = ()
+    output_points: tuple[OutputPoint, ...] = ()
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    default_active_names: frozenset[str] | None = None
+    _index: dict[str, int] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        idx = {b.name: i for i, b in enumerate(self.bodies)}
+        if len(idx) != len(self.bodies):
+            raise ModelError(f"body names must be unique, got {[b.name for b in self.bodies]}")
+        if not self.bodies:
+            raise ModelError("a spatial model needs at least one body")
+        object.__setattr__(self, "_index", idx)
+        g = np.asarray(self.gravity, dtype=float)
+        if g.shape != (3,) or not np.isfinite(g).all():
+            raise ModelError(f"gravity must be a finite 3-vector, got {self.gravity!r}")
+        object.__setattr__(self, "gravity", (float(g[0]), float(g[1]), float(g[2])))
+        for j in self.joints:
+            self.body_index(j.body_a)
+            self.body_index(j.body_b)
+        names = self.constraint_names
+        if len(set(names)) != len(names):
+            raise ModelError(f"constraint names must be unique, got {list(names)}")
+        jn = {j.name: j for j in self.joints}
+        for a in self.actuators:
+            if a.joint not in jn:
+                raise UnknownNameError(
+                    f"actuator {a.name!r}: unknown joint {a.joint!r}; known: {list(jn)}"
+                )
+        if self.default_active_names is not None:
+            self.resolve_active(self.default_active_names)
+
+    # ------------------------------------------------------------------ names and sizes
+    @property
+    def coordinate_names(self) -> tuple[str, ...]:  # type: ignore[override]
+        return tuple(
+            f"{b.name}.{c}" for b in self.bodies for c in ("x", "y", "z", "e0", "e1", "e2", "e3")
+        )
+
+    @property
+    def constraints(self) -> tuple[ConstraintSpec, ...]:  # type: ignore[override]
+        norms = tuple(
+            ConstraintSpec(f"{b.name}.norm", "holonomic", 1, "unit quaternion ½(‖ε‖² − 1)")
+            for b in self.bodies
+        )
+        joints = tuple(
+            ConstraintSpec(j.name, "holonomic", j.dim, f"{j.kind} {j.body_a}–{j.body_b}")
+            for j in self.joints
+        )
+        return norms + joints
+
+    @property
+    def actuator_names(self) -> tuple[str, ...]:  # type: ignore[override]
+        return tuple(a.name for a in self.actuators)
+
+    @property
+    def default_active(self) -> frozenset[str]:  # type: ignore[override]
+        if self.default_active_names is None:
+            return frozenset(self.constraint_names)
+        return frozenset(self.default_active_names)
+
+    @property
+    def body_names(self) -> tuple[str, ...]:
+        """Names of the bodies, in coordinate order."""
+        return tuple(b.name for b in self.bodies)
+
+    @property
+    def has_outputs(self) -> bool:  # type: ignore[override]
+        return bool(self.output_points)
+
+    def body_index(self, name: str) -> int:
+        """Index of body ``name`` (−1 for :data:`GROUND`).
+
+        Raises
+        ------
+        UnknownNameError
+            If there is no such body.
+        """
+        if name == GROUND:
+            return -1
+        try:
+            return self._index[name]
+        except KeyError:
+            raise UnknownNameError(
+                f"unknown body {name!r}; known: {[GROUND, *self._index]}"
+            ) from None
+
+    def joint(self, name: str) -> Joint:
+        """The joint called ``name`` (:class:`UnknownNameError` otherwise)."""
+        for j in self.joints:
+            if j.name == name:
+                return j
+        raise UnknownNameError(
+            f"model {self.name!r} has no joint {name!r}; known: {[j.name for j in self.joints]}"
+        )
+
+    def reference_configuration(self) -> FloatArray:
+        """The reference configuration ``q`` (body poses given to the builder), shape (n,).
+
+        Every joint is satisfied there, because joints are defined from it.
+        """
+        return np.concatenate([np.concatenate((b.position, b.quaternion)) for b in self.bodies])
+
+    # ------------------------------------------------------------------ kinematics
+    def _kin(self, q: FloatArray, qd: FloatArray, body: str, local: FloatArray, point: bool) -> _Kin:
+        """World point ``r + R s`` (point=True) or vector ``R s`` of body ``body``."""
+        n = self.n
+        i = self.body_index(body)
+        J = np.zeros((3, n))
+        Jd = np.zeros((3, n))
+        if i < 0:
+            return _Kin(np.array(local, dtype=float), J, Jd)
+        o = 7 * i
+        e = q[o + 3 : o + 7]
+        ed = qd[o + 3 : o + 7]
+        Qs = point_tensor(local)
+        Qe = Qs @ e  # (3, 4)
+        val = Qe @ e
+        if point:
+            val = val + q[o : o + 3]
+            J[:, o : o + 3] = np.eye(3)
+        J[:, o + 3 : o + 7] = 2.0 * Qe
+        Jd[:, o + 3 : o + 7] = 2.0 * (Qs @ ed)
+        return _Kin(val, J, Jd)
+
+    def point_position(self, q: ArrayLike, body: str, point: ArrayLike) -> FloatArray:
+        """World position of the body-frame point ``point`` (relative to the COM), shape (3,)."""
+        qv = _as_vector(q, "q", self.n)
+        return self._kin(qv, np.zeros(self.n), body, np.asarray(point, float), True).val
+
+    def point_jacobian(self, q: ArrayLike, body: str, point: ArrayLike) -> FloatArray:
+        """``∂p/∂q`` of a body point, shape (3, n)."""
+        qv = _as_vector(q, "q", self.n)
+        return self._kin(qv, np.zeros(self.n), body, np.asarray(point, float), True).J
+
+    def rotation(self, q: ArrayLike, body: str) -> FloatArray:
+        """Rotation matrix ``R(ε/‖ε‖)`` of a body, shape (3, 3)."""
+        qv = _as_vector(q, "q", self.n)
+        i = self.body_index(body)
+        if i < 0:
+            return np.eye(3)
+        e = qv[7 * i + 3 : 7 * i + 7]
+        return rotation_matrix(e / np.linalg.norm(e))
+
+    def angular_velocity(self, q: ArrayLike, qd: ArrayLike, body: str, *, frame: str = "body") -> FloatArray:
+        """Angular velocity ``ω' = 2 G ε̇`` (``frame="body"``) or ``ω = R ω'`` (``"world"``)."""
+        qv = _as_vector(q, "q", self.n)
+        v = _as_vector(qd, "qd", self.n)
+        i = self.body_index(body)
+        if i < 0:
+            return np.zeros(3)
+        e = qv[7 * i + 3 : 7 * i + 7]
+        w = 2.0 * G_matrix(e) @ v[7 * i + 3 : 7 * i + 7]
+        if frame == "body":
+            return w
+        if frame == "world":
+            return rotation_matrix(e) @ w
+        from ...errors import InputError
+
+        raise InputError(f"frame must be 'body' or 'world', got {frame!r}")
+
+    # ------------------------------------------------------------------ dynamics
+    def mass_matrix(self, q: ArrayLike) -> FloatArray:
+        qv = _as_vector(q, "q", self.n)
+        M = np.zeros((self.n, self.n))
+        for i, b in enumerate(self.bodies):
+            o = 7 * i
+            M[o : o + 3, o : o + 3] = b.mass * np.eye(3)
+            G = G_matrix(qv[o + 3 : o + 7])
+            M[o + 3 : o + 7, o + 3 : o + 7] = 4.0 * G.T @ b.inertia @ G
+        return M
+
+    def coriolis_matrix(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
+        qv = _as_vector(q, "q", self.n)
+        v = _as_vector(qd, "qd", self.n)
+        C = np.zeros((self.n, self.n))
+        for i, b in enumerate(self.bodies):
+            o = 7 * i
+            e = qv[o + 3 : o + 7]
+            ed = v[o + 3 : o + 7]
+            G = G_matrix(e)
+            Cb = 4.0 * G_matrix(ed).T @ b.inertia @ G + 4.0 * H_matrix(b.inertia @ (G @ ed))
+            C[o + 3 : o + 7, o + 3 : o + 7] = Cb
+        return C
+
+    def coriolis_force(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
+        """``C q̇``; per body ``8 G(ε̇)ᵀ J G(ε) ε̇`` on the quaternion block."""
+        qv = _as_vector(q, "q", self.n)
+        v = _as_vector(qd, "qd", self.n)
+        out = np.zeros(self.n)
+        for i, b in enumerate(self.bodies):
+            o = 7 * i
+            ed = v[o + 3 : o + 7]
+            out[o + 3 : o + 7] = 8.0 * G_matrix(ed).T @ (b.inertia @ (G_matrix(qv[o + 3 : o + 7]) @ ed))
+        return out
+
+    def _spring_line(self, q: FloatArray, qd: FloatArray, s: Spring) -> tuple[_Kin, float]:
+        pa = self._kin(q, qd, s.body_a, s.point_a, True)
+        pb = self._kin(q, qd, s.body_b, s.point_b, True)
+        d = _diff(pb, pa)
+        return d, float(np.linalg.norm(d.val))
+
+    def conservative_force(self, q: ArrayLike) -> FloatArray:
+        qv = _as_vector(q, "q", self.n)
+        f = np.zeros(self.n)
+        g = np.asarray(self.gravity)
+        for i, b in enumerate(self.bodies):
+            f[7 * i : 7 * i + 3] = b.mass * g
+        zero = np.zeros(self.n)
+        for s in self.springs:
+            d, ell = self._spring_line(qv, zero, s)
+            if s.rest_length == 0.0:
+                f -= s.stiffness * (d.val @ d.J)
+            elif ell > 0.0:
+                f -= s.stiffness * (ell - s.rest_length) / ell * (d.val @ d.J)
+        return f
+
+    def potential_energy(self, q: ArrayLike) -> float:
+        qv = _as_vector(q, "q", self.n)
+        g = np.asarray(self.gravity)
+        V = -sum(b.mass * float(g @ qv[7 * i : 7 * i + 3]) for i, b in enumerate(self.bodies))
+        zero = np.zeros(self.n)
+        for s in self.springs:
+            _, ell = self._spring_line(qv, zero, s)
+            V += 0.5 * s.stiffness * (ell - s.rest_length) ** 2
+        return float(V)
+
+    def passive_force(self, t: float, q: ArrayLike, qd: ArrayLike) -> FloatArray:
+        """Spring dampers: ``−c ℓ̇`` along the line of each spring (zero where ℓ = 0)."""
+        qv = _as_vector(q, "q", self.n)
+        v = _as_vector(qd, "qd", self.n)
+        f = np.zeros(self.n)
+        for s in self.springs:
+            if s.damping == 0.0:
+                continue
+            d, ell = self._spring_line(qv, v, s)
+            if ell > 0.0:
+                u = d.val / ell
+                f -= s.damping * float(u @ (d.J @ v)) * (u @ d.J)
+        return f
+
+    def input_matrix(self, q: ArrayLike) -> FloatArray:
+        qv = _as_vector(q, "q", self.n)
+        zero = np.zeros(self.n)
+        B = np.zeros((self.n, self.k))
+        for c, a in enumerate(self.actuators):
+            j = self.joint(a.joint)
+            axis = self._kin(qv, zero, j.body_a, j.vectors_a[0], False)
+            if a.dof == "rotation":
+                # torque τ = u·axis on b, −τ on a; generalized force 2 E(ε)ᵀ τ per body
+                # (virtual power τ·ω with ω = 2 E ε̇)
+                for body, sign in ((j.body_b, 1.0), (j.body_a, -1.0)):
+                    i = self.body_index(body)
+                    if i < 0:
+                        continue
+                    o = 7 * i
+                    B[o + 3 : o + 7, c] += sign * 2.0 * E_matrix(qv[o + 3 : o + 7]).T @ axis.val
+            else:
+                pa = self._kin(qv, zero, j.body_a, j.point_a, True)
+                pb = self._kin(qv, zero, j.body_b, j.point_b, True)
+                _, grad, _ = _dot(axis, _diff(pb, pa), zero)
+                B[:, c] = grad
+        return B
+
+    # ------------------------------------------------------------------ constraints
+    def _joint_rows(
+        self, q: FloatArray, qd: FloatArray, j: Joint
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """φ, A, Ȧ of one joint, shapes (d,), (d, n), (d, n)."""
+        rows: list[tuple[float, FloatArray, FloatArray]] = []
+        kind = j.kind
+        va = [self._kin(q, qd, j.body_a, v, False) for v in j.vectors_a]
+        vb = [self._kin(q, qd, j.body_b, v, False) for v in j.vectors_b]
+        pa = self._kin(q, qd, j.body_a, j.point_a, True)
+        pb = self._kin(q, qd, j.body_b, j.point_b, True)
+        d = _diff(pb, pa)
+        if kind in ("spherical", "revolute", "universal", "weld"):
+            for r in range(3):
+                rows.append((float(d.val[r]), d.J[r], d.Jd[r]))
+        if kind in ("revolute", "cylindrical", "prismatic"):
+            rows.append(_dot(va[1], vb[0], qd))
+            rows.append(_dot(va[2], vb[0], qd))
+        if kind in ("cylindrical", "prismatic"):
+            rows.append(_dot(va[1], d, qd))
+            rows.append(_dot(va[2], d, qd))
+        if kind == "prismatic":
+            rows.append(_dot(va[1], vb[2], qd))
+        if kind == "universal":
+            rows.append(_dot(va[0], vb[0], qd))
+        if kind == "weld":
+            rows.append(_dot(va[0], vb[1], qd))
+            rows.append(_dot(va[1], vb[2], qd))
+            rows.append(_dot(va[2], vb[0], qd))
+        if kind == "point_on_plane":
+            rows.append(_dot(va[0], d, qd))
+        phi = np.array([r[0] for r in rows])
+        A = np.array([r[1] for r in rows])
+        Ad = np.array([r[2] for r in rows])
+        return phi, A, Ad
+
+    def _all_rows(
+        self, q: FloatArray, qd: FloatArray, act: frozenset[str]
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        n = self.n
+        phis: list[FloatArray] = []
+        As: list[FloatArray] = []
+        Ads: list[FloatArray] = []
+        for i, b in enumerate(self.bodies):
+            if f"{b.name}.norm" not in act:
+                continue
+            o = 7 * i
+            e = q[o + 3 : o + 7]
+            A = np.zeros((1, n))
+            Ad = np.zeros((1, n))
+            A[0, o + 3 : o + 7] = e
+            Ad[0, o + 3 : o + 7] = qd[o + 3 : o + 7]
+            phis.append(np.array([0.5 * (float(e @ e) - 1.0)]))
+            As.append(A)
+            Ads.append(Ad)
+        for j in self.joints:
+            if j.name not in act:
+                continue
+            phi, A, Ad = self._joint_rows(q, qd, j)
+            phis.append(phi)
+            As.append(A)
+            Ads.append(Ad)
+        if not As:
+            return np.zeros(0), np.zeros((0, n)), np.zeros((0, n))
+        return np.concatenate(phis), np.vstack(As), np.vstack(Ads)
+
+    def constraint_terms(
+        self,
+        t: float,
+        q: ArrayLike,
+        qd: ArrayLike,
+        active: Iterable[str] | None = None,
+    ) -> ConstraintTerms:
+        act = self.resolve_active(active)
+        qv = _as_vector(q, "q", self.n)
+        v = _as_vector(qd, "qd", self.n)
+        phi, A, Ad = self._all_rows(qv, v, act)
+        return ConstraintTerms(
+            A=A, gamma=Ad @ v, phi=phi, velocity=A @ v, holonomic=np.ones(phi.shape[0], dtype=bool)
+        )
+
+    def constraint_jacobian_dot(
+        self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
+    ) -> FloatArray:
+        """The exact matrix ``Ȧ = dA/dt`` (closed form), shape (m, n)."""
+        act = self.resolve_active(active)
+        qv = _as_vector(q, "q", self.n)
+        v = _as_vector(qd, "qd", self.n)
+        return self._all_rows(qv, v, act)[2]
+
+    # ------------------------------------------------------------------ extras
+    def outputs(self, t: float, q: ArrayLike, qd: ArrayLike) -> dict[str, FloatArray]:
+        """Position ``"<name>"`` and velocity ``"<name>_velocity"`` of each output point."""
+        qv = _as_vector(q, "q", self.n)
+        v = _as_vector(qd, "qd", self.n)
+        out: dict[str, FloatArray] = {}
+        for p in self.output_points:
+            k = self._kin(qv, v, p.body, p.point, True)
+            out[p.name] = k.val
+            out[f"{p.name}_velocity"] = k.J @ v
+        return out
+
+    def geometry(self, q: ArrayLike) -> Geometry:
+        """Segments from each body's COM to its joint/spring/output points; body frames."""
+        qv = _as_vector(q, "q", self.n)
+        zero = np.zeros(self.n)
+        segs: list[FloatArray] = []
+        pts: list[FloatArray] = []
+        labels: list[str] = []
+        com = {b.name: qv[7 * i : 7 * i + 3] for i, b in enumerate(self.bodies)}
+
+        def attach(body: str, local: FloatArray) -> FloatArray:
+            p = self._kin(qv, zero, body, local, True).val
+            if body != GROUND:
+                segs.append(np.stack([com[body], p]))
+            return p
+
+        for j in self.joints:
+            attach(j.body_a, j.point_a)
+            pts.append(attach(j.body_b, j.point_b))
+            labels.append(j.name)
+        for s in self.springs:
+            pa = attach(s.body_a, s.point_a)
+            pb = attach(s.body_b, s.point_b)
+            segs.append(np.stack([pa, pb]))
+        for o in self.output_points:
+            pts.append(attach(o.body, o.point))
+            labels.append(o.name)
+        frames = []
+        for b in self.bodies:
+            R = self.rotation(qv, b.name)
+            frames.append(np.vstack([com[b.name], R.T]))
+        return Geometry(
+            dim=3,
+            segments=np.array(segs).reshape(-1, 2, 3),
+            points=np.array(pts).reshape(-1, 3),
+            frames=np.array(frames).reshape(-1, 4, 3),
+            labels=tuple(labels),
+        )
+
+    def replace(self, **changes: Any) -> SpatialModel:
+        """A copy with some fields replaced (e.g. ``gravity=``, ``bodies=``); re-validated."""
+        import dataclasses
+
+        known = {f.name for f in dataclasses.fields(self) if f.init}
+        unknown = set(changes) - known
+        if unknown:
+            from ...errors import InputError
+
+            raise InputError(f"replace(): unknown field(s) {sorted(unknown)}; known: {sorted(known)}")
+        return dataclasses.replace(self, **changes)
