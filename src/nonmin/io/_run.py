@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -184,6 +185,13 @@ def write_outputs(result: ScenarioResult, out: Path) -> dict[str, Path]:
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, Path] = {}
     traj_name = opts.get("trajectory", "trajectory.npz")
+    source: dict[str, Any] = {"scenario": str(sc.path.resolve())}
+    lib = sc.section("model").get("library")
+    if lib:
+        source.update(library=lib, params=dict(sc.section("model").get("params", {})))
+    if hasattr(traj, "metadata") and dataclasses.is_dataclass(traj):
+        traj = dataclasses.replace(traj, metadata={**traj.metadata, "source": source, "scenario_name": sc.name})
+        result.trajectory = traj
     files["trajectory"] = Path(traj.save(out / traj_name) or (out / traj_name))
     if opts.get("csv", True):
         files["csv"] = Path(traj.to_csv(out / "trajectory.csv") or (out / "trajectory.csv"))

@@ -269,7 +269,7 @@ def check_model(
         )
         tt = np.asarray(traj.t)
         rank = np.asarray(traj.rank)
-        cond = np.asarray(traj.cond_mbar)
+        cond = np.asarray(traj.cond)
         mu = np.asarray(traj.mu)
         ok = str(getattr(traj.status, "name", traj.status)).lower() != "failed"
         items.append(
