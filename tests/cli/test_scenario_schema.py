@@ -1,0 +1,61 @@
+"""Malformed scenario files give ScenarioError naming the file, the key, expected and received."""
+
+from pathlib import Path
+
+import pytest
+
+from nonmin.errors import ScenarioError
+from nonmin.io import SCENARIO_SCHEMA, load_scenario
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _write(tmp_path: Path, text: str) -> Path:
+    p = tmp_path / "s.toml"
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.parametrize(
+    ("text", "fragments"),
+    [
+        ('[model]\nlibrary = "A01_pendulum"\n[simulate]\ndt = "fast"\n', ["simulate.dt", "expected a number", "string 'fast'"]),
+        ('[model]\nlibrary = "A01_pendulum"\n[simulate]\nstepsize = 1\n', ["unknown key 'simulate.stepsize'", "expected one of"]),
+        ('[model]\nlibrary = 3\n', ["model.library", "expected a string", "integer 3"]),
+        ('[simulate]\nt_final = 1.0\n', ["missing required table [model]"]),
+        ('[model]\nlibrary = "x"\n[initial]\nq = [1, "a"]\n', ["initial.q[1]", "expected a list of a number"]),
+        ('[model]\nlibrary = "x"\n[[events]]\nat_time = 1.0\n', ["missing required key 'events[0].name'"]),
+        ('[model]\nlibrary = "x"\n[[events]]\nname = "e"\ntransition = "explode"\n', ["events[0].transition", "one of"]),
+        ('[model]\nlibrary = "x"\nbogus = 1\n', ["unknown key 'model.bogus'"]),
+        ('[model\nlibrary = "x"\n', ["not valid TOML"]),
+        ('[model]\nlibrary = "x"\n[output]\nplots = "yes"\n', ["output.plots", "expected a boolean"]),
+    ],
+)
+def test_malformed_scenarios(tmp_path, text, fragments):
+    p = _write(tmp_path, text)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(p)
+    msg = str(info.value)
+    assert str(p) in msg
+    for frag in fragments:
+        assert frag in msg, msg
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(ScenarioError, match="not found"):
+        load_scenario(tmp_path / "nope.toml")
+
+
+def test_every_schema_key_is_documented():
+    doc = (ROOT / "docs" / "scenarios.md").read_text()
+
+    def walk(section, prefix=""):
+        for k in section.keys:
+            yield prefix + k, k
+        for k, sub in section.sections.items():
+            yield from walk(sub, prefix + k + ".")
+        for k, sub in section.array_sections.items():
+            yield from walk(sub, prefix + k + ".")
+
+    for path, key in walk(SCENARIO_SCHEMA):
+        assert f"`{key}`" in doc, f"docs/scenarios.md does not document {path}"
