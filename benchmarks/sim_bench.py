@@ -40,13 +40,10 @@ Run ``python benchmarks/sim_bench.py`` (``--quick`` for a smoke run); results go
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import os
 import platform
 import statistics
-import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -487,7 +484,7 @@ def run_exudyn(mech: BarMechanism, dt: float, *, spectral_radius: float = 0.9,
     status = "ok"
     mbs = sens_q = sens_v = None
     for rep in range(repeat + 1):
-        sc, mbs, sens_q, sens_v, s = build()
+        _sc, mbs, sens_q, sens_v, s = build()
         t0 = time.perf_counter()
         try:
             ok = mbs.SolveDynamic(s)
