@@ -5,6 +5,10 @@ coordinates, spatial multibody with unit quaternions, SymPy expressions, URDF/MJ
 (Pinocchio, MuJoCo). All produce :class:`Model` instances.
 """
 
+from ._assembly import AssemblyResidual as AssemblyResidual
+from ._assembly import assemble as assemble
+from ._assembly import assembly_residual as assembly_residual
+from ._assembly import consistent as consistent
 from ._check import ModelReport as ModelReport
 from ._check import check_model as check_model
 from ._function import FunctionConstraint as FunctionConstraint
@@ -19,6 +23,7 @@ from ._protocol import State as State
 
 __all__ = [
     "CONSTRAINT_KINDS",
+    "AssemblyResidual",
     "ConstraintSpec",
     "ConstraintTerms",
     "FunctionConstraint",
@@ -28,5 +33,8 @@ __all__ = [
     "ModelReport",
     "ModelTerms",
     "State",
+    "assemble",
+    "assembly_residual",
     "check_model",
+    "consistent",
 ]

@@ -1,0 +1,374 @@
+"""A small mutable builder that produces an immutable :class:`PlanarModel`."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+from ...errors import InputError, ModelError, UnknownNameError
+from ._elements import (
+    GROUND,
+    AngleDriver,
+    Body,
+    ConstantSpeed,
+    Gear,
+    Joint,
+    JointActuator,
+    Point,
+    PointForce,
+    PointOnLine,
+    Prismatic,
+    Profile,
+    Revolute,
+    Rod,
+    RotationalSpring,
+    Spring,
+    Torque,
+    Weld,
+    _finite,
+    _unit,
+    _vec2,
+)
+from ._model import Actuator, ForceElement, OutputsFn, PlanarModel
+
+__all__ = ["PlanarBuilder", "PointRef"]
+
+#: A point: the name of a named point, or ``(body, (x_local, y_local))``
+#: (global coordinates on the ground, e.g. ``("ground", (2.0, 0.0))``).
+PointRef = str | tuple[str, Any]
+
+
+class PlanarBuilder:
+    """Describe a planar mechanism step by step, then :meth:`build` an immutable model.
+
+    Bodies get coordinates ``(x, y, θ)`` in the order they are added (point masses ``(x, y)``).
+    Points are referenced by name (see :meth:`point`) or as ``(body, (x, y))`` with local
+    coordinates (global ones on ``"ground"``). Every joint takes ``active=`` (is it in the
+    default active set) and one-row joints take ``unilateral=``.
+
+    Examples
+    --------
+    A pendulum: a bar of 1 m pinned to the ground at its end.
+
+    >>> from nonmin.model.planar import PlanarBuilder
+    >>> b = PlanarBuilder("pendulum")
+    >>> b.body("bar", mass=1.0, inertia=1 / 12, points={"tip": (0.5, 0.0)})
+    'bar'
+    >>> b.revolute("pivot", ("ground", (0.0, 0.0)), ("bar", (-0.5, 0.0)))
+    'pivot'
+    >>> model = b.build()
+    >>> model.n, model.constraint_names
+    (3, ('pivot',))
+    """
+
+    def __init__(self, name: str, *, gravity: Iterable[float] = (0.0, -9.81), description: str = "") -> None:
+        self.name = str(name)
+        self.gravity = _vec2(gravity, "gravity")
+        self.description = description
+        self._bodies: list[Body] = []
+        self._points: dict[str, Point] = {}
+        self._joints: list[Joint] = []
+        self._inactive: set[str] = set()
+        self._active_unilateral: set[str] = set()
+        self._forces: list[ForceElement] = []
+        self._actuators: list[Actuator] = []
+        self._outputs: list[str] = []
+
+    # ------------------------------------------------------------------ bodies and points
+    def _body_known(self, name: str, where: str) -> None:
+        if name != GROUND and name not in {b.name for b in self._bodies}:
+            raise UnknownNameError(
+                f"{where}: unknown body {name!r}; known bodies: {[GROUND] + [b.name for b in self._bodies]}"
+            )
+
+    def body(
+        self,
+        name: str,
+        *,
+        mass: float,
+        inertia: float,
+        points: Mapping[str, Iterable[float]] | None = None,
+    ) -> str:
+        """Add a rigid body (COM at its origin) with optional named points (local coordinates)."""
+        if inertia is None:
+            raise ModelError(f"body {name!r}: inertia is required (use point_mass() for a point mass)")
+        return self._add_body(Body(name, mass, inertia), points)
+
+    def point_mass(self, name: str, *, mass: float, points: Iterable[str] = ()) -> str:
+        """Add a point mass (coordinates x, y); ``points`` names points located at it."""
+        return self._add_body(Body(name, mass, None), {p: (0.0, 0.0) for p in points})
+
+    def _add_body(self, body: Body, points: Mapping[str, Iterable[float]] | None) -> str:
+        if any(b.name == body.name for b in self._bodies):
+            raise ModelError(f"duplicate body name {body.name!r}")
+        self._bodies.append(body)
+        for pname, loc in (points or {}).items():
+            self.point(pname, body.name, loc)
+        return body.name
+
+    def point(self, name: str, body: str, local: Iterable[float] = (0.0, 0.0)) -> str:
+        """Name a body-fixed point (global coordinates when ``body="ground"``)."""
+        if name in self._points:
+            raise ModelError(f"duplicate point name {name!r}")
+        self._body_known(body, f"point {name!r}")
+        self._points[name] = Point(body, _vec2(local, f"point {name!r}: local"))
+        return name
+
+    def ground_point(self, name: str, position: Iterable[float]) -> str:
+        """Name a fixed point of the ground (global coordinates)."""
+        return self.point(name, GROUND, position)
+
+    def _ref(self, ref: PointRef, where: str) -> Point:
+        if isinstance(ref, str):
+            if ref not in self._points:
+                raise UnknownNameError(f"{where}: unknown point {ref!r}; known: {sorted(self._points)}")
+            return self._points[ref]
+        if isinstance(ref, Point):
+            self._body_known(ref.body, where)
+            return ref
+        try:
+            body, loc = ref
+        except (TypeError, ValueError):
+            raise InputError(
+                f"{where}: a point must be a point name or (body, (x, y)), got {ref!r}"
+            ) from None
+        self._body_known(str(body), where)
+        return Point(str(body), _vec2(loc, f"{where}: local point"))
+
+    # ------------------------------------------------------------------ joints
+    def _add_joint(self, joint: Joint, active: bool) -> str:
+        if any(j.name == joint.name for j in self._joints):
+            raise ModelError(f"duplicate joint name {joint.name!r}")
+        if not isinstance(joint.name, str) or not joint.name:
+            raise InputError(f"joint name must be a non-empty string, got {joint.name!r}")
+        for body in joint.bodies:
+            self._body_known(body, f"joint {joint.name!r}")
+        for body in joint.needs_angle():
+            if body != GROUND and next(b for b in self._bodies if b.name == body).is_point_mass:
+                raise ModelError(
+                    f"joint {joint.name!r} ({type(joint).__name__}) needs the rotation of body "
+                    f"{body!r}, which is a point mass"
+                )
+        self._joints.append(joint)
+        if joint.kind == "unilateral":
+            if active:
+                self._active_unilateral.add(joint.name)
+        elif not active:
+            self._inactive.add(joint.name)
+        return joint.name
+
+    def revolute(self, name: str, a: PointRef, b: PointRef, *, active: bool = True) -> str:
+        """Pin joint: point a (on its body) coincides with point b (2 rows)."""
+        w = f"revolute {name!r}"
+        return self._add_joint(Revolute(name, self._ref(a, w), self._ref(b, w)), active)
+
+    def weld(self, name: str, a: PointRef, b: PointRef, *, angle: float = 0.0, active: bool = True) -> str:
+        """Rigid connection: pin plus ``θ_b − θ_a = angle`` (3 rows)."""
+        w = f"weld {name!r}"
+        return self._add_joint(
+            Weld(name, self._ref(a, w), self._ref(b, w), _finite(angle, f"{w}: angle")), active
+        )
+
+    def prismatic(
+        self,
+        name: str,
+        a: PointRef,
+        b: PointRef,
+        *,
+        axis: Iterable[float],
+        angle: float = 0.0,
+        active: bool = True,
+    ) -> str:
+        """Slider: b moves along the line through a with direction ``axis`` (fixed on a's body)."""
+        w = f"prismatic {name!r}"
+        return self._add_joint(
+            Prismatic(name, self._ref(a, w), _unit(axis, f"{w}: axis"), self._ref(b, w), _finite(angle, f"{w}: angle")),
+            active,
+        )
+
+    def point_on_line(
+        self,
+        name: str,
+        a: PointRef,
+        b: PointRef,
+        *,
+        axis: Iterable[float],
+        unilateral: bool = False,
+        active: bool | None = None,
+    ) -> str:
+        """Point b on the line through a along ``axis`` (on a's body); signed distance, left > 0.
+
+        With ``unilateral=True`` this is a contact ``gap = n·(p_b − p_a) ≥ 0`` with ``n`` the
+        left normal of the axis, inactive by default.
+        """
+        w = f"point_on_line {name!r}"
+        act = (not unilateral) if active is None else bool(active)
+        return self._add_joint(
+            PointOnLine(name, self._ref(a, w), _unit(axis, f"{w}: axis"), self._ref(b, w), bool(unilateral)),
+            act,
+        )
+
+    def rod(
+        self,
+        name: str,
+        a: PointRef,
+        b: PointRef,
+        *,
+        length: float,
+        unilateral: bool = False,
+        active: bool | None = None,
+    ) -> str:
+        """Distance ``|p_b − p_a| = length``; unilateral: a rope, ``length − |p_b − p_a| ≥ 0``."""
+        w = f"rod {name!r}"
+        L = _finite(length, f"{w}: length")
+        if not L > 0.0:
+            raise ModelError(f"{w}: length must be > 0, got {L}")
+        act = (not unilateral) if active is None else bool(active)
+        return self._add_joint(Rod(name, self._ref(a, w), self._ref(b, w), L, bool(unilateral)), act)
+
+    def gear(
+        self,
+        name: str,
+        body_a: str,
+        body_b: str,
+        *,
+        ratio: float,
+        offset: float = 0.0,
+        carrier: str = GROUND,
+        active: bool = True,
+    ) -> str:
+        """Gear / coupler: ``(θ_b − θ_c) = ratio (θ_a − θ_c) + offset`` (c: carrier, default ground)."""
+        w = f"gear {name!r}"
+        return self._add_joint(
+            Gear(name, body_a, body_b, _finite(ratio, f"{w}: ratio"), _finite(offset, f"{w}: offset"), carrier),
+            active,
+        )
+
+    def drive_angle(
+        self,
+        name: str,
+        body_b: str,
+        *,
+        body_a: str = GROUND,
+        profile: Profile | None = None,
+        start: float = 0.0,
+        speed: float = 0.0,
+        active: bool = True,
+    ) -> str:
+        """Rheonomic driver ``θ_b − θ_a = f(t)``; default ``f(t) = start + speed·t``.
+
+        ``profile`` is a callable ``t -> (f, ḟ, f̈)`` for other prescribed motions.
+        """
+        prof: Profile = (
+            ConstantSpeed(_finite(start, "start"), _finite(speed, "speed")) if profile is None else profile
+        )
+        if not callable(prof):
+            raise InputError(f"drive_angle {name!r}: profile must be callable t -> (f, fd, fdd)")
+        return self._add_joint(AngleDriver(name, body_a, body_b, prof), active)
+
+    # ------------------------------------------------------------------ forces and actuators
+    def _unique_force_name(self, name: str) -> None:
+        if any(f.name == name for f in self._forces):
+            raise ModelError(f"duplicate force element name {name!r}")
+
+    def spring(
+        self,
+        name: str,
+        a: PointRef,
+        b: PointRef,
+        *,
+        stiffness: float = 0.0,
+        rest_length: float = 0.0,
+        damping: float = 0.0,
+    ) -> str:
+        """Translational spring–damper between two points (``stiffness`` N/m, ``damping`` N·s/m)."""
+        w = f"spring {name!r}"
+        self._unique_force_name(name)
+        k = _finite(stiffness, f"{w}: stiffness")
+        c = _finite(damping, f"{w}: damping")
+        l0 = _finite(rest_length, f"{w}: rest_length")
+        if k < 0 or c < 0 or l0 < 0:
+            raise ModelError(f"{w}: stiffness, damping and rest_length must be ≥ 0, got {k}, {c}, {l0}")
+        self._forces.append(Spring(name, self._ref(a, w), self._ref(b, w), k, l0, c))
+        return name
+
+    def rotational_spring(
+        self,
+        name: str,
+        body_a: str,
+        body_b: str,
+        *,
+        stiffness: float = 0.0,
+        rest_angle: float = 0.0,
+        damping: float = 0.0,
+    ) -> str:
+        """Rotational spring–damper on ``θ_b − θ_a`` (N·m/rad, N·m·s/rad)."""
+        w = f"rotational_spring {name!r}"
+        self._unique_force_name(name)
+        for body in (body_a, body_b):
+            self._body_known(body, w)
+        k = _finite(stiffness, f"{w}: stiffness")
+        c = _finite(damping, f"{w}: damping")
+        if k < 0 or c < 0:
+            raise ModelError(f"{w}: stiffness and damping must be ≥ 0, got {k}, {c}")
+        self._forces.append(RotationalSpring(name, body_a, body_b, k, _finite(rest_angle, f"{w}: rest_angle"), c))
+        return name
+
+    def _unique_actuator(self, name: str) -> None:
+        if any(a.name == name for a in self._actuators):
+            raise ModelError(f"duplicate actuator name {name!r}")
+
+    def actuator(self, name: str, joint: str) -> str:
+        """A column of B at a joint: torque at a revolute, force along a prismatic joint."""
+        self._unique_actuator(name)
+        if not any(j.name == joint for j in self._joints):
+            raise UnknownNameError(
+                f"actuator {name!r}: unknown joint {joint!r}; known: {[j.name for j in self._joints]}"
+            )
+        self._actuators.append(JointActuator(name, joint))
+        return name
+
+    def torque(self, name: str, body_b: str, *, body_a: str = GROUND) -> str:
+        """A column of B: torque on body b (reaction on body a)."""
+        self._unique_actuator(name)
+        for body in (body_a, body_b):
+            self._body_known(body, f"torque {name!r}")
+        self._actuators.append(Torque(name, body_a, body_b))
+        return name
+
+    def force(self, name: str, at: PointRef, *, direction: Iterable[float]) -> str:
+        """A column of B: force along a fixed global ``direction`` (unit) at a point."""
+        self._unique_actuator(name)
+        w = f"force {name!r}"
+        self._actuators.append(PointForce(name, self._ref(at, w), _unit(direction, f"{w}: direction")))
+        return name
+
+    def output(self, *points: str) -> None:
+        """Report these named points' positions and velocities in ``model.outputs``."""
+        for p in points:
+            if p not in self._points:
+                raise UnknownNameError(f"output: unknown point {p!r}; known: {sorted(self._points)}")
+            self._outputs.append(p)
+
+    # ------------------------------------------------------------------ build
+    def build(self, *, outputs_fn: OutputsFn | None = None) -> PlanarModel:
+        """The immutable :class:`PlanarModel`."""
+        default = frozenset(
+            j.name
+            for j in self._joints
+            if (j.kind != "unilateral" and j.name not in self._inactive)
+            or j.name in self._active_unilateral
+        )
+        return PlanarModel(
+            name=self.name,
+            bodies=tuple(self._bodies),
+            joints=tuple(self._joints),
+            points=tuple(self._points.items()),
+            forces=tuple(self._forces),
+            actuators=tuple(self._actuators),
+            gravity=self.gravity,
+            default_active_names=default,
+            output_points=tuple(self._outputs),
+            outputs_fn=outputs_fn,
+            description=self.description,
+        )
