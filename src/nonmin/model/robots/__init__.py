@@ -1,0 +1,38 @@
+"""Robots from URDF and MJCF: Pinocchio and MuJoCo models as nonmin models.
+
+* :class:`RobotModel` — a rigid-body tree evaluated by Pinocchio (extra ``pin``), built with
+  ``RobotModel.from_urdf``, ``RobotModel.from_pinocchio`` or ``RobotModel.from_mjcf``
+  (MJCF parsed by MuJoCo, extra ``mujoco``; ``<equality>`` connect/weld/joint all imported).
+* :class:`FrameConstraint` — named, switchable constraints between frames: ``point`` (3D loop
+  closure), ``weld`` (6D), ``hinge`` (5D), ``planar_point``, ``planar_weld``,
+  ``point_on_plane`` and unilateral ``contact``; :class:`JointCoupling` — polynomial joint
+  coupling.
+* :func:`data_path` — path of a robot file shipped with nonmin (``nonmin/data/robots``).
+
+The constraint values and :func:`data_path` need no optional dependency; :class:`RobotModel`
+is imported lazily, so ``import nonmin.model.robots`` never imports Pinocchio and a missing
+Pinocchio raises :class:`~nonmin.errors.MissingDependencyError` naming the extra ``pin`` only
+when :class:`RobotModel` is used.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from ._constraints import FRAME_CONSTRAINT_TYPES as FRAME_CONSTRAINT_TYPES
+from ._constraints import FrameConstraint as FrameConstraint
+from ._constraints import JointCoupling as JointCoupling
+from ._data import data_path as data_path
+
+if TYPE_CHECKING:
+    from ._pinocchio import RobotModel as RobotModel
+
+__all__ = ["FRAME_CONSTRAINT_TYPES", "FrameConstraint", "JointCoupling", "RobotModel", "data_path"]
+
+
+def __getattr__(name: str) -> Any:
+    if name == "RobotModel":
+        from ._pinocchio import RobotModel
+
+        return RobotModel
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
