@@ -567,6 +567,24 @@ class RobotModel(Model):
         T, Td = self._velocity_map(qv, v)
         return T @ self._q(qdd, "qdd") + Td @ v
 
+    def from_mujoco_qpos(self, qpos: ArrayLike) -> FloatArray:
+        """nonmin coordinates from a MuJoCo ``qpos`` (quaternions ``w,x,y,z`` → ``x,y,z,w``)."""
+        q = self._q(qpos, "qpos").copy()
+        for b in self._blocks:
+            if b.kind != "vector":
+                sl = _quat_slice(b)
+                q[sl] = np.roll(q[sl], -1)
+        return q
+
+    def to_mujoco_qpos(self, q: ArrayLike) -> FloatArray:
+        """MuJoCo ``qpos`` from nonmin coordinates (quaternions ``x,y,z,w`` → ``w,x,y,z``)."""
+        qpos = self._q(q).copy()
+        for b in self._blocks:
+            if b.kind != "vector":
+                sl = _quat_slice(b)
+                qpos[sl] = np.roll(qpos[sl], 1)
+        return qpos
+
     # ------------------------------------------------------------------ dynamics
     def mass_matrix(self, q: ArrayLike) -> FloatArray:
         """``M = Tᵀ M_v T`` (Pinocchio CRBA incl. armature, symmetrized), shape (n, n)."""
