@@ -40,10 +40,13 @@ Run ``python benchmarks/sim_bench.py`` (``--quick`` for a smoke run); results go
 
 from __future__ import annotations
 
+import argparse
+import json
 import math
 import os
 import platform
 import statistics
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -727,3 +730,284 @@ def machine_info() -> dict[str, Any]:
         versions["nonmin"] = "not importable"
     return {"platform": platform.platform(), "cpu": cpu, "cpu_count": os.cpu_count(),
             "versions": versions}
+
+
+# ---------------------------------------------------------------------------------------------
+# nonmin
+# ---------------------------------------------------------------------------------------------
+def nonmin_mechanism(bar: BarMechanism) -> Any:
+    """The library mechanism that is the same physical system as ``bar``."""
+    from nonmin import library
+
+    if bar.name == "crossed_four_bar":
+        return library.get("crossed_four_bar")
+    if bar.name.startswith("A02_N"):
+        return library.get("A02_n_four_bar", n=int(bar.name[5:]))
+    raise KeyError(bar.name)
+
+
+def _nonmin_to_com(bar: BarMechanism, model: Any, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """Per-bar COM state (T, nb, 6) from nonmin planar-body coordinates (x, y, θ per body)."""
+    names = list(model.coordinate_names)
+    out = np.zeros((q.shape[0], bar.nb, 6))
+    for i, body in enumerate(_nonmin_body_names(bar)):
+        for k, suffix in enumerate(("x", "y", "theta")):
+            col = names.index(f"{body}.{suffix}")
+            out[:, i, k] = q[:, col]
+            out[:, i, 3 + k] = qd[:, col]
+    return out
+
+
+def _nonmin_body_names(bar: BarMechanism) -> list[str]:
+    if bar.name == "crossed_four_bar":
+        return ["crank", "coupler", "rocker"]
+    n = (bar.nb - 1) // 2
+    return [f"crank{i}" for i in range(n + 1)] + [f"coupler{i}" for i in range(1, n + 1)]
+
+
+def run_nonmin(bar: BarMechanism, method: str, *, dt: float | None = None,
+               rtol: float = 1e-8, atol: float = 1e-10, stabilization: str = "projection",
+               repeat: int = 3) -> RunResult:
+    from nonmin.sim import simulate
+
+    mech = nonmin_mechanism(bar)
+    t_eval = sample_times(bar.t_final)
+    kw: dict[str, Any] = {"method": method, "stabilization": stabilization, "t_eval": t_eval}
+    if dt is not None:
+        kw["dt"] = dt
+    if method not in ("rk4", "midpoint"):
+        kw.update(rtol=rtol, atol=atol)
+    walls = []
+    status = "ok"
+    traj = None
+    for rep in range(repeat + 1):
+        t0 = time.perf_counter()
+        traj = simulate(mech, (0.0, bar.t_final), throw=False, progress=False, **kw)
+        t1 = time.perf_counter()
+        if rep > 0:
+            walls.append(t1 - t0)
+        if not traj.success:
+            status = f"failed: {traj.message[:80]}"
+            break
+    assert traj is not None
+    com = _nonmin_to_com(bar, mech.model, np.asarray(traj.q), np.asarray(traj.qd))
+    setting = f"{method} {stabilization}" + (f" rtol={rtol:g}" if "dt" not in kw else "")
+    return RunResult("nonmin", setting, bar.name, dt, np.asarray(traj.t), com,
+                     walls if status == "ok" else [], status,
+                     extra={"n_steps": traj.n_steps, "n_rhs": traj.n_rhs})
+
+
+# ---------------------------------------------------------------------------------------------
+# driver
+# ---------------------------------------------------------------------------------------------
+PeerSpec = tuple[str, dict[str, Any]]
+
+
+def default_configs(mech: BarMechanism, quick: bool) -> list[PeerSpec]:
+    """Which engine settings run on a mechanism."""
+    big = mech.nb > 10
+    dts = [1e-3] if (quick or big) else [1e-3, 1e-4]
+    cfg: list[PeerSpec] = []
+    for dt in dts:
+        cfg.append(("exudyn", {"dt": dt}))
+    for dt in ([2e-3, *dts] if not quick else dts):
+        cfg.append(("mujoco", {"dt": dt, "setting": "default"}))
+        cfg.append(("mujoco", {"dt": dt, "setting": "stiff"}))
+    for dt in dts:
+        cfg.append(("pinocchio", {"dt": dt}))
+    cfg += NONMIN_CONFIGS.get(mech.name, [])
+    return cfg
+
+
+#: nonmin settings per mechanism (chosen by the accuracy/cost sweep, see benchmarks/SIM.md).
+NONMIN_CONFIGS: dict[str, list[PeerSpec]] = {
+    "crossed_four_bar": [
+        ("nonmin", {"method": "rk4", "dt": 5e-4}),
+        ("nonmin", {"method": "rk4", "dt": 1e-3}),
+        ("nonmin", {"method": "dopri5", "rtol": 1e-9, "atol": 1e-11}),
+    ],
+    "A02_N2": [
+        ("nonmin", {"method": "rk4", "dt": 1e-3}),
+        ("nonmin", {"method": "dopri5", "rtol": 1e-9, "atol": 1e-11}),
+    ],
+    "A02_N40": [
+        ("nonmin", {"method": "rk4", "dt": 1e-3}),
+    ],
+}
+
+RUNNERS: dict[str, Callable[..., RunResult]] = {
+    "exudyn": run_exudyn,
+    "mujoco": run_mujoco,
+    "pinocchio": run_pinocchio,
+    "nonmin": run_nonmin,
+}
+
+
+def reference_for(mech: BarMechanism) -> Callable[[np.ndarray], np.ndarray]:
+    if mech.name.startswith("A02_N"):
+        return a02_reference(int(mech.name[5:]))
+    return reduced_reference(mech)
+
+
+def run_mechanism(mech: BarMechanism, configs: Sequence[PeerSpec], repeat: int,
+                  log: Callable[[str], None] = print) -> list[dict[str, Any]]:
+    ref_fn = reference_for(mech)
+    t_ref = sample_times(mech.t_final)
+    ref_vals = ref_fn(t_ref)
+
+    def cached_ref(t: np.ndarray) -> np.ndarray:
+        if len(t) == len(t_ref) and np.allclose(t, t_ref, atol=1e-9):
+            return ref_vals
+        return ref_fn(t)
+
+    rows = []
+    for engine, kw in configs:
+        try:
+            res = RUNNERS[engine](mech, repeat=repeat, **kw)
+            row = summarize(mech, res, cached_ref)
+        except Exception as exc:  # an engine that cannot run is a result, not a crash
+            row = {"engine": engine, "setting": str(kw), "mechanism": mech.name,
+                   "dt": kw.get("dt"), "status": f"error: {type(exc).__name__}: {exc}"[:200],
+                   "on_branch": False}
+        rows.append(row)
+        log(_row_line(row))
+    return rows
+
+
+def _row_line(r: dict[str, Any]) -> str:
+    def f(x: Any) -> str:
+        return "-" if x is None else (f"{x:.2e}" if isinstance(x, float) else str(x))
+
+    return (f"{r['mechanism']:>16} {r['engine']:>9} {r['setting'][:34]:<34} dt={f(r.get('dt')):>8} "
+            f"branch={'yes' if r.get('on_branch') else 'NO ':<3} "
+            f"closure={f(r.get('closure_max')):>9} dE={f(r.get('energy_drift')):>9} "
+            f"err={f(r.get('error_vs_reference_max')):>9} "
+            f"wall/s={f(r.get('wall_per_sim_s')):>9} {r.get('status', '')}")
+
+
+def compare(rows: list[dict[str, Any]], closure_target: float = 1e-10,
+            energy_target: float = 1e-6) -> dict[str, Any]:
+    """The speed target: nonmin's fastest accurate run vs the fastest peer on the branch."""
+    ok = [r for r in rows if r.get("on_branch") and "wall_per_sim_s" in r]
+    peers = [r for r in ok if r["engine"] != "nonmin"]
+    mine = [r for r in ok if r["engine"] == "nonmin" and r["closure_max"] <= closure_target
+            and r["energy_drift"] <= energy_target]
+    out: dict[str, Any] = {"closure_target": closure_target, "energy_target": energy_target}
+    best_peer = min(peers, key=lambda r: r["wall_per_sim_s"]) if peers else None
+    best_mine = min(mine, key=lambda r: r["wall_per_sim_s"]) if mine else None
+    out["fastest_peer_on_branch"] = _tag(best_peer)
+    out["fastest_nonmin_meeting_targets"] = _tag(best_mine)
+    if best_peer and best_mine:
+        out["ratio_nonmin_over_fastest_peer"] = (best_mine["wall_per_sim_s"]
+                                                 / best_peer["wall_per_sim_s"])
+    equal = [r for r in peers if best_mine is not None
+             and r["closure_max"] <= best_mine["closure_max"] * 10
+             and r["energy_drift"] <= best_mine["energy_drift"] * 10]
+    out["peers_with_equal_or_better_accuracy"] = [_tag(r) for r in equal]
+    if best_mine and equal:
+        fastest_equal = min(equal, key=lambda r: r["wall_per_sim_s"])
+        out["ratio_nonmin_over_fastest_equal_accuracy_peer"] = (
+            best_mine["wall_per_sim_s"] / fastest_equal["wall_per_sim_s"])
+    return out
+
+
+def _tag(r: dict[str, Any] | None) -> dict[str, Any] | None:
+    if r is None:
+        return None
+    keys = ("engine", "setting", "dt", "closure_max", "energy_drift", "wall_per_sim_s")
+    return {k: r.get(k) for k in keys}
+
+
+def write_markdown(path: Path, results: dict[str, Any]) -> None:
+    info = results["machine"]
+    lines = ["# Simulation benchmark: nonmin vs Exudyn, MuJoCo, Pinocchio", "",
+             f"Generated by `{results['command']}` on {results['date_utc']}.", "",
+             "Machine: " + ", ".join(f"{k}={v}" for k, v in info.items() if k != "versions"),
+             "", "Versions: " + ", ".join(f"{k} {v}" for k, v in info["versions"].items()), "",
+             f"Load average (1, 5, 15 min) before: {results['load_before']}, after: "
+             f"{results['load_after']}. Wall times: median of {results['repeat']} timed runs "
+             "after one warm-up run, all engines in the same process; setup excluded. "
+             f"Branch tolerance {BRANCH_TOL} rad; samples every {SAMPLE_DT} s.", "",
+             "Definitions: closure = largest separation of two bar ends that a joint keeps "
+             "together [m]; dE = max |E(t) − E(0)| [J]; err = max |B(t) − B_ref(t)| of the "
+             "first bar's end against the exact 1-DOF reduction [m]; wall/s = wall-clock "
+             "seconds per simulated second.", ""]
+    for mech_name, block in results["mechanisms"].items():
+        lines += [f"## {mech_name}", "", "| engine | setting | dt [s] | on branch | closure [m] "
+                  "| dE [J] | err [m] | wall/s | status |", "|---|---|---|---|---|---|---|---|---|"]
+        for r in block["rows"]:
+            def f(x: Any) -> str:
+                if x is None:
+                    return "-"
+                return f"{x:.2e}" if isinstance(x, float) else str(x)
+
+            lines.append(
+                f"| {r['engine']} | {r['setting']} | {f(r.get('dt'))} | "
+                f"{'yes' if r.get('on_branch') else '**no**'} | {f(r.get('closure_max'))} | "
+                f"{f(r.get('energy_drift'))} | {f(r.get('error_vs_reference_max'))} | "
+                f"{f(r.get('wall_per_sim_s'))} | {r.get('status', '')} |")
+        c = block["comparison"]
+        lines += ["", "Speed target (nonmin's fastest run with closure ≤ "
+                  f"{c['closure_target']:g} m and dE ≤ {c['energy_target']:g} J vs the fastest "
+                  "peer that stays on the branch):", "",
+                  f"- fastest peer on branch: {c['fastest_peer_on_branch']}",
+                  f"- fastest nonmin meeting targets: {c['fastest_nonmin_meeting_targets']}",
+                  f"- ratio nonmin / fastest peer: {c.get('ratio_nonmin_over_fastest_peer')}",
+                  "- peers with equal or better accuracy (closure and dE within 10× of "
+                  f"nonmin's): {c['peers_with_equal_or_better_accuracy'] or 'none'}",
+                  f"- ratio nonmin / fastest equal-accuracy peer: "
+                  f"{c.get('ratio_nonmin_over_fastest_equal_accuracy_peer')}", ""]
+    lines += results.get("discussion", [])
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="short horizons, one repeat")
+    ap.add_argument("--repeat", type=int, default=3, help="timed runs per setting (median)")
+    ap.add_argument("--mechanisms", default="crossed_four_bar,A02_N2,A02_N40")
+    ap.add_argument("--engines", default="exudyn,mujoco,pinocchio,nonmin")
+    ap.add_argument("--json", default=str(HERE / "results" / "sim_bench.json"))
+    ap.add_argument("--markdown", default=str(HERE / "SIM.md"))
+    args = ap.parse_args(argv)
+    repeat = 1 if args.quick else args.repeat
+    engines = set(args.engines.split(","))
+    mechs: list[BarMechanism] = []
+    for name in args.mechanisms.split(","):
+        if name == "crossed_four_bar":
+            mechs.append(crossed_four_bar_mechanism(library_four_bar_params()))
+        elif name.startswith("A02_N"):
+            mechs.append(a02_mechanism(int(name[5:])))
+        else:
+            raise SystemExit(f"unknown mechanism {name!r}")
+    if args.quick:
+        mechs = [BarMechanism(**{**m.__dict__, "t_final": min(m.t_final, 2.0)}) for m in mechs]
+    load_before = os.getloadavg()
+    results: dict[str, Any] = {
+        "command": "python " + " ".join([Path(sys.argv[0]).name, *(argv or sys.argv[1:])]),
+        "date_utc": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "machine": machine_info(), "repeat": repeat, "quick": args.quick,
+        "mechanisms": {},
+    }
+    for mech in mechs:
+        cfgs = [c for c in default_configs(mech, args.quick) if c[0] in engines]
+        rows = run_mechanism(mech, cfgs, repeat)
+        results["mechanisms"][mech.name] = {"t_final": mech.t_final, "notes": mech.notes,
+                                            "rows": rows, "comparison": compare(rows)}
+        print(json.dumps(results["mechanisms"][mech.name]["comparison"], indent=1))
+    results["load_before"] = [round(x, 2) for x in load_before]
+    results["load_after"] = [round(x, 2) for x in os.getloadavg()]
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).write_text(json.dumps(results, indent=1, default=float), encoding="utf-8")
+    write_markdown(Path(args.markdown), results)
+    print(f"wrote {args.json} and {args.markdown}")
+    return 0
+
+
+def library_four_bar_params() -> FourBarParams:
+    """Parameters of nonmin's library crossed four-bar (the peers model the same system)."""
+    return FourBarParams()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
