@@ -1,0 +1,56 @@
+"""Simulation through singular configurations and switching topology.
+
+One entry point, :func:`simulate`, with pluggable integrators (:data:`METHODS`: ``"rk4"``,
+``"dopri5"``, ``"midpoint"``), stabilizations (:data:`STABILIZATIONS`: ``"none"``,
+``"baumgarte"``, ``"projection"``), events with transitions as values (:class:`Event`,
+:class:`Activate`, :class:`Deactivate`, :class:`Reset`), automatic unilateral contact, and an
+immutable :class:`Trajectory` result that saves to one self-describing file.
+"""
+
+from ._events import Activate as Activate
+from ._events import Deactivate as Deactivate
+from ._events import Event as Event
+from ._events import EventRecord as EventRecord
+from ._events import Reset as Reset
+from ._integrators import METHODS as METHODS
+from ._integrators import RK4 as RK4
+from ._integrators import DormandPrince5 as DormandPrince5
+from ._integrators import ImplicitMidpoint as ImplicitMidpoint
+from ._integrators import Integrator as Integrator
+from ._integrators import StepperState as StepperState
+from ._integrators import StepResult as StepResult
+from ._simulate import DEFAULT_DT as DEFAULT_DT
+from ._simulate import simulate as simulate
+from ._stabilization import STABILIZATIONS as STABILIZATIONS
+from ._stabilization import Baumgarte as Baumgarte
+from ._stabilization import NoStabilization as NoStabilization
+from ._stabilization import Projection as Projection
+from ._stabilization import Stabilization as Stabilization
+from ._trajectory import Status as Status
+from ._trajectory import Trajectory as Trajectory
+from ._trajectory import load_trajectory as load_trajectory
+
+__all__ = [
+    "DEFAULT_DT",
+    "METHODS",
+    "RK4",
+    "STABILIZATIONS",
+    "Activate",
+    "Baumgarte",
+    "Deactivate",
+    "DormandPrince5",
+    "Event",
+    "EventRecord",
+    "ImplicitMidpoint",
+    "Integrator",
+    "NoStabilization",
+    "Projection",
+    "Reset",
+    "Stabilization",
+    "Status",
+    "StepResult",
+    "StepperState",
+    "Trajectory",
+    "load_trajectory",
+    "simulate",
+]

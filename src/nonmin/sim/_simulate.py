@@ -1,0 +1,778 @@
+"""The hybrid simulation driver :func:`simulate`.
+
+One accepted step of the driver:
+
+1. the integrator advances ``y = (q, qd)`` with the active set (and controller state) frozen;
+   the right-hand side is ``qdd`` of the drift-tolerant projection dynamics (corrected eq.
+   (ddq_sim)) from :func:`nonmin.core.solve_dynamics`' kernel, one factorization per call;
+2. the stabilization projects the new state (mass metric by default);
+3. every guard (user events, and automatic contact guards) is compared with its value at the
+   step start; for the earliest crossing the step is re-integrated from its start to the
+   located time (Brent's method on the partial step size, |Δt| ≤ 1e-13 s), so the located state
+   is exactly what the integrator produces there;
+4. the transition is applied (activation with the impact map, deactivation, or a reset) and the
+   integration restarts from the event.
+
+Unilateral contact (constraint kind ``"unilateral"``, ``contact=True``): while inactive the
+guard is the gap, crossing downward → impact with Newton's restitution; if the bounce is too
+small to resolve (separation speed ≤ ``impact_velocity_threshold`` or predicted flight time
+≤ ``2·dt``) the impact is plastic and the contact becomes persistent (Zeno accumulation point
+handled by truncation). While active the guard is the normal force ``λ = (A⁺)ᵀ f_c`` restricted
+to the contact row (compressive ≥ 0, no multipliers in the dynamics); it is released when λ
+crosses zero *and* the released gap acceleration is separating (no chattering).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import brentq
+
+from ..core.dynamics import _solve
+from ..core.linalg import range_basis
+from ..errors import (
+    InputError,
+    NonFiniteError,
+    NonminError,
+    NotPositiveDefiniteError,
+    ShapeError,
+    SimulationError,
+    UnknownNameError,
+    ZenoError,
+)
+from ..model import Model
+from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
+from ._integrators import METHODS, Integrator, StepperState
+from ._progress import Progress
+from ._stabilization import Projection, Stabilization, resolve_stabilization
+from ._trajectory import Status, Trajectory
+
+__all__ = ["DEFAULT_DT", "simulate"]
+
+FloatArray = NDArray[np.float64]
+
+#: Default fixed step (s) of fixed-step methods when ``dt`` is not given.
+DEFAULT_DT = 1e-3
+
+#: Absolute tolerance (s) of event location (Brent's method).
+EVENT_XTOL = 1e-13
+
+_KNOWN_EXTRA = (
+    "rank_rtol",
+    "impact_velocity_threshold",
+    "zeno_max_events",
+    "zeno_window",
+    "project_initial",
+    "h0",
+)
+
+
+# --------------------------------------------------------------------------- evaluation
+
+
+class _Point(NamedTuple):
+    """Full evaluation of the dynamics at one state (what a sample records)."""
+
+    t: float
+    q: FloatArray
+    qd: FloatArray
+    qdd: FloatArray
+    f_c: FloatArray
+    u: FloatArray
+    rank: int
+    mu: float
+    L: FloatArray
+    lam: FloatArray
+    A: FloatArray
+    gamma: FloatArray
+    phi: FloatArray
+    velocity: FloatArray
+    holonomic: NDArray[np.bool_]
+    energy: float
+
+
+@dataclass
+class _System:
+    """Model + controller + stabilization bias, with the active set and controller state."""
+
+    model: Model
+    controller: Any
+    stab: Stabilization
+    rank_rtol: float | None
+    n: int
+    k: int
+    active: frozenset[str]
+    cstate: Any
+    n_rhs: int = 0
+
+    def _forces(self, t: float, q: FloatArray, qd: FloatArray) -> tuple[Any, FloatArray, FloatArray]:
+        terms = self.model.evaluate(t, q, qd, self.active)
+        g = terms.h + terms.f_passive
+        if self.controller is not None:
+            u = np.asarray(self.controller(t, q, qd, self.cstate, active=self.active), dtype=float)
+            if u.shape != (self.k,):
+                raise ShapeError(f"controller must return u of shape ({self.k},), got shape {u.shape}")
+            g = g + terms.B @ u
+        else:
+            u = np.zeros(self.k)
+        return terms, g, u
+
+    def rhs(self, t: float, y: FloatArray) -> FloatArray:
+        """``F(t, y) = (qd, qdd)``."""
+        self.n_rhs += 1
+        n = self.n
+        q, qd = y[:n], y[n:]
+        terms, g, _ = self._forces(t, q, qd)
+        ct = terms.constraints
+        basis = range_basis(ct.A, self.rank_rtol)
+        qdd, _, _, _ = _solve(terms.M, g, basis, self.stab.bias(ct), None)
+        if not np.all(np.isfinite(qdd)):
+            raise SimulationError(f"non-finite acceleration at t = {t:.12g}")
+        return np.concatenate((qd, qdd))
+
+    def point(self, t: float, q: FloatArray, qd: FloatArray) -> _Point:
+        """Everything recorded at a sample (one more model evaluation)."""
+        self.n_rhs += 1
+        terms, g, u = self._forces(t, q, qd)
+        ct = terms.constraints
+        basis = range_basis(ct.A, self.rank_rtol)
+        qdd, _, mu, L = _solve(terms.M, g, basis, self.stab.bias(ct), None)
+        if not np.all(np.isfinite(qdd)):
+            raise SimulationError(f"non-finite acceleration at t = {t:.12g}")
+        f_c = terms.M @ qdd - g
+        lam = basis.pinv().T @ f_c if ct.A.shape[0] else np.zeros(0)
+        energy = 0.5 * float(qd @ terms.M @ qd) + self.model.potential_energy(q)
+        return _Point(t, q, qd, qdd, f_c, u, int(basis.rank), float(mu), L, lam, ct.A, ct.gamma,
+                      ct.phi, ct.velocity, ct.holonomic, energy)
+
+    def free_gap_acceleration(self, t: float, q: FloatArray, qd: FloatArray, name: str) -> float:
+        """Acceleration of constraint ``name``'s gap if it were inactive."""
+        saved = self.active
+        self.active = saved - {name}
+        try:
+            y = self.rhs(t, np.concatenate((q, qd)))
+        finally:
+            self.active = saved
+        ct = self.model.constraint_terms(t, q, qd, frozenset({name}))
+        return float(ct.A[0] @ y[self.n :] + ct.gamma[0])
+
+
+# --------------------------------------------------------------------------- guards
+
+
+class _Watch(NamedTuple):
+    kind: str  # "user", "impact", "release"
+    name: str
+    direction: int
+    event: Event | None
+
+
+def _guard_value(sys: _System, w: _Watch, p: _Point) -> float:
+    if w.kind == "user":
+        assert w.event is not None
+        val = float(w.event.guard(p.t, p.q, p.qd, p.f_c))
+        if not math.isfinite(val):
+            raise SimulationError(f"event {w.name!r}: guard returned {val} at t = {p.t:.12g}")
+        return val
+    if w.kind == "impact":
+        ct = sys.model.constraint_terms(p.t, p.q, p.qd, frozenset({w.name}))
+        return float(ct.phi[0])
+    # release: compressive normal force of the active unilateral constraint
+    rows = sys.model.row_slices(sys.active)[w.name]
+    return float(p.lam[rows][0])
+
+
+def _crossed(g0: float, g1: float, direction: int) -> bool:
+    up = g0 < 0.0 <= g1
+    down = g0 > 0.0 >= g1
+    if direction > 0:
+        return up
+    if direction < 0:
+        return down
+    return up or down
+
+
+# --------------------------------------------------------------------------- recorder
+
+
+class _Recorder:
+    def __init__(self, model: Model) -> None:
+        self.names = model.constraint_names
+        self.cols: dict[str, list[Any]] = {
+            k: []
+            for k in ("t", "q", "qd", "qdd", "f_c", "u", "active_mask", "rank", "cond", "mu",
+                      "energy", "phi_norm", "velocity_residual_norm")
+        }
+
+    def add(self, p: _Point, active: frozenset[str]) -> None:
+        c = self.cols
+        c["t"].append(p.t)
+        c["q"].append(p.q.copy())
+        c["qd"].append(p.qd.copy())
+        c["qdd"].append(p.qdd)
+        c["f_c"].append(p.f_c)
+        c["u"].append(p.u)
+        c["active_mask"].append([nm in active for nm in self.names])
+        c["rank"].append(p.rank)
+        sv = np.linalg.svd(p.L, compute_uv=False)
+        c["cond"].append(float((sv[0] / sv[-1]) ** 2) if sv.size else 1.0)
+        c["mu"].append(p.mu)
+        c["energy"].append(p.energy)
+        hol = p.phi[p.holonomic]
+        c["phi_norm"].append(float(np.max(np.abs(hol))) if hol.size else 0.0)
+        c["velocity_residual_norm"].append(float(np.max(np.abs(p.velocity))) if p.velocity.size else 0.0)
+
+    def arrays(self, n: int, k: int) -> dict[str, Any]:
+        c = self.cols
+        N = len(c["t"])
+        return {
+            "t": np.asarray(c["t"], dtype=float),
+            "q": np.asarray(c["q"], dtype=float).reshape(N, n),
+            "qd": np.asarray(c["qd"], dtype=float).reshape(N, n),
+            "qdd": np.asarray(c["qdd"], dtype=float).reshape(N, n),
+            "f_c": np.asarray(c["f_c"], dtype=float).reshape(N, n),
+            "u": np.asarray(c["u"], dtype=float).reshape(N, k),
+            "active_mask": np.asarray(c["active_mask"], dtype=bool).reshape(N, len(self.names)),
+            "rank": np.asarray(c["rank"], dtype=np.int64),
+            "cond": np.asarray(c["cond"], dtype=float),
+            "mu": np.asarray(c["mu"], dtype=float),
+            "energy": np.asarray(c["energy"], dtype=float),
+            "phi_norm": np.asarray(c["phi_norm"], dtype=float),
+            "velocity_residual_norm": np.asarray(c["velocity_residual_norm"], dtype=float),
+        }
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _resolve_method(method: Integrator | str, dt: float | None, rtol: float, atol: float) -> Integrator:
+    if isinstance(method, Integrator):
+        return method
+    if isinstance(method, str):
+        if method not in METHODS:
+            raise UnknownNameError(f"method: unknown integrator {method!r}; known: {sorted(METHODS)}")
+        cls = METHODS[method]
+        if cls.adaptive:
+            return cls(rtol=rtol, atol=atol)  # type: ignore[call-arg]
+        return cls(dt=dt)  # type: ignore[call-arg]
+    raise InputError(
+        f"method must be an Integrator object or one of {sorted(METHODS)}, got {type(method).__name__}"
+    )
+
+
+def _positive(x: Any, name: str) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a positive number, got {x!r}") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise InputError(f"{name} must be a positive finite number, got {x!r}")
+    return v
+
+
+def _t_span(t_span: Any) -> tuple[float, float]:
+    if np.isscalar(t_span):
+        pair = (0.0, float(t_span))  # type: ignore[arg-type]
+    else:
+        arr = np.asarray(t_span, dtype=float)
+        if arr.shape != (2,):
+            raise ShapeError(f"t_span must be (t0, t1) or a final time, got shape {arr.shape}")
+        pair = (float(arr[0]), float(arr[1]))
+    if not all(math.isfinite(v) for v in pair):
+        raise NonFiniteError(f"t_span must be finite, got {pair}")
+    if not pair[1] > pair[0]:
+        raise InputError(f"t_span must be increasing (t0 < t1), got {pair}")
+    return pair
+
+
+def _vector(x: ArrayLike, name: str, n: int) -> FloatArray:
+    arr = np.array(x, dtype=float)
+    if arr.shape != (n,):
+        raise ShapeError(f"{name} must have shape ({n},), got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise NonFiniteError(f"{name} must be finite")
+    return arr
+
+
+def _check_names(model: Model, names: Iterable[str], what: str) -> None:
+    unknown = sorted(set(names).difference(model.constraint_names))
+    if unknown:
+        raise UnknownNameError(
+            f"{what}: unknown constraint name(s) {unknown} for model {model.name!r}; "
+            f"known: {list(model.constraint_names)}"
+        )
+
+
+def _restitution_of(restitution: float | dict[str, float], name: str) -> float:
+    if isinstance(restitution, dict):
+        return float(restitution.get(name, 0.0))
+    return float(restitution)
+
+
+# --------------------------------------------------------------------------- driver
+
+
+def simulate(
+    model: Any,
+    t_span: float | Sequence[float],
+    q0: ArrayLike | None = None,
+    qd0: ArrayLike | None = None,
+    *,
+    active: Iterable[str] | str | None = None,
+    method: Integrator | str = "rk4",
+    dt: float | None = None,
+    rtol: float = 1e-8,
+    atol: float = 1e-10,
+    stabilization: Stabilization | str | None = "projection",
+    controller: Any = None,
+    events: Iterable[Event] = (),
+    contact: bool = True,
+    restitution: float | dict[str, float] = 0.0,
+    t_eval: ArrayLike | None = None,
+    max_steps: int = 10_000_000,
+    throw: bool = True,
+    progress: bool | None = None,
+    **options: Any,
+) -> Trajectory:
+    """Simulate a constrained mechanical system through singularities and topology switches.
+
+    Parameters
+    ----------
+    model : Model or Mechanism
+        Any :class:`nonmin.model.Model`; or an object with ``.model`` and ``.state`` (a library
+        mechanism), whose state then supplies the defaults of ``q0``, ``qd0`` and ``active``.
+    t_span : (float, float) or float
+        ``(t0, t1)`` with ``t0 < t1``; a single number means ``(0, t1)``.
+    q0, qd0 : array_like, shape (n,)
+        Initial coordinates and velocities (qd0 defaults to zero).
+    active : iterable of str, optional
+        Initially active constraints (default ``model.default_active``).
+    method : str or Integrator, default "rk4"
+        ``"rk4"`` (fixed step ``dt``), ``"dopri5"`` (adaptive, ``rtol``/``atol``),
+        ``"midpoint"`` (implicit midpoint, fixed ``dt``), or an :class:`Integrator` object.
+    dt : float, optional
+        Step of fixed-step methods (default :data:`DEFAULT_DT`); for adaptive ones the largest
+        step allowed.
+    rtol, atol : float
+        Tolerances of adaptive methods.
+    stabilization : str or Stabilization, default "projection"
+        ``"none"``, ``"baumgarte"``, ``"projection"`` (mass-metric post-step projection).
+    controller : callable ``(t, q, qd, state, active=...) -> u``, optional
+        A :class:`nonmin.control.Controller` (``initial_state`` and ``update`` are used when
+        present); ``u`` has shape (k,) and enters as ``B(q) u``.
+    events : iterable of Event
+        User events (see :class:`Event`).
+    contact : bool, default True
+        Automatic impact/release handling of unilateral constraints.
+    restitution : float or dict, default 0.0
+        Newton restitution of automatic contact impacts (per constraint name with a dict).
+    t_eval : array_like, optional
+        Record only at these times (increasing, inside ``t_span``); default: every step.
+    max_steps : int
+        Fail after this many accepted steps.
+    throw : bool, default True
+        Raise on failure; with False return the partial trajectory with ``status`` failed.
+    progress : bool or None
+        Progress bar (None: only when stderr is a terminal).
+    **options
+        ``rank_rtol`` (rank tolerance of A), ``impact_velocity_threshold`` (m/s, default 1e-6),
+        ``zeno_max_events`` / ``zeno_window`` (raise :class:`ZenoError` when more than that many
+        events fire within that time window; defaults 50 and 1e-6 s), ``project_initial``
+        (project the initial state onto the constraints; default True with projection),
+        ``h0`` (first step of adaptive methods).
+
+    Returns
+    -------
+    Trajectory
+
+    Raises
+    ------
+    InputError, ShapeError, UnknownNameError
+        Bad arguments.
+    SimulationError, ZenoError, NotPositiveDefiniteError
+        When the integration cannot go on (unless ``throw=False``).
+    """
+    unknown = sorted(set(options).difference(_KNOWN_EXTRA))
+    if unknown:
+        raise InputError(
+            f"simulate: unknown keyword argument(s) {unknown}; known extra options: {list(_KNOWN_EXTRA)}"
+        )
+    # ---------------------------------------------------------------- model / mechanism
+    if not isinstance(model, Model):
+        mech = model
+        inner = getattr(mech, "model", None)
+        if not isinstance(inner, Model):
+            raise InputError(
+                f"model must be a nonmin Model or a mechanism with .model, got {type(model).__name__}"
+            )
+        model = inner
+        st = getattr(mech, "state", None)
+        if st is not None:
+            if q0 is None:
+                q0 = st.q
+            if qd0 is None:
+                qd0 = st.qd
+            if active is None:
+                active = st.active
+    n, k = model.n, model.k
+    t0, t1 = _t_span(t_span)
+    if q0 is None:
+        raise InputError("simulate: q0 is required for a bare model (shape (n,))")
+    q = _vector(q0, "q0", n)
+    qd = np.zeros(n) if qd0 is None else _vector(qd0, "qd0", n)
+    act = model.resolve_active(active)
+    stab = resolve_stabilization(stabilization)
+    if dt is not None:
+        dt = _positive(dt, "dt")
+    integ = _resolve_method(method, dt, _positive(rtol, "rtol"), _positive(atol, "atol"))
+    if integ.adaptive:
+        h0 = float(options.get("h0", 0.0))
+        if dt is not None and hasattr(integ, "h_max"):
+            integ = type(integ)(**{**integ.__dict__, "h_max": dt})
+    else:
+        step = getattr(integ, "dt", None) or dt or DEFAULT_DT
+        h0 = _positive(step, "dt")
+    events = tuple(events)
+    for ev in events:
+        if not isinstance(ev, Event):
+            raise InputError(f"events must be Event values, got {type(ev).__name__}")
+        tr = ev.transition
+        if isinstance(tr, Activate | Deactivate):
+            _check_names(model, tr.names, f"event {ev.name!r}")
+    if isinstance(restitution, dict):
+        _check_names(model, restitution, "restitution")
+        for nm, e in restitution.items():
+            if not 0.0 <= float(e) <= 1.0:
+                raise InputError(f"restitution[{nm!r}] must lie in [0, 1], got {e!r}")
+    elif not 0.0 <= float(restitution) <= 1.0:
+        raise InputError(f"restitution must lie in [0, 1], got {restitution!r}")
+    t_out: FloatArray | None = None
+    if t_eval is not None:
+        t_out = np.asarray(t_eval, dtype=float).ravel()
+        if t_out.size and (np.any(np.diff(t_out) < 0) or t_out[0] < t0 or t_out[-1] > t1):
+            raise InputError(f"t_eval must be non-decreasing and inside t_span {(t0, t1)}")
+    if controller is not None and not callable(controller):
+        raise InputError(f"controller must be callable, got {type(controller).__name__}")
+    if int(max_steps) < 1:
+        raise InputError(f"max_steps must be ≥ 1, got {max_steps!r}")
+    rank_rtol = options.get("rank_rtol")
+    v_thresh = float(options.get("impact_velocity_threshold", 1e-6))
+    zeno_max = int(options.get("zeno_max_events", 50))
+    zeno_window = float(options.get("zeno_window", 1e-6))
+    project_initial = bool(options.get("project_initial", isinstance(stab, Projection)))
+
+    cstate = controller.initial_state() if hasattr(controller, "initial_state") else None
+    system = _System(model, controller, stab, rank_rtol, n, k, act, cstate)
+    unilateral = tuple(c.name for c in model.constraints if c.kind == "unilateral") if contact else ()
+    meta = {
+        "model": _describe(model),
+        "options": {
+            "t_span": [t0, t1],
+            "method": integ.name or type(integ).__name__,
+            "integrator": repr(integ),
+            "dt": h0 if not integ.adaptive else dt,
+            "rtol": rtol,
+            "atol": atol,
+            "stabilization": repr(stab),
+            "contact": bool(contact),
+            "restitution": restitution,
+            "controller": None if controller is None else repr(controller),
+            "events": [e.name for e in events],
+            "rank_rtol": rank_rtol,
+        },
+        "initial_state": {"t": t0, "q": q.tolist(), "qd": qd.tolist(), "active": sorted(act)},
+    }
+    rec = _Recorder(model)
+    records: list[EventRecord] = []
+    status = Status.SUCCESS
+    message = "reached the end of t_span"
+    n_steps = 0
+    n_rejected = 0
+    bar = Progress(t0, t1, progress)
+    try:
+        if project_initial and act:
+            q, qd = stab.project(model, t0, q, qd, act, rank_rtol) if isinstance(stab, Projection) \
+                else Projection().project(model, t0, q, qd, act, rank_rtol)
+        t = t0
+        p = system.point(t, q, qd)
+        if t_out is None or (t_out.size and t_out[0] == t0):
+            rec.add(p, system.active)
+        out_i = 0 if t_out is None else int(np.searchsorted(t_out, t0, side="right"))
+        watches = _watches(events, system.active, unilateral)
+        gvals = [_guard_value(system, w, p) for w in watches]
+        state = integ.init(system.rhs, t, np.concatenate((q, qd)), h0)
+        recent_events: list[float] = []
+        while t < t1:
+            if n_steps >= max_steps:
+                raise SimulationError(f"max_steps = {max_steps} reached at t = {t:.12g}")
+            y_start, f_start, t_start = state.y, state.f, state.t
+            res = integ.step(system.rhs, state, t1)
+            n_rejected += res.n_rejected
+            n_steps += 1
+            h = res.h
+            t_new = res.state.t
+
+            def at(s: float, _y: FloatArray = y_start, _f: Any = f_start, _t: float = t_start) -> _Point:
+                """Projected state after a partial step of size s from the step start."""
+                if s <= 0.0:
+                    yy = _y
+                else:
+                    yy = integ.advance(system.rhs, _t, _y, _f, s)
+                qq, vv = stab.project(model, _t + s, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
+                return system.point(_t + s, qq, vv)
+
+            q1, qd1 = stab.project(model, t_new, res.state.y[:n].copy(), res.state.y[n:].copy(),
+                                   system.active, rank_rtol)
+            p1 = system.point(t_new, q1, qd1)
+            new_g = [_guard_value(system, w, p1) for w in watches]
+            fired = [i for i, w in enumerate(watches) if _crossed(gvals[i], new_g[i], w.direction)]
+            if fired:
+                best_s, best_i = h, -1
+                for i in fired:
+                    w = watches[i]
+
+                    def gfun(s: float, _w: _Watch = w) -> float:
+                        return _guard_value(system, _w, at(s))
+
+                    g_end = new_g[i]
+                    if g_end == 0.0:
+                        s_root = h
+                    else:
+                        s_root = float(brentq(gfun, 0.0, h, xtol=EVENT_XTOL, rtol=4.5e-16, maxiter=200))
+                        # take the bracket end on the far side of the crossing
+                        s_root = _past_root(gfun, s_root, h, gvals[i])
+                    if s_root < best_s or best_i < 0:
+                        best_s, best_i = s_root, i
+                w = watches[best_i]
+                pe = at(best_s) if best_s < h else p1
+                te = t_start + best_s
+                _sample_t_eval(rec, t_out, out_i, t_start, te, at, system)
+                out_i = _advance_out(t_out, out_i, te)
+                rec.add(pe, system.active)
+                before_active = system.active
+                qn, qdn, new_active, label, terminal, h_cap = _apply(
+                    system, w, pe, restitution, v_thresh, h0 if not integ.adaptive else 0.0
+                )
+                if isinstance(stab, Projection) and new_active:
+                    qn, qdn = stab.project(model, te, qn, qdn, new_active, rank_rtol)
+                system.active = new_active
+                records.append(EventRecord(te, label, _transition_text(w), pe.q.copy(), pe.qd.copy(),
+                                           qn.copy(), qdn.copy(), before_active, new_active))
+                recent_events.append(te)
+                while recent_events and recent_events[0] < te - zeno_window:
+                    recent_events.pop(0)
+                if len(recent_events) > zeno_max:
+                    raise ZenoError(
+                        f"{len(recent_events)} events within {zeno_window:g} s before t = {te:.12g} "
+                        f"(last: {label!r}); Zeno accumulation not resolved — raise "
+                        "impact_velocity_threshold or zeno_max_events"
+                    )
+                p = system.point(te, qn, qdn)
+                rec.add(p, system.active)
+                t = te
+                if controller is not None and hasattr(controller, "update"):
+                    system.cstate = controller.update(te, qn, qdn, system.cstate, active=system.active)
+                watches = _watches(events, system.active, unilateral)
+                gvals = [_guard_value(system, w2, p) for w2 in watches]
+                h_next = state.h if not integ.adaptive else res.state.h
+                if h_cap > 0 and integ.adaptive:
+                    h_next = min(h_next, h_cap)
+                state = StepperState(te, np.concatenate((qn, qdn)), None, h_next)
+                bar.update(t)
+                if terminal:
+                    status = Status.EVENT_TERMINATED
+                    message = f"terminal event {label!r} at t = {te:.12g}"
+                    break
+                continue
+            # no event: accept the step
+            _sample_t_eval(rec, t_out, out_i, t_start, t_new, at, system)
+            out_i = _advance_out(t_out, out_i, t_new)
+            if t_out is None:
+                rec.add(p1, system.active)
+            t = t_new
+            gvals = new_g
+            changed = not (np.array_equal(q1, res.state.y[:n]) and np.array_equal(qd1, res.state.y[n:]))
+            state = StepperState(t, np.concatenate((q1, qd1)), None if changed else res.state.f, res.state.h)
+            if controller is not None and hasattr(controller, "update"):
+                system.cstate = controller.update(t, q1, qd1, system.cstate, active=system.active)
+            bar.update(t)
+    except (SimulationError, NotPositiveDefiniteError, NonminError, FloatingPointError) as exc:
+        if throw:
+            bar.close()
+            raise
+        status = Status.FAILED
+        message = f"{type(exc).__name__}: {exc}"
+    finally:
+        bar.close()
+    arrays = rec.arrays(n, k)
+    return Trajectory(
+        **arrays,
+        constraint_names=model.constraint_names,
+        coordinate_names=model.coordinate_names,
+        actuator_names=model.actuator_names,
+        events=tuple(records),
+        status=status,
+        message=message,
+        n_steps=n_steps,
+        n_rhs=system.n_rhs,
+        n_rejected=n_rejected,
+        metadata=meta,
+    )
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _describe(model: Model) -> dict[str, Any]:
+    try:
+        return dict(model.describe())
+    except Exception:  # describe() is informative only
+        return {"name": model.name, "type": type(model).__name__}
+
+
+def _watches(events: tuple[Event, ...], active: frozenset[str], unilateral: tuple[str, ...]) -> list[_Watch]:
+    out = [_Watch("user", e.name, e.direction, e) for e in events]
+    for nm in unilateral:
+        if nm in active:
+            out.append(_Watch("release", nm, -1, None))
+        else:
+            out.append(_Watch("impact", nm, -1, None))
+    return out
+
+
+def _past_root(gfun: Callable[[float], float], s: float, h: float, g0: float) -> float:
+    """Nudge the located root to the side where the guard has left g0's sign (≤ 1e-13 s)."""
+    if g0 == 0.0:
+        return s
+    sign0 = math.copysign(1.0, g0)
+    g = gfun(s)
+    step = EVENT_XTOL / 4
+    tries = 0
+    while g * sign0 > 0 and tries < 8 and s < h:
+        s = min(h, s + step)
+        g = gfun(s)
+        step *= 2
+        tries += 1
+    return s
+
+
+def _transition_text(w: _Watch) -> str:
+    if w.kind == "user":
+        assert w.event is not None
+        return describe_transition(w.event.transition)
+    return f"{w.kind} {w.name}"
+
+
+def _advance_out(t_out: FloatArray | None, i: int, t: float) -> int:
+    if t_out is None:
+        return i
+    while i < t_out.size and t_out[i] <= t:
+        i += 1
+    return i
+
+
+def _sample_t_eval(
+    rec: _Recorder,
+    t_out: FloatArray | None,
+    i: int,
+    t_start: float,
+    t_end: float,
+    at: Callable[[float], _Point],
+    system: _System,
+) -> None:
+    """Record the requested output times in ``(t_start, t_end]`` (partial steps from t_start)."""
+    if t_out is None:
+        return
+    while i < t_out.size and t_out[i] <= t_end:
+        pt = at(float(t_out[i]) - t_start)
+        rec.add(pt._replace(t=float(t_out[i])), system.active)
+        i += 1
+
+
+def _apply(
+    system: _System,
+    w: _Watch,
+    p: _Point,
+    restitution: float | dict[str, float],
+    v_thresh: float,
+    dt_fixed: float,
+) -> tuple[FloatArray, FloatArray, frozenset[str], str, bool, float]:
+    """Apply the transition of watch ``w`` at point ``p``.
+
+    Returns (q, qd, active, label, terminal, h_cap) — h_cap > 0 caps the next adaptive step.
+    """
+    from ..core import impact_map
+
+    model = system.model
+    q, qd, act = p.q.copy(), p.qd.copy(), system.active
+    if w.kind == "user":
+        ev = w.event
+        assert ev is not None
+        tr = ev.transition
+        if isinstance(tr, Activate):
+            new = act | frozenset(tr.names)
+            ct = model.constraint_terms(p.t, q, qd, new)
+            if ct.A.shape[0]:
+                qd = impact_map(model.mass_matrix(q), ct.A, qd, restitution=tr.restitution,
+                                rtol=system.rank_rtol)
+            act = new
+        elif isinstance(tr, Deactivate):
+            act = act - frozenset(tr.names)
+        elif isinstance(tr, Reset):
+            out = tr.fn(p.t, q, qd, act)
+            if not (isinstance(out, tuple) and len(out) == 3):
+                raise InputError(f"event {ev.name!r}: Reset fn must return (q, qd, active)")
+            q = _vector(out[0], f"event {ev.name!r} reset q", system.n)
+            qd = _vector(out[1], f"event {ev.name!r} reset qd", system.n)
+            act = model.resolve_active(out[2])
+        return q, qd, act, ev.name, ev.terminal, 0.0
+    if w.kind == "impact":
+        name = w.name
+        e = _restitution_of(restitution, name)
+        new = act | {name}
+        ct_c = model.constraint_terms(p.t, q, qd, frozenset({name}))
+        v_minus = float(ct_c.A[0] @ qd)
+        M = model.mass_matrix(q)
+        ct = model.constraint_terms(p.t, q, qd, new)
+        persistent = e == 0.0 or e * abs(v_minus) <= v_thresh
+        h_cap = 0.0
+        if not persistent:
+            qd_b = impact_map(M, ct.A, qd, restitution=e, rtol=system.rank_rtol)
+            a_gap = _gap_acc(system, p.t, q, qd_b, name)  # the contact stays inactive
+            v_plus = float(ct_c.A[0] @ qd_b)
+            flight = math.inf if a_gap >= 0 else 2.0 * v_plus / (-a_gap)
+            if flight <= 2.0 * dt_fixed:
+                persistent = True
+            else:
+                h_cap = flight / 4.0 if math.isfinite(flight) else 0.0
+                return q, qd_b, act, f"impact:{name}", False, h_cap
+        qd = impact_map(M, ct.A, qd, restitution=0.0, rtol=system.rank_rtol)
+        # persistent contact — unless the contact force would pull right away
+        saved = system.active
+        system.active = new
+        try:
+            pn = system.point(p.t, q, qd)
+            lam = float(pn.lam[model.row_slices(new)[name]][0])
+            if lam < 0 and system.free_gap_acceleration(p.t, q, qd, name) > 0:
+                new = act
+        finally:
+            system.active = saved
+        return q, qd, new, f"impact:{name}", False, 0.0
+    # release
+    name = w.name
+    a_free = system.free_gap_acceleration(p.t, q, qd, name)
+    if a_free > 0.0:
+        return q, qd, act - {name}, f"release:{name}", False, 0.0
+    return q, qd, act, f"release-refused:{name}", False, 0.0
+
+
+def _gap_acc(system: _System, t: float, q: FloatArray, qd: FloatArray, name: str) -> float:
+    """Gap acceleration of ``name`` under the current active set (which excludes it)."""
+    y = system.rhs(t, np.concatenate((q, qd)))
+    ct = system.model.constraint_terms(t, q, qd, frozenset({name}))
+    return float(ct.A[0] @ y[system.n :] + ct.gamma[0])

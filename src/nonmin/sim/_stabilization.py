@@ -1,0 +1,183 @@
+"""Constraint stabilization: none, Baumgarte, and post-step projection in the mass metric.
+
+Only ``A qdd + γ = 0`` is enforced by the dynamics, so ``φ`` and ``A qd + φ_t`` drift. Three
+remedies, given as objects or registered names (:data:`STABILIZATIONS`):
+
+* :class:`NoStabilization` (``"none"``).
+* :class:`Baumgarte` (``"baumgarte"``): replaces the bias by ``γ + 2α (A qd + φ_t) + β² φ``
+  (:func:`nonmin.core.baumgarte_bias`), i.e. enforces ``φ̈ + 2αφ̇ + β²φ = 0``.
+* :class:`Projection` (``"projection"``): after every accepted step, Gauss–Newton iterations
+  ``q ← q + Sᵀ(−A⁺φ)`` (:func:`nonmin.core.position_correction`, the minimum-kinetic-metric
+  step onto φ = 0) until ``‖φ‖∞ ≤ tol``, then the velocity correction
+  ``qd ← qd + Sᵀ(−A⁺(A qd + φ_t))``; for scleronomic constraints this is exactly the plastic
+  impact map ``M̄⁻¹PM qd`` (:func:`nonmin.core.impact_map`, ERRATA "Drift"), and it also handles
+  rheonomic rows. ``metric="euclidean"`` uses the identity instead of M (for comparison only:
+  it drifts in energy).
+"""
+
+from __future__ import annotations
+
+from abc import ABC
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..core.dynamics import _optimal_mu
+from ..core.linalg import cho_solve, cholesky, range_basis
+from ..errors import InputError
+from ..model import ConstraintTerms, Model
+
+__all__ = ["STABILIZATIONS", "Baumgarte", "NoStabilization", "Projection", "Stabilization"]
+
+FloatArray = NDArray[np.float64]
+
+
+class Stabilization(ABC):  # noqa: B024 - every method has a neutral default
+    """Base class: a bias modification and/or a post-step projection (both optional)."""
+
+    name: ClassVar[str] = ""
+
+    def bias(self, ct: ConstraintTerms) -> FloatArray:
+        """The acceleration bias passed to the dynamics (default: ``γ``)."""
+        return ct.gamma
+
+    def project(
+        self,
+        model: Model,
+        t: float,
+        q: FloatArray,
+        qd: FloatArray,
+        active: frozenset[str],
+        rtol: float | None,
+    ) -> tuple[FloatArray, FloatArray]:
+        """Post-step correction of ``(q, qd)`` (default: none)."""
+        return q, qd
+
+
+@dataclass(frozen=True)
+class NoStabilization(Stabilization):
+    """No stabilization: the constraints drift at the integrator's accuracy."""
+
+    name: ClassVar[str] = "none"
+
+
+@dataclass(frozen=True)
+class Baumgarte(Stabilization):
+    """Baumgarte terms ``γ + 2α (A qd + φ_t) + β² φ`` (gains in 1/s, ≥ 0)."""
+
+    alpha: float = 10.0
+    beta: float = 10.0
+
+    name: ClassVar[str] = "baumgarte"
+
+    def __post_init__(self) -> None:
+        if not (self.alpha >= 0 and self.beta >= 0):
+            raise InputError(f"Baumgarte: alpha and beta must be ≥ 0, got {self.alpha}, {self.beta}")
+
+    def bias(self, ct: ConstraintTerms) -> FloatArray:
+        return ct.gamma + 2.0 * self.alpha * ct.velocity + self.beta * self.beta * ct.phi
+
+
+def _min_norm_correction(
+    M: FloatArray, A: FloatArray, r: FloatArray, rtol: float | None, metric: str
+) -> FloatArray:
+    """``Δ = Sᵀ(−A⁺r)``: minimizes ``½ΔᵀMΔ`` subject to ``AΔ = −r`` (Euclidean: ``−A⁺r``)."""
+    basis = range_basis(A, rtol)
+    x = -basis.solve(r)
+    if metric == "euclidean":
+        return x
+    n = M.shape[-1]
+    Q = basis.range_projector()
+    P = np.eye(n) - Q
+    PM = P @ M
+    PMP = PM @ P
+    mu = _optimal_mu(PMP, M, np.asarray(basis.rank, dtype=float))
+    L = cholesky(PMP + mu * Q)
+    return x - P @ cho_solve(L, M @ x)
+
+
+@dataclass(frozen=True)
+class Projection(Stabilization):
+    """Post-step projection onto ``φ = 0`` and ``A qd + φ_t = 0`` in the mass metric.
+
+    Parameters
+    ----------
+    tol : float
+        Stop the position iterations when ``‖φ‖∞ ≤ tol`` (absolute, in the units of φ).
+    max_iter : int
+        Gauss–Newton iterations at most (usually 1–2 are needed after a step).
+    velocity : bool
+        Also project the velocity.
+    metric : {"mass", "euclidean"}
+        Metric of the projection; ``"mass"`` (default) is the physically right one.
+    """
+
+    tol: float = 1e-12
+    max_iter: int = 8
+    velocity: bool = True
+    metric: str = "mass"
+
+    name: ClassVar[str] = "projection"
+
+    def __post_init__(self) -> None:
+        if self.metric not in ("mass", "euclidean"):
+            raise InputError(f"Projection: metric must be 'mass' or 'euclidean', got {self.metric!r}")
+        if not (self.tol > 0 and self.max_iter >= 0):
+            raise InputError(f"Projection: need tol > 0 and max_iter ≥ 0, got {self.tol}, {self.max_iter}")
+
+    def project(
+        self,
+        model: Model,
+        t: float,
+        q: FloatArray,
+        qd: FloatArray,
+        active: frozenset[str],
+        rtol: float | None,
+    ) -> tuple[FloatArray, FloatArray]:
+        if not active:
+            return q, qd
+        M = model.mass_matrix(q)
+        for _ in range(self.max_iter):
+            ct = model.constraint_terms(t, q, qd, active)
+            hol = ct.holonomic
+            if not hol.any():
+                break
+            phi = ct.phi[hol]
+            if float(np.max(np.abs(phi))) <= self.tol:
+                break
+            q = q + _min_norm_correction(M, ct.A[hol], phi, rtol, self.metric)
+            M = model.mass_matrix(q)
+        if self.velocity:
+            ct = model.constraint_terms(t, q, qd, active)
+            if ct.A.shape[0]:
+                qd = qd + _min_norm_correction(M, ct.A, ct.velocity, rtol, self.metric)
+        return q, qd
+
+
+STABILIZATIONS: dict[str, type[Stabilization]] = {
+    "none": NoStabilization,
+    "baumgarte": Baumgarte,
+    "projection": Projection,
+}
+
+
+def resolve_stabilization(spec: Stabilization | str | None) -> Stabilization:
+    """An instance from an object or a registered name."""
+    from ..errors import UnknownNameError
+
+    if spec is None:
+        return NoStabilization()
+    if isinstance(spec, Stabilization):
+        return spec
+    if isinstance(spec, str):
+        if spec not in STABILIZATIONS:
+            raise UnknownNameError(
+                f"stabilization: unknown name {spec!r}; known: {sorted(STABILIZATIONS)}"
+            )
+        return STABILIZATIONS[spec]()
+    raise InputError(
+        f"stabilization must be a Stabilization object or one of {sorted(STABILIZATIONS)}, "
+        f"got {type(spec).__name__}"
+    )
