@@ -14,6 +14,8 @@ package, imported below).
 from importlib import import_module as _import_module
 from importlib.util import find_spec as _find_spec
 
+from ._andrews import AndrewsModel as AndrewsModel
+from ._andrews import a03_andrews as a03_andrews
 from ._iftomm import a01_pendulum as a01_pendulum
 from ._iftomm import a02_n_four_bar as a02_n_four_bar
 from ._iftomm import n_four_bar_reference as n_four_bar_reference
@@ -29,9 +31,11 @@ from ._registry import names as names
 from ._registry import register as register
 
 __all__ = [
+    "AndrewsModel",
     "Mechanism",
     "a01_pendulum",
     "a02_n_four_bar",
+    "a03_andrews",
     "arm2r_wall",
     "crossed_four_bar",
     "crossed_four_bar_reference",
