@@ -64,8 +64,9 @@ def test_kkt_agreement_at_regular_configurations(sys_):
     assert rel(sol.qdd, qdd_k) <= REF_RTOL
     fc_k = A.T @ lam
     assert rel(sol.f_c, fc_k, np.linalg.norm(h + f)) <= REF_RTOL
-    assert np.array_equal(constraint_force(M, h, A, gamma, f), sol.f_c)
-    assert np.array_equal(forward_dynamics(M, h, A, gamma, f), sol.qdd)
+    # the three entry points give the same answer
+    assert rel(constraint_force(M, h, A, gamma, f), sol.f_c, np.linalg.norm(h + f)) <= 1e-13
+    assert rel(forward_dynamics(M, h, A, gamma, f), sol.qdd) <= 1e-13
 
 
 @given(systems(kinds=SINGULAR))
