@@ -133,7 +133,7 @@ def n_four_bar_reference(
     def rhs(_t: float, y: np.ndarray) -> list[float]:
         return [y[1], -g * c * math.cos(y[0]) / inertia]
 
-    sol = solve_ivp(rhs, (0.0, float(ts.max())), [math.pi / 2, -1.0], method="DOP853",
+    sol = solve_ivp(rhs, (0.0, max(float(ts.max()), 1e-9)), [math.pi / 2, -1.0], method="DOP853",
                     t_eval=ts, rtol=rtol, atol=atol)
     th, om = sol.y
     ct, st = np.cos(th), np.sin(th)

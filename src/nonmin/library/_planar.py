@@ -173,7 +173,7 @@ def crossed_four_bar_reference(
         m, dm, dV = mass_and_slope(float(y[0]))
         return [float(y[1]), -(0.5 * dm * y[1] ** 2 + dV) / m]
 
-    sol = solve_ivp(rhs, (0.0, float(ts.max())), [theta0, omega0], method="DOP853",
+    sol = solve_ivp(rhs, (0.0, max(float(ts.max()), 1e-9)), [theta0, omega0], method="DOP853",
                     t_eval=ts, rtol=rtol, atol=atol)
     if not sol.success:  # pragma: no cover
         raise RuntimeError(f"crossed_four_bar_reference: solve_ivp failed: {sol.message}")

@@ -124,6 +124,7 @@ def assemble(
     if not tol > 0:
         raise InputError(f"tol must be > 0, got {tol}")
     idx = _fixed_indices(model, fixed)
+    q_fixed, qd_fixed = q[idx].copy(), qd[idx].copy()
     zeros = np.zeros(n)
 
     # ---- positions: Gauss–Newton in the mass metric
@@ -144,6 +145,7 @@ def assemble(
         except NotPositiveDefiniteError as exc:
             raise AssemblyError(f"assemble: M is not positive definite on N(A) at iteration {it}: {exc}") from exc
         q = q + dq
+        q[idx] = q_fixed  # exactly, not only to round-off
         if _norm(dq) <= 1e-3 * tol and res > tol:
             # stagnation: a least-squares point that is not on the manifold
             ct = model.constraint_terms(t, q, zeros, act)
@@ -165,6 +167,7 @@ def assemble(
         A, r = _with_fixed(ct.A, vel, idx, n)
         try:
             qd = qd + position_correction(model.mass_matrix(q), A, r, rtol=rtol)
+            qd[idx] = qd_fixed
         except NotPositiveDefiniteError as exc:
             raise AssemblyError(f"assemble: M is not positive definite on N(A): {exc}") from exc
     vres = _norm(model.constraint_terms(t, q, qd, act).velocity)
