@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import brentq
 
-from ..core.dynamics import _solve
+from ..core import forward_dynamics, solve_dynamics
 from ..core.linalg import range_basis
 from ..errors import (
     InputError,
@@ -129,8 +129,7 @@ class _System:
         q, qd = y[:n], y[n:]
         terms, g, _ = self._forces(t, q, qd)
         ct = terms.constraints
-        basis = range_basis(ct.A, self.rank_rtol)
-        qdd, _, _, _ = _solve(terms.M, g, basis, self.stab.bias(ct), None)
+        qdd = forward_dynamics(terms.M, g, ct.A, self.stab.bias(ct), rtol=self.rank_rtol)
         if not np.all(np.isfinite(qdd)):
             raise SimulationError(f"non-finite acceleration at t = {t:.12g}")
         return np.concatenate((qd, qdd))
@@ -140,14 +139,14 @@ class _System:
         self.n_rhs += 1
         terms, g, u = self._forces(t, q, qd)
         ct = terms.constraints
-        basis = range_basis(ct.A, self.rank_rtol)
-        qdd, _, mu, L = _solve(terms.M, g, basis, self.stab.bias(ct), None)
+        sol = solve_dynamics(terms.M, g, ct.A, self.stab.bias(ct), rtol=self.rank_rtol)
+        qdd, f_c, mu, L = sol.qdd, sol.f_c, float(sol.mu), sol.L
         if not np.all(np.isfinite(qdd)):
             raise SimulationError(f"non-finite acceleration at t = {t:.12g}")
-        f_c = terms.M @ qdd - g
-        lam = basis.pinv().T @ f_c if ct.A.shape[0] else np.zeros(0)
+        # λ with f_c = Aᵀλ (least squares; only for contact release and diagnostics)
+        lam = range_basis(ct.A, self.rank_rtol).pinv().T @ f_c if ct.A.shape[0] else np.zeros(0)
         energy = 0.5 * float(qd @ terms.M @ qd) + self.model.potential_energy(q)
-        return _Point(t, q, qd, qdd, f_c, u, int(basis.rank), float(mu), L, lam, ct.A, ct.gamma,
+        return _Point(t, q, qd, qdd, f_c, u, int(sol.rank), mu, L, lam, ct.A, ct.gamma,
                       ct.phi, ct.velocity, ct.holonomic, energy)
 
     def free_gap_acceleration(self, t: float, q: FloatArray, qd: FloatArray, name: str) -> float:

@@ -9,7 +9,8 @@ remedies, given as objects or registered names (:data:`STABILIZATIONS`):
 * :class:`Projection` (``"projection"``): after every accepted step, Gauss–Newton iterations
   ``q ← q + Sᵀ(−A⁺φ)`` (:func:`nonmin.core.position_correction`, the minimum-kinetic-metric
   step onto φ = 0) until ``‖φ‖∞ ≤ tol``, then the velocity correction
-  ``qd ← qd + Sᵀ(−A⁺(A qd + φ_t))``; for scleronomic constraints this is exactly the plastic
+  ``qd ← qd + Sᵀ(−A⁺(A qd + φ_t))`` (same formula as position_correction, applied to the
+  velocity residual); for scleronomic constraints this is exactly the plastic
   impact map ``M̄⁻¹PM qd`` (:func:`nonmin.core.impact_map`, ERRATA "Drift"), and it also handles
   rheonomic rows. ``metric="euclidean"`` uses the identity instead of M (for comparison only:
   it drifts in energy).
@@ -24,8 +25,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from ..core.dynamics import _optimal_mu
-from ..core.linalg import cho_solve, cholesky, range_basis
+from ..core.linalg import range_basis
 from ..errors import InputError
 from ..model import ConstraintTerms, Model
 
@@ -80,22 +80,34 @@ class Baumgarte(Stabilization):
         return ct.gamma + 2.0 * self.alpha * ct.velocity + self.beta * self.beta * ct.phi
 
 
-def _min_norm_correction(
-    M: FloatArray, A: FloatArray, r: FloatArray, rtol: float | None, metric: str
-) -> FloatArray:
-    """``Δ = Sᵀ(−A⁺r)``: minimizes ``½ΔᵀMΔ`` subject to ``AΔ = −r`` (Euclidean: ``−A⁺r``)."""
-    basis = range_basis(A, rtol)
-    x = -basis.solve(r)
-    if metric == "euclidean":
-        return x
-    n = M.shape[-1]
-    Q = basis.range_projector()
-    P = np.eye(n) - Q
-    PM = P @ M
-    PMP = PM @ P
-    mu = _optimal_mu(PMP, M, np.asarray(basis.rank, dtype=float))
-    L = cholesky(PMP + mu * Q)
-    return x - P @ cho_solve(L, M @ x)
+class _MetricProjector:
+    """Factorization for repeated minimum-norm corrections ``Δ = Sᵀ(−A⁺r)`` at fixed (M, A).
+
+    ``Δ`` minimizes ``½ΔᵀMΔ`` subject to ``AΔ = −r`` (the formula of
+    :func:`nonmin.core.position_correction`, with the same rank policy); with
+    ``metric="euclidean"`` it is ``−A⁺r``. Unchecked: inputs come from a validated model.
+    """
+
+    def __init__(self, M: FloatArray, A: FloatArray, rtol: float | None, metric: str) -> None:
+        self.basis = range_basis(A, rtol)
+        self.M = M
+        self.euclidean = metric == "euclidean"
+        if self.euclidean:
+            return
+        n = M.shape[0]
+        Vk = self.basis.Vh[self.basis.keep]
+        Q = Vk.T @ Vk
+        self.P = np.eye(n) - Q
+        PMP = self.P @ M @ self.P
+        dof = n - Vk.shape[0]
+        mu = float(np.trace(PMP)) / dof if dof > 0 else float(np.trace(M)) / n
+        self.Mbar = PMP + (mu if mu > 0 else 1.0) * Q
+
+    def correct(self, r: FloatArray) -> FloatArray:
+        x = -self.basis.solve(r)
+        if self.euclidean:
+            return x
+        return x - self.P @ np.linalg.solve(self.Mbar, self.M @ x)
 
 
 @dataclass(frozen=True)
@@ -139,20 +151,22 @@ class Projection(Stabilization):
         if not active:
             return q, qd
         M = model.mass_matrix(q)
-        for _ in range(self.max_iter):
-            ct = model.constraint_terms(t, q, qd, active)
-            hol = ct.holonomic
-            if not hol.any():
-                break
-            phi = ct.phi[hol]
-            if float(np.max(np.abs(phi))) <= self.tol:
-                break
-            q = q + _min_norm_correction(M, ct.A[hol], phi, rtol, self.metric)
-            M = model.mass_matrix(q)
-        if self.velocity:
-            ct = model.constraint_terms(t, q, qd, active)
-            if ct.A.shape[0]:
-                qd = qd + _min_norm_correction(M, ct.A, ct.velocity, rtol, self.metric)
+        ct = model.constraint_terms(t, q, qd, active)
+        hol = ct.holonomic
+        fac: _MetricProjector | None = None
+        if hol.any():
+            for it in range(self.max_iter):
+                phi = ct.phi[hol]
+                if float(np.max(np.abs(phi))) <= self.tol:
+                    break
+                if fac is None or it % 3 == 2:  # simplified Gauss–Newton, refreshed every 3rd
+                    fac = _MetricProjector(M, ct.A[hol], rtol, self.metric)
+                q = q + fac.correct(phi)
+                ct = model.constraint_terms(t, q, qd, active)
+            if fac is not None:
+                M = model.mass_matrix(q)
+        if self.velocity and ct.A.shape[0]:
+            qd = qd + _MetricProjector(M, ct.A, rtol, self.metric).correct(ct.velocity)
         return q, qd
 
 
