@@ -143,6 +143,14 @@ def _quat_slice(b: _Block) -> slice:
     return slice(start, start + 4)
 
 
+def _frame_index(pm: Any, name: str, robot: str = "") -> int:
+    """Index of the first frame called ``name`` (a URDF link and its joint may share a name)."""
+    for i in range(len(pm.frames)):
+        if pm.frames[i].name == name:
+            return i
+    raise UnknownNameError(f"robot {robot or pm.name!r} has no frame {name!r}")
+
+
 class _Kin:
     """Kinematic quantities of one state, computed in one Pinocchio pass (scratch, per call)."""
 
@@ -279,7 +287,7 @@ class RobotModel(Model):
                         f"constraint {c.name!r}: frame_{side} {fname!r} is not a frame of the "
                         f"robot; known: {sorted(frame_names)}"
                     )
-                parent = pm.frames[pm.getFrameId(fname)]
+                parent = pm.frames[_frame_index(pm, fname)]
                 placement = parent.placement * _se3(H)
                 new = pin.Frame(
                     f"{c.name}:{side}", parent.parentJoint, placement, pin.FrameType.OP_FRAME
@@ -475,9 +483,7 @@ class RobotModel(Model):
 
     def frame_id(self, name: str) -> int:
         """Index of a frame of the internal Pinocchio model (constraint frames: ``c:a``, ``c:b``)."""
-        if not self._pm.existFrame(name):
-            raise UnknownNameError(f"robot {self.name!r} has no frame {name!r}")
-        return int(self._pm.getFrameId(name))
+        return _frame_index(self._pm, name, robot=self.name)
 
     def _q(self, q: ArrayLike, name: str = "q") -> FloatArray:
         arr = np.asarray(q, dtype=float)
