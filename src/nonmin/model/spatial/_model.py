@@ -241,6 +241,8 @@ class SpatialModel(Model):
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     default_active_names: frozenset[str] | None = None
     _index: dict[str, int] = field(init=False, repr=False, compare=False)
+    _names: tuple[str, ...] = field(init=False, repr=False, compare=False)
+    _specs: tuple[ConstraintSpec, ...] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         idx = {b.name: i for i, b in enumerate(self.bodies)}
@@ -249,6 +251,24 @@ class SpatialModel(Model):
         if not self.bodies:
             raise ModelError("a spatial model needs at least one body")
         object.__setattr__(self, "_index", idx)
+        object.__setattr__(
+            self,
+            "_names",
+            tuple(
+                f"{b.name}.{c}"
+                for b in self.bodies
+                for c in ("x", "y", "z", "e0", "e1", "e2", "e3")
+            ),
+        )
+        norms = tuple(
+            ConstraintSpec(f"{b.name}.norm", "holonomic", 1, "unit quaternion ½(‖ε‖² − 1)")
+            for b in self.bodies
+        )
+        joints = tuple(
+            ConstraintSpec(j.name, "holonomic", j.dim, f"{j.kind} {j.body_a}–{j.body_b}")
+            for j in self.joints
+        )
+        object.__setattr__(self, "_specs", norms + joints)
         g = np.asarray(self.gravity, dtype=float)
         if g.shape != (3,) or not np.isfinite(g).all():
             raise ModelError(f"gravity must be a finite 3-vector, got {self.gravity!r}")
@@ -271,21 +291,15 @@ class SpatialModel(Model):
     # ------------------------------------------------------------------ names and sizes
     @property
     def coordinate_names(self) -> tuple[str, ...]:  # type: ignore[override]
-        return tuple(
-            f"{b.name}.{c}" for b in self.bodies for c in ("x", "y", "z", "e0", "e1", "e2", "e3")
-        )
+        return self._names
 
     @property
     def constraints(self) -> tuple[ConstraintSpec, ...]:  # type: ignore[override]
-        norms = tuple(
-            ConstraintSpec(f"{b.name}.norm", "holonomic", 1, "unit quaternion ½(‖ε‖² − 1)")
-            for b in self.bodies
-        )
-        joints = tuple(
-            ConstraintSpec(j.name, "holonomic", j.dim, f"{j.kind} {j.body_a}–{j.body_b}")
-            for j in self.joints
-        )
-        return norms + joints
+        return self._specs
+
+    @property
+    def n(self) -> int:
+        return 7 * len(self.bodies)
 
     @property
     def actuator_names(self) -> tuple[str, ...]:  # type: ignore[override]
