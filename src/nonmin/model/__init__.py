@@ -38,3 +38,15 @@ __all__ = [
     "check_model",
     "consistent",
 ]
+
+# Robots (URDF/MJCF via Pinocchio/MuJoCo) are re-exported lazily, so that importing
+# nonmin.model never imports pinocchio: nonmin.model.RobotModel imports it on first access.
+_LAZY_ROBOTS = ("RobotModel", "FrameConstraint", "JointCoupling")
+
+
+def __getattr__(name: str) -> object:
+    if name in _LAZY_ROBOTS:
+        from . import robots
+
+        return getattr(robots, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
