@@ -96,3 +96,16 @@ def test_two_arm_grasp_is_consistent() -> None:
     assert robot.k == 8  # the arms are actuated, the box is not
     with pytest.raises(InputError, match="closure"):
         fourbar("glue")
+
+
+@pytest.mark.parametrize("name", ["serial_arm", "fourbar", "fourbar_mjcf", "two_arm_grasp"])
+def test_examples_pass_the_model_checker(name: str) -> None:
+    """The project's checker: A = ∂φ/∂q, Christoffel C, f_g = −∂V/∂q, consistency, M̄ > 0."""
+    if name == "fourbar_mjcf":
+        pytest.importorskip("mujoco")
+    import nonmin.model.robots as robots
+    from nonmin.model import check_model
+
+    robot, state = getattr(robots, name)()
+    report = check_model(robot, state, duration=0.0)
+    assert report.passed, report.format()

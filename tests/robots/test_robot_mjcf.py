@@ -181,3 +181,11 @@ def test_unsupported_mjcf_features_are_rejected(tmp_path) -> None:
                     '<geom size="0.1"/></body></worldbody></mujoco>')
     with pytest.raises(ModelError, match="stiffness"):
         RobotModel.from_mjcf(path)
+
+
+def test_free_joint_damping_is_rejected(tmp_path) -> None:
+    path = tmp_path / "damped.xml"
+    path.write_text('<mujoco><worldbody><body><joint name="f" type="free" damping="1"/>'
+                    '<geom size="0.1"/></body></worldbody></mujoco>')
+    with pytest.raises(ModelError, match="damping"):
+        RobotModel.from_mjcf(path)

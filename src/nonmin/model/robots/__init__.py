@@ -7,7 +7,11 @@
   closure), ``weld`` (6D), ``hinge`` (5D), ``planar_point``, ``planar_weld``,
   ``point_on_plane`` and unilateral ``contact``; :class:`JointCoupling` — polynomial joint
   coupling.
-* :func:`data_path` — path of a robot file shipped with nonmin (``nonmin/data/robots``).
+* :func:`data_path` — path of a robot file shipped with nonmin (``nonmin/data/robots``);
+  example robots built from them, each returning ``(model, state)``: :func:`serial_arm`
+  (4-dof arm, unilateral end-effector contact), :func:`fourbar` (URDF four-bar + loop-closure
+  constraint of a chosen type), :func:`fourbar_mjcf` (MJCF four-bar with ``<equality>``
+  connect/weld/joint) and :func:`two_arm_grasp` (two arms holding a free-floating box).
 
 The constraint values and :func:`data_path` need no optional dependency; :class:`RobotModel`
 is imported lazily, so ``import nonmin.model.robots`` never imports Pinocchio and a missing
@@ -25,9 +29,25 @@ from ._constraints import JointCoupling as JointCoupling
 from ._data import data_path as data_path
 
 if TYPE_CHECKING:
+    from ._examples import fourbar as fourbar
+    from ._examples import fourbar_mjcf as fourbar_mjcf
+    from ._examples import serial_arm as serial_arm
+    from ._examples import two_arm_grasp as two_arm_grasp
     from ._pinocchio import RobotModel as RobotModel
 
-__all__ = ["FRAME_CONSTRAINT_TYPES", "FrameConstraint", "JointCoupling", "RobotModel", "data_path"]
+__all__ = [
+    "FRAME_CONSTRAINT_TYPES",
+    "FrameConstraint",
+    "JointCoupling",
+    "RobotModel",
+    "data_path",
+    "fourbar",
+    "fourbar_mjcf",
+    "serial_arm",
+    "two_arm_grasp",
+]
+
+_EXAMPLES = ("fourbar", "fourbar_mjcf", "serial_arm", "two_arm_grasp")
 
 
 def __getattr__(name: str) -> Any:
@@ -35,4 +55,8 @@ def __getattr__(name: str) -> Any:
         from ._pinocchio import RobotModel
 
         return RobotModel
+    if name in _EXAMPLES:
+        from . import _examples
+
+        return getattr(_examples, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

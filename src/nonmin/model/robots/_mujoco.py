@@ -17,7 +17,8 @@ URDF robot. The conversion is exact:
 * every body and site becomes a Pinocchio frame of the same name (the world body is
   ``"universe"``);
 * ``dof_armature`` → ``model.armature``, ``dof_damping`` → joint damping, ``opt.gravity`` →
-  gravity. Joint stiffness, tendons and flex equalities are rejected (:class:`ModelError`).
+  gravity. Joint stiffness, damping of free joints, tendon and flex equalities are rejected
+  (:class:`ModelError`).
 
 Coordinates are Pinocchio's (quaternions ``x, y, z, w``); :meth:`RobotModel.from_mujoco_qpos`
 and :meth:`RobotModel.to_mujoco_qpos` reorder MuJoCo's ``w, x, y, z``. MuJoCo's ``qvel`` equals
@@ -143,6 +144,14 @@ def build_pinocchio_model(mj: Any) -> tuple[Any, dict[str, Any]]:
         local = pin.SE3(_quat_wxyz_to_rot(mj.site_quat[s]), np.array(mj.site_pos[s], dtype=float))
         pm.addFrame(pin.Frame(sname, support[b], X[b] * local, pin.FrameType.OP_FRAME), False)
         site_frames[s] = sname
+    for j, name in joint_names.items():
+        if int(mj.jnt_type[j]) == JT.mjJNT_FREE:
+            dofs = slice(int(mj.jnt_dofadr[j]), int(mj.jnt_dofadr[j]) + 6)
+            if np.any(np.asarray(mj.dof_damping[dofs]) != 0.0):
+                raise ModelError(
+                    f"free joint {name!r}: damping is not supported (MuJoCo damps its world-frame "
+                    "linear velocity, RobotModel damps Pinocchio's body-frame velocity)"
+                )
     if pm.nv != mj.nv or pm.nq != mj.nq:  # pragma: no cover - guarded by construction
         raise ModelError(f"MJCF conversion mismatch: nq {pm.nq}/{mj.nq}, nv {pm.nv}/{mj.nv}")
     pm.armature = np.array(mj.dof_armature, dtype=float)
