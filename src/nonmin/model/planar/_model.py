@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from ...errors import InputError, ModelError, NonFiniteError, ShapeError, UnknownNameError
 from .._protocol import ConstraintSpec, ConstraintTerms, FloatArray, Geometry, Model, ModelTerms
@@ -119,6 +119,68 @@ class _Kin:
         A[row, ith] += coef
 
 
+class _RevoluteBatch:
+    """Vectorized evaluation of all revolute joints (the common case, e.g. A02 with N = 40).
+
+    Coordinates are addressed in ``q_ext = (q, 0)``: the ground's x, y, θ and a point mass's θ
+    point at the extra zero entry (index n), whose Jacobian column is discarded.
+    """
+
+    def __init__(self, joints: tuple[Joint, ...], index: dict[str, tuple[int, int, int]], n: int) -> None:
+        revs = [j for j in joints if type(j) is Revolute]
+        self.names = [j.name for j in revs]
+        self.position = {name: k for k, name in enumerate(self.names)}
+        self.n = n
+
+        def idx(body: str) -> tuple[int, int, int]:
+            if body == GROUND:
+                return (n, n, n)
+            ix, iy, ith = index[body]
+            return (ix, iy, ith if ith >= 0 else n)
+
+        ia = np.array([idx(j.a.body) for j in revs], dtype=np.intp).reshape(-1, 3)
+        ib = np.array([idx(j.b.body) for j in revs], dtype=np.intp).reshape(-1, 3)
+        self.ia, self.ib = ia, ib
+        self.sa = np.array([j.a.local for j in revs], dtype=float).reshape(-1, 2)
+        self.sb = np.array([j.b.local for j in revs], dtype=float).reshape(-1, 2)
+
+    def fill(
+        self,
+        q: FloatArray,
+        qd: FloatArray,
+        rows: NDArray[np.intp],
+        use: NDArray[np.bool_],
+        A: FloatArray,
+        Ad: FloatArray,
+        phi: FloatArray,
+        gamma: FloatArray,
+    ) -> None:
+        """Write the rows of the used revolute joints (first row index ``rows``).
+
+        Fancy-index ``+=`` is safe: within one side (a or b) the pairs (row, column) are
+        distinct except in the discarded extra column n.
+        """
+        qe = np.append(q, 0.0)
+        ve = np.append(qd, 0.0)
+        r0, r1 = rows, rows + 1
+        for sign, ind, loc in ((1.0, self.ia[use], self.sa[use]), (-1.0, self.ib[use], self.sb[use])):
+            th = qe[ind[:, 2]]
+            om = ve[ind[:, 2]]
+            c, s = np.cos(th), np.sin(th)
+            rx = c * loc[:, 0] - s * loc[:, 1]
+            ry = s * loc[:, 0] + c * loc[:, 1]
+            phi[r0] += sign * (qe[ind[:, 0]] + rx)
+            phi[r1] += sign * (qe[ind[:, 1]] + ry)
+            A[r0, ind[:, 0]] += sign
+            A[r1, ind[:, 1]] += sign
+            A[r0, ind[:, 2]] += -sign * ry
+            A[r1, ind[:, 2]] += sign * rx
+            Ad[r0, ind[:, 2]] += -sign * om * rx
+            Ad[r1, ind[:, 2]] += -sign * om * ry
+            gamma[r0] += -sign * om * om * rx
+            gamma[r1] += -sign * om * om * ry
+
+
 @dataclass(frozen=True, eq=False)
 class PlanarModel(Model):
     """Planar multibody system in absolute coordinates ``(x, y, θ)`` per body.
@@ -165,6 +227,7 @@ class PlanarModel(Model):
     _index: dict[str, tuple[int, int, int]] = field(init=False, repr=False, compare=False)
     _mdiag: FloatArray = field(init=False, repr=False, compare=False)
     _point_map: dict[str, Point] = field(init=False, repr=False, compare=False)
+    _rev: _RevoluteBatch = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         s = object.__setattr__
@@ -233,6 +296,7 @@ class PlanarModel(Model):
             check_point(p, f"point {pname!r}")
             pmap[pname] = p
         s(self, "_point_map", pmap)
+        s(self, "_rev", _RevoluteBatch(self.joints, index, off))
         for pname in self.output_points:
             if pname not in pmap:
                 raise UnknownNameError(f"output_points: unknown point {pname!r}; known: {sorted(pmap)}")
@@ -511,26 +575,38 @@ class PlanarModel(Model):
     ) -> tuple[ConstraintTerms, FloatArray]:
         act = self.resolve_active(active)
         n = self.n
-        As, Ads, gs, ps, vs = [], [], [], [], []
-        for j in self.joints:
-            if j.name not in act:
-                continue
-            phi, A, Ad, gamma, phit = j.terms(kin, float(t))
-            As.append(A)
-            Ads.append(Ad)
-            gs.append(gamma)
-            ps.append(phi)
-            vs.append(A @ kin.qd + phit)
-        if not As:
+        rev = self._rev
+        sel = [j for j in self.joints if j.name in act]
+        m = sum(j.dim for j in sel)
+        if m == 0:
             e = np.zeros(0)
             return ConstraintTerms(np.zeros((0, n)), e, e.copy(), e.copy(), np.zeros(0, dtype=bool)), np.zeros((0, n))
-        m = sum(a.shape[0] for a in As)
-        return (
-            ConstraintTerms(
-                np.vstack(As), np.concatenate(gs), np.concatenate(ps), np.concatenate(vs), np.ones(m, dtype=bool)
-            ),
-            np.vstack(Ads),
-        )
+        A = np.zeros((m, n + 1))  # the extra column collects the terms of ground / point-mass θ
+        Ad = np.zeros((m, n + 1))
+        phi = np.zeros(m)
+        gamma = np.zeros(m)
+        phit = np.zeros(m)
+        rows = np.zeros(len(rev.names), dtype=np.intp)
+        use = np.zeros(len(rev.names), dtype=bool)
+        r = 0
+        for j in sel:
+            k = rev.position.get(j.name)
+            if k is not None:
+                rows[k] = r
+                use[k] = True
+            else:
+                ph, Aj, Adj, gj, ptj = j.terms(kin, float(t))
+                A[r : r + j.dim, :n] = Aj
+                Ad[r : r + j.dim, :n] = Adj
+                phi[r : r + j.dim] = ph
+                gamma[r : r + j.dim] = gj
+                phit[r : r + j.dim] = ptj
+            r += j.dim
+        if use.any():
+            rev.fill(kin.q, kin.qd, rows[use], use, A, Ad, phi, gamma)
+        A = A[:, :n]
+        Ad = Ad[:, :n]
+        return ConstraintTerms(A, gamma, phi, A @ kin.qd + phit, np.ones(m, dtype=bool)), Ad
 
     def constraint_terms(
         self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
