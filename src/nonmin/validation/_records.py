@@ -26,8 +26,9 @@ class Check:
     ----------
     name : str
         What is measured (e.g. ``"|B0(10) - B0_ref|"``).
-    value : float or bool
-        The measured value (``bool`` for yes/no checks such as "stays on branch").
+    value : float, int, bool or str
+        The measured value (``bool`` for yes/no checks such as "stays on branch"; ``str`` for
+        reported-only descriptions).
     target : float or bool or None
         The stated target; ``None`` for reported-only quantities.
     comparison : {"<=", ">=", "==", "report"}
@@ -37,7 +38,7 @@ class Check:
     """
 
     name: str
-    value: float | bool
+    value: float | int | bool | str
     target: float | bool | None = None
     comparison: Comparison = "report"
     unit: str = ""
@@ -49,6 +50,8 @@ class Check:
             return True
         if isinstance(self.value, bool) or isinstance(self.target, bool):
             return bool(self.value) == bool(self.target)
+        if isinstance(self.value, str):
+            return False
         v = float(self.value)
         if not math.isfinite(v):
             return False
