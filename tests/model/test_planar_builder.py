@@ -32,6 +32,7 @@ def every_joint_model():
     b.ground_point("O", (0.1, -0.2))
     b.revolute("rev", "O", ("b1", (-0.5, 0.05)))
     b.revolute("rev2", ("b1", (0.5, 0.0)), ("b2", (-0.4, 0.1)))
+    b.revolute("rev_pm", ("b3", (0.1, -0.3)), "PM")
     b.weld("weld", ("b2", (0.2, 0.3)), ("b3", (-0.1, 0.4)), angle=0.4)
     b.prismatic("pris", ("b1", (0.1, 0.2)), ("b3", (0.3, -0.2)), axis=(0.6, 0.8), angle=-0.2)
     b.point_on_line("pol", ("b2", (0.05, -0.1)), "PM", axis=(1.0, 2.0))
@@ -73,7 +74,7 @@ def test_model_sizes_and_kinds():
     assert kinds["wall"] == kinds["rope"] == "unilateral"
     assert kinds["drive"] == "rheonomic"
     assert MODEL.default_active == frozenset(ALL) - {"wall", "rope"}
-    assert MODEL.num_rows(ALL) == 2 + 2 + 3 + 2 + 1 + 1 + 1 + 1 + 1 + 1 + 1 + 1 + 1
+    assert MODEL.num_rows(ALL) == 2 + 2 + 2 + 3 + 2 + 1 + 1 + 1 + 1 + 1 + 1 + 1 + 1 + 1
 
 
 @pytest.mark.parametrize("seed", range(6))
