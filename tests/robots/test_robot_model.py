@@ -286,3 +286,16 @@ def test_bad_input_raises_typed_errors() -> None:
         RobotModel.from_urdf(path, gravity=[0.0, 9.81])
     with pytest.raises(InputError, match="quaternion"):
         _free_pendulum().mass_matrix(np.zeros(11))
+
+
+def test_exact_jacobian_derivative() -> None:
+    """Ȧ (Pinocchio Jacobian time variations) equals dA/dt by central differences and Ȧ qd = γ."""
+    r = _all_types_robot()
+    every = r.constraint_names
+    rng = np.random.default_rng(8)
+    q = r.random_configuration(rng)
+    qd = rng.normal(size=r.n)
+    Ad = r.constraint_jacobian_dot(0.0, q, qd, every)
+    Ad_fd = _fd(lambda x: r.constraint_jacobian(0.0, x, every), q, qd)
+    assert _rel_err(Ad, Ad_fd) < FD_TOL
+    np.testing.assert_allclose(Ad @ qd, r.constraint_bias(0.0, q, qd, every), atol=1e-11)

@@ -154,7 +154,9 @@ def _frame_index(pm: Any, name: str, robot: str = "") -> int:
 class _Kin:
     """Kinematic quantities of one state, computed in one Pinocchio pass (scratch, per call)."""
 
-    def __init__(self, robot: RobotModel, q: FloatArray, qd: FloatArray, *, dynamics: bool) -> None:
+    def __init__(
+        self, robot: RobotModel, q: FloatArray, qd: FloatArray, *, dynamics: bool, jdot: bool = False
+    ) -> None:
         self.robot = robot
         pm = robot._pm
         self.data = pm.createData()
@@ -162,7 +164,10 @@ class _Kin:
         self.T, self.Tdot = robot._velocity_map(q, qd)
         self.v = self.T @ qd
         d = self.data
+        self.jdot = jdot
         pin.computeJointJacobians(pm, d, self.qn)
+        if jdot:
+            pin.computeJointJacobiansTimeVariation(pm, d, self.qn, self.v)
         pin.forwardKinematics(pm, d, self.qn, self.v, np.zeros(pm.nv))
         pin.updateFramePlacements(pm, d)
         if dynamics:
@@ -191,6 +196,13 @@ class _Kin:
                 np.array(acc.angular),
             )
         return self._cache[fid]
+
+    def frame_dot(self, fid: int) -> tuple[FloatArray, FloatArray]:
+        """Time derivatives of the LOCAL_WORLD_ALIGNED frame Jacobian: J̇p, J̇ω (3, nv) each."""
+        Jd = np.array(
+            pin.getFrameJacobianTimeVariation(self.robot._pm, self.data, fid, _LWA)
+        )
+        return Jd[:3], Jd[3:]
 
 
 # --------------------------------------------------------------------------- the model
@@ -627,11 +639,13 @@ class RobotModel(Model):
     # ------------------------------------------------------------------ constraints
     def _constraint_rows(
         self, kin: _Kin, q: FloatArray, qd: FloatArray, act: frozenset[str]
-    ) -> ConstraintTerms:
+    ) -> tuple[ConstraintTerms, FloatArray | None]:
+        """Stacked constraint terms and, when ``kin`` has Jacobian derivatives, the matrix Ȧ."""
         n = self.n
         As: list[FloatArray] = []
         gs: list[FloatArray] = []
         ps: list[FloatArray] = []
+        Ads: list[FloatArray] = []
         for b in self._blocks:
             nm = f"{b.joint}.unit_quaternion"
             if b.kind == "vector" or nm not in act:
@@ -642,31 +656,41 @@ class RobotModel(Model):
             As.append(row)
             gs.append(np.array([qd[sl] @ qd[sl]]))
             ps.append(np.array([0.5 * (q[sl] @ q[sl] - 1.0)]))
+            rowd = np.zeros((1, n))
+            rowd[0, sl] = qd[sl]
+            Ads.append(rowd)
         for c in self.robot_constraints:
             if c.name not in act:
                 continue
+            Ad: FloatArray | None
             if isinstance(c, JointCoupling):
-                A, g, p = self._coupling_rows(c, q, qd)
+                A, g, p, Ad = self._coupling_rows(c, q, qd)
             else:
-                Av, gv, p = self._frame_rows(c, kin)
+                Av, gv, p, Adv = self._frame_rows(c, kin)
                 A = Av @ kin.T
                 g = gv + Av @ (kin.Tdot @ qd)
+                Ad = None if Adv is None else Adv @ kin.T + Av @ kin.Tdot
             As.append(A)
             gs.append(g)
             ps.append(p)
+            if Ad is not None:
+                Ads.append(Ad)
         if not As:
-            return ConstraintTerms(
+            empty = ConstraintTerms(
                 np.zeros((0, n)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0, dtype=bool)
             )
+            return empty, np.zeros((0, n))
         A = np.vstack(As)
-        return ConstraintTerms(
+        terms = ConstraintTerms(
             A, np.concatenate(gs), np.concatenate(ps), A @ qd, np.ones(A.shape[0], dtype=bool)
         )
+        return terms, (np.vstack(Ads) if kin.jdot else None)
 
     def _coupling_rows(
         self, c: JointCoupling, q: FloatArray, qd: FloatArray
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
         A = np.zeros((1, self.n))
+        Ad = np.zeros((1, self.n))
         i1 = self._jq[c.joint1]
         A[0, i1] = 1.0
         phi = q[i1] - c.reference1 - c.polycoef[0]
@@ -680,30 +704,43 @@ class RobotModel(Model):
             d2 = 2 * a[2] + 6 * a[3] * x + 12 * a[4] * x**2
             phi -= poly
             A[0, i2] -= d1
+            Ad[0, i2] = -d2 * qd[i2]
             gamma = -d2 * qd[i2] ** 2
-        return A, np.array([gamma]), np.array([phi])
+        return A, np.array([gamma]), np.array([phi]), Ad
 
-    def _frame_rows(self, c: FrameConstraint, kin: _Kin) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Rows in Pinocchio velocity space: A_v (d, nv), γ_v = J̇ v terms (d,), φ (d,)."""
+    def _frame_rows(
+        self, c: FrameConstraint, kin: _Kin
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray | None]:
+        """Rows in Pinocchio velocity space: A_v (d, nv), γ_v = J̇ v terms (d,), φ (d,), Ȧ_v.
+
+        ``Ȧ_v`` (the time derivative of A_v, from Pinocchio's LOCAL_WORLD_ALIGNED
+        ``getFrameJacobianTimeVariation``) is None unless ``kin`` computed Jacobian derivatives.
+        """
         fa, fb = self._fids[c.name]
         pa, Ra, Jpa, Jwa, vpa, wa, apa, ala = kin.frame(fa)
         pb, Rb, Jpb, Jwb, vpb, wb, apb, alb = kin.frame(fb)
+        jd = kin.jdot
+        Jdpa, Jdwa = kin.frame_dot(fa) if jd else (Jpa, Jwa)
+        Jdpb, Jdwb = kin.frame_dot(fb) if jd else (Jpb, Jwb)
         t = c.type
         if t in ("point", "weld", "hinge"):
-            A_pos, g_pos, p_pos = Jpa - Jpb, apa - apb, pa - pb
+            A_pos, g_pos, p_pos, Ad_pos = Jpa - Jpb, apa - apb, pa - pb, Jdpa - Jdpb
             if t == "point":
-                return A_pos, g_pos, p_pos
+                return A_pos, g_pos, p_pos, Ad_pos if jd else None
             if t == "weld":
                 A_rot = Jwa - Jwb
                 g_rot = ala - alb
                 p_rot = np.array(pin.log3(Ra @ Rb.T))
-                return np.vstack([A_pos, A_rot]), np.concatenate([g_pos, g_rot]), np.concatenate(
-                    [p_pos, p_rot]
+                return (
+                    np.vstack([A_pos, A_rot]),
+                    np.concatenate([g_pos, g_rot]),
+                    np.concatenate([p_pos, p_rot]),
+                    np.vstack([Ad_pos, Jdwa - Jdwb]) if jd else None,
                 )
             # hinge: φ_i = (R_a u_i)·(R_b k)
             u1, u2 = complete_basis(c.axis)
             Kb = Rb @ c.axis
-            rows, gam, phi = [], [], []
+            rows, gam, phi, drows = [], [], [], []
             dw, dal = wa - wb, ala - alb
             for u in (u1, u2):
                 U = Ra @ u
@@ -712,17 +749,20 @@ class RobotModel(Model):
                 rows.append(r @ (Jwa - Jwb))
                 gam.append(rdot @ dw + r @ dal)
                 phi.append(U @ Kb)
+                drows.append(rdot @ (Jwa - Jwb) + r @ (Jdwa - Jdwb))
             return (
                 np.vstack([A_pos, np.array(rows)]),
                 np.concatenate([g_pos, gam]),
                 np.concatenate([p_pos, phi]),
+                np.vstack([Ad_pos, np.array(drows)]) if jd else None,
             )
         if t in ("planar_point", "planar_weld"):
             e1, e2 = complete_basis(c.axis)
             E = np.vstack([e1, e2])
             A_pos, g_pos, p_pos = E @ (Jpa - Jpb), E @ (apa - apb), E @ (pa - pb)
+            Ad_pos = E @ (Jdpa - Jdpb)
             if t == "planar_point":
-                return A_pos, g_pos, p_pos
+                return A_pos, g_pos, p_pos, Ad_pos if jd else None
             nrm = c.axis
             A_rot = nrm @ (Jwa - Jwb)
             g_rot = nrm @ (ala - alb)
@@ -731,6 +771,7 @@ class RobotModel(Model):
                 np.vstack([A_pos, A_rot[None, :]]),
                 np.concatenate([g_pos, [g_rot]]),
                 np.concatenate([p_pos, [p_rot]]),
+                np.vstack([Ad_pos, (nrm @ (Jdwa - Jdwb))[None, :]]) if jd else None,
             )
         # point_on_plane / contact: φ = N·(p_b − p_a), N = R_a k
         N = Ra @ c.axis
@@ -744,7 +785,18 @@ class RobotModel(Model):
             + Nd @ dv
             + N @ (apb - apa)
         )
-        return A_row[None, :], np.array([gamma]), np.array([N @ dvec])
+        Ad_row = (
+            (np.cross(Nd, dvec) + np.cross(N, dv)) @ Jwa
+            + np.cross(N, dvec) @ Jdwa
+            + Nd @ (Jpb - Jpa)
+            + N @ (Jdpb - Jdpa)
+        )
+        return (
+            A_row[None, :],
+            np.array([gamma]),
+            np.array([N @ dvec]),
+            Ad_row[None, :] if jd else None,
+        )
 
     def constraint_terms(
         self,
@@ -760,7 +812,22 @@ class RobotModel(Model):
         act = self.resolve_active(active)
         qv, v = self._q(q), self._q(qd, "qd")
         kin = _Kin(self, qv, v, dynamics=False)
-        return self._constraint_rows(kin, qv, v, act)
+        return self._constraint_rows(kin, qv, v, act)[0]
+
+    def constraint_jacobian_dot(
+        self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
+    ) -> FloatArray:
+        """Exact ``Ȧ = dA/dt`` along ``qd`` (Pinocchio Jacobian time variations), shape (m, n).
+
+        ``Ȧ = Ȧ_v T + A_v Ṫ`` with ``Ȧ_v`` from ``getFrameJacobianTimeVariation``; satisfies
+        ``Ȧ qd = γ``.
+        """
+        act = self.resolve_active(active)
+        qv, v = self._q(q), self._q(qd, "qd")
+        kin = _Kin(self, qv, v, dynamics=False, jdot=True)
+        Ad = self._constraint_rows(kin, qv, v, act)[1]
+        assert Ad is not None
+        return Ad
 
     def evaluate(
         self,
@@ -779,7 +846,8 @@ class RobotModel(Model):
         h = -T.T @ kin.gv - Cqd
         fp = -T.T @ (self._damp * kin.v) if self._damp.any() else np.zeros(self.n)
         B = T[list(self._act_v), :].T.copy()
-        return ModelTerms(M=M, h=h, f_passive=fp, B=B, constraints=self._constraint_rows(kin, qv, v, act))
+        cons = self._constraint_rows(kin, qv, v, act)[0]
+        return ModelTerms(M=M, h=h, f_passive=fp, B=B, constraints=cons)
 
     # ------------------------------------------------------------------ kinematics / geometry
     def frame_placement(self, q: ArrayLike, frame: str) -> FloatArray:
