@@ -299,3 +299,42 @@ def test_exact_jacobian_derivative() -> None:
     Ad_fd = _fd(lambda x: r.constraint_jacobian(0.0, x, every), q, qd)
     assert _rel_err(Ad, Ad_fd) < FD_TOL
     np.testing.assert_allclose(Ad @ qd, r.constraint_bias(0.0, q, qd, every), atol=1e-11)
+
+
+def test_hinge_and_point_on_plane_admissible_motions() -> None:
+    """Null-space motions of a hinge rotate only about its axis; point-on-plane slides in-plane."""
+    robot, state = two_arm_grasp()
+    weld, point = robot.robot_constraints
+    k = np.array([0.0, 0.6, 0.8])
+    hinge = FrameConstraint.hinge("grasp_left", weld.frame_a, weld.frame_b, axis=k,
+                                  placement_a=weld.placement_a, placement_b=weld.placement_b)
+    plane = FrameConstraint.point_on_plane("grasp_right", point.frame_b, point.frame_a,
+                                           normal=(0.0, 0.0, 1.0))
+    r = robot.replace(robot_constraints=(hinge, plane))
+    q = state.q
+    A = r.constraint_jacobian(0.0, q)
+    assert np.abs(r.constraint_residual(0.0, q)).max() < 1e-9
+    _, s, Vt = np.linalg.svd(A)
+    N = Vt[int(np.sum(s > 1e-10)):].T
+    pm = r.pinocchio_model
+    LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    rng = np.random.default_rng(9)
+    for _ in range(3):
+        qd = N @ rng.normal(size=N.shape[1])
+        v = r.to_pinocchio_velocity(q, qd)
+        d = pm.createData()
+        pin.forwardKinematics(pm, d, r.pinocchio_configuration(q), v)
+        pin.updateFramePlacements(pm, d)
+
+        def vel(name, d=d):
+            return pin.getFrameVelocity(pm, d, r.frame_id(name), LWA)
+
+        va, vb = vel("grasp_left:a"), vel("grasp_left:b")
+        axis = d.oMf[r.frame_id("grasp_left:a")].rotation @ k
+        dw = va.angular - vb.angular
+        np.testing.assert_allclose(va.linear, vb.linear, atol=1e-12)
+        np.testing.assert_allclose(dw - (dw @ axis) * axis, 0.0, atol=1e-12)
+        normal = d.oMf[r.frame_id("grasp_right:a")].rotation @ np.array([0.0, 0.0, 1.0])
+        rel = vel("grasp_right:b").linear - vel("grasp_right:a").linear
+        # the two points coincide, so the plane's rotation does not move the point
+        assert abs(rel @ normal) < 1e-12
