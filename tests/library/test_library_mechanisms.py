@@ -290,3 +290,14 @@ def test_slider_crank_driver_and_change_point_variant():
     q[6:9] = 0.0
     _, rank = nullspace_projector(iso.model.constraint_jacobian(0.0, q))
     assert int(rank) == 7
+
+
+@pytest.mark.parametrize("name", sorted(REQUIRED))
+def test_mechanisms_are_picklable_values(name):
+    import pickle
+
+    mech = lib.get(name)
+    back = pickle.loads(pickle.dumps(mech))
+    q, qd = mech.state.q, mech.state.qd
+    np.testing.assert_array_equal(back.model.constraint_jacobian(0.0, q), mech.model.constraint_jacobian(0.0, q))
+    assert back.model.outputs(0.0, q, qd).keys() == mech.model.outputs(0.0, q, qd).keys()

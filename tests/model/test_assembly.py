@@ -112,3 +112,20 @@ def test_inactive_unilateral_penetration_is_reported():
     assert not consistent(m, s)
     s_on = assemble(m, [1.2, 0.3], active=["wall"])
     np.testing.assert_allclose(s_on.q, [1.0, 0.3], atol=1e-12)
+
+
+def test_mass_matrix_singular_off_the_nullspace():
+    """M = diag(1, 1, 0) is singular, but positive definite on N(A) for A = [0, 0, 1] (+ a circle)."""
+    from nonmin.model import FunctionConstraint, FunctionModel
+
+    circle = FunctionConstraint.holonomic(
+        "circle", phi=lambda q: [0.5 * (q[0] ** 2 + q[1] ** 2 - 1.0)], jacobian=lambda q: [[q[0], q[1], 0.0]],
+        adot_qd=lambda q, v: [v[0] ** 2 + v[1] ** 2])
+    plane = FunctionConstraint.holonomic(
+        "plane", phi=lambda q: [q[2]], jacobian=lambda q: [[0.0, 0.0, 1.0]], adot_qd=lambda q, v: [0.0])
+    m = FunctionModel("massless_z", ["x", "y", "z"], mass=lambda q: np.diag([1.0, 1.0, 0.0]),
+                      coriolis=lambda q, v: np.zeros((3, 3)), conservative=lambda q: np.zeros(3),
+                      potential=lambda q: 0.0, constraints=[circle, plane])
+    s = assemble(m, [0.9, 0.3, 0.2], [1.0, 1.0, 1.0])
+    assert consistent(m, s, tol=1e-12)
+    assert s.q[2] == pytest.approx(0.0, abs=1e-14) and abs(np.hypot(s.q[0], s.q[1]) - 1) < 1e-12

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -257,6 +258,21 @@ def crossed_four_bar(
 
 
 # ----------------------------------------------------------------------------- 2R arm and wall
+@dataclass(frozen=True)
+class _ArmOutputs:
+    """Outputs of :func:`arm2r_wall` (a value, so models stay picklable)."""
+
+    wall_x: float
+
+    def __call__(self, model: PlanarModel, t: float, q: FloatArray, qd: FloatArray) -> dict[str, FloatArray]:
+        tip = model.point_position("tip", q)
+        return {
+            "gap": np.array(self.wall_x - tip[0]),
+            "joint_angles": np.array([q[2], q[5] - q[2]]),
+            "joint_rates": np.array([qd[2], qd[5] - qd[2]]),
+        }
+
+
 @register("arm2r_wall")
 def arm2r_wall(
     *,
@@ -290,15 +306,7 @@ def arm2r_wall(
     b.actuator("elbow", "elbow")
     b.output("tip")
 
-    def outputs(model: PlanarModel, t: float, q: FloatArray, qd: FloatArray) -> dict[str, FloatArray]:
-        tip = model.point_position("tip", q)
-        return {
-            "gap": np.array(float(wall_x) - tip[0]),
-            "joint_angles": np.array([q[2], q[5] - q[2]]),
-            "joint_rates": np.array([qd[2], qd[5] - qd[2]]),
-        }
-
-    model = b.build(outputs_fn=outputs)
+    model = b.build(outputs_fn=_ArmOutputs(float(wall_x)))
     a1, a2 = float(joint_angles[0]), float(joint_angles[0] + joint_angles[1])
     p0 = np.zeros(2)
     p1 = p0 + l1 * np.array([math.cos(a1), math.sin(a1)])
@@ -317,6 +325,11 @@ def arm2r_wall(
 
 
 # ----------------------------------------------------------------------------- five-bar
+def _five_bar_outputs(model: PlanarModel, t: float, q: FloatArray, qd: FloatArray) -> dict[str, FloatArray]:
+    i1, i2 = model.body_slice("prox1").stop - 1, model.body_slice("prox2").stop - 1
+    return {"actuated_angles": np.array([q[i1], q[i2]]), "actuated_rates": np.array([qd[i1], qd[i2]])}
+
+
 @register("five_bar")
 def five_bar(
     *,
@@ -356,11 +369,7 @@ def five_bar(
     b.actuator("base2", "base2")
     b.output("E")
 
-    def outputs(model: PlanarModel, t: float, q: FloatArray, qd: FloatArray) -> dict[str, FloatArray]:
-        i1, i2 = model.body_slice("prox1").stop - 1, model.body_slice("prox2").stop - 1
-        return {"actuated_angles": np.array([q[i1], q[i2]]), "actuated_rates": np.array([qd[i1], qd[i2]])}
-
-    model = b.build(outputs_fn=outputs)
+    model = b.build(outputs_fn=_five_bar_outputs)
     E = np.asarray(end_effector, dtype=float)
     B1 = _circle_intersection(A[1], l1, E, l2, +1.0)
     B2 = _circle_intersection(A[2], l1, E, l2, -1.0)
@@ -377,6 +386,14 @@ def five_bar(
 
 
 # ----------------------------------------------------------------------------- slider-crank
+def _slider_outputs(model: PlanarModel, t: float, q: FloatArray, qd: FloatArray) -> dict[str, FloatArray]:
+    return {
+        "crank_angle": np.array(q[2]),
+        "slider_position": np.array(q[6]),
+        "slider_velocity": np.array(qd[6]),
+    }
+
+
 @register("slider_crank")
 def slider_crank(
     *,
@@ -419,14 +436,7 @@ def slider_crank(
     b.actuator("piston", "slide")
     b.output("S")
 
-    def outputs(model: PlanarModel, t: float, q: FloatArray, qd: FloatArray) -> dict[str, FloatArray]:
-        return {
-            "crank_angle": np.array(q[2]),
-            "slider_position": np.array(q[6]),
-            "slider_velocity": np.array(qd[6]),
-        }
-
-    model = b.build(outputs_fn=outputs)
+    model = b.build(outputs_fn=_slider_outputs)
     P = crank * np.array([math.cos(theta0), math.sin(theta0)])
     xs = P[0] + math.sqrt(max(rod * rod - P[1] * P[1], 0.0))
     S = np.array([xs, 0.0])
@@ -444,6 +454,10 @@ def slider_crank(
 
 
 # ----------------------------------------------------------------------------- dual-arm grasp
+def _dual_outputs(model: PlanarModel, t: float, q: FloatArray, qd: FloatArray) -> dict[str, FloatArray]:
+    return {"object_pose": q[12:15].copy(), "object_velocity": qd[12:15].copy()}
+
+
 @register("dual_arm_grasp")
 def dual_arm_grasp(
     *,
@@ -508,10 +522,7 @@ def dual_arm_grasp(
         b.actuator(f"{s}_elbow", f"{s}_elbow")
     b.output("L_tip", "R_tip")
 
-    def outputs(model: PlanarModel, t: float, q: FloatArray, qd: FloatArray) -> dict[str, FloatArray]:
-        return {"object_pose": q[12:15].copy(), "object_velocity": qd[12:15].copy()}
-
-    model = b.build(outputs_fn=outputs)
+    model = b.build(outputs_fn=_dual_outputs)
     return Mechanism(
         model=model,
         state=model.state(np.array(q0)),
