@@ -58,7 +58,7 @@ def test_sizes_and_initial_state() -> None:
     assert model.n == 35 and model.num_rows() == 35
     ct = model.constraint_terms(0.0, s.q, s.qd)
     np.testing.assert_allclose(ct.phi, 0.0, atol=1e-15)
-    np.testing.assert_allclose(model.outputs(0.0, s.q, s.qd)["P3"], [1.0, -1.0, 0.0], atol=1e-15)
+    np.testing.assert_allclose(model.outputs(0.0, s.q, s.qd)["P3.position"], [1.0, -1.0, 0.0], atol=1e-15)
 
 
 def test_exactly_one_redundant_constraint_along_the_motion(motion) -> None:
@@ -74,7 +74,7 @@ def test_exactly_one_redundant_constraint_along_the_motion(motion) -> None:
         assert sv[-1] < 1e-12 * sv[0]
         assert sv[-2] > 1e-2 * sv[0]
         assert int(range_basis(A).rank) == m - 1
-        p3.append(model.outputs(0.0, q, qd)["P3"])
+        p3.append(model.outputs(0.0, q, qd)["P3.position"])
     # it really moves (mobility 1), converting potential into kinetic energy
     assert np.linalg.norm(p3[-1] - p3[0]) > 0.1
     q_end, qd_end = sol.y[:n, -1], sol.y[n:, -1]
@@ -106,3 +106,14 @@ def test_acceleration_matches_least_squares_kkt(motion) -> None:
         assert int(res.rank) == m - 1
         np.testing.assert_allclose(res.qdd, x[:n], atol=1e-9)
         np.testing.assert_allclose(A @ res.qdd + g, 0.0, atol=1e-10)
+
+
+def test_registered_in_library() -> None:
+    import nonmin.library as lib
+    from nonmin.model import consistent
+
+    mech = lib.get("A04_bricard", t_final=1.0)
+    assert mech.name == "A04_bricard" and mech.t_final == 1.0
+    assert consistent(mech.model, mech.state)
+    assert set(mech.model.outputs(0.0, mech.state.q, mech.state.qd)) == {"P3.position", "P3.velocity"}
+    assert "IFToMM" in mech.reference

@@ -92,7 +92,19 @@ def test_top_outputs_and_parameters() -> None:
     model = top_model(l=0.2, tilt=0.0)
     s = top_state(model, spin=10.0)
     out = model.outputs(0.0, s.q, s.qd)
-    np.testing.assert_allclose(out["com"], [0, 0, 0.2], atol=1e-15)
-    np.testing.assert_allclose(out["apex"], [0, 0, 0.4], atol=1e-15)
-    np.testing.assert_allclose(out["apex_velocity"], 0.0, atol=1e-14)  # spinning upright
+    np.testing.assert_allclose(out["com.position"], [0, 0, 0.2], atol=1e-15)
+    np.testing.assert_allclose(out["apex.position"], [0, 0, 0.4], atol=1e-15)
+    np.testing.assert_allclose(out["apex.velocity"], 0.0, atol=1e-14)  # spinning upright
     np.testing.assert_allclose(model.angular_velocity(s.q, s.qd, "top"), [0, 0, 10.0], atol=1e-14)
+
+
+def test_registered_in_library() -> None:
+    import nonmin.library as lib
+    from nonmin.model import consistent
+
+    mech = lib.get("spinning_top", spin=25.0, precession=1.0)
+    assert mech.name == "spinning_top"
+    assert consistent(mech.model, mech.state)
+    w = mech.model.angular_velocity(mech.state.q, mech.state.qd, "top", frame="world")
+    axis = mech.model.rotation(mech.state.q, "top")[:, 2]
+    assert w @ axis == pytest.approx(25.0 + np.cos(0.3) * 1.0)

@@ -231,10 +231,10 @@ def test_damper_dissipates_and_outputs_geometry() -> None:
     qd = rng.normal(size=m.n)
     assert m.passive_force(0.0, q, qd) @ qd <= 0.0
     out = m.outputs(0.0, q, qd)
-    assert set(out) == {"tip", "tip_velocity"}
-    np.testing.assert_allclose(out["tip"], [1, 1, 1], atol=1e-12)
+    assert set(out) == {"tip.position", "tip.velocity"}
+    np.testing.assert_allclose(out["tip.position"], [1, 1, 1], atol=1e-12)
     J = m.point_jacobian(q, "b2", m.output_points[0].point)
-    np.testing.assert_allclose(out["tip_velocity"], J @ qd, atol=1e-12)
+    np.testing.assert_allclose(out["tip.velocity"], J @ qd, atol=1e-12)
     geo = m.geometry(q)
     assert geo.dim == 3 and geo.segments.shape[1:] == (2, 3) and geo.frames.shape == (3, 4, 3)
     np.testing.assert_allclose(geo.frames[1, 1:], rotation_matrix(q[10:14]).T, atol=1e-12)

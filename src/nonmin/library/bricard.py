@@ -17,8 +17,8 @@ J5     (0, −1, 1)      z     rod4 – rod5
 J6     (0, 0, 1)       x     rod5 – ground
 =====  ==============  ====  ===============
 
-Released from rest at that configuration; output ``P3`` = position of J3 (and
-``P3_velocity``). Built with the spatial (unit-quaternion) source: n = 35 coordinates,
+Released from rest at that configuration; outputs ``P3.position`` (J3) and
+``P3.velocity``. Built with the spatial (unit-quaternion) source: n = 35 coordinates,
 m = 5 norm + 6 × 5 joint rows = 35 constraint rows of rank 34 along the motion (Grübler
 counts 0 degrees of freedom, the mobility is 1: one row is redundant everywhere). nonmin
 treats it like any other model: the rank-revealing projector absorbs the redundancy.
@@ -30,8 +30,14 @@ import numpy as np
 
 from ..model import State
 from ..model.spatial import SpatialBuilder, SpatialModel
+from ._registry import Mechanism, register
 
-__all__ = ["NAME", "bricard_model", "bricard_state"]
+__all__ = ["NAME", "a04_bricard", "bricard_model", "bricard_state"]
+
+IFTOMM_REF = (
+    "M. González, D. Dopico, U. Lugrís, J. Cuadrado, Multibody Syst. Dyn. 16 (2006) 179–190; "
+    "IFToMM Library of Computational Benchmark Problems, problem A04 (Bricard's mechanism)"
+)
 
 #: Registry name.
 NAME = "A04_bricard"
@@ -91,3 +97,30 @@ def bricard_model(
 def bricard_state(model: SpatialModel) -> State:
     """The benchmark's initial state: the tabled configuration, at rest."""
     return model.state(model.reference_configuration(), np.zeros(model.n))
+
+
+@register(NAME)
+def a04_bricard(
+    *,
+    g: float = 9.81,
+    mass: float = 1.0,
+    length: float = 1.0,
+    width: float = 0.1,
+    t_final: float = 10.0,
+) -> Mechanism:
+    """IFToMM A04: Bricard's mechanism (five rods, six revolute joints, one redundant row).
+
+    Source: IFToMM benchmark A04 (González et al., Multibody Syst. Dyn. 16 (2006) 179–190).
+    Spatial unit-quaternion model (:func:`bricard_model`), released from rest in the tabled
+    configuration (:func:`bricard_state`); horizon 10 s; outputs ``P3.position``,
+    ``P3.velocity``. rank(A) = m − 1 = 34 along the motion, mobility 1 (Grübler: 0).
+    """
+    model = bricard_model(g=g, mass=mass, length=length, width=width)
+    return Mechanism(
+        model=model,
+        state=bricard_state(model),
+        t_final=float(t_final),
+        description="IFToMM A04 Bricard mechanism (spatial, unit quaternions; one redundant "
+        "constraint along the whole motion)",
+        reference=IFTOMM_REF,
+    )

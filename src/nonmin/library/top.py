@@ -8,8 +8,8 @@ the tip along it; gravity ``g`` along −z.
 
 Initial state: the symmetry axis tilted by ``tilt`` about the world x axis, spinning at
 ``spin`` about the symmetry axis, precessing at ``precession`` about the world z axis; the
-velocities are consistent (tip at rest, ``εᵀε̇ = 0``). Outputs: ``com`` and ``apex`` (the
-point at ``2 l`` on the axis) positions and velocities.
+velocities are consistent (tip at rest, ``εᵀε̇ = 0``). Outputs: ``com.position``,
+``apex.position`` (the point at ``2 l`` on the axis) and their ``.velocity``.
 """
 
 from __future__ import annotations
@@ -24,8 +24,9 @@ from ..model.spatial import (
     quaternion_from_axis_angle,
     rotation_matrix,
 )
+from ._registry import Mechanism, register
 
-__all__ = ["NAME", "top_model", "top_state"]
+__all__ = ["NAME", "spinning_top", "top_model", "top_state"]
 
 #: Registry name.
 NAME = "spinning_top"
@@ -82,3 +83,40 @@ def top_state(model: SpatialModel, *, spin: float = 60.0, precession: float = 0.
     ed = 0.5 * G_matrix(e).T @ w_body
     rd = np.cross(R @ w_body, q[0:3])  # tip at the origin is at rest
     return model.state(q, np.concatenate((rd, ed)))
+
+
+@register(NAME)
+def spinning_top(
+    *,
+    mass: float = 0.5,
+    l: float = 0.1,
+    transverse_inertia: float = 2.5e-3,
+    axial_inertia: float = 3.0e-3,
+    g: float = 9.81,
+    tilt: float = 0.3,
+    spin: float = 60.0,
+    precession: float = 0.0,
+    t_final: float = 2.0,
+) -> Mechanism:
+    """Heavy symmetric (Lagrange) top with a fixed tip, one body in unit-quaternion coordinates.
+
+    Source: the classical Lagrange top (Goldstein, *Classical Mechanics*, 3rd ed., §5.7);
+    reference solution: Euler's equations about the fixed point (tests integrate both).
+    See :func:`top_model` and :func:`top_state` for the parameters.
+    """
+    model = top_model(
+        mass=mass,
+        l=l,
+        transverse_inertia=transverse_inertia,
+        axial_inertia=axial_inertia,
+        g=g,
+        tilt=tilt,
+    )
+    return Mechanism(
+        model=model,
+        state=top_state(model, spin=spin, precession=precession),
+        t_final=float(t_final),
+        description="heavy symmetric top with a fixed tip (spatial, unit quaternion, "
+        "spherical joint to the ground)",
+        reference="H. Goldstein, C. Poole, J. Safko, Classical Mechanics, 3rd ed. (2002), §5.7",
+    )

@@ -388,7 +388,8 @@ class SpatialBuilder:
         return self
 
     def add_output_point(self, name: str, body: str, *, point: ArrayLike) -> SpatialBuilder:
-        """Report the position (``name``) and velocity (``name + "_velocity"``) of a point."""
+        """Report the position (``"<name>.position"``) and velocity (``"<name>.velocity"``) of
+        a body point given in world coordinates at the reference configuration."""
         p = _vec3(point, f"output {name!r}: point")
         self._ref(body)
         if name in {o.name for o in self._outputs}:

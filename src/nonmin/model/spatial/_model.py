@@ -606,14 +606,14 @@ class SpatialModel(Model):
 
     # ------------------------------------------------------------------ extras
     def outputs(self, t: float, q: ArrayLike, qd: ArrayLike) -> dict[str, FloatArray]:
-        """Position ``"<name>"`` and velocity ``"<name>_velocity"`` of each output point."""
+        """Position ``"<name>.position"`` and velocity ``"<name>.velocity"`` of each output point."""
         qv = _as_vector(q, "q", self.n)
         v = _as_vector(qd, "qd", self.n)
         out: dict[str, FloatArray] = {}
         for p in self.output_points:
             k = self._kin(qv, v, p.body, p.point, True)
-            out[p.name] = k.val
-            out[f"{p.name}_velocity"] = k.J @ v
+            out[f"{p.name}.position"] = k.val
+            out[f"{p.name}.velocity"] = k.J @ v
         return out
 
     def geometry(self, q: ArrayLike) -> Geometry:
