@@ -5,8 +5,16 @@ vectors ``(..., n)``), accepts ``m = 0`` and rank-deficient A, and imports nothi
 NumPy and SciPy. Conventions (paper): ``M qdd + C qd = f_g + f_c + f``, ``h = f_g − C qd``,
 ``A qd = 0``, ``adot_qd = Ȧ qd``. Pinocchio: ``nle = C qd − f_g = −h``; ``J qdd + γ = 0``, so
 ``adot_qd = γ``.
+
+:func:`forward_dynamics`, :func:`constraint_force` and :func:`solve_dynamics` run on numba-compiled
+kernels when numba is installed (extra ``fast``) and on NumPy otherwise; :func:`set_backend`,
+:func:`use_backend` or the environment variable ``NONMIN_BACKEND`` (``auto``/``numpy``/``numba``)
+choose explicitly. Both backends agree to round-off.
 """
 
+from ._fast import get_backend as get_backend
+from ._fast import set_backend as set_backend
+from ._fast import use_backend as use_backend
 from .dynamics import DynamicsSolution as DynamicsSolution
 from .dynamics import baumgarte_bias as baumgarte_bias
 from .dynamics import constraint_force as constraint_force
@@ -40,6 +48,7 @@ __all__ = [
     "constraint_inertia",
     "coriolis_bar",
     "forward_dynamics",
+    "get_backend",
     "impact_map",
     "lambda_matrix",
     "nullspace_projector",
@@ -48,5 +57,7 @@ __all__ = [
     "projector_derivative",
     "pseudo_inverse",
     "range_basis",
+    "set_backend",
     "solve_dynamics",
+    "use_backend",
 ]

@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import _validation as V
+from . import _fast
 from .linalg import FloatArray, RangeBasis, cho_solve, cholesky, matvec, pseudo_inverse, range_basis
 
 __all__ = [
@@ -230,6 +231,23 @@ def solve_dynamics(
     See :func:`forward_dynamics` for the arguments. Returns a :class:`DynamicsSolution` with
     ``qdd``, ``f_c``, ``P``, ``rank``, ``mu`` and the Cholesky factor of M̄.
     """
+    fast = _fast.solve(M, h, A, adot_qd, f, mu, rtol, _fast.ALL)  # compiled backend (_fast)
+    if fast is not None:
+        qdd_c, fc_c, P_c, L_c, rank_c, mu_c = fast
+        return DynamicsSolution(qdd=qdd_c, f_c=fc_c, P=P_c, rank=rank_c, mu=mu_c, L=L_c)
+    return _solve_dynamics_numpy(M, h, A, adot_qd, f, mu, rtol)
+
+
+def _solve_dynamics_numpy(
+    M: ArrayLike,
+    h: ArrayLike,
+    A: ArrayLike,
+    adot_qd: ArrayLike,
+    f: ArrayLike | None,
+    mu: ArrayLike | None,
+    rtol: float | None,
+) -> DynamicsSolution:
+    """Reference NumPy evaluation of :func:`solve_dynamics` (validates its inputs)."""
     Mm, hv, Am, ad, fv = _check_dynamics_inputs(M, h, A, adot_qd, f)
     mu_a = None if mu is None else V.positive_scalar_or_batch(mu, "mu")
     g = hv if fv is None else hv + fv
@@ -296,7 +314,10 @@ def forward_dynamics(
     >>> np.allclose(qdd, [0.0, -9.81])
     True
     """
-    return solve_dynamics(M, h, A, adot_qd, f, mu=mu, rtol=rtol).qdd
+    fast = _fast.solve(M, h, A, adot_qd, f, mu, rtol, _fast.QDD)
+    if fast is not None:
+        return fast
+    return _solve_dynamics_numpy(M, h, A, adot_qd, f, mu, rtol).qdd
 
 
 def constraint_force(
@@ -319,7 +340,10 @@ def constraint_force(
     -------
     f_c : ndarray, shape (..., n)
     """
-    return solve_dynamics(M, h, A, adot_qd, f, mu=mu, rtol=rtol).f_c
+    fast = _fast.solve(M, h, A, adot_qd, f, mu, rtol, _fast.FC)
+    if fast is not None:
+        return fast
+    return _solve_dynamics_numpy(M, h, A, adot_qd, f, mu, rtol).f_c
 
 
 def baumgarte_bias(

@@ -1,0 +1,266 @@
+"""Backend selection and the compiled fast path of the dynamics kernels.
+
+:func:`nonmin.core.forward_dynamics`, :func:`~nonmin.core.constraint_force` and
+:func:`~nonmin.core.solve_dynamics` evaluate either with the reference NumPy kernels or with
+numba-compiled kernels (:mod:`nonmin.core._fast_kernels`, optional extra ``fast``). Both give
+the same results to round-off (tests demand 1e-12 relative); a single call and the same state
+inside a batch give bitwise identical results on the compiled backend.
+
+Choosing the backend
+--------------------
+``"auto"`` (default) uses numba when it can be imported, ``"numpy"`` always uses NumPy,
+``"numba"`` demands numba (``MissingDependencyError`` naming the extra ``fast`` otherwise).
+The initial choice comes from the environment variable ``NONMIN_BACKEND`` (read at import);
+:func:`set_backend` changes it for the process, :func:`use_backend` for a ``with`` block.
+
+The compiled path keeps the boundary contract: it accepts the same inputs, checks finiteness and
+the symmetry of M inside the kernel with the same decision rule, and whenever a state is not
+regular (invalid input, M̄ not positive definite, shapes it does not handle) it re-runs the
+NumPy path, which raises the typed error (or, in a round-off borderline case of the SPD test,
+returns the NumPy result). The first call compiles the kernels (cached on disk afterwards).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from .. import _validation as V
+from ..errors import InputError, missing_dependency
+from .linalg import DEFAULT_RTOL, SPD_RTOL, FloatArray, resolve_rtol
+
+__all__ = ["BACKENDS", "get_backend", "set_backend", "use_backend"]
+
+#: Accepted backend names.
+BACKENDS = ("auto", "numpy", "numba")
+
+#: Batches at least this large run on numba's parallel driver (smaller ones serially).
+PARALLEL_MIN_BATCH = 256
+
+_state: dict[str, Any] = {"name": "auto", "kernels": None, "tried": False}
+
+
+def _check_name(name: object) -> str:
+    if not isinstance(name, str) or name.lower() not in BACKENDS:
+        raise InputError(f"backend must be one of {BACKENDS}, got {name!r}")
+    return name.lower()
+
+
+def _load() -> ModuleType | None:
+    """Import the compiled kernels once; None if numba is not importable."""
+    if not _state["tried"]:
+        _state["tried"] = True
+        try:
+            from . import _fast_kernels
+        except ImportError:
+            _fast_kernels = None  # type: ignore[assignment]
+        _state["kernels"] = _fast_kernels
+    kernels: ModuleType | None = _state["kernels"]
+    return kernels
+
+
+def set_backend(name: str) -> str:
+    """Select the backend of the dynamics kernels; returns the previous setting.
+
+    Parameters
+    ----------
+    name : {"auto", "numpy", "numba"}
+        ``"auto"``: numba if importable, else NumPy.
+
+    Raises
+    ------
+    InputError
+        Unknown name.
+    MissingDependencyError
+        ``"numba"`` requested but numba is not installed (extra ``fast``).
+    """
+    new = _check_name(name)
+    if new == "numba" and _load() is None:
+        raise missing_dependency("numba", "fast", "the compiled backend of nonmin.core")
+    old: str = _state["name"]
+    _state["name"] = new
+    return old
+
+
+def get_backend() -> str:
+    """The backend actually used now: ``"numpy"`` or ``"numba"``."""
+    if _state["name"] == "numpy":
+        return "numpy"
+    return "numba" if _load() is not None else "numpy"
+
+
+@contextmanager
+def use_backend(name: str) -> Iterator[None]:
+    """Context manager: evaluate with backend ``name`` inside the block, then restore."""
+    old = set_backend(name)
+    try:
+        yield
+    finally:
+        _state["name"] = old
+
+
+def _init_from_env() -> None:
+    env = os.environ.get("NONMIN_BACKEND", "auto").strip().lower() or "auto"
+    if env not in BACKENDS:
+        raise InputError(f"environment variable NONMIN_BACKEND must be one of {BACKENDS}, got {env!r}")
+    _state["name"] = env
+
+
+_init_from_env()
+
+
+_ND = np.ndarray
+_F64 = np.dtype(np.float64)
+
+
+def _prep(x: Any, name: str) -> FloatArray:
+    if type(x) is _ND and x.dtype is _F64 and x.flags.c_contiguous:
+        return x
+    return np.ascontiguousarray(V.as_float_array(x, name))
+
+
+_NO_MU = np.ones(1)
+_PARAMS: dict[tuple[bool, float], FloatArray] = {}
+
+
+def _params(has_f: bool, tol: float) -> FloatArray:
+    """Cached parameter vector ``[has_f, mu, has_mu, rtol, spd_rtol, sym_rtol]`` (mu not given)."""
+    key = (has_f, tol)
+    p = _PARAMS.get(key)
+    if p is None:
+        p = np.array([float(has_f), 1.0, 0.0, tol, SPD_RTOL, V.SYMMETRY_RTOL])
+        if len(_PARAMS) < 64:
+            _PARAMS[key] = p
+    return p
+
+
+#: ``what`` codes of :func:`solve`.
+QDD, FC, ALL = 0, 1, 2
+
+
+def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | None,
+          what: int) -> Any:  # fmt: skip
+    """Compiled evaluation, or None when the caller must take the NumPy path.
+
+    Returns ``qdd`` (``what=QDD``), ``f_c`` (``FC``) or ``(qdd, f_c, P, L, rank, mu)`` (``ALL``),
+    all with the broadcast batch shape. None is returned when the backend is NumPy or when the
+    inputs are not regular (shapes, non-finite entries, asymmetric M, M̄ not positive definite):
+    the NumPy path then raises the typed error.
+    """
+    kern = _state["kernels"] if _state["tried"] else _load()
+    if kern is None or _state["name"] == "numpy":
+        return None
+    Mm = _prep(M, "M")
+    hv = _prep(h, "h")
+    Am = _prep(A, "A")
+    gv = _prep(adot_qd, "adot_qd")
+    has_f = f is not None
+    fv = _prep(f, "f") if has_f else hv
+    has_mu = mu is not None
+    if Mm.ndim == 2 and hv.ndim == 1 and Am.ndim == 2 and gv.ndim == 1 and fv.ndim == 1:
+        # ------------------------------------------------------------ single state
+        n = Mm.shape[0]
+        m, nA = Am.shape
+        if Mm.shape[1] != n or hv.shape[0] != n or nA != n or gv.shape[0] != m or n == 0:
+            return None
+        if has_f and fv.shape[0] != n:
+            return None
+        tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
+        if has_mu:
+            mu_v = V.positive_scalar_or_batch(mu, "mu")
+            if mu_v.ndim:
+                return None
+            params = np.array([float(has_f), float(mu_v), 1.0, tol, SPD_RTOL, V.SYMMETRY_RTOL])
+        else:
+            params = _params(has_f, tol)
+        out = np.empty(2 * n + 3)
+        if what != ALL:
+            if kern.solve_one(Mm, hv, fv, Am, gv, params, out):
+                return None
+            return out[:n] if what == QDD else out[n : 2 * n]
+        P = np.empty((n, n))
+        L = np.empty((n, n))
+        if kern.solve_one_pl(Mm, hv, fv, Am, gv, params, out, P, L):
+            return None
+        rank = np.asarray(int(out[2 * n]), dtype=np.intp)
+        mu_used = mu_v if has_mu else np.asarray(out[2 * n + 1])
+        return out[:n], out[n : 2 * n], P, L, rank, mu_used
+    return _solve_batch(kern, Mm, hv, Am, gv, fv, has_f, mu, rtol, what)
+
+
+def _solve_batch(kern: ModuleType, Mm: FloatArray, hv: FloatArray, Am: FloatArray,
+                 gv: FloatArray, fv: FloatArray, has_f: bool, mu: Any, rtol: float | None,
+                 what: int) -> Any:  # fmt: skip
+    if Mm.ndim < 2 or Am.ndim < 2 or hv.ndim < 1 or gv.ndim < 1 or fv.ndim < 1:
+        return None
+    n = Mm.shape[-1]
+    m = Am.shape[-2]
+    if Mm.shape[-2] != n or hv.shape[-1] != n or Am.shape[-1] != n or gv.shape[-1] != m:
+        return None
+    if n == 0 or fv.shape[-1] != n:
+        return None
+    tol = resolve_rtol(rtol)
+    has_mu = mu is not None
+    mu_v = V.positive_scalar_or_batch(mu, "mu") if has_mu else _NO_MU
+    shapes = [Mm.shape[:-2], hv.shape[:-1], Am.shape[:-2], gv.shape[:-1]]
+    if has_f:
+        shapes.append(fv.shape[:-1])
+    if has_mu:
+        shapes.append(mu_v.shape)
+    try:
+        bshape = tuple(np.broadcast_shapes(*shapes))
+    except ValueError:
+        return None
+    N = 1
+    for s in bshape:
+        N *= s
+
+    def flat(x: FloatArray, core: tuple[int, ...]) -> FloatArray:
+        if x.shape[: x.ndim - len(core)] != bshape:
+            x = np.broadcast_to(x, bshape + core)
+        return np.ascontiguousarray(x.reshape((N, *core)))
+
+    Mb = flat(Mm, (n, n))
+    hb = flat(hv, (n,))
+    Ab = flat(Am, (m, n))
+    gb = flat(gv, (m,))
+    fb = flat(fv, (n,)) if has_f else hb
+    mub = flat(mu_v, ()) if has_mu else _NO_MU
+    want_pl = what == ALL
+    qdd = np.empty((N, n))
+    fc = np.empty((N, n))
+    if want_pl:
+        P = np.empty((N, n, n))
+        L = np.empty((N, n, n))
+    else:
+        P = L = np.empty((1, 1, 1))
+    status = np.empty(N, dtype=np.int64)
+    rank = np.empty(N, dtype=np.intp)
+    mu_out = np.empty(N)
+    ratio = np.empty(N)
+    args = (Mb, hb, fb, has_f, Ab, gb, mub, has_mu, tol, SPD_RTOL, V.SYMMETRY_RTOL, qdd, fc, P, L,
+            want_pl, status, rank, mu_out, ratio)  # fmt: skip
+    nthreads = kern.num_threads()
+    if N >= PARALLEL_MIN_BATCH and nthreads > 1:
+        kern.solve_batch_parallel(*args, nthreads)
+    else:
+        kern.solve_batch_serial(*args)
+    if status.any():
+        return None
+    if what == QDD:
+        return qdd.reshape((*bshape, n))
+    if what == FC:
+        return fc.reshape((*bshape, n))
+    return (
+        qdd.reshape((*bshape, n)),
+        fc.reshape((*bshape, n)),
+        P.reshape((*bshape, n, n)),
+        L.reshape((*bshape, n, n)),
+        rank.reshape(bshape),
+        np.asarray(mu_v) if has_mu else mu_out.reshape(bshape),
+    )
