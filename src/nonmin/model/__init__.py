@@ -20,6 +20,10 @@ from ._protocol import Geometry as Geometry
 from ._protocol import Model as Model
 from ._protocol import ModelTerms as ModelTerms
 from ._protocol import State as State
+from .spatial import SpatialBuilder as SpatialBuilder
+from .spatial import SpatialModel as SpatialModel
+from .symbolic import SymbolicConstraint as SymbolicConstraint
+from .symbolic import SymbolicModel as SymbolicModel
 
 __all__ = [
     "CONSTRAINT_KINDS",
@@ -32,7 +36,11 @@ __all__ = [
     "Model",
     "ModelReport",
     "ModelTerms",
+    "SpatialBuilder",
+    "SpatialModel",
     "State",
+    "SymbolicConstraint",
+    "SymbolicModel",
     "assemble",
     "assembly_residual",
     "check_model",
