@@ -175,3 +175,51 @@ def test_redundant_weld_plus_point_on_same_frames() -> None:
     a_it, _, _, _, prox = _pin_constraint_dynamics(red, q, qd, tau, specs, mu=1e-6, max_iter=200)
     assert prox.iter > 1
     np.testing.assert_allclose(a_it, a_ref, atol=1e-6 * max(1.0, np.abs(a_ref).max()))
+
+
+def _solo12_urdf():
+    from pathlib import Path
+
+    root = Path(pin.__file__).resolve().parents[4] / "share" / "example-robot-data" / "robots"
+    path = root / "solo_description" / "robots" / "solo12.urdf"
+    if not path.is_file():
+        pytest.skip("example-robot-data (solo12.urdf) is not installed")
+    return path
+
+
+def test_real_quadruped_four_feet_pinned_and_redundant_contacts() -> None:
+    """Solo-12 (example-robot-data, free-flyer base): 4 feet pinned (12 rows) vs Pinocchio;
+    adding the 4 unilateral ground contacts of the same feet (4 duplicated rows) changes
+    nothing in nonmin while Pinocchio's exact KKT fails."""
+    base = RobotModel.from_urdf(_solo12_urdf(), root_joint="freeflyer")
+    feet = ["FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"]
+    rng = np.random.default_rng(7)
+    q = base.random_configuration(rng)
+    q[:3] = [0.0, 0.0, 0.3]
+    pins = tuple(
+        FrameConstraint.point(f"pin_{f}", f, placement_b=base.frame_placement(q, f)[:3, 3])
+        for f in feet
+    )
+    robot = base.replace(robot_constraints=pins)
+    qd = _admissible_velocity(robot, q, None, rng)
+    tau = np.concatenate([np.zeros(6), rng.normal(size=robot.nv - 6)])
+    sol, _, T = _nonmin(robot, q, qd, tau, None)
+    a, f_c, _, _, _ = _pin_constraint_dynamics(robot, q, qd, tau, [(3, c.name) for c in pins])
+    assert int(sol.rank) == 1 + 12
+    scale = max(1.0, np.abs(a).max())
+    np.testing.assert_allclose(robot.to_pinocchio_acceleration(q, qd, sol.qdd), a,
+                               atol=TOL * scale, rtol=0)
+    np.testing.assert_allclose(sol.f_c, T.T @ f_c, atol=TOL * max(1.0, np.abs(f_c).max()))
+    # ground contacts at the feet's heights duplicate the pins' vertical rows
+    contacts = tuple(
+        FrameConstraint.contact(f"ground_{f}", f,
+                                plane_placement=[0.0, 0.0, base.frame_placement(q, f)[2, 3]])
+        for f in feet
+    )
+    red = robot.replace(robot_constraints=pins + contacts)
+    every = red.constraint_names
+    assert red.constraint("ground_FL_FOOT").kind == "unilateral"
+    sol_r, mt_r, _ = _nonmin(red, q, qd, tau, every)
+    assert mt_r.constraints.A.shape[0] == 1 + 16 and int(sol_r.rank) == 13
+    np.testing.assert_allclose(sol_r.qdd, sol.qdd, atol=1e-9 * max(1.0, np.abs(sol.qdd).max()))
+    assert np.abs(mt_r.constraints.A @ sol_r.qdd + mt_r.constraints.gamma).max() < 1e-9
