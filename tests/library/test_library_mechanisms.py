@@ -151,6 +151,9 @@ def test_crossed_four_bar_reference_passes_change_points_with_conserved_energy()
     assert np.ptp(ref["energy"]) < 1e-8
     # the crank makes full turns (monotone angle), crossing θ = π, 2π, ... (change points)
     assert np.all(np.diff(ref["theta"]) > 0) and ref["theta"][-1] > 3 * math.pi
+    # all coordinates are continuous in time (angles are not wrapped)
+    assert np.abs(np.diff(ref["q"], axis=0)).max() < 0.5
+    np.testing.assert_allclose(np.diff(ref["q"], axis=0), 0.01 * 0.5 * (ref["qd"][1:] + ref["qd"][:-1]), atol=2e-3)
     # at a change point the model's A loses one rank
     mech = lib.crossed_four_bar()
     q_cp = lib._planar._cfb_coordinates(math.pi, 1.0)[0]

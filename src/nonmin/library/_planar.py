@@ -60,13 +60,15 @@ def _cfb_branch(theta: ArrayLike) -> dict[str, FloatArray]:
     Crank A B (A = 0), rocker D C (D = (2, 0)). With ``z = e^{iθ}`` the rocker direction on the
     anti-parallelogram branch is ``e^{iψ} = (z − 2)/(1 − 2z)`` (the reflection of the
     parallelogram solution ``ψ = θ`` across the line B D), so ``ψ' = −3/(5 − 4 cos θ)`` and
-    ``ψ'' = 12 sin θ/(5 − 4 cos θ)²``. Returns positions, first and second θ-derivatives of the
+    ``ψ'' = 12 sin θ/(5 − 4 cos θ)²``. The angles are continuous functions of θ (no wrapping):
+    ``ψ = −θ + arg(c z)`` and the coupler angle stays in [−π/3, π/3]. Returns positions, first and second θ-derivatives of the
     three COMs and angles (arrays with a leading dimension like θ).
     """
     th = np.asarray(theta, dtype=float)
     z = np.exp(1j * th)
     c = (z - 2.0) / (1.0 - 2.0 * z)
-    psi = np.unwrap(np.atleast_1d(np.angle(c))).reshape(th.shape) if th.ndim else np.angle(c)
+    # continuous in θ: ψ + θ = arg(c z) stays in [−π/3, π/3] (ψ winds once backwards per turn)
+    psi = -th + np.angle(c * z)
     den = 5.0 - 4.0 * np.cos(th)
     dpsi = -3.0 / den
     ddpsi = 12.0 * np.sin(th) / den**2
@@ -82,7 +84,7 @@ def _cfb_branch(theta: ArrayLike) -> dict[str, FloatArray]:
     w = C - B
     dw = dC - dB
     ddw = ddC - ddB
-    chi = np.arctan2(w[..., 1], w[..., 0])
+    chi = np.arctan2(w[..., 1], w[..., 0])  # stays in [−π/3, π/3]: continuous
 
     def cross(a: FloatArray, b: FloatArray) -> FloatArray:
         return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
