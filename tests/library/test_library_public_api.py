@@ -1,0 +1,36 @@
+"""The public surfaces of nonmin.library and nonmin.model.planar are curated and pinned."""
+
+import nonmin.library as lib
+import nonmin.model.planar as planar
+
+
+def test_library_public_names():
+    assert {
+        "Mechanism",
+        "AndrewsModel",
+        "a01_pendulum",
+        "a02_n_four_bar",
+        "a03_andrews",
+        "arm2r_wall",
+        "crossed_four_bar",
+        "crossed_four_bar_reference",
+        "dual_arm_grasp",
+        "five_bar",
+        "get",
+        "n_four_bar_reference",
+        "names",
+        "register",
+        "slider_crank",
+    } <= set(lib.__all__)
+    for name in lib.__all__:
+        assert getattr(lib, name).__doc__, name
+
+
+def test_planar_public_names():
+    assert set(planar.__all__) == {
+        "GROUND", "AngleDriver", "Body", "ConstantSpeed", "Gear", "Joint", "JointActuator",
+        "PlanarBuilder", "PlanarModel", "Point", "PointForce", "PointOnLine", "PointRef",
+        "Prismatic", "Revolute", "Rod", "RotationalSpring", "Spring", "Torque", "Weld",
+    }
+    for name in planar.__all__:
+        assert hasattr(planar, name)
