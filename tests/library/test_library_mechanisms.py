@@ -52,7 +52,7 @@ def test_registry_names_and_errors():
         lib.get("A02_n_four_bar", N=0)
 
 
-@pytest.mark.parametrize("name", sorted(REQUIRED))
+@pytest.mark.parametrize("name", lib.names())
 def test_every_mechanism_is_consistent_and_documented(name):
     mech = lib.get(name)
     assert mech.name == name
