@@ -42,6 +42,18 @@ SINGULAR = ("deficient", "duplicated", "zero_rows", "all_zero", "wide")
 ENERGY_RTOL = 1e-10
 
 
+#: the classical impact formula is trusted to CLASSICAL_FACTOR · eps · cond≠0(AM⁻¹Aᵀ).
+CLASSICAL_FACTOR = 100.0
+
+
+def _cond_nonzero(A, M):
+    if A.shape[0] == 0:
+        return 1.0
+    ev = np.linalg.eigvalsh(A @ np.linalg.solve(M, A.T))
+    nz = ev[ev > 1e-10 * ev.max()] if ev.max() > 0 else np.ones(1)
+    return float(nz.max() / nz.min())
+
+
 def _is_spd(M):
     ev = np.linalg.eigvalsh(M)
     return ev.min() > 1e-8 * ev.max()
@@ -166,7 +178,11 @@ def test_impact_map_is_classical_projection_with_carnot_loss(sys_, e):
     vs = max(np.linalg.norm(v), 1e-300)
     assert rel(plastic, ref, vs) <= REF_RTOL
     if _is_spd(M):  # the classical formula needs M⁻¹
-        assert rel(plastic, classical_impact(M, A, v), vs) <= REF_RTOL
+        # it works with G = AM⁻¹Aᵀ, whose condition number is cond(A)²·cond(M): its own error
+        # is ~eps·cond(G) (up to 3e-10 for cond(A) ~ 4e3); the mass-metric reference is not
+        # affected and is held to REF_RTOL above.
+        tol = max(REF_RTOL, CLASSICAL_FACTOR * np.finfo(float).eps * _cond_nonzero(A, M))
+        assert rel(plastic, classical_impact(M, A, v), vs) <= tol
     # Carnot: T⁻ − T⁺ = ½ (v⁻ − v⁺)ᵀ M (v⁻ − v⁺)
     T = 0.5 * v @ M @ v
     Tp = 0.5 * plastic @ M @ plastic
