@@ -23,6 +23,15 @@ REF_RTOL = 1e-10
 #: qdd for two very different virtual masses μ (the problem is then worse conditioned).
 MU_RTOL = 1e-8
 
+def available_backends() -> tuple[str, ...]:
+    """The dynamics backends of nonmin.core that can run here (numpy always; numba if present)."""
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        return ("numpy",)
+    return ("numpy", "numba")
+
+
 KINDS = ("full", "deficient", "duplicated", "zero_rows", "all_zero", "wide", "empty")
 
 

@@ -11,7 +11,7 @@ import itertools
 
 import numpy as np
 import pytest
-from core_testlib import random_A, random_spd, singular_mass_pd_on_nullspace
+from core_testlib import available_backends, random_A, random_spd, singular_mass_pd_on_nullspace
 
 from nonmin.core import (
     actuation_projectors,
@@ -30,6 +30,7 @@ from nonmin.core import (
     pseudo_inverse,
     range_basis,
     solve_dynamics,
+    use_backend,
 )
 
 N_, M_ = 5, 3
@@ -129,14 +130,21 @@ def _assert_batch_equals_singles(d, fn, broadcast=()):
             assert np.array_equal(b[idx], np.asarray(s)), idx
 
 
-@pytest.mark.parametrize("name,fn", _kernels(), ids=[k for k, _ in _kernels()])
-def test_batched_equals_single_bitwise(name, fn):
-    _assert_batch_equals_singles(_batch(3), fn)
+BACKENDS = available_backends()
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("name,fn", _kernels(), ids=[k for k, _ in _kernels()])
-def test_batched_equals_single_bitwise_no_constraints(name, fn):
-    _assert_batch_equals_singles(_batch(4, m=0), fn)
+def test_batched_equals_single_bitwise(name, fn, backend):
+    with use_backend(backend):
+        _assert_batch_equals_singles(_batch(3), fn)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("name,fn", _kernels(), ids=[k for k, _ in _kernels()])
+def test_batched_equals_single_bitwise_no_constraints(name, fn, backend):
+    with use_backend(backend):
+        _assert_batch_equals_singles(_batch(4, m=0), fn)
 
 
 BROADCAST_M = ["forward_dynamics", "constraint_force", "solve_dynamics", "impact_map",
@@ -144,19 +152,26 @@ BROADCAST_M = ["forward_dynamics", "constraint_force", "solve_dynamics", "impact
                "optimal_virtual_mass", "coriolis_bar"]
 
 
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("name", BROADCAST_M)
-def test_broadcast_M_against_batched_A_bitwise(name):
+def test_broadcast_M_against_batched_A_bitwise(name, backend):
     d = _batch(5)
     rng = np.random.default_rng(9)
     d["M"] = random_spd(rng, N_)  # one (n, n) M for the whole batch of A
     d["C"] = rng.standard_normal((N_, N_))
     d["mu"] = optimal_virtual_mass(d["M"], d["P"])
     fn = dict(_kernels())[name]
-    _assert_batch_equals_singles(d, fn, broadcast=("M", "C"))
+    with use_backend(backend):
+        _assert_batch_equals_singles(d, fn, broadcast=("M", "C"))
 
 
-def test_batch_of_one_and_scalar_mu_broadcast():
-    d = _batch(6)
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_batch_of_one_and_scalar_mu_broadcast(backend):
+    with use_backend(backend):
+        _batch_of_one(_batch(6))
+
+
+def _batch_of_one(d):
     one = {k: v[:1, :1] for k, v in d.items()}
     q1 = forward_dynamics(one["M"], one["h"], one["A"], one["g"], one["f"])
     q = forward_dynamics(d["M"][0, 0], d["h"][0, 0], d["A"][0, 0], d["g"][0, 0], d["f"][0, 0])
