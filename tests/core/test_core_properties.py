@@ -25,6 +25,7 @@ from nonmin.core import (
     constraint_force_projector,
     constraint_inertia,
     forward_dynamics,
+    lambda_matrix,
     nullspace_projector,
     optimal_virtual_mass,
 )
@@ -173,3 +174,23 @@ def test_actuation_pendulum_horizontal_force_is_feasible():
     B = np.array([[1.0], [0.0]])
     R, _ = actuation_projectors(B, P)
     assert np.allclose(P @ R, P, atol=PROJ_TOL)
+
+
+@given(systems(kinds=("full", "deficient", "duplicated", "zero_rows", "wide")))
+def test_lambda_annihilated_by_P_and_Q_Omega_only_on_admissible_velocities(sys_):
+    """PΛ = ΛᵀP = 0 (eq. (PLambda)); QΩqd = Ωqd = Λqd for qd ∈ N, but QΩ ≠ Ω (ERRATA 3)."""
+    _, A, r, rng = sys_
+    n = A.shape[1]
+    Adot = (A @ np.linalg.pinv(A)) @ rng.standard_normal(A.shape)  # Ȧ consistent with A
+    Lam = lambda_matrix(A, Adot)
+    P, _ = nullspace_projector(A)
+    Q = np.eye(n) - P
+    s = max(np.abs(Lam).max(), 1.0)
+    assert np.abs(P @ Lam).max() <= PROJ_TOL * s * n
+    assert np.abs(Lam.T @ P).max() <= PROJ_TOL * s * n
+    Om = Lam - Lam.T
+    qd = basis_of_nullspace(A, r) @ rng.standard_normal(n - r)
+    assert np.abs(Q @ Om @ qd - Om @ qd).max() <= PROJ_TOL * s * n * (1 + np.abs(qd).max())
+    assert np.abs(Om @ qd - Lam @ qd).max() <= PROJ_TOL * s * n * (1 + np.abs(qd).max())
+    # as matrices QΩ − Ω = PΛᵀ, which is not zero in general
+    assert np.abs((Q @ Om - Om) - P @ Lam.T).max() <= PROJ_TOL * s * n

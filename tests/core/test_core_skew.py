@@ -246,7 +246,7 @@ def sampled(request):
         Mb = {k: _mbar_at(mech, sol.sol(t + k * DELTA)[:n], mu) for k in (-2, -1, 1, 2)}
         Mbar_dot = (Mb[-2] - 8 * Mb[-1] + 8 * Mb[1] - Mb[2]) / (12 * DELTA)
         out.append((q, qd, Mbar_dot))
-    return mech, mu, out
+    return mech, mu, out, sol
 
 
 def test_mass_matrix_singularity_of_quaternion_body():
@@ -261,7 +261,7 @@ def test_mass_matrix_singularity_of_quaternion_body():
 
 
 def test_dMbar_dt_minus_2Cbar_is_skew(sampled):
-    mech, mu, samples = sampled
+    mech, mu, samples, _ = sampled
     for q, qd, Mbar_dot in samples:
         M = mech.mass(q).real
         C = christoffel(mech, q, qd)
@@ -273,7 +273,7 @@ def test_dMbar_dt_minus_2Cbar_is_skew(sampled):
 
 def test_finite_difference_matches_projector_derivative(sampled):
     """dM̄/dt = ṖMP + PṀP + PMṖ − μṖ with Ṗ = ΛP + PΛᵀ (eq. (OmegaP), Appendix A)."""
-    mech, mu, samples = sampled
+    mech, mu, samples, _ = sampled
     for q, qd, Mbar_dot in samples:
         M = mech.mass(q).real
         Mdot = np.einsum("kij,k->ij", mass_derivatives(mech, q), qd)
@@ -287,7 +287,7 @@ def test_finite_difference_matches_projector_derivative(sampled):
 
 def test_eq_motion2_holds_along_trajectory(sampled):
     """M̄ qdd + C̄ qd = P (f + f_g) (eq. (EqMotion2)) with qdd from forward_dynamics."""
-    mech, mu, samples = sampled
+    mech, mu, samples, _ = sampled
     for q, qd, _ in samples:
         M = mech.mass(q).real
         C = christoffel(mech, q, qd)
@@ -303,7 +303,7 @@ def test_eq_motion2_holds_along_trajectory(sampled):
 
 def test_other_form_Cbar_prime_is_not_skew(sampled):
     """ERRATA 3: C̄' = PC + (PM − μI)Ω has C̄'qd = C̄qd but dM̄/dt − 2C̄' is not skew."""
-    mech, mu, samples = sampled
+    mech, mu, samples, _ = sampled
     worst = 0.0
     for q, qd, Mbar_dot in samples:
         M = mech.mass(q).real
@@ -343,3 +343,16 @@ def test_skewness_needs_the_christoffel_C():
     bad = Mbar_dot - 2 * coriolis_bar(M, C_alt, A, Adot, mu)
     assert _sym_ratio(good) <= SKEW_RTOL
     assert _sym_ratio(bad) >= NOT_SKEW_MIN
+
+
+def test_projector_derivative_matches_finite_difference(sampled):
+    """Ṗ = ΛP + PΛᵀ (eq. (OmegaP), Appendix A (dotP-A+)) against dP/dt along the trajectory."""
+    mech, _, _, sol = sampled
+    n = mech.q0.size
+    for t in T_SAMPLES:
+        y = sol.sol(t)
+        q, qd = y[:n], y[n:]
+        Pk = {k: nullspace_projector(mech.jac(sol.sol(t + k * DELTA)[:n]))[0] for k in (-2, -1, 1, 2)}
+        Pdot_fd = (Pk[-2] - 8 * Pk[-1] + 8 * Pk[1] - Pk[2]) / (12 * DELTA)
+        Pdot = projector_derivative(mech.jac(q), mech.jac_dot(q, qd))
+        assert np.linalg.norm(Pdot - Pdot_fd) <= FD_RTOL * np.linalg.norm(Pdot), mech.name
