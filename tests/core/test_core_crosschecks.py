@@ -26,6 +26,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from nonmin.core import (
+    baumgarte_bias,
     constraint_force,
     constraint_force_projector,
     forward_dynamics,
@@ -242,3 +243,31 @@ def test_position_correction_is_mass_metric_minimum_norm(sys_):
         Minv = np.linalg.inv(M)
         classical = -Minv @ A.T @ np.linalg.solve(A @ Minv @ A.T, phi)
         assert rel(dq, classical, s) <= REF_RTOL
+
+
+# --------------------------------------------------------------------------- drift-tolerant form
+
+
+@given(st.booleans().flatmap(lambda s: systems(kinds=("full", "duplicated"), singular_mass=s)),
+       st.floats(0.0, 20.0), st.floats(0.0, 20.0))
+def test_drift_tolerant_form_with_baumgarte_terms(sys_, alpha, beta):
+    """qd ∉ N(A), φ ≠ 0: with adot_qd = baumgarte_bias(Ȧqd, A qd, φ) the result satisfies
+    φ̈ + 2αφ̇ + β²φ = 0 (A qdd + Ȧqd + 2αAqd + β²φ = 0) and P(M qdd − f − h) = 0, and equals KKT
+    with the same bias (ERRATA "Drift")."""
+    M, A, r, rng = sys_
+    n, m = A.shape[1], A.shape[0]
+    h, f = _load(rng, M, n)
+    qd = rng.standard_normal(n)  # NOT admissible: A qd ≠ 0
+    Adot = (A @ np.linalg.pinv(A)) @ rng.standard_normal(A.shape)
+    phi = A @ rng.standard_normal(n)  # consistent residuals
+    bias = baumgarte_bias(Adot @ qd, A @ qd, phi, alpha=alpha, beta=beta)
+    assert np.allclose(bias, Adot @ qd + 2 * alpha * (A @ qd) + beta**2 * phi, rtol=1e-14, atol=0)
+    qdd = forward_dynamics(M, h, A, bias, f)
+    scale = np.linalg.norm(A) * np.linalg.norm(qdd) + np.linalg.norm(bias)
+    assert np.linalg.norm(A @ qdd + bias) <= REF_RTOL * scale
+    P, _ = nullspace_projector(A)
+    assert np.linalg.norm(P @ (M @ qdd - f - h)) <= REF_RTOL * (
+        np.linalg.norm(M) * np.linalg.norm(qdd) + np.linalg.norm(f + h))
+    if r == m:
+        qk, _ = kkt_solve(M, A, h + f, bias)
+        assert rel(qdd, qk) <= REF_RTOL
