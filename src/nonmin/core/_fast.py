@@ -212,10 +212,12 @@ def _solve_batch(kern: ModuleType, Mm: FloatArray, hv: FloatArray, Am: FloatArra
         shapes.append(fv.shape[:-1])
     if has_mu:
         shapes.append(mu_v.shape)
-    try:
-        bshape = tuple(np.broadcast_shapes(*shapes))
-    except ValueError:
-        return None
+    bshape = shapes[0]
+    if any(s != bshape for s in shapes[1:]):
+        try:
+            bshape = tuple(np.broadcast_shapes(*shapes))
+        except ValueError:
+            return None
     N = 1
     for s in bshape:
         N *= s
@@ -245,8 +247,8 @@ def _solve_batch(kern: ModuleType, Mm: FloatArray, hv: FloatArray, Am: FloatArra
     ratio = np.empty(N)
     args = (Mb, hb, fb, has_f, Ab, gb, mub, has_mu, tol, SPD_RTOL, V.SYMMETRY_RTOL, qdd, fc, P, L,
             want_pl, status, rank, mu_out, ratio)  # fmt: skip
-    nthreads = kern.num_threads()
-    if N >= PARALLEL_MIN_BATCH and nthreads > 1:
+    nthreads = kern.num_threads() if N >= PARALLEL_MIN_BATCH else 1
+    if nthreads > 1:
         kern.solve_batch_parallel(*args, nthreads)
     else:
         kern.solve_batch_serial(*args)

@@ -150,6 +150,13 @@ def solve_state(M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
             for j in range(n + 1):
                 B[i, j] = 0.0
     # ---------------------------------------------------------------- 3. Jacobi SVD
+    # Rows of norm ≤ eps·‖B‖_F are round-off (e.g. the difference of two duplicated rows): they
+    # are never rotated, else the sweeps would chase noise (their σ is far below any rtol).
+    frob2 = 0.0
+    for i in range(m):
+        for k in range(n):
+            frob2 += B[i, k] * B[i, k]
+    noise2 = _EPS * _EPS * frob2
     for _sweep in range(MAX_SWEEPS):
         rotated = False
         for i in range(m - 1):
@@ -163,7 +170,7 @@ def solve_state(M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
                     aa += x * x
                     bb += y * y
                     cc += x * y
-                if cc == 0.0 or abs(cc) <= _EPS * math.sqrt(aa * bb):
+                if aa <= noise2 or bb <= noise2 or abs(cc) <= _EPS * math.sqrt(aa * bb):
                     continue
                 rotated = True
                 zeta = (bb - aa) / (2.0 * cc)
