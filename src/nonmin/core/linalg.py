@@ -179,7 +179,7 @@ def cholesky(Mbar: FloatArray, name: str = "Mbar") -> FloatArray:
     # One arithmetic for single and batched calls (NumPy's LAPACK, same routine per matrix), so
     # that a single call and the same state inside a batch agree bitwise.
     try:
-        L = np.linalg.cholesky(Mbar)
+        L = np.asarray(np.linalg.cholesky(Mbar), dtype=np.float64)
     except np.linalg.LinAlgError:
         raise NotPositiveDefiniteError(
             f"{name} = PMP + μQ is not positive definite: the inertia matrix M is not positive "
