@@ -82,7 +82,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         sc = load_scenario(path)
         print(f"[nonmin demo] {sc.name}: {sc.data.get('description', '')}", flush=True)
         t0 = time.perf_counter()
-        res = run_scenario(sc, out / name, progress=args.progress)
+        res = run_scenario(sc, out / name, progress=args.progress, t_final=args.t_final)
         wall = time.perf_counter() - t0
         rows.append(_summary_row(name, res.trajectory, wall))
         failed |= _status_name(res.trajectory) == "failed"
@@ -100,7 +100,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     sc = load_scenario(args.scenario)
     t0 = time.perf_counter()
-    res = run_scenario(sc, args.out, progress=args.progress)
+    res = run_scenario(sc, args.out, progress=args.progress, t_final=args.t_final)
     wall = time.perf_counter() - t0
     traj = res.trajectory
     print(_format_rows([_summary_row(sc.name, traj, wall)]))
@@ -204,10 +204,10 @@ def cmd_list(args: argparse.Namespace) -> int:
     for name in library.names():
         print(f"  {name}")
     print("integrators (simulate(method=...)):")
-    for name in sim.integrator_names():
+    for name in sorted(sim.METHODS):
         print(f"  {name}")
     print("stabilizers (simulate(stabilization=...)):")
-    for name in sim.stabilization_names():
+    for name in sorted(sim.STABILIZATIONS):
         print(f"  {name}")
     print("controllers ([controller] type = ...):")
     for name in control.names():
@@ -250,6 +250,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sp.add_argument("--out", default="nonmin-demo", help="output folder (default ./nonmin-demo)")
     sp.add_argument("--only", nargs="+", choices=DEMO_SCENARIOS, help="run only these scenarios")
+    sp.add_argument("--t-final", type=float, default=None, help="shorten every scenario to this end time [s]")
     progress_flags(sp)
     sp.set_defaults(func=cmd_demo)
 

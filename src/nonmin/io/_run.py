@@ -138,6 +138,7 @@ def run_scenario(
     *,
     progress: bool | None = None,
     write: bool = True,
+    t_final: float | None = None,
 ) -> ScenarioResult:
     """Build the model, state, controller and events of a scenario, simulate, write outputs."""
     from ..sim import simulate
@@ -146,6 +147,7 @@ def run_scenario(
     state = sc.initial_state(model, default_state)
     kw = simulate_kwargs(sc)
     sim = sc.section("simulate")
+    t_override = t_final
     t_final = float(sim.get("t_final", getattr(default_state, "t", 0.0) + 1.0))
     if "t_final" not in sim:
         lib = sc.section("model").get("library")
@@ -153,6 +155,8 @@ def run_scenario(
             from .. import library
 
             t_final = float(library.get(lib, **dict(sc.section("model").get("params", {}))).t_final)
+    if t_override is not None:
+        t_final = float(t_override)
     if "output_dt" in sim:
         kw["t_eval"] = np.arange(
             state.t, t_final + 0.5 * float(sim["output_dt"]), float(sim["output_dt"])
