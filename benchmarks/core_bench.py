@@ -1,0 +1,505 @@
+"""Benchmark of nonmin.core's dynamics kernels against Pinocchio's constraintDynamics.
+
+Mechanisms: serial chains of ``n`` revolute joints (unit links, 1 kg each) whose tip is pinned
+to the world by a loop-closure constraint (Pinocchio ``RigidConstraintModel`` CONTACT_3D between
+the tip and the world point it occupies at the reference configuration):
+
+* ``planar``  — all axes along z: the 3 constraint rows have rank 2 (the z row vanishes), so
+  nonmin sees a rank-deficient A and Pinocchio relies on its proximal regularization;
+* ``spatial`` — axes cycling z, y, x: rank 3.
+
+For each mechanism and state, M (CRBA, symmetrized), h = −nle, A = J (tip point Jacobian,
+LOCAL_WORLD_ALIGNED) and γ = classical acceleration of the tip at q̈ = 0 are computed with
+Pinocchio once (setup, not timed). Timed, each from Python, in the same run:
+
+* ``nonmin.core.forward_dynamics(M, h, A, γ, τ)`` and ``constraint_force(...)`` — single call
+  and batched over N states (one call with arrays of leading dimension N), with the compiled
+  (numba) backend and the NumPy backend;
+* ``pinocchio.constraintDynamics(model, data, q, v, τ, cmodels, cdatas, prox)`` — proximal
+  solver; it computes M, h, J itself, so it does more work than nonmin's kernel;
+* ``pinocchio.forwardDynamics(model, data, τ, J, γ, 0)`` — Pinocchio's KKT solve on the M and
+  nle already in ``data`` (after ``computeAllTerms``, outside the timing): the same inputs as
+  nonmin (fails or is inaccurate where J is rank deficient).
+
+Pinocchio has no batched Python API; its batched time is a Python loop over the N states.
+Before timing, nonmin's q̈ is compared with Pinocchio's (constraintDynamics with a tight proximal
+accuracy) at every state; the maximum relative difference is recorded.
+
+Usage::
+
+    python benchmarks/core_bench.py            # full run, rewrites the table in README.md
+    python benchmarks/core_bench.py --quick    # small sizes, few repeats (smoke test)
+
+Results: ``benchmarks/results/core_bench.json`` and ``core_bench.csv``; Markdown table between
+the markers in ``benchmarks/README.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results"
+README = HERE / "README.md"
+#: Pinocchio proximal settings used for both the accuracy check and the timings.
+PROX: dict[str, Any] = {"absolute_accuracy": 1e-12, "relative_accuracy": 1e-12, "mu": 1e-10,
+                        "max_iter": 100}  # fmt: skip
+BEGIN = "<!-- core_bench:begin -->"
+END = "<!-- core_bench:end -->"
+
+
+def _pin() -> Any:
+    try:
+        import pinocchio
+    except ImportError as exc:  # pragma: no cover - environment dependent
+        raise SystemExit(
+            "core_bench needs Pinocchio: pip install 'nonmin[pin]' (module 'pinocchio')"
+        ) from exc
+    return pinocchio
+
+
+# --------------------------------------------------------------------------- mechanisms
+
+
+@dataclass
+class Mechanism:
+    """A Pinocchio chain with a loop-closure constraint and a set of states."""
+
+    name: str
+    n: int
+    model: Any
+    data: Any
+    cmodels: Any
+    cdatas: Any
+    frame_id: int
+    q: np.ndarray  # (N, n)
+    v: np.ndarray  # (N, n)
+    tau: np.ndarray  # (N, n)
+
+
+def build_chain(kind: str, n: int, n_states: int, seed: int = 0) -> Mechanism:
+    """Serial chain of ``n`` revolute joints with its tip pinned to the world (see module doc)."""
+    pin = _pin()
+    rng = np.random.default_rng(seed + 1000 * n + (0 if kind == "planar" else 1))
+    model = pin.Model()
+    parent = 0
+    axes = [np.array([0.0, 0.0, 1.0])]
+    if kind == "spatial":
+        axes = [np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])]
+    for i in range(n):
+        placement = pin.SE3(np.eye(3), np.array([1.0 if i > 0 else 0.0, 0.0, 0.0]))
+        axis = axes[i % len(axes)]
+        joint = pin.JointModelRevoluteUnaligned(axis)
+        jid = model.addJoint(parent, joint, placement, f"j{i}")
+        inertia = pin.Inertia(1.0, np.array([0.5, 0.0, 0.0]), np.diag([0.01, 1.0 / 12, 1.0 / 12]))
+        model.appendBodyToJoint(jid, inertia, pin.SE3.Identity())
+        parent = jid
+    tip = pin.SE3(np.eye(3), np.array([1.0, 0.0, 0.0]))
+    frame_id = model.addFrame(pin.Frame("tip", parent, tip, pin.FrameType.OP_FRAME))
+    data = model.createData()
+    # Reference configuration: generic angles; the tip is pinned where it is there.
+    q0 = rng.uniform(-0.8, 0.8, n)
+    pin.framesForwardKinematics(model, data, q0)
+    anchor = pin.SE3(np.eye(3), data.oMf[frame_id].translation.copy())
+    cm = pin.RigidConstraintModel(
+        pin.ContactType.CONTACT_3D, model, parent, tip, 0, anchor, pin.ReferenceFrame.LOCAL
+    )
+    cmodels = pin.StdVec_RigidConstraintModel()
+    cmodels.append(cm)
+    cdatas = pin.StdVec_RigidConstraintData()
+    cdatas.append(cm.createData())
+    # States: the reference configuration with random velocities and torques (the constraint
+    # holds at position level only at q0; the acceleration-level problem is well posed anywhere).
+    q = np.tile(q0, (n_states, 1)) + 0.05 * rng.standard_normal((n_states, n))
+    q[0] = q0
+    v = rng.standard_normal((n_states, n))
+    tau = rng.standard_normal((n_states, n))
+    return Mechanism(f"{kind}-{n}", n, model, data, cmodels, cdatas, frame_id, q, v, tau)
+
+
+def terms(mech: Mechanism) -> dict[str, np.ndarray]:
+    """M, h, A, γ for every state (computed with Pinocchio; not timed)."""
+    pin = _pin()
+    model, data, fid = mech.model, mech.data, mech.frame_id
+    N, n = mech.q.shape
+    M = np.empty((N, n, n))
+    h = np.empty((N, n))
+    A = np.empty((N, 3, n))
+    gam = np.empty((N, 3))
+    zero = np.zeros(n)
+    for k in range(N):
+        q, v = mech.q[k], mech.v[k]
+        Mk = pin.crba(model, data, q)
+        Mk = np.triu(Mk) + np.triu(Mk, 1).T
+        M[k] = Mk
+        h[k] = -pin.rnea(model, data, q, v, zero)
+        pin.computeJointJacobians(model, data, q)
+        pin.framesForwardKinematics(model, data, q)
+        A[k] = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
+        pin.forwardKinematics(model, data, q, v, zero)
+        acc = pin.getFrameClassicalAcceleration(
+            model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        )
+        gam[k] = acc.linear
+    return {"M": M, "h": h, "A": A, "gamma": gam, "tau": mech.tau.copy()}
+
+
+# --------------------------------------------------------------------------- timing
+
+
+def timeit_median(fn: Callable[[], Any], *, target_s: float, repeats: int) -> dict[str, float]:
+    """Median and minimum over ``repeats`` of the mean time per call of ``fn`` (seconds).
+
+    The number of calls per repeat is chosen so that one repeat takes about ``target_s``.
+    """
+    fn()  # warm-up (JIT, caches)
+    t0 = time.perf_counter()
+    fn()
+    one = max(time.perf_counter() - t0, 1e-7)
+    number = max(1, int(target_s / one))
+    samples = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(number):
+            fn()
+        samples.append((time.perf_counter() - t0) / number)
+    return {"median": statistics.median(samples), "min": min(samples), "number": number}
+
+
+def _us(t: dict[str, float], per: int = 1) -> dict[str, float]:
+    return {"median_us": 1e6 * t["median"] / per, "min_us": 1e6 * t["min"] / per, "calls": t["number"]}
+
+
+def machine_info() -> dict[str, Any]:
+    """Machine, versions and load (recorded with every run)."""
+    import numba
+    import scipy
+
+    pin = _pin()
+    try:
+        commit = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=HERE, capture_output=True, text=True,
+            check=False,
+        ).stdout.strip()  # fmt: skip
+    except OSError:
+        commit = ""
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {
+        "date_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()),
+        "cpu": cpu,
+        "logical_cpus": os.cpu_count(),
+        "platform": platform.platform(),
+        "python": sys.version.split()[0],
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "numba": numba.__version__,
+        "numba_threads": numba.get_num_threads(),
+        "pinocchio": pin.__version__,
+        "nonmin_commit": commit,
+        "loadavg_start": list(os.getloadavg()),
+    }
+
+
+JIT_SCRIPT = """
+import time, numpy as np
+t0 = time.perf_counter()
+import nonmin.core as c
+t1 = time.perf_counter()
+rng = np.random.default_rng(0)
+M = np.eye(6) * 2.0; h = rng.standard_normal(6); A = rng.standard_normal((3, 6)); g = np.zeros(3)
+c.forward_dynamics(M, h, A, g)
+t2 = time.perf_counter()
+c.forward_dynamics(np.stack([M] * 1000), np.stack([h] * 1000), np.stack([A] * 1000), np.zeros((1000, 3)))
+t3 = time.perf_counter()
+print(t1 - t0, t2 - t1, t3 - t2)
+"""
+
+
+def jit_times() -> dict[str, float]:
+    """First-call times in fresh processes: cold (empty numba cache) and warm (cache on disk)."""
+    import tempfile
+
+    out: dict[str, float] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        env = dict(os.environ, NUMBA_CACHE_DIR=tmp, NONMIN_BACKEND="numba")
+        for label in ("cold", "warm"):
+            res = subprocess.run(
+                [sys.executable, "-c", JIT_SCRIPT], env=env, capture_output=True, text=True,
+                check=True,
+            )  # fmt: skip
+            imp, single, batch = (float(x) for x in res.stdout.split())
+            out[f"{label}_import_s"] = imp
+            out[f"{label}_first_single_s"] = single
+            out[f"{label}_first_batch_s"] = batch
+    return out
+
+
+# --------------------------------------------------------------------------- one mechanism
+
+
+def bench_mechanism(
+    kind: str, n: int, sizes: list[int], *, target_s: float, repeats: int, n_check: int
+) -> dict[str, Any]:
+    """Accuracy check and timings for one mechanism (see module docstring)."""
+    import nonmin.core as core
+
+    pin = _pin()
+    n_states = max(max(sizes), n_check)
+    mech = build_chain(kind, n, n_states)
+    T = terms(mech)
+    M, h, A, gam, tau = T["M"], T["h"], T["A"], T["gamma"], T["tau"]
+    model, data, cms, cds = mech.model, mech.data, mech.cmodels, mech.cdatas
+    pin.initConstraintDynamics(model, data, cms, cds)
+    prox = pin.ProximalSettings(
+        PROX["absolute_accuracy"], PROX["relative_accuracy"], PROX["mu"], PROX["max_iter"]
+    )
+    rank = int(np.linalg.matrix_rank(A[0]))
+    rec: dict[str, Any] = {"mechanism": mech.name, "kind": kind, "n": n, "m": 3, "rank": rank}
+
+    # ---- accuracy: nonmin (both backends) and Pinocchio's KKT against constraintDynamics
+    err_nb = err_np = err_kkt = 0.0
+    iters = []
+    for k in range(n_check):
+        ref = pin.constraintDynamics(model, data, mech.q[k], mech.v[k], tau[k], cms, cds, prox)
+        ref = np.array(ref)
+        iters.append(prox.iter)
+        scale = max(float(np.max(np.abs(ref))), 1.0)
+        with core.use_backend("numba"):
+            a = core.forward_dynamics(M[k], h[k], A[k], gam[k], tau[k])
+        with core.use_backend("numpy"):
+            b = core.forward_dynamics(M[k], h[k], A[k], gam[k], tau[k])
+        pin.computeAllTerms(model, data, mech.q[k], mech.v[k])
+        c = np.array(pin.forwardDynamics(model, data, tau[k], A[k], gam[k], 0.0))
+        err_nb = max(err_nb, float(np.max(np.abs(a - ref))) / scale)
+        err_np = max(err_np, float(np.max(np.abs(b - ref))) / scale)
+        kkt = float(np.max(np.abs(c - ref))) / scale if np.all(np.isfinite(c)) else float("inf")
+        err_kkt = max(err_kkt, kkt)
+    with core.use_backend("numba"):
+        qb = core.forward_dynamics(M[:n_check], h[:n_check], A[:n_check], gam[:n_check], tau[:n_check])
+        q1 = np.array([core.forward_dynamics(M[k], h[k], A[k], gam[k], tau[k]) for k in range(n_check)])
+    rec["accuracy"] = {
+        "states_checked": n_check,
+        "max_rel_diff_numba_vs_pin_constraintDynamics": err_nb,
+        "max_rel_diff_numpy_vs_pin_constraintDynamics": err_np,
+        "max_rel_diff_pin_kkt_vs_pin_constraintDynamics": err_kkt,
+        "numba_batch_equals_single_bitwise": bool(np.array_equal(qb, q1)),
+        "pin_prox_iterations_max": int(max(iters)),
+        "pin_prox_settings": PROX,
+    }
+
+    # ---- single call (state 0)
+    q0, v0, t0 = mech.q[0], mech.v[0], tau[0]
+    M0, h0, A0, g0 = M[0], h[0], A[0], gam[0]
+    single: dict[str, Any] = {}
+    with core.use_backend("numba"):
+        single["nonmin_numba_forward_dynamics"] = _us(
+            timeit_median(lambda: core.forward_dynamics(M0, h0, A0, g0, t0), target_s=target_s,
+                          repeats=repeats))  # fmt: skip
+        single["nonmin_numba_constraint_force"] = _us(
+            timeit_median(lambda: core.constraint_force(M0, h0, A0, g0, t0), target_s=target_s,
+                          repeats=repeats))  # fmt: skip
+    with core.use_backend("numpy"):
+        single["nonmin_numpy_forward_dynamics"] = _us(
+            timeit_median(lambda: core.forward_dynamics(M0, h0, A0, g0, t0), target_s=target_s,
+                          repeats=repeats))  # fmt: skip
+    single["pin_constraintDynamics"] = _us(
+        timeit_median(lambda: pin.constraintDynamics(model, data, q0, v0, t0, cms, cds, prox),
+                      target_s=target_s, repeats=repeats))  # fmt: skip
+    pin.computeAllTerms(model, data, q0, v0)
+    single["pin_kkt_forwardDynamics"] = _us(
+        timeit_median(lambda: pin.forwardDynamics(model, data, t0, A0, g0, 0.0),
+                      target_s=target_s, repeats=repeats))  # fmt: skip
+    rec["single"] = single
+
+    # ---- batched: one nonmin call on N states; Pinocchio: Python loop over the N states
+    batched = []
+    for N in sizes:
+        Mb, hb, Ab, gb, tb = M[:N], h[:N], A[:N], gam[:N], tau[:N]
+        row: dict[str, Any] = {"N": N}
+        with core.use_backend("numba"):
+            row["nonmin_numba_forward_dynamics"] = _us(
+                timeit_median(lambda: core.forward_dynamics(Mb, hb, Ab, gb, tb),  # noqa: B023
+                              target_s=target_s, repeats=repeats), N)  # fmt: skip
+            row["nonmin_numba_constraint_force"] = _us(
+                timeit_median(lambda: core.constraint_force(Mb, hb, Ab, gb, tb),  # noqa: B023
+                              target_s=target_s, repeats=repeats), N)  # fmt: skip
+        with core.use_backend("numpy"):
+            row["nonmin_numpy_forward_dynamics"] = _us(
+                timeit_median(lambda: core.forward_dynamics(Mb, hb, Ab, gb, tb),  # noqa: B023
+                              target_s=target_s, repeats=max(3, repeats // 2)), N)  # fmt: skip
+        qs, vs = mech.q[:N], mech.v[:N]
+
+        def pin_loop() -> None:
+            for k in range(N):  # noqa: B023
+                pin.constraintDynamics(model, data, qs[k], vs[k], tb[k], cms, cds, prox)  # noqa: B023
+
+        row["pin_constraintDynamics_loop"] = _us(
+            timeit_median(pin_loop, target_s=target_s, repeats=max(3, repeats // 2)), N)  # fmt: skip
+        batched.append(row)
+    rec["batched"] = batched
+    return rec
+
+
+# --------------------------------------------------------------------------- reporting
+
+
+def _f(x: float) -> str:
+    return f"{x:.3g}" if x < 100 else f"{x:.0f}"
+
+
+def markdown(results: dict[str, Any]) -> str:
+    """The two result tables (single call; batched per state) and the run's context."""
+    info = results["machine"]
+    lines = [
+        f"Run {info['date_utc']} UTC on {info['cpu']} ({info['logical_cpus']} logical CPUs, "
+        f"numba threads {info['numba_threads']}), Python {info['python']}, NumPy {info['numpy']}, "
+        f"numba {info['numba']}, Pinocchio {info['pinocchio']}, nonmin {info['nonmin_commit']}. "
+        f"Load average (1/5/15 min) at start {', '.join(f'{x:.2f}' for x in info['loadavg_start'])}"
+        f", at end {', '.join(f'{x:.2f}' for x in info['loadavg_end'])} — the machine is shared, "
+        "so absolute times are noisy; ratios come from the same run.",
+        "",
+        "**Single call** (µs, median over repeats; state 0 of each mechanism). "
+        "`ratio` = nonmin (numba) forward_dynamics / Pinocchio constraintDynamics.",
+        "",
+        "| mechanism | n | rank A | nonmin fd (numba) | nonmin f_c (numba) | nonmin fd (NumPy) "
+        "| pin constraintDynamics | pin KKT forwardDynamics | ratio | max rel. Δq̈ vs pin |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in results["mechanisms"]:
+        s = r["single"]
+        nb = s["nonmin_numba_forward_dynamics"]["median_us"]
+        pc = s["pin_constraintDynamics"]["median_us"]
+        lines.append(
+            f"| {r['mechanism']} | {r['n']} | {r['rank']} | {_f(nb)} | "
+            f"{_f(s['nonmin_numba_constraint_force']['median_us'])} | "
+            f"{_f(s['nonmin_numpy_forward_dynamics']['median_us'])} | {_f(pc)} | "
+            f"{_f(s['pin_kkt_forwardDynamics']['median_us'])} | {nb / pc:.2f} | "
+            f"{r['accuracy']['max_rel_diff_numba_vs_pin_constraintDynamics']:.1e} |"
+        )
+    lines += [
+        "",
+        "**Batched** (µs per state, median): nonmin = one call on arrays of N states; "
+        "Pinocchio = Python loop of constraintDynamics over the N states. "
+        "`ratio` = nonmin (numba) forward_dynamics / Pinocchio loop.",
+        "",
+        "| mechanism | N | nonmin fd (numba) | nonmin f_c (numba) | nonmin fd (NumPy) "
+        "| pin constraintDynamics loop | ratio |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in results["mechanisms"]:
+        for b in r["batched"]:
+            nb = b["nonmin_numba_forward_dynamics"]["median_us"]
+            pl = b["pin_constraintDynamics_loop"]["median_us"]
+            lines.append(
+                f"| {r['mechanism']} | {b['N']} | {_f(nb)} | "
+                f"{_f(b['nonmin_numba_constraint_force']['median_us'])} | "
+                f"{_f(b['nonmin_numpy_forward_dynamics']['median_us'])} | {_f(pl)} | "
+                f"{nb / pl:.2f} |"
+            )
+    jit = results.get("jit")
+    if jit:
+        lines += [
+            "",
+            "**First call** (fresh process, s): cold numba cache — import "
+            f"{jit['cold_import_s']:.2f}, first single call {jit['cold_first_single_s']:.2f}, "
+            f"first batched call {jit['cold_first_batch_s']:.2f}; with the on-disk cache — "
+            f"import {jit['warm_import_s']:.2f}, first single call "
+            f"{jit['warm_first_single_s']:.2f}, first batched call {jit['warm_first_batch_s']:.2f}.",
+        ]
+    return "\n".join(lines)
+
+
+def write_csv(results: dict[str, Any], path: Path) -> None:
+    """Tidy CSV: one row per (mechanism, N, method) with median and minimum µs per state."""
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["mechanism", "kind", "n", "m", "rank", "mode", "N", "method",
+                    "median_us_per_state", "min_us_per_state", "calls_per_repeat"])  # fmt: skip
+        for r in results["mechanisms"]:
+            base = [r["mechanism"], r["kind"], r["n"], r["m"], r["rank"]]
+            for meth, t in r["single"].items():
+                w.writerow([*base, "single", 1, meth, f"{t['median_us']:.4g}",
+                            f"{t['min_us']:.4g}", t["calls"]])  # fmt: skip
+            for b in r["batched"]:
+                for meth, t in b.items():
+                    if meth == "N":
+                        continue
+                    w.writerow([*base, "batched", b["N"], meth, f"{t['median_us']:.4g}",
+                                f"{t['min_us']:.4g}", t["calls"]])  # fmt: skip
+
+
+def update_readme(table: str, command: str) -> None:
+    """Replace the text between the markers in benchmarks/README.md (append them if absent)."""
+    block = f"{BEGIN}\n<!-- generated by: {command} -->\n\n{table}\n\n{END}"
+    text = README.read_text() if README.exists() else "# Benchmarks\n"
+    if BEGIN in text and END in text:
+        head, rest = text.split(BEGIN, 1)
+        _, tail = rest.split(END, 1)
+        text = head + block + tail
+    else:
+        text = text.rstrip("\n") + "\n\n" + block + "\n"
+    README.write_text(text)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--quick", action="store_true", help="small sizes, few repeats")
+    parser.add_argument("--no-readme", action="store_true", help="do not rewrite README.md")
+    args = parser.parse_args(argv)
+    if args.quick:
+        mechs = [("planar", 3), ("planar", 12), ("spatial", 6)]
+        sizes, target_s, repeats, n_check = [1, 100, 1000], 0.01, 3, 20
+    else:
+        mechs = [("planar", 3), ("planar", 6), ("planar", 12), ("planar", 20), ("planar", 30),
+                 ("spatial", 6), ("spatial", 12), ("spatial", 20), ("spatial", 30)]  # fmt: skip
+        sizes, target_s, repeats, n_check = [1, 10, 100, 1000, 10000], 0.05, 7, 200
+    info = machine_info()
+    results: dict[str, Any] = {"machine": info, "quick": args.quick, "mechanisms": []}
+    print("first-call (JIT) times ...", flush=True)
+    results["jit"] = jit_times()
+    for kind, n in mechs:
+        print(f"{kind}-{n} ...", flush=True)
+        rec = bench_mechanism(kind, n, sizes, target_s=target_s, repeats=repeats, n_check=n_check)
+        results["mechanisms"].append(rec)
+        s = rec["single"]
+        print(
+            f"  single: numba {s['nonmin_numba_forward_dynamics']['median_us']:.2f} us, "
+            f"pin {s['pin_constraintDynamics']['median_us']:.2f} us; max rel diff "
+            f"{rec['accuracy']['max_rel_diff_numba_vs_pin_constraintDynamics']:.1e}",
+            flush=True,
+        )
+    info["loadavg_end"] = list(os.getloadavg())
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    stem = "core_bench_quick" if args.quick else "core_bench"
+    (RESULTS / f"{stem}.json").write_text(json.dumps(results, indent=1))
+    write_csv(results, RESULTS / f"{stem}.csv")
+    table = markdown(results)
+    print(table)
+    if not args.quick and not args.no_readme:
+        update_readme(table, "python benchmarks/core_bench.py")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
