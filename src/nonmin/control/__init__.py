@@ -21,6 +21,9 @@ from ._common import ControlState as ControlState
 from ._force import ForceControl as ForceControl
 from ._force import constraint_force_components as constraint_force_components
 from ._protocol import Controller as Controller
+from ._registry import CONTROLLERS as CONTROLLERS
+from ._registry import get as get
+from ._registry import names as names
 from ._regulator import Regulator as Regulator
 from ._switched import Switched as Switched
 from ._targets import Reference as Reference
@@ -31,6 +34,7 @@ from ._targets import project_velocity as project_velocity
 from ._tracking import Tracker as Tracker
 
 __all__ = [
+    "CONTROLLERS",
     "ControlInfo",
     "ControlState",
     "Controller",
@@ -43,6 +47,8 @@ __all__ = [
     "Tracker",
     "align_quaternions",
     "constraint_force_components",
+    "get",
+    "names",
     "project_acceleration",
     "project_configuration",
     "project_velocity",
