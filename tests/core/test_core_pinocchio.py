@@ -48,7 +48,7 @@ def test_pinocchio_forward_dynamics_mapping(seed):
     Jm = _jac(model, data, pin.integrate(model, q, -FD_EPS * v), fid)
     assert rel(gamma, (Jp - Jm) @ v / (2 * FD_EPS)) <= FD_RTOL  # γ = Ȧ qd
     pin.computeAllTerms(model, data, q, v)
-    M = np.triu(data.M) + np.triu(data.M, 1).T  # Pinocchio fills the upper triangle
+    M = np.triu(data.M) + np.triu(data.M, 1).T  # older Pinocchio filled only the upper triangle
     nle = data.nle.copy()
     a = pin.forwardDynamics(model, data, q, v, tau, J, gamma).copy()
     lam = data.lambda_c.copy()
