@@ -24,7 +24,7 @@ offset ``s``, ``p = r + R(ε) s = r + [εᵀQ_a(s)ε]_a``, ``∂p/∂ε = 2 Q(s)
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, Literal, NamedTuple
 
@@ -187,6 +187,19 @@ class OutputPoint:
     point: FloatArray
 
 
+class _Lazy:
+    """Index-on-demand memo: ``lazy[r]`` computes ``fn(r)`` once."""
+
+    def __init__(self, fn: Callable[[int], _Kin]) -> None:
+        self._fn = fn
+        self._memo: dict[int, _Kin] = {}
+
+    def __getitem__(self, r: int) -> _Kin:
+        if r not in self._memo:
+            self._memo[r] = self._fn(r)
+        return self._memo[r]
+
+
 class _Kin(NamedTuple):
     """A world-frame 3-vector quantity x(q): value, Jacobian ∂x/∂q and its time derivative."""
 
@@ -243,6 +256,7 @@ class SpatialModel(Model):
     _index: dict[str, int] = field(init=False, repr=False, compare=False)
     _names: tuple[str, ...] = field(init=False, repr=False, compare=False)
     _specs: tuple[ConstraintSpec, ...] = field(init=False, repr=False, compare=False)
+    _tensors: dict[str, tuple[Any, ...]] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         idx = {b.name: i for i, b in enumerate(self.bodies)}
@@ -269,6 +283,19 @@ class SpatialModel(Model):
             for j in self.joints
         )
         object.__setattr__(self, "_specs", norms + joints)
+        object.__setattr__(
+            self,
+            "_tensors",
+            {
+                j.name: (
+                    point_tensor(j.point_a),
+                    point_tensor(j.point_b),
+                    [point_tensor(v) for v in j.vectors_a],
+                    [point_tensor(v) for v in j.vectors_b],
+                )
+                for j in self.joints
+            },
+        )
         g = np.asarray(self.gravity, dtype=float)
         if g.shape != (3,) or not np.isfinite(g).all():
             raise ModelError(f"gravity must be a finite 3-vector, got {self.gravity!r}")
@@ -354,8 +381,19 @@ class SpatialModel(Model):
         return np.concatenate([np.concatenate((b.position, b.quaternion)) for b in self.bodies])
 
     # ------------------------------------------------------------------ kinematics
-    def _kin(self, q: FloatArray, qd: FloatArray, body: str, local: FloatArray, point: bool) -> _Kin:
-        """World point ``r + R s`` (point=True) or vector ``R s`` of body ``body``."""
+    def _kin(
+        self,
+        q: FloatArray,
+        qd: FloatArray,
+        body: str,
+        local: FloatArray,
+        point: bool,
+        Qs: FloatArray | None = None,
+    ) -> _Kin:
+        """World point ``r + R s`` (point=True) or vector ``R s`` of body ``body``.
+
+        ``Qs`` is the precomputed :func:`point_tensor` of ``local`` (computed if None).
+        """
         n = self.n
         i = self.body_index(body)
         J = np.zeros((3, n))
@@ -365,7 +403,8 @@ class SpatialModel(Model):
         o = 7 * i
         e = q[o + 3 : o + 7]
         ed = qd[o + 3 : o + 7]
-        Qs = point_tensor(local)
+        if Qs is None:
+            Qs = point_tensor(local)
         Qe = Qs @ e  # (3, 4)
         val = Qe @ e
         if point:
@@ -521,10 +560,11 @@ class SpatialModel(Model):
         """φ, A, Ȧ of one joint, shapes (d,), (d, n), (d, n)."""
         rows: list[tuple[float, FloatArray, FloatArray]] = []
         kind = j.kind
-        va = [self._kin(q, qd, j.body_a, v, False) for v in j.vectors_a]
-        vb = [self._kin(q, qd, j.body_b, v, False) for v in j.vectors_b]
-        pa = self._kin(q, qd, j.body_a, j.point_a, True)
-        pb = self._kin(q, qd, j.body_b, j.point_b, True)
+        Tpa, Tpb, Tva, Tvb = self._tensors[j.name]
+        va = _Lazy(lambda r: self._kin(q, qd, j.body_a, j.vectors_a[r], False, Tva[r]))
+        vb = _Lazy(lambda r: self._kin(q, qd, j.body_b, j.vectors_b[r], False, Tvb[r]))
+        pa = self._kin(q, qd, j.body_a, j.point_a, True, Tpa)
+        pb = self._kin(q, qd, j.body_b, j.point_b, True, Tpb)
         d = _diff(pb, pa)
         if kind in ("spherical", "revolute", "universal", "weld"):
             for r in range(3):
