@@ -259,6 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument(
         "--out", default=None, help="output folder (default: [output] dir or SCENARIO-out)"
     )
+    sp.add_argument("--t-final", type=float, default=None, help="override the scenario's end time [s]")
     progress_flags(sp)
     sp.set_defaults(func=cmd_run)
 

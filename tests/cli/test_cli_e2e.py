@@ -1,0 +1,104 @@
+"""Every CLI verb end to end on shipped scenarios, into a temporary folder."""
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nonmin.cli import DEMO_SCENARIOS, EXIT_FAILED, EXIT_OK, EXIT_USAGE, main
+from nonmin.sim import load_trajectory
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "src" / "nonmin" / "data" / "scenarios"
+
+
+def _png_ok(path: Path) -> None:
+    from PIL import Image
+
+    assert path.exists() and path.stat().st_size > 5000
+    with Image.open(path) as im:
+        arr = np.asarray(im.convert("L"), dtype=float)
+    assert arr.std() > 5.0, f"{path} looks blank"
+
+
+def test_run_writes_all_outputs(tmp_path, capsys):
+    out = tmp_path / "run"
+    code = main(["run", str(SCENARIOS / "crossed_four_bar.toml"), "--out", str(out), "--t-final", "0.4", "--no-progress"])
+    assert code == EXIT_OK
+    traj = load_trajectory(out / "trajectory.npz")
+    assert traj.t[-1] == pytest.approx(0.4)
+    assert traj.q.shape[1] == 9 and np.isfinite(traj.q).all()
+    assert np.max(traj.phi_norm) < 1e-10
+    assert traj.metadata["source"]["library"] == "crossed_four_bar"
+    csv = np.loadtxt(out / "trajectory.csv", delimiter=",", comments="#")
+    assert csv.shape[0] == len(traj)
+    assert np.allclose(csv[:, 0], traj.t)
+    _png_ok(out / "trajectory.png")
+    gif = out / "animation.gif"
+    assert gif.exists() and gif.stat().st_size > 10_000
+    printed = capsys.readouterr().out
+    assert "crossed four-bar" in printed and "success" in printed
+
+    # plot and animate read the saved result
+    assert main(["plot", str(out / "trajectory.npz"), "-o", str(tmp_path / "p.png")]) == EXIT_OK
+    _png_ok(tmp_path / "p.png")
+    assert main(["animate", str(out / "trajectory.npz"), "-o", str(tmp_path / "a.gif"), "--fps", "10"]) == EXIT_OK
+    assert (tmp_path / "a.gif").stat().st_size > 10_000
+
+
+def test_demo_quick(tmp_path, capsys):
+    code = main(["demo", "--out", str(tmp_path), "--t-final", "0.3", "--no-progress"])
+    assert code == EXIT_OK
+    printed = capsys.readouterr().out
+    for name in DEMO_SCENARIOS:
+        assert (tmp_path / name / "trajectory.npz").exists()
+        _png_ok(tmp_path / name / "trajectory.png")
+        assert name in printed
+    assert (tmp_path / "summary.txt").read_text().count("success") + (tmp_path / "summary.txt").read_text().count(
+        "event_terminated"
+    ) == len(DEMO_SCENARIOS)
+
+
+def test_check_library_model(capsys):
+    assert main(["check", "crossed_four_bar", "--duration", "0.3", "--samples", "80"]) == EXIT_OK
+    out = capsys.readouterr().out
+    assert "PASSED" in out and "rank of A drops at t =" in out
+
+
+def test_list(capsys):
+    assert main(["list"]) == EXIT_OK
+    out = capsys.readouterr().out
+    for word in ("crossed_four_bar", "rk4", "projection", "regulator"):
+        assert word in out
+
+
+def test_usage_errors(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[model]\nlibrary = "crossed_four_bar"\n[simulate]\ndt = "x"\n')
+    assert main(["run", str(bad)]) == EXIT_USAGE
+    assert "simulate.dt" in capsys.readouterr().err
+    unknown = tmp_path / "unknown.toml"
+    unknown.write_text('[model]\nlibrary = "no_such_model"\n')
+    assert main(["run", str(unknown)]) == EXIT_USAGE
+    assert "no_such_model" in capsys.readouterr().err
+    assert main(["check", "no_such_model"]) == EXIT_USAGE
+
+
+def test_failed_simulation_exit_code(tmp_path, capsys):
+    sc = tmp_path / "fail.toml"
+    sc.write_text(
+        '[model]\nlibrary = "crossed_four_bar"\n[simulate]\nt_final = 0.5\nmethod = "rk4"\ndt = 0.5\n'
+        '[output]\nplots = false\nanimation = false\n'
+    )
+    code = main(["run", str(sc), "--out", str(tmp_path / "o")])
+    # one huge step either fails (exit 1) or succeeds; it must never crash (exit 4)
+    assert code in (EXIT_OK, EXIT_FAILED)
+
+
+def test_console_script_entry_point():
+    exe = shutil.which("nonmin")
+    cmd = [exe] if exe else [sys.executable, "-m", "nonmin.cli"]
+    res = subprocess.run([*cmd, "--version"], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0 and "nonmin" in res.stdout
