@@ -109,6 +109,8 @@ class _System:
     active: frozenset[str]
     cstate: Any
     n_rhs: int = 0
+    need_lambda: bool = False
+    unilateral: tuple[str, ...] = ()
 
     def _forces(self, t: float, q: FloatArray, qd: FloatArray) -> tuple[Any, FloatArray, FloatArray]:
         terms = self.model.evaluate(t, q, qd, self.active)
@@ -144,7 +146,10 @@ class _System:
         if not np.all(np.isfinite(qdd)):
             raise SimulationError(f"non-finite acceleration at t = {t:.12g}")
         # λ with f_c = Aᵀλ (least squares; only for contact release and diagnostics)
-        lam = range_basis(ct.A, self.rank_rtol).pinv().T @ f_c if ct.A.shape[0] else np.zeros(0)
+        if ct.A.shape[0] and (self.need_lambda or any(nm in self.active for nm in self.unilateral)):
+            lam = range_basis(ct.A, self.rank_rtol).pinv().T @ f_c
+        else:
+            lam = np.zeros(0)
         energy = 0.5 * float(qd @ terms.M @ qd) + self.model.potential_energy(q)
         return _Point(t, q, qd, qdd, f_c, u, int(sol.rank), mu, L, lam, ct.A, ct.gamma,
                       ct.phi, ct.velocity, ct.holonomic, energy)
@@ -466,8 +471,8 @@ def simulate(
     project_initial = bool(options.get("project_initial", isinstance(stab, Projection)))
 
     cstate = controller.initial_state() if hasattr(controller, "initial_state") else None
-    system = _System(model, controller, stab, rank_rtol, n, k, act, cstate)
     unilateral = tuple(c.name for c in model.constraints if c.kind == "unilateral") if contact else ()
+    system = _System(model, controller, stab, rank_rtol, n, k, act, cstate, unilateral=unilateral)
     meta = {
         "model": _describe(model),
         "options": {
@@ -542,7 +547,7 @@ def simulate(
                     if g_end == 0.0:
                         s_root = h
                     else:
-                        s_root = float(brentq(gfun, 0.0, h, xtol=EVENT_XTOL, rtol=4.5e-16, maxiter=200))
+                        s_root = float(brentq(gfun, 0.0, h, xtol=EVENT_XTOL, rtol=1e-15, maxiter=200))
                         # take the bracket end on the far side of the crossing
                         s_root = _past_root(gfun, s_root, h, gvals[i])
                     if s_root < best_s or best_i < 0:
