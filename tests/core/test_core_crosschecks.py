@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from core_testlib import (
     MU_RTOL,
     REF_RTOL,
@@ -271,3 +272,40 @@ def test_drift_tolerant_form_with_baumgarte_terms(sys_, alpha, beta):
     if r == m:
         qk, _ = kkt_solve(M, A, h + f, bias)
         assert rel(qdd, qk) <= REF_RTOL
+
+
+@pytest.mark.parametrize("qd", [[2.0, 0.0, 2.0], [1.0, -2.0, -3.0]],
+                         ids=["parallelogram-branch", "crossed-branch"])
+def test_udwadia_kalaba_parallelogram_four_bar_at_change_point(qd):
+    """A parallelogram four-bar (L1 = L3, L0 = L2) with all links collinear: the loop-closure
+    Jacobian drops from rank 2 to rank 1 (a real kinematic singularity; λ is indeterminate).
+
+    The x-closure row vanishes there; its second derivative demands L1ω1² + L2ω2² = L3ω3²,
+    which (with the y-closure L1ω1 + L2ω2 = L3ω3) holds on the two branches through the change
+    point: ω2 = 0, ω1 = ω3 and ω2 = −2ω1, ω3 = −3ω1. On them γ ∈ R(A) (consistent).
+    """
+    L2 = 1.0  # = L0, the ground link (the pivots are at x = 0 and x = L0)
+    L1 = L3 = 0.5
+    m1, m2, m3, g = 1.0, 1.5, 1.2, 9.81
+    q = np.zeros(3)
+    qd = np.asarray(qd)
+    s, c = np.sin(q), np.cos(q)
+    A = np.array([[-L1 * s[0], -L2 * s[1], L3 * s[2]], [L1 * c[0], L2 * c[1], -L3 * c[2]]])
+    Adot = np.array([[-L1 * c[0] * qd[0], -L2 * c[1] * qd[1], L3 * c[2] * qd[2]],
+                     [-L1 * s[0] * qd[0], -L2 * s[1] * qd[1], L3 * s[2] * qd[2]]])
+    assert np.linalg.norm(A @ qd) <= 1e-15
+    gamma = Adot @ qd
+    assert abs(gamma[0]) <= 1e-15  # consistent: the vanished row asks for zero
+    c12 = np.cos(q[0] - q[1])
+    M = np.array([[m1 * L1**2 / 3 + m2 * L1**2, m2 * L1 * L2 / 2 * c12, 0.0],
+                  [m2 * L1 * L2 / 2 * c12, m2 * L2**2 / 3, 0.0],
+                  [0.0, 0.0, m3 * L3**2 / 3]])
+    # C = 0 here: only M12 depends on q, through cos(θ1 − θ2), whose slope is 0 at θ1 = θ2
+    h = -g * np.array([(m1 * L1 / 2 + m2 * L1) * c[0], m2 * L2 / 2 * c[1], m3 * L3 / 2 * c[2]])
+    _, r = nullspace_projector(A)
+    assert int(r) == 1
+    qdd = forward_dynamics(M, h, A, gamma)
+    assert rel(qdd, udwadia_kalaba(M, A, h, gamma)) <= REF_RTOL
+    assert np.linalg.norm(A @ qdd + gamma) <= REF_RTOL * np.linalg.norm(h)
+    fc = constraint_force(M, h, A, gamma)
+    assert rel(fc, M @ qdd - h, np.linalg.norm(h)) <= REF_RTOL
