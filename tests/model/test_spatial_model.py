@@ -336,3 +336,21 @@ def test_other_bad_input_raises() -> None:
     m = b.build()
     with pytest.raises(ShapeError):
         m.mass_matrix(np.zeros(6))
+
+
+def test_assembly_of_spatial_models() -> None:
+    """Gauss–Newton assembly works despite the singular quaternion block of M; a guess that
+    cannot be assembled (zero quaternion) raises AssemblyError."""
+    from nonmin.errors import AssemblyError
+    from nonmin.library.top import top_model
+    from nonmin.model import assemble, consistent
+
+    m = top_model()
+    rng = np.random.default_rng(12)
+    q = m.reference_configuration() + 0.05 * rng.normal(size=7)
+    s = assemble(m, q, rng.normal(size=7))
+    assert consistent(m, s)
+    assert np.linalg.norm(s.q[3:7]) == pytest.approx(1.0, abs=1e-10)
+    np.testing.assert_allclose(m.point_position(s.q, "top", [0, 0, -0.1]), 0.0, atol=1e-10)
+    with pytest.raises(AssemblyError):
+        assemble(m, np.zeros(7))
