@@ -1,0 +1,67 @@
+"""Every tutorial in docs/tutorials runs: its ```python blocks, in order, form one script.
+
+The script runs in a fresh interpreter in a temporary directory with the Agg backend, and must
+finish within :data:`TIME_LIMIT` (the tutorials themselves take a few seconds on an idle
+machine; the limit leaves room for a loaded CI machine).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+TUTORIALS = ROOT / "docs" / "tutorials"
+#: Wall-clock limit per tutorial [s] (generous: 8 processes share 2 cores during development).
+TIME_LIMIT = 90.0
+EXPECTED = ("01_planar_mechanism.md", "02_switching_events.md", "03_control_closed_chain.md",
+            "04_urdf_loop_closure.md")
+
+
+def python_blocks(text: str) -> list[str]:
+    """The ```python fenced blocks of a Markdown text, in order."""
+    return re.findall(r"^```python\n(.*?)^```", text, flags=re.S | re.M)
+
+
+def tutorial_script(path: Path) -> str:
+    """The runnable script of a tutorial: its python blocks joined in order."""
+    blocks = python_blocks(path.read_text(encoding="utf-8"))
+    return "\n\n".join(b.rstrip() for b in blocks) + "\n"
+
+
+def test_block_extraction() -> None:
+    text = "intro\n```python\nx = 1\n```\n\n```text\nnot code\n```\n```python\ny = x + 1\n```\n"
+    assert python_blocks(text) == ["x = 1\n", "y = x + 1\n"]
+
+
+def test_all_tutorials_present() -> None:
+    names = sorted(p.name for p in TUTORIALS.glob("*.md"))
+    for name in EXPECTED:
+        assert name in names
+        assert len(python_blocks((TUTORIALS / name).read_text(encoding="utf-8"))) >= 3
+
+
+@pytest.mark.parametrize("name", EXPECTED)
+def test_tutorial_runs(name: str, tmp_path: Path) -> None:
+    script = tmp_path / (Path(name).stem + ".py")
+    script.write_text(tutorial_script(TUTORIALS / name), encoding="utf-8")
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONHASHSEED="0")
+    start = time.perf_counter()
+    proc = subprocess.run(
+        [sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
+        timeout=TIME_LIMIT,
+    )
+    elapsed = time.perf_counter() - start
+    assert proc.returncode == 0, f"{name} failed after {elapsed:.1f} s:\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}"
+    assert proc.stdout.strip(), f"{name} printed nothing"
+    # every tutorial saves at least one figure; the files must be non-empty PNGs
+    pngs = list(tmp_path.glob("*.png"))
+    assert pngs, f"{name} wrote no figure"
+    for png in pngs:
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
