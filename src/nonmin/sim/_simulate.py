@@ -69,6 +69,7 @@ _KNOWN_EXTRA = (
     "zeno_window",
     "project_initial",
     "h0",
+    "event_rearm",
 )
 
 
@@ -388,7 +389,9 @@ def simulate(
         ``zeno_max_events`` / ``zeno_window`` (raise :class:`ZenoError` when more than that many
         events fire within that time window; defaults 50 and 1e-6 s), ``project_initial``
         (project the initial state onto the constraints; default True with projection),
-        ``h0`` (first step of adaptive methods).
+        ``h0`` (first step of adaptive methods), ``event_rearm`` (a user event that fired
+        cannot fire again until ``|guard| > event_rearm``, default 1e-9: guards that stay at 0
+        after their transition, e.g. a constraint that was just activated, do not chatter).
 
     Returns
     -------
@@ -468,6 +471,7 @@ def simulate(
     v_thresh = float(options.get("impact_velocity_threshold", 1e-6))
     zeno_max = int(options.get("zeno_max_events", 50))
     zeno_window = float(options.get("zeno_window", 1e-6))
+    rearm_tol = float(options.get("event_rearm", 1e-9))
     project_initial = bool(options.get("project_initial", isinstance(stab, Projection)))
 
     cstate = controller.initial_state() if hasattr(controller, "initial_state") else None
@@ -511,6 +515,7 @@ def simulate(
         gvals = [_guard_value(system, w, p) for w in watches]
         state = integ.init(system.rhs, t, np.concatenate((q, qd)), h0)
         recent_events: list[float] = []
+        disarmed: set[int] = set()
         while t < t1:
             if n_steps >= max_steps:
                 raise SimulationError(f"max_steps = {max_steps} reached at t = {t:.12g}")
@@ -534,40 +539,60 @@ def simulate(
                                    system.active, rank_rtol)
             p1 = system.point(t_new, q1, qd1)
             new_g = [_guard_value(system, w, p1) for w in watches]
-            fired = [i for i, w in enumerate(watches) if _crossed(gvals[i], new_g[i], w.direction)]
+            fired = [
+                i for i, w in enumerate(watches)
+                if _crossed(gvals[i], new_g[i], w.direction) and id(w.event) not in disarmed
+            ]
+            for key in list(disarmed):  # re-arm user events whose guard left the zero band
+                j = next((i for i, w in enumerate(watches) if id(w.event) == key), None)
+                if j is None or abs(new_g[j]) > rearm_tol:
+                    disarmed.discard(key)
             if fired:
-                best_s, best_i = h, -1
+                roots: list[tuple[float, int]] = []
                 for i in fired:
                     w = watches[i]
 
                     def gfun(s: float, _w: _Watch = w) -> float:
                         return _guard_value(system, _w, at(s))
 
-                    g_end = new_g[i]
-                    if g_end == 0.0:
+                    if new_g[i] == 0.0:
                         s_root = h
                     else:
                         s_root = float(brentq(gfun, 0.0, h, xtol=EVENT_XTOL, rtol=1e-15, maxiter=200))
                         # take the bracket end on the far side of the crossing
                         s_root = _past_root(gfun, s_root, h, gvals[i])
-                    if s_root < best_s or best_i < 0:
-                        best_s, best_i = s_root, i
-                w = watches[best_i]
+                    roots.append((s_root, i))
+                roots.sort()
+                best_s = roots[0][0]
+                # events within the location tolerance fire together (user events first)
+                group = [i for s_i, i in roots if s_i <= best_s + 4 * EVENT_XTOL]
+                group.sort(key=lambda i: (watches[i].kind != "user", i))
                 pe = at(best_s) if best_s < h else p1
                 te = t_start + best_s
                 _sample_t_eval(rec, t_out, out_i, t_start, te, at, system)
                 out_i = _advance_out(t_out, out_i, te)
                 rec.add(pe, system.active)
-                before_active = system.active
-                qn, qdn, new_active, label, terminal, h_cap = _apply(
-                    system, w, pe, restitution, v_thresh, h0 if not integ.adaptive else 0.0
-                )
-                if isinstance(stab, Projection) and new_active:
-                    qn, qdn = stab.project(model, te, qn, qdn, new_active, rank_rtol)
-                system.active = new_active
-                records.append(EventRecord(te, label, _transition_text(w), pe.q.copy(), pe.qd.copy(),
-                                           qn.copy(), qdn.copy(), before_active, new_active))
-                recent_events.append(te)
+                terminal = False
+                h_cap = 0.0
+                label = ""
+                p = pe
+                for i in group:
+                    w = watches[i]
+                    before_active = system.active
+                    qn, qdn, new_active, label, term_i, cap_i = _apply(
+                        system, w, p, restitution, v_thresh, h0 if not integ.adaptive else 0.0
+                    )
+                    if isinstance(stab, Projection) and new_active:
+                        qn, qdn = stab.project(model, te, qn, qdn, new_active, rank_rtol)
+                    system.active = new_active
+                    records.append(EventRecord(te, label, _transition_text(w), p.q.copy(), p.qd.copy(),
+                                               qn.copy(), qdn.copy(), before_active, new_active))
+                    if w.kind == "user":
+                        disarmed.add(id(w.event))
+                    terminal = terminal or term_i
+                    h_cap = cap_i if h_cap == 0.0 else (min(h_cap, cap_i) if cap_i > 0 else h_cap)
+                    recent_events.append(te)
+                    p = system.point(te, qn, qdn)
                 while recent_events and recent_events[0] < te - zeno_window:
                     recent_events.pop(0)
                 if len(recent_events) > zeno_max:
@@ -576,8 +601,8 @@ def simulate(
                         f"(last: {label!r}); Zeno accumulation not resolved — raise "
                         "impact_velocity_threshold or zeno_max_events"
                     )
-                p = system.point(te, qn, qdn)
                 rec.add(p, system.active)
+                qn, qdn = p.q, p.qd
                 t = te
                 if controller is not None and hasattr(controller, "update"):
                     system.cstate = controller.update(te, qn, qdn, system.cstate, active=system.active)

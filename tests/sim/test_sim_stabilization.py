@@ -1,0 +1,90 @@
+"""Stabilization: residuals after projection; the crossed four-bar stays on its branch."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import (
+    crossed_branch_point,
+    crossed_initial_state,
+    joint_C,
+    make_crossed_four_bar,
+    make_pendulum,
+)
+
+from nonmin.errors import InputError
+from nonmin.sim import Baumgarte, Projection, simulate
+
+PHI_TOL = 1e-10
+
+
+def test_projection_keeps_constraint_residuals_at_round_off() -> None:
+    tr = simulate(make_pendulum(), (0.0, 2.0), [1.0, 0.0], dt=0.01)
+    assert tr.phi_norm.max() <= PHI_TOL
+    assert tr.velocity_residual_norm.max() <= PHI_TOL
+    # without stabilization the same run drifts visibly
+    tr0 = simulate(make_pendulum(), (0.0, 2.0), [1.0, 0.0], dt=0.01, stabilization="none")
+    assert tr0.phi_norm.max() > 100 * PHI_TOL
+
+
+def test_projection_corrects_an_inconsistent_initial_state() -> None:
+    tr = simulate(make_pendulum(), (0.0, 0.1), [1.01, 0.02], [0.3, 0.5], dt=0.01)
+    assert tr.phi_norm[0] <= 1e-12
+    assert tr.velocity_residual_norm[0] <= 1e-12
+
+
+def test_baumgarte_reduces_drift_compared_with_none() -> None:
+    kw = {"dt": 0.01, "t_eval": np.linspace(0, 3, 31)}
+    none = simulate(make_pendulum(), (0.0, 3.0), [1.0, 0.0], stabilization="none", **kw)
+    bg = simulate(make_pendulum(), (0.0, 3.0), [1.0, 0.0], stabilization=Baumgarte(5.0, 5.0), **kw)
+    assert bg.phi_norm.max() < none.phi_norm.max()
+
+
+def _branch_error(q: np.ndarray) -> np.ndarray:
+    C = joint_C(q)
+    Cb = np.array([crossed_branch_point(a) for a in q[:, 0]])
+    return np.linalg.norm(C - Cb, axis=1)
+
+
+def _change_points(q: np.ndarray) -> int:
+    """Crossings of the collinear configurations θ1 ≡ 0 (mod π)."""
+    k = np.floor(np.unwrap(q[:, 0]) / np.pi)
+    return int(np.count_nonzero(np.diff(k)))
+
+
+def test_crossed_four_bar_stays_on_its_branch_through_change_points() -> None:
+    model = make_crossed_four_bar()
+    q0, qd0 = crossed_initial_state(rate=5.0)
+    tr = simulate(model, (0.0, 2.0), q0, qd0, dt=1e-3, t_eval=np.linspace(0.0, 2.0, 401))
+    assert tr.success
+    assert _change_points(tr.q) >= 3
+    assert _branch_error(tr.q).max() < 1e-8
+    assert tr.phi_norm.max() <= PHI_TOL
+    assert tr.energy_drift < 1e-5
+    assert tr.rank.min() == 2  # the change points are passed without stopping at them
+
+
+def test_euclidean_projection_drifts_more_in_energy_than_mass_metric() -> None:
+    model = make_crossed_four_bar()
+    q0, qd0 = crossed_initial_state(rate=5.0)
+    kw = {"dt": 2e-3, "t_eval": np.linspace(0.0, 1.5, 16)}
+    mass = simulate(model, (0.0, 1.5), q0, qd0, **kw)
+    eucl = simulate(model, (0.0, 1.5), q0, qd0, stabilization=Projection(metric="euclidean"), **kw)
+    assert 10 * mass.energy_drift < eucl.energy_drift
+
+
+def test_crossed_four_bar_library_model_matches_reference() -> None:
+    library = pytest.importorskip("nonmin.library")
+    mech = library.get("crossed_four_bar")
+    t_eval = np.linspace(0.0, 1.0, 11)
+    tr = simulate(mech, (0.0, 1.0), dt=1e-3, t_eval=t_eval)
+    ref = library.crossed_four_bar_reference(t_eval)
+    assert np.max(np.abs(tr.q - ref["q"])) < 1e-6
+    assert tr.phi_norm.max() <= PHI_TOL
+
+
+def test_stabilization_objects_validate() -> None:
+    with pytest.raises(InputError, match="metric"):
+        Projection(metric="manhattan")
+    with pytest.raises(InputError, match="alpha"):
+        Baumgarte(alpha=-1.0)
