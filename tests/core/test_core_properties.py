@@ -194,3 +194,44 @@ def test_lambda_annihilated_by_P_and_Q_Omega_only_on_admissible_velocities(sys_)
     assert np.abs(Om @ qd - Lam @ qd).max() <= PROJ_TOL * s * n * (1 + np.abs(qd).max())
     # as matrices QΩ − Ω = PΛᵀ, which is not zero in general
     assert np.abs((Q @ Om - Om) - P @ Lam.T).max() <= PROJ_TOL * s * n
+
+
+@given(both_masses, st.integers(0, 2**32 - 1))
+def test_row_scaling_of_A_changes_nothing(sys_, seed):
+    """Rows of A (and γ) scaled by 10^±4: same rank, P and qdd (row equilibration, policy 2).
+
+    (Row norms that differ by more than 1/rtol = 1e10 are not covered: policy 1 then declares
+    the small row vanished; see test_rank_tolerance_is_observable_and_overridable.)"""
+    M, A, r, rng = sys_
+    n, m = A.shape[1], A.shape[0]
+    scale = 10.0 ** np.random.default_rng([seed, 3]).uniform(-4, 4, m)
+    mscale = np.abs(M).max() or 1.0
+    h = rng.standard_normal(n) * mscale
+    gamma = A @ rng.standard_normal(n)
+    P, rank = nullspace_projector(A)
+    Ps, rank_s = nullspace_projector(A * scale[:, None])
+    assert int(rank_s) == int(rank) == r
+    assert np.abs(Ps - P).max() <= 1e3 * PROJ_TOL
+    q0 = forward_dynamics(M, h, A, gamma)
+    q1 = forward_dynamics(M, h, A * scale[:, None], gamma * scale)
+    s = np.linalg.norm(q0) + np.linalg.norm(h) / mscale
+    assert rel(q1, q0, s) <= MU_RTOL
+
+
+def test_rank_tolerance_is_observable_and_overridable():
+    """A row that is dependent up to 1e-8 (relative): independent at the default rtol = 1e-10,
+    dependent at rtol = 1e-6; the rank used is returned and the result follows it."""
+    A = np.array([[1.0, 0.0, 0.0], [1.0, 1e-8, 0.0]])
+    M = np.diag([1.0, 2.0, 3.0])
+    h = np.array([1.0, -1.0, 0.5])
+    _, r_default = nullspace_projector(A)
+    _, r_loose = nullspace_projector(A, rtol=1e-6)
+    assert (int(r_default), int(r_loose)) == (2, 1)
+    q_default = forward_dynamics(M, h, A, np.zeros(2))
+    q_loose = forward_dynamics(M, h, A, np.zeros(2), rtol=1e-6)
+    assert abs(q_default[1]) <= 1e-12  # second coordinate fixed too
+    # second coordinate (almost) free: the kept direction is (1, 5e-9, 0)
+    assert abs(q_loose[1] - h[1] / M[1, 1]) <= 1e-8
+    # policy 1: a row whose norm is ≤ rtol·max row norm has vanished (rank 1, not 2)
+    _, r_vanished = nullspace_projector(np.array([[1.0, 0.0, 0.0], [0.0, 1e-11, 0.0]]))
+    assert int(r_vanished) == 1
