@@ -12,6 +12,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ...errors import InputError, ModelError, NonFiniteError, ShapeError, UnknownNameError
 from .._protocol import ConstraintSpec, ConstraintTerms, FloatArray, Geometry, Model, ModelTerms
+from . import _compiled
 from ._elements import (
     GROUND,
     Body,
@@ -28,6 +29,9 @@ from ._elements import (
 )
 
 __all__ = ["PlanarModel"]
+
+#: Active-set layouts kept per model (cleared when exceeded; a run uses a handful).
+_MAX_LAYOUTS = 256
 
 Actuator = JointActuator | PointForce | Torque
 ForceElement = Spring | RotationalSpring
@@ -228,6 +232,16 @@ class PlanarModel(Model):
     _mdiag: FloatArray = field(init=False, repr=False, compare=False)
     _point_map: dict[str, Point] = field(init=False, repr=False, compare=False)
     _rev: _RevoluteBatch = field(init=False, repr=False, compare=False)
+    # compiled evaluation (built once; caches are not compared and hold no state of a run)
+    _plan: _compiled.Plan = field(init=False, repr=False, compare=False)
+    _layouts: dict[frozenset[str], _compiled.Layout] = field(init=False, repr=False, compare=False)
+    _constraints: tuple[ConstraintSpec, ...] = field(init=False, repr=False, compare=False)
+    _coordinate_names: tuple[str, ...] = field(init=False, repr=False, compare=False)
+    _M: FloatArray = field(init=False, repr=False, compare=False)
+    _fg: FloatArray = field(init=False, repr=False, compare=False)
+    _B: FloatArray | None = field(init=False, repr=False, compare=False)
+    _stiff: bool = field(init=False, repr=False, compare=False)
+    _damped: bool = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         s = object.__setattr__
@@ -344,6 +358,28 @@ class PlanarModel(Model):
                         raise ModelError(f"actuator {act.name!r}: body {body!r} is a point mass")
             else:
                 check_point(act.point, f"actuator {act.name!r}")
+        s(self, "_constraints", tuple(ConstraintSpec(j.name, j.kind, j.dim, j.describe()) for j in self.joints))
+        cnames: list[str] = []
+        for b in self.bodies:
+            cnames += [f"{b.name}.x", f"{b.name}.y"]
+            if b.inertia is not None:
+                cnames.append(f"{b.name}.theta")
+        s(self, "_coordinate_names", tuple(cnames))
+        s(self, "_plan", _compiled.Plan(self.joints, index, off))
+        s(self, "_layouts", {})
+        M = np.diag(self._mdiag)
+        M.flags.writeable = False
+        s(self, "_M", M)
+        fg = self._gravity_force()
+        fg.flags.writeable = False
+        s(self, "_fg", fg)
+        s(self, "_stiff", any(fe.stiffness != 0.0 for fe in self.forces))
+        s(self, "_damped", any(fe.damping != 0.0 for fe in self.forces))
+        s(self, "_B", None)
+        if not any(self._actuator_varies(a) for a in self.actuators):
+            B = self._input_matrix(np.zeros(off))
+            B.flags.writeable = False
+            s(self, "_B", B)
         if self.default_active_names is None:
             dflt = frozenset(j.name for j in self.joints if j.kind != "unilateral")
             s(self, "default_active_names", dflt)
@@ -354,12 +390,7 @@ class PlanarModel(Model):
     # ------------------------------------------------------------------ protocol attributes
     @property
     def coordinate_names(self) -> tuple[str, ...]:  # type: ignore[override]
-        out: list[str] = []
-        for b in self.bodies:
-            out += [f"{b.name}.x", f"{b.name}.y"]
-            if b.inertia is not None:
-                out.append(f"{b.name}.theta")
-        return tuple(out)
+        return self._coordinate_names
 
     @property
     def n(self) -> int:
@@ -367,7 +398,11 @@ class PlanarModel(Model):
 
     @property
     def constraints(self) -> tuple[ConstraintSpec, ...]:  # type: ignore[override]
-        return tuple(ConstraintSpec(j.name, j.kind, j.dim, j.describe()) for j in self.joints)
+        return self._constraints
+
+    @property
+    def constraint_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints)
 
     @property
     def actuator_names(self) -> tuple[str, ...]:  # type: ignore[override]
@@ -450,7 +485,7 @@ class PlanarModel(Model):
 
     # ------------------------------------------------------------------ dynamics
     def mass_matrix(self, q: ArrayLike) -> FloatArray:
-        return np.diag(self._mdiag)
+        return self._M.copy()
 
     def coriolis_matrix(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
         return np.zeros((self.n, self.n))
@@ -477,6 +512,12 @@ class PlanarModel(Model):
         return pb - pa, vb - va, D
 
     def conservative_force(self, q: ArrayLike) -> FloatArray:
+        if not self._stiff:
+            _vec(q, "q", self.n)
+            return self._fg.copy()
+        return self._conservative_force(q)
+
+    def _conservative_force(self, q: ArrayLike) -> FloatArray:
         kin = self._kin(q)
         f = self._gravity_force()
         for fe in self.forces:
@@ -501,7 +542,9 @@ class PlanarModel(Model):
 
     def potential_energy(self, q: ArrayLike) -> float:
         kin = self._kin(q)
-        V = -float(self._gravity_force() @ kin.q)
+        V = -float(self._fg @ kin.q)
+        if not self._stiff:
+            return V
         for fe in self.forces:
             if fe.stiffness == 0.0:
                 continue
@@ -516,6 +559,9 @@ class PlanarModel(Model):
         return V
 
     def passive_force(self, t: float, q: ArrayLike, qd: ArrayLike) -> FloatArray:
+        return self._passive_force(q, qd)
+
+    def _passive_force(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
         kin = self._kin(q, qd)
         f = np.zeros(self.n)
         for fe in self.forces:
@@ -537,7 +583,22 @@ class PlanarModel(Model):
                 f += row[0]
         return f
 
+    def _actuator_varies(self, act: Actuator) -> bool:
+        """Whether the column of ``act`` in B depends on q (else it is cached at build time)."""
+        if isinstance(act, Torque):
+            return False
+        if isinstance(act, JointActuator):
+            return not isinstance(self.joint(act.joint), Revolute)
+        p = act.point
+        return p.body != GROUND and self._index[p.body][2] >= 0 and p.local != (0.0, 0.0)
+
     def input_matrix(self, q: ArrayLike) -> FloatArray:
+        if self._B is not None:
+            _vec(q, "q", self.n)
+            return self._B.copy()
+        return self._input_matrix(q)
+
+    def _input_matrix(self, q: ArrayLike) -> FloatArray:
         kin = self._kin(q)
         B = np.zeros((self.n, self.k))
         jmap = {j.name: j for j in self.joints}
@@ -608,9 +669,56 @@ class PlanarModel(Model):
         Ad = Ad[:, :n]
         return ConstraintTerms(A, gamma, phi, A @ kin.qd + phit, np.ones(m, dtype=bool)), Ad
 
+    def resolve_active(self, active: Iterable[str] | str | None) -> frozenset[str]:
+        if active is None:
+            return self.default_active
+        if type(active) is frozenset and active in self._layouts:
+            return active
+        return super().resolve_active(active)
+
+    def _layout(self, active: Iterable[str] | None) -> _compiled.Layout:
+        """The compiled row layout of an active set (cached per frozenset)."""
+        key = self.default_active if active is None else active
+        lay = self._layouts.get(key) if type(key) is frozenset else None  # type: ignore[call-overload]
+        if lay is None:
+            act = super().resolve_active(key)
+            lay = self._layouts.get(act)
+            if lay is None:
+                if len(self._layouts) >= _MAX_LAYOUTS:
+                    self._layouts.clear()
+                lay = self._plan.layout(act)
+                self._layouts[act] = lay
+        return lay
+
+    def _state_arrays(self, q: ArrayLike, qd: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """``q``, ``qd`` as float64 arrays of shape (n,), checked once (shape and finiteness)."""
+        n = self.n
+        qv = q if type(q) is np.ndarray and q.dtype == np.float64 else np.asarray(q, dtype=np.float64)
+        v = qd if type(qd) is np.ndarray and qd.dtype == np.float64 else np.asarray(qd, dtype=np.float64)
+        if qv.shape != (n,):
+            raise ShapeError(f"q must have shape ({n},), got shape {qv.shape}")
+        if v.shape != (n,):
+            raise ShapeError(f"qd must have shape ({n},), got shape {v.shape}")
+        # one cheap test; the exact one only when it fails (NaN/inf, or an overflow of finite values)
+        if not math.isfinite(float(qv @ qv) + float(v @ v)):
+            _vec(qv, "q", n)
+            _vec(v, "qd", n)
+        return qv, v
+
     def constraint_terms(
         self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
     ) -> ConstraintTerms:
+        qv, v = self._state_arrays(q, qd)
+        return _compiled.constraint_terms(self, self._layout(active), t, qv, v)
+
+    def reference_constraint_terms(
+        self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
+    ) -> ConstraintTerms:
+        """:meth:`constraint_terms` from the per-joint formulas (:meth:`Joint.terms`), slow.
+
+        The straightforward reference implementation against which the compiled evaluation is
+        tested; same results up to round-off.
+        """
         return self._stack(t, self._kin(q, qd), active)[0]
 
     def constraint_jacobian_dot(
@@ -622,13 +730,14 @@ class PlanarModel(Model):
     def evaluate(
         self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
     ) -> ModelTerms:
-        kin = self._kin(q, qd)
+        qv, v = self._state_arrays(q, qd)
+        lay = self._layout(active)
         return ModelTerms(
-            M=np.diag(self._mdiag),
-            h=self.conservative_force(kin.q),
-            f_passive=self.passive_force(t, kin.q, kin.qd),
-            B=self.input_matrix(kin.q),
-            constraints=self._stack(t, kin, active)[0],
+            M=self._M.copy(),
+            h=self._conservative_force(qv) if self._stiff else self._fg.copy(),
+            f_passive=self._passive_force(qv, v) if self._damped else np.zeros(self.n),
+            B=self._B.copy() if self._B is not None else self._input_matrix(qv),
+            constraints=_compiled.constraint_terms(self, lay, t, qv, v),
         )
 
     # ------------------------------------------------------------------ outputs and geometry

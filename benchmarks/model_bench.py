@@ -1,0 +1,152 @@
+"""Benchmark of the planar multibody model's evaluation (``PlanarModel.evaluate``) and of the
+resulting simulation speed.
+
+Timed, each from Python, in one run:
+
+* ``model.evaluate(t, q, qd, active)`` — M, h, f_passive, B and the constraint terms
+  (A, γ, φ, velocity residual) at the mechanism's initial state and default active set:
+  crossed four-bar, IFToMM A02 with N = 2 and N = 40, five-bar, 2R arm at the wall;
+* ``model.constraint_terms(...)`` alone;
+* ``simulate(mechanism, (0, T), method="rk4", dt=1e-3)`` — wall time per simulated second
+  for the crossed four-bar and A02 N = 2 (includes the core solve and the simulator's own work).
+
+Each evaluation timing is the median over ``--repeat`` calls after a warm-up; the simulation
+timing is the median of three runs after one warm-up run (JIT compilation excluded).
+
+Usage::
+
+    python benchmarks/model_bench.py                  # prints a Markdown table
+    python benchmarks/model_bench.py --label after --json benchmarks/results/model_after.json
+    python benchmarks/model_bench.py --quick          # few repeats (smoke test)
+
+Results of the runs quoted in ``benchmarks/MODEL.md`` are in ``benchmarks/results/model_*.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).resolve().parent
+
+CASES: list[tuple[str, str, dict[str, Any]]] = [
+    ("crossed_four_bar", "crossed_four_bar", {}),
+    ("A02 N=2", "A02_n_four_bar", {"N": 2}),
+    ("A02 N=40", "A02_n_four_bar", {"N": 40}),
+    ("five_bar", "five_bar", {}),
+    ("arm2r_wall", "arm2r_wall", {}),
+]
+SIM_CASES: list[tuple[str, str, dict[str, Any]]] = [
+    ("crossed_four_bar", "crossed_four_bar", {}),
+    ("A02 N=2", "A02_n_four_bar", {"N": 2}),
+]
+
+
+def median_us(fn: Callable[[], object], repeat: int, warmup: int = 20) -> float:
+    """Median wall time of ``fn()`` in microseconds."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return 1e6 * statistics.median(times)
+
+
+def machine() -> dict[str, Any]:
+    import numpy as np
+
+    try:
+        commit = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"], cwd=HERE, capture_output=True, text=True, check=False
+        ).stdout.strip()
+    except OSError:
+        commit = ""
+    return {
+        "python": sys.version.split()[0],
+        "numpy": np.__version__,
+        "platform": platform.platform(),
+        "cpus": os.cpu_count(),
+        "commit": commit,
+    }
+
+
+def run(repeat: int, sim_T: float) -> dict[str, Any]:
+    from nonmin import library
+    from nonmin.sim import simulate
+
+    rows = []
+    for label, name, kw in CASES:
+        mech = library.get(name, **kw)
+        m, s = mech.model, mech.state
+        t, q, qd, act = float(s.t), s.q, s.qd, s.active
+        rows.append(
+            {
+                "case": label,
+                "n": m.n,
+                "m": m.num_rows(act),
+                "evaluate_us": median_us(lambda m=m, t=t, q=q, qd=qd, act=act: m.evaluate(t, q, qd, act), repeat),
+                "constraint_terms_us": median_us(
+                    lambda m=m, t=t, q=q, qd=qd, act=act: m.constraint_terms(t, q, qd, act), repeat
+                ),
+            }
+        )
+    sims = []
+    for label, name, kw in SIM_CASES:
+        mech = library.get(name, **kw)
+        simulate(mech, (0.0, 0.05), method="rk4", dt=1e-3, progress=False)  # warm-up (JIT)
+        walls = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            simulate(mech, (0.0, sim_T), method="rk4", dt=1e-3, progress=False)
+            walls.append(time.perf_counter() - t0)
+        sims.append({"case": label, "T": sim_T, "wall_s_per_sim_s": statistics.median(walls) / sim_T})
+    return {"machine": machine(), "repeat": repeat, "evaluate": rows, "simulate": sims}
+
+
+def markdown(res: dict[str, Any], label: str) -> str:
+    lines = [
+        f"**{label}** (repeat={res['repeat']}, commit {res['machine']['commit']})",
+        "",
+        "| mechanism | n | m | evaluate (µs) | constraint_terms (µs) |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    for r in res["evaluate"]:
+        lines.append(
+            f"| {r['case']} | {r['n']} | {r['m']} | {r['evaluate_us']:.1f} | {r['constraint_terms_us']:.1f} |"
+        )
+    lines += ["", "| simulate rk4, dt=1e-3 | wall s per simulated s |", "|---|---:|"]
+    for r in res["simulate"]:
+        lines.append(f"| {r['case']} (T={r['T']:g} s) | {r['wall_s_per_sim_s']:.2f} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeat", type=int, default=2000)
+    ap.add_argument("--sim-T", type=float, default=1.0, help="simulated seconds per simulate() run")
+    ap.add_argument("--quick", action="store_true", help="few repeats, short simulation")
+    ap.add_argument("--label", default="run")
+    ap.add_argument("--json", type=Path, default=None, help="write the results to this JSON file")
+    args = ap.parse_args(argv)
+    repeat, sim_T = (100, 0.1) if args.quick else (args.repeat, args.sim_T)
+    res = run(repeat, sim_T)
+    res["label"] = args.label
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(res, indent=2))
+    print(markdown(res, args.label))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,396 @@
+"""Compiled (vectorized) evaluation of a planar model: index arrays built once, NumPy inside.
+
+Every joint is decomposed at build time into *row primitives* of four kinds:
+
+* ``pin``   — two rows ``φ = p_a − p_b`` (revolute; the first two rows of a weld),
+* ``line``  — one row ``φ = n·(p_b − p_a)``, ``n = R_a u^⊥`` (point-on-line; prismatic row 2),
+* ``rod``   — one row ``φ = s (dᵀd − L²)/(2L)``, ``d = p_b − p_a``, ``s = ±1``,
+* ``angle`` — one row linear in the angles, ``φ = g·q − c − f(t)`` (weld row 3, prismatic row 1,
+  gear, angle driver with the profile ``f``); its ``A`` row ``g`` is constant.
+
+Joints of a user-defined :class:`~nonmin.model.planar.Joint` subclass (not one of the above) keep
+their own :meth:`Joint.terms`. For an active set, a :class:`Layout` (cached per frozenset by the
+model) holds the row of every primitive, the constant entries of ``A`` (a template) and the flat
+indices of its variable entries. One evaluation then computes the kinematics of every primitive's
+points with a few vectorized operations and scatters them into ``A``, ``γ`` and ``φ``; the
+formulas are those of :mod:`._elements` (the per-joint reference implementation).
+
+Coordinates are addressed in ``q_ext = (q, 0)``: the ground's ``x, y, θ`` and a point mass's
+``θ`` point at the extra zero entry ``n``. Entries of ``A`` in that column are discarded by
+sending them to a dump slot after the ``m·n`` entries of the flat buffer.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._protocol import ConstraintTerms, FloatArray
+from ._elements import (
+    GROUND,
+    AngleDriver,
+    Gear,
+    Joint,
+    Point,
+    PointOnLine,
+    Prismatic,
+    Revolute,
+    Rod,
+    Weld,
+)
+
+if TYPE_CHECKING:
+    from ._model import PlanarModel
+
+IntArray = NDArray[np.intp]
+_ZERO1 = np.zeros(1)
+
+
+@dataclass(frozen=True)
+class _Side:
+    """One point of a primitive: ``(ix, iy, ith)`` in q_ext and local coordinates."""
+
+    ix: int
+    iy: int
+    ith: int
+    sx: float
+    sy: float
+
+
+@dataclass(frozen=True)
+class _Prim:
+    """A row primitive of a joint (``offset``: its first row within the joint)."""
+
+    kind: str  # "pin" | "line" | "rod" | "angle"
+    offset: int
+    a: _Side | None = None
+    b: _Side | None = None
+    ux: float = 0.0  # line: unit axis (body a)
+    uy: float = 0.0
+    coef: float = 0.0  # rod: s / L
+    length: float = 0.0  # rod: L
+    sign: float = 1.0  # rod: s
+    angles: tuple[tuple[int, float], ...] = ()  # angle: (column, coefficient)
+    const: float = 0.0  # angle: c
+    profile: Callable[[float], tuple[float, float, float]] | None = None  # angle: driver f(t)
+
+
+class Plan:
+    """Row primitives of every joint of a model (built once, in the model's ``__post_init__``)."""
+
+    def __init__(self, joints: tuple[Joint, ...], index: dict[str, tuple[int, int, int]], n: int) -> None:
+        self.n = n
+        self.joints = joints
+        self.dims = tuple(j.dim for j in joints)
+
+        def side(p: Point) -> _Side:
+            if p.body == GROUND:
+                return _Side(n, n, n, p.local[0], p.local[1])
+            ix, iy, ith = index[p.body]
+            return _Side(ix, iy, ith if ith >= 0 else n, p.local[0], p.local[1])
+
+        def theta(body: str) -> int:
+            return n if body == GROUND else index[body][2]
+
+        def angle_row(offset: int, terms: Iterable[tuple[str, float]], const: float, profile: object = None) -> _Prim:
+            cols = tuple((theta(b), float(c)) for b, c in terms if b != GROUND)
+            return _Prim("angle", offset, angles=cols, const=const, profile=profile)  # type: ignore[arg-type]
+
+        prims: list[tuple[_Prim, ...] | None] = []
+        for j in joints:
+            tj = type(j)
+            if tj is Revolute:
+                assert isinstance(j, Revolute)
+                prims.append((_Prim("pin", 0, side(j.a), side(j.b)),))
+            elif tj is Weld:
+                assert isinstance(j, Weld)
+                prims.append(
+                    (
+                        _Prim("pin", 0, side(j.a), side(j.b)),
+                        angle_row(2, ((j.b.body, 1.0), (j.a.body, -1.0)), j.angle),
+                    )
+                )
+            elif tj is PointOnLine:
+                assert isinstance(j, PointOnLine)
+                prims.append((_Prim("line", 0, side(j.a), side(j.b), ux=j.axis[0], uy=j.axis[1]),))
+            elif tj is Prismatic:
+                assert isinstance(j, Prismatic)
+                prims.append(
+                    (
+                        angle_row(0, ((j.b.body, 1.0), (j.a.body, -1.0)), j.angle),
+                        _Prim("line", 1, side(j.a), side(j.b), ux=j.axis[0], uy=j.axis[1]),
+                    )
+                )
+            elif tj is Rod:
+                assert isinstance(j, Rod)
+                s = -1.0 if j.unilateral else 1.0
+                prims.append(
+                    (_Prim("rod", 0, side(j.a), side(j.b), coef=s / j.length, length=j.length, sign=s),)
+                )
+            elif tj is Gear:
+                assert isinstance(j, Gear)
+                prims.append(
+                    (
+                        angle_row(
+                            0,
+                            ((j.body_b, 1.0), (j.carrier, -1.0 + j.ratio), (j.body_a, -j.ratio)),
+                            j.offset,
+                        ),
+                    )
+                )
+            elif tj is AngleDriver:
+                assert isinstance(j, AngleDriver)
+                prims.append((angle_row(0, ((j.body_b, 1.0), (j.body_a, -1.0)), 0.0, j.profile),))
+            else:
+                prims.append(None)  # a user-defined joint: its own terms()
+        self.prims = tuple(prims)
+
+    def layout(self, active: frozenset[str]) -> Layout:
+        """The :class:`Layout` of an active set (names already validated)."""
+        return Layout(self, active)
+
+
+def _known(s: _Side | None) -> _Side:
+    assert s is not None
+    return s
+
+
+def _flat(row: IntArray, col: IntArray, m: int, n: int) -> IntArray:
+    """Flat index ``row·n + col`` into the (m·n + 1) buffer; column n goes to the dump slot."""
+    return np.where(col < n, row * n + col, m * n).astype(np.intp)
+
+
+class Layout:
+    """Row layout and index arrays of one active set (immutable once built)."""
+
+    def __init__(self, plan: Plan, active: frozenset[str]) -> None:
+        n = plan.n
+        self.n = n
+        pins: list[tuple[int, _Side, _Side]] = []
+        lines: list[tuple[int, _Prim]] = []
+        rods: list[tuple[int, _Prim]] = []
+        angles: list[tuple[int, _Prim]] = []
+        generic: list[tuple[int, Joint]] = []
+        r = 0
+        for j, dim, pr in zip(plan.joints, plan.dims, plan.prims, strict=True):
+            if j.name not in active:
+                continue
+            if pr is None:
+                generic.append((r, j))
+            else:
+                for p in pr:
+                    row = r + p.offset
+                    if p.kind == "pin":
+                        assert p.a is not None and p.b is not None
+                        pins.append((row, p.a, p.b))
+                    elif p.kind == "line":
+                        lines.append((row, p))
+                    elif p.kind == "rod":
+                        rods.append((row, p))
+                    else:
+                        angles.append((row, p))
+            r += dim
+        m = r
+        self.m = m
+        self.generic = tuple(generic)
+        P, NL, NR = len(pins), len(lines), len(rods)
+        self.P, self.NL, self.NR = P, NL, NR
+        # sides, in the order pin a, pin b, line a, line b, rod a, rod b
+        sides: list[_Side] = (
+            [a for _, a, _ in pins]
+            + [b for _, _, b in pins]
+            + [_known(p.a) for _, p in lines]
+            + [_known(p.b) for _, p in lines]
+            + [_known(p.a) for _, p in rods]
+            + [_known(p.b) for _, p in rods]
+        )
+        S = len(sides)
+        self.S = S
+        self.I3: IntArray = np.array(
+            [[s.ix for s in sides], [s.iy for s in sides], [s.ith for s in sides]], dtype=np.intp
+        ).reshape(3, S)
+        sx: FloatArray = np.array([s.sx for s in sides], dtype=np.float64)
+        sy: FloatArray = np.array([s.sy for s in sides], dtype=np.float64)
+        self.SL = np.stack([sx, sy]) if S else np.zeros((2, 0))
+        self.SLp = np.stack([-sy, sx]) if S else np.zeros((2, 0))
+
+        const_idx: list[IntArray] = []
+        const_val: list[FloatArray] = []
+        var_idx: list[IntArray] = []
+        ix, iy, ith = self.I3
+        # ---------------------------------------------------------------- pins
+        prow = np.array([row for row, _, _ in pins], dtype=np.intp)
+        self.pin_rows = np.concatenate([prow, prow + 1])  # x rows, then y rows
+        if P:
+            sgn = np.concatenate([np.ones(P), -np.ones(P)])
+            r2 = np.concatenate([prow, prow])
+            const_idx += [_flat(r2, ix[: 2 * P], m, n), _flat(r2 + 1, iy[: 2 * P], m, n)]
+            const_val += [sgn, sgn]
+            # θ entries: sign·(R s)^⊥ — x row gets sign·rsp_x, y row sign·rsp_y
+            var_idx += [_flat(r2, ith[: 2 * P], m, n), _flat(r2 + 1, ith[: 2 * P], m, n)]
+            self.pin_sign = np.concatenate([sgn, sgn])
+        # ---------------------------------------------------------------- lines
+        self.line_rows = np.array([row for row, _ in lines], dtype=np.intp)
+        if NL:
+            o = 2 * P
+            a_, b_ = slice(o, o + NL), slice(o + NL, o + 2 * NL)
+            rl = self.line_rows
+            # u^⊥ = (−u_y, u_x) and its perpendicular (−u_x, −u_y), for n = c·UP + s·UPp
+            ux = np.array([p.ux for _, p in lines])
+            uy = np.array([p.uy for _, p in lines])
+            self.UP = np.stack([-uy, ux])
+            self.UPp = np.stack([-ux, -uy])
+            # value order: n_x (x_b), n_y (y_b), n·rsp_b (θ_b), −n_x (x_a), −n_y (y_a), θ_a
+            var_idx += [
+                _flat(rl, ix[b_], m, n),
+                _flat(rl, iy[b_], m, n),
+                _flat(rl, ith[b_], m, n),
+                _flat(rl, ix[a_], m, n),
+                _flat(rl, iy[a_], m, n),
+                _flat(rl, ith[a_], m, n),
+            ]
+        # ---------------------------------------------------------------- rods
+        self.rod_rows = np.array([row for row, _ in rods], dtype=np.intp)
+        if NR:
+            o = 2 * P + 2 * NL
+            a_, b_ = slice(o, o + NR), slice(o + NR, o + 2 * NR)
+            rr = self.rod_rows
+            self.rod_coef = np.array([p.coef for _, p in rods])
+            self.rod_len = np.array([p.length for _, p in rods])
+            self.rod_sign = np.array([p.sign for _, p in rods])
+            var_idx += [
+                _flat(rr, ix[b_], m, n),
+                _flat(rr, iy[b_], m, n),
+                _flat(rr, ith[b_], m, n),
+                _flat(rr, ix[a_], m, n),
+                _flat(rr, iy[a_], m, n),
+                _flat(rr, ith[a_], m, n),
+            ]
+        # ---------------------------------------------------------------- angle rows
+        self.angle_rows = np.array([row for row, _ in angles], dtype=np.intp)
+        G = np.zeros((len(angles), n + 1))
+        for k, (row, p) in enumerate(angles):
+            for col, c in p.angles:
+                G[k, col] += c
+                if col < n:
+                    const_idx.append(np.array([row * n + col], dtype=np.intp))
+                    const_val.append(np.array([c]))
+        self.G = np.ascontiguousarray(G[:, :n])
+        self.angle_const = np.array([p.const for _, p in angles])
+        self.drivers = tuple(
+            (k, int(row), p.profile) for k, (row, p) in enumerate(angles) if p.profile is not None
+        )
+        # ---------------------------------------------------------------- A template
+        buf = np.zeros(m * n + 1)
+        if const_idx:
+            np.add.at(buf, np.concatenate(const_idx), np.concatenate(const_val))
+        buf[m * n] = 0.0
+        self.A0 = buf
+        self.var_idx = np.concatenate(var_idx) if var_idx else np.zeros(0, dtype=np.intp)
+        real = self.var_idx[self.var_idx < m * n]
+        #: variable entries may share a position (e.g. a joint between two points of one body)
+        self.var_unique = bool(np.unique(real).size == real.size)
+        self.holonomic = np.ones(m, dtype=bool)
+        self.has_rheo = bool(self.drivers) or bool(generic)
+
+
+def constraint_terms(
+    model: PlanarModel, lay: Layout, t: float, q: FloatArray, qd: FloatArray
+) -> ConstraintTerms:
+    """Stacked ``(A, γ, φ, A qd + φ_t, holonomic)`` of the layout's active set."""
+    n, m = lay.n, lay.m
+    if m == 0:
+        e = np.zeros(0)
+        return ConstraintTerms(np.zeros((0, n)), e, e.copy(), e.copy(), np.zeros(0, dtype=bool))
+    buf = lay.A0.copy()
+    phi = np.zeros(m)
+    gamma = np.zeros(m)
+    P, NL, NR = lay.P, lay.NL, lay.NR
+    if lay.S:
+        qe = np.concatenate((q, _ZERO1))
+        ve = np.concatenate((qd, _ZERO1))
+        Q = qe[lay.I3]  # (3, S): x, y, θ of each side's body
+        V = ve[lay.I3]
+        c = np.cos(Q[2])
+        s = np.sin(Q[2])
+        rs = c * lay.SL + s * lay.SLp  # R s, (2, S)
+        rsp = c * lay.SLp - s * lay.SL  # (R s)^⊥
+        p = Q[:2] + rs  # point positions
+        om = V[2]
+        om2rs = (om * om) * rs
+        vals: list[FloatArray] = []
+        if P:
+            P2 = 2 * P
+            phi[lay.pin_rows] = (p[:, :P] - p[:, P:P2]).ravel()
+            gamma[lay.pin_rows] = (om2rs[:, P:P2] - om2rs[:, :P]).ravel()
+            vals.append((rsp[:, :P2] * lay.pin_sign.reshape(2, P2)).ravel())
+        if NL or NR:
+            v = V[:2] + om * rsp  # point velocities
+        if NL:
+            o = 2 * P
+            a_, b_ = slice(o, o + NL), slice(o + NL, o + 2 * NL)
+            ca, sa, oma = c[a_], s[a_], om[a_]
+            nrm = ca * lay.UP + sa * lay.UPp  # n = R_a u^⊥
+            nperp = np.stack([-nrm[1], nrm[0]])
+            d = p[:, b_] - p[:, a_]
+            dd = v[:, b_] - v[:, a_]
+            dn = (nrm * d).sum(axis=0)
+            phi[lay.line_rows] = dn
+            gamma[lay.line_rows] = (
+                2.0 * oma * (nperp * dd).sum(axis=0)
+                + (nrm * (om2rs[:, a_] - om2rs[:, b_])).sum(axis=0)
+                - oma * oma * dn
+            )
+            nb = (nrm * rsp[:, b_]).sum(axis=0)
+            na = (d * nperp).sum(axis=0) - (nrm * rsp[:, a_]).sum(axis=0)
+            vals.append(np.concatenate([nrm[0], nrm[1], nb, -nrm[0], -nrm[1], na]))
+        if NR:
+            o = 2 * P + 2 * NL
+            a_, b_ = slice(o, o + NR), slice(o + NR, o + 2 * NR)
+            d = p[:, b_] - p[:, a_]
+            dd = v[:, b_] - v[:, a_]
+            k = lay.rod_coef
+            L = lay.rod_len
+            phi[lay.rod_rows] = lay.rod_sign * ((d * d).sum(axis=0) - L * L) / (2.0 * L)
+            gamma[lay.rod_rows] = k * ((dd * dd).sum(axis=0) + (d * (om2rs[:, a_] - om2rs[:, b_])).sum(axis=0))
+            kd = k * d
+            tb = (kd * rsp[:, b_]).sum(axis=0)
+            ta = (kd * rsp[:, a_]).sum(axis=0)
+            vals.append(np.concatenate([kd[0], kd[1], tb, -kd[0], -kd[1], -ta]))
+        allv = vals[0] if len(vals) == 1 else np.concatenate(vals)
+        if lay.var_unique:
+            buf[lay.var_idx] += allv
+        else:
+            np.add.at(buf, lay.var_idx, allv)
+    A = buf[: m * n].reshape(m, n)
+    phit: FloatArray | None = None
+    if lay.angle_rows.size:
+        pa = lay.G @ q - lay.angle_const
+        if lay.drivers:
+            phit = np.zeros(m)
+            for k_, row, prof in lay.drivers:
+                f, fd, fdd = (float(x) for x in prof(float(t)))
+                pa[k_] -= f
+                gamma[row] = -fdd
+                phit[row] = -fd
+        phi[lay.angle_rows] = pa
+    if lay.generic:
+        from ._model import _Kin
+
+        kin = _Kin(model, q, qd)
+        if phit is None:
+            phit = np.zeros(m)
+        for r, j in lay.generic:
+            ph, Aj, _, gj, ptj = j.terms(kin, float(t))
+            A[r : r + j.dim] = Aj
+            phi[r : r + j.dim] = ph
+            gamma[r : r + j.dim] = gj
+            phit[r : r + j.dim] = ptj
+    vel = A @ qd
+    if phit is not None:
+        vel += phit
+    return ConstraintTerms(A, gamma, phi, vel, lay.holonomic.copy())
