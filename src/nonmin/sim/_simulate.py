@@ -387,7 +387,7 @@ def simulate(
     **options
         ``rank_rtol`` (rank tolerance of A), ``impact_velocity_threshold`` (m/s, default 1e-6),
         ``zeno_max_events`` / ``zeno_window`` (raise :class:`ZenoError` when more than that many
-        events fire within that time window; defaults 50 and 1e-6 s), ``project_initial``
+        events fire within that time window; defaults 20 and 1e-6 s), ``project_initial``
         (project the initial state onto the constraints; default True with projection),
         ``h0`` (first step of adaptive methods), ``event_rearm`` (a user event that fired
         cannot fire again until ``|guard| > event_rearm``, default 1e-9: guards that stay at 0
@@ -469,7 +469,7 @@ def simulate(
         raise InputError(f"max_steps must be ≥ 1, got {max_steps!r}")
     rank_rtol = options.get("rank_rtol")
     v_thresh = float(options.get("impact_velocity_threshold", 1e-6))
-    zeno_max = int(options.get("zeno_max_events", 50))
+    zeno_max = int(options.get("zeno_max_events", 20))
     zeno_window = float(options.get("zeno_window", 1e-6))
     rearm_tol = float(options.get("event_rearm", 1e-9))
     project_initial = bool(options.get("project_initial", isinstance(stab, Projection)))
@@ -541,7 +541,8 @@ def simulate(
             new_g = [_guard_value(system, w, p1) for w in watches]
             fired = [
                 i for i, w in enumerate(watches)
-                if _crossed(gvals[i], new_g[i], w.direction) and id(w.event) not in disarmed
+                if (_crossed(gvals[i], new_g[i], w.direction) and id(w.event) not in disarmed)
+                or (w.kind == "impact" and gvals[i] <= 0.0 and new_g[i] < 0.0)
             ]
             for key in list(disarmed):  # re-arm user events whose guard left the zero band
                 j = next((i for i, w in enumerate(watches) if id(w.event) == key), None)
@@ -555,7 +556,11 @@ def simulate(
                     def gfun(s: float, _w: _Watch = w) -> float:
                         return _guard_value(system, _w, at(s))
 
-                    if new_g[i] == 0.0:
+                    if w.kind == "impact" and gvals[i] <= 0.0:
+                        # a bounce too short to resolve (or a start inside the obstacle): the
+                        # gap never became positive at a sample — contact from the step start
+                        s_root = 0.0
+                    elif new_g[i] == 0.0:
                         s_root = h
                     else:
                         s_root = float(brentq(gfun, 0.0, h, xtol=EVENT_XTOL, rtol=1e-15, maxiter=200))
@@ -579,8 +584,10 @@ def simulate(
                 for i in group:
                     w = watches[i]
                     before_active = system.active
+                    forced = w.kind == "impact" and gvals[i] <= 0.0
                     qn, qdn, new_active, label, term_i, cap_i = _apply(
-                        system, w, p, restitution, v_thresh, h0 if not integ.adaptive else 0.0
+                        system, w, p, 0.0 if forced else restitution, v_thresh,
+                        h0 if not integ.adaptive else 0.0,
                     )
                     if isinstance(stab, Projection) and new_active:
                         qn, qdn = stab.project(model, te, qn, qdn, new_active, rank_rtol)
