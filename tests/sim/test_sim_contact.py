@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import XW, G, arm_tip_x, make_arm_wall, make_ball
 from scipy.integrate import solve_ivp
 
+from conftest import XW, G, arm_tip_x, make_arm_wall, make_ball
 from nonmin.errors import ZenoError
 from nonmin.sim import Status, simulate
 

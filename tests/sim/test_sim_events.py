@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import G, make_pendulum
 from scipy.special import ellipk
 
+from conftest import G, make_pendulum
 from nonmin.errors import InputError
 from nonmin.model import FunctionConstraint, FunctionModel
 from nonmin.sim import Activate, Deactivate, Event, Reset, Status, simulate

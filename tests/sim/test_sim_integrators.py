@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import G, make_pendulum
 from scipy.integrate import solve_ivp
 
+from conftest import G, make_pendulum
 from nonmin.sim import RK4, DormandPrince5, ImplicitMidpoint, simulate
 
 T_END = 1.0

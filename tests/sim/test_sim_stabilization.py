@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from conftest import (
     crossed_branch_point,
     crossed_initial_state,
@@ -11,7 +12,6 @@ from conftest import (
     make_crossed_four_bar,
     make_pendulum,
 )
-
 from nonmin.errors import InputError
 from nonmin.sim import Baumgarte, Projection, simulate
 

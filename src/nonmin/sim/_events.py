@@ -122,7 +122,7 @@ class Event:
             object.__setattr__(self, "name", getattr(self.guard, "__name__", "event"))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class EventRecord:
     """One event that fired during a simulation.
 
