@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from ...errors import ModelError
 from .._protocol import ConstraintTerms, FloatArray
 from ._elements import (
     GROUND,
@@ -40,6 +41,8 @@ from ._elements import (
     Prismatic,
     Revolute,
     Rod,
+    RotationalSpring,
+    Spring,
     Weld,
 )
 
@@ -299,14 +302,17 @@ class Layout:
 
 
 def constraint_terms(
-    model: PlanarModel, lay: Layout, t: float, q: FloatArray, qd: FloatArray
-) -> ConstraintTerms:
-    """Stacked ``(A, γ, φ, A qd + φ_t, holonomic)`` of the layout's active set."""
+    model: PlanarModel, lay: Layout, t: float, q: FloatArray, qd: FloatArray, adot: bool = False
+) -> tuple[ConstraintTerms, FloatArray | None]:
+    """Stacked ``(A, γ, φ, A qd + φ_t, holonomic)`` of the layout's active set, and ``Ȧ``
+    (shape (m, n)) when ``adot`` is true (else None)."""
     n, m = lay.n, lay.m
     if m == 0:
         e = np.zeros(0)
-        return ConstraintTerms(np.zeros((0, n)), e, e.copy(), e.copy(), np.zeros(0, dtype=bool))
+        Ad0 = np.zeros((0, n)) if adot else None
+        return ConstraintTerms(np.zeros((0, n)), e, e.copy(), e.copy(), np.zeros(0, dtype=bool)), Ad0
     buf = lay.A0.copy()
+    dvals: list[FloatArray] = []
     phi = np.zeros(m)
     gamma = np.zeros(m)
     P, NL, NR = lay.P, lay.NL, lay.NR
@@ -328,6 +334,8 @@ def constraint_terms(
             phi[lay.pin_rows] = (p[:, :P] - p[:, P:P2]).ravel()
             gamma[lay.pin_rows] = (om2rs[:, P:P2] - om2rs[:, :P]).ravel()
             vals.append((rsp[:, :P2] * lay.pin_sign.reshape(2, P2)).ravel())
+            if adot:  # d/dt of sign·(R s)^⊥ is −sign·θ̇ R s
+                dvals.append((-(om[:P2] * rs[:, :P2]) * lay.pin_sign.reshape(2, P2)).ravel())
         if NL or NR:
             v = V[:2] + om * rsp  # point velocities
         if NL:
@@ -348,6 +356,17 @@ def constraint_terms(
             nb = (nrm * rsp[:, b_]).sum(axis=0)
             na = (d * nperp).sum(axis=0) - (nrm * rsp[:, a_]).sum(axis=0)
             vals.append(np.concatenate([nrm[0], nrm[1], nb, -nrm[0], -nrm[1], na]))
+            if adot:  # Ȧ = ṅᵀD + nᵀḊ + (ḋ·n^⊥ − θ̇_a d·n) e_θa,  ṅ = θ̇_a n^⊥
+                ndot = oma * nperp
+                omb = om[b_]
+                dnb = (ndot * rsp[:, b_]).sum(axis=0) - omb * (nrm * rs[:, b_]).sum(axis=0)
+                dna = (
+                    -(ndot * rsp[:, a_]).sum(axis=0)
+                    + oma * (nrm * rs[:, a_]).sum(axis=0)
+                    + (dd * nperp).sum(axis=0)
+                    - oma * dn
+                )
+                dvals.append(np.concatenate([ndot[0], ndot[1], dnb, -ndot[0], -ndot[1], dna]))
         if NR:
             o = 2 * P + 2 * NL
             a_, b_ = slice(o, o + NR), slice(o + NR, o + 2 * NR)
@@ -361,12 +380,23 @@ def constraint_terms(
             tb = (kd * rsp[:, b_]).sum(axis=0)
             ta = (kd * rsp[:, a_]).sum(axis=0)
             vals.append(np.concatenate([kd[0], kd[1], tb, -kd[0], -kd[1], -ta]))
+            if adot:  # Ȧ = (s/L)(ḋᵀD + dᵀḊ)
+                kdd = k * dd
+                dtb = (kdd * rsp[:, b_]).sum(axis=0) - om[b_] * (kd * rs[:, b_]).sum(axis=0)
+                dta = -(kdd * rsp[:, a_]).sum(axis=0) + om[a_] * (kd * rs[:, a_]).sum(axis=0)
+                dvals.append(np.concatenate([kdd[0], kdd[1], dtb, -kdd[0], -kdd[1], dta]))
         allv = vals[0] if len(vals) == 1 else np.concatenate(vals)
         if lay.var_unique:
             buf[lay.var_idx] += allv
         else:
             np.add.at(buf, lay.var_idx, allv)
     A = buf[: m * n].reshape(m, n)
+    Ad: FloatArray | None = None
+    if adot:
+        dbuf = np.zeros(m * n + 1)
+        if dvals:
+            np.add.at(dbuf, lay.var_idx, np.concatenate(dvals))
+        Ad = dbuf[: m * n].reshape(m, n)
     phit: FloatArray | None = None
     if lay.angle_rows.size:
         pa = lay.G @ q - lay.angle_const
@@ -385,12 +415,235 @@ def constraint_terms(
         if phit is None:
             phit = np.zeros(m)
         for r, j in lay.generic:
-            ph, Aj, _, gj, ptj = j.terms(kin, float(t))
+            ph, Aj, Adj, gj, ptj = j.terms(kin, float(t))
             A[r : r + j.dim] = Aj
+            if Ad is not None:
+                Ad[r : r + j.dim] = Adj
             phi[r : r + j.dim] = ph
             gamma[r : r + j.dim] = gj
             phit[r : r + j.dim] = ptj
     vel = A @ qd
     if phit is not None:
         vel += phit
-    return ConstraintTerms(A, gamma, phi, vel, lay.holonomic.copy())
+    return ConstraintTerms(A, gamma, phi, vel, lay.holonomic.copy()), Ad
+
+
+# ----------------------------------------------------------------------------- forces and B
+def _side_arrays(sides: list[_Side]) -> tuple[IntArray, FloatArray, FloatArray]:
+    """``(I3, SL, SLp)``: q_ext indices (3, S), local vectors ``s`` and ``s^⊥`` (2, S)."""
+    S = len(sides)
+    I3 = np.array([[s.ix for s in sides], [s.iy for s in sides], [s.ith for s in sides]], dtype=np.intp)
+    sx = np.array([s.sx for s in sides], dtype=np.float64)
+    sy = np.array([s.sy for s in sides], dtype=np.float64)
+    return I3.reshape(3, S), np.stack([sx, sy]).reshape(2, S), np.stack([-sy, sx]).reshape(2, S)
+
+
+class Forces:
+    """Springs, rotational springs, dampers and the q-dependent columns of B, vectorized.
+
+    Contributions to a force vector are accumulated with ``np.bincount`` over q_ext indices
+    (the extra entry n collects the terms of the ground and of point-mass rotations).
+    """
+
+    def __init__(
+        self,
+        springs: list[Spring],
+        rsprings: list[RotationalSpring],
+        index: dict[str, tuple[int, int, int]],
+        n: int,
+    ) -> None:
+        self.n = n
+
+        def side(p: Point) -> _Side:
+            if p.body == GROUND:
+                return _Side(n, n, n, p.local[0], p.local[1])
+            ix, iy, ith = index[p.body]
+            return _Side(ix, iy, ith if ith >= 0 else n, p.local[0], p.local[1])
+
+        def theta(body: str) -> int:
+            if body == GROUND:
+                return n
+            ith = index[body][2]
+            return ith if ith >= 0 else n
+
+        self.NS = len(springs)
+        sides = [side(sp.a) for sp in springs] + [side(sp.b) for sp in springs]
+        self.I3, self.SL, self.SLp = _side_arrays(sides)
+        ns = self.NS
+        # force index order: x_b, y_b, θ_b, x_a, y_a, θ_a
+        self.sp_idx = np.concatenate(
+            [self.I3[0, ns:], self.I3[1, ns:], self.I3[2, ns:], self.I3[0, :ns], self.I3[1, :ns], self.I3[2, :ns]]
+        ).astype(np.intp)
+        self.sp_k = np.array([sp.stiffness for sp in springs], dtype=np.float64)
+        self.sp_L0 = np.array([sp.rest_length for sp in springs], dtype=np.float64)
+        self.sp_c = np.array([sp.damping for sp in springs], dtype=np.float64)
+        self.sp_names = tuple(sp.name for sp in springs)
+        self.NR = len(rsprings)
+        self.rs_a = np.array([theta(r.body_a) for r in rsprings], dtype=np.intp)
+        self.rs_b = np.array([theta(r.body_b) for r in rsprings], dtype=np.intp)
+        self.rs_idx = np.concatenate([self.rs_b, self.rs_a]).astype(np.intp)
+        self.rs_k = np.array([r.stiffness for r in rsprings], dtype=np.float64)
+        self.rs_th0 = np.array([r.rest_angle for r in rsprings], dtype=np.float64)
+        self.rs_c = np.array([r.damping for r in rsprings], dtype=np.float64)
+
+    def _spring_kin(self, q: FloatArray, qd: FloatArray | None) -> tuple[FloatArray, ...]:
+        """``(d, ḋ, rsp_a, rsp_b)`` of every spring (``ḋ`` zero when qd is None)."""
+        ns = self.NS
+        qe = np.concatenate((q, _ZERO1))
+        Q = qe[self.I3]
+        c = np.cos(Q[2])
+        s = np.sin(Q[2])
+        rs = c * self.SL + s * self.SLp
+        rsp = c * self.SLp - s * self.SL
+        p = Q[:2] + rs
+        d = p[:, ns:] - p[:, :ns]
+        if qd is None:
+            dd = np.zeros_like(d)
+        else:
+            V = np.concatenate((qd, _ZERO1))[self.I3]
+            v = V[:2] + V[2] * rsp
+            dd = v[:, ns:] - v[:, :ns]
+        return d, dd, rsp[:, :ns], rsp[:, ns:]
+
+    def _scatter(self, coef: FloatArray, d: FloatArray, rspa: FloatArray, rspb: FloatArray) -> FloatArray:
+        """``Σ coef_i · D_iᵀ d_i`` as a vector over q_ext (length n + 1)."""
+        cd = coef * d
+        w = np.concatenate([cd[0], cd[1], (cd * rspb).sum(axis=0), -cd[0], -cd[1], -(cd * rspa).sum(axis=0)])
+        f: FloatArray = np.bincount(self.sp_idx, weights=w, minlength=self.n + 1)  # type: ignore[assignment]
+        return f
+
+    def conservative(self, fg: FloatArray, q: FloatArray) -> FloatArray:
+        """``f_g`` = gravity ``fg`` plus the spring forces ``−k(ℓ − ℓ0) Dᵀe``."""
+        f = np.zeros(self.n + 1)
+        if self.NS:
+            d, _, rspa, rspb = self._spring_kin(q, None)
+            ell = np.hypot(d[0], d[1])
+            pos = ell > 0.0
+            bad = ~pos & (self.sp_k != 0.0) & (self.sp_L0 != 0.0)
+            if bad.any():
+                name = self.sp_names[int(np.flatnonzero(bad)[0])]
+                raise ModelError(f"spring {name!r}: zero length, force direction undefined")
+            coef = -self.sp_k * (1.0 - self.sp_L0 / np.where(pos, ell, 1.0)) * pos
+            f += self._scatter(coef, d, rspa, rspb)
+        if self.NR:
+            qe = np.concatenate((q, _ZERO1))
+            tau = -self.rs_k * (qe[self.rs_b] - qe[self.rs_a] - self.rs_th0)
+            f += np.bincount(self.rs_idx, weights=np.concatenate([tau, -tau]), minlength=self.n + 1)
+        return fg + f[: self.n]
+
+    def potential(self, q: FloatArray) -> float:
+        """Elastic energy of the springs."""
+        V = 0.0
+        if self.NS:
+            d, _, _, _ = self._spring_kin(q, None)
+            ell = np.hypot(d[0], d[1])
+            V += float(np.sum(0.5 * self.sp_k * (ell - self.sp_L0) ** 2))
+        if self.NR:
+            qe = np.concatenate((q, _ZERO1))
+            V += float(np.sum(0.5 * self.rs_k * (qe[self.rs_b] - qe[self.rs_a] - self.rs_th0) ** 2))
+        return V
+
+    def passive(self, q: FloatArray, qd: FloatArray) -> FloatArray:
+        """Damper forces ``−c ℓ̇ Dᵀe`` and ``−c(θ̇_b − θ̇_a)``."""
+        f = np.zeros(self.n + 1)
+        if self.NS:
+            d, dd, rspa, rspb = self._spring_kin(q, qd)
+            ell2 = (d * d).sum(axis=0)
+            pos = ell2 > 0.0
+            coef = -self.sp_c * (d * dd).sum(axis=0) / np.where(pos, ell2, 1.0) * pos
+            f += self._scatter(coef, d, rspa, rspb)
+        if self.NR:
+            ve = np.concatenate((qd, _ZERO1))
+            tau = -self.rs_c * (ve[self.rs_b] - ve[self.rs_a])
+            f += np.bincount(self.rs_idx, weights=np.concatenate([tau, -tau]), minlength=self.n + 1)
+        return f[: self.n]
+
+
+class Inputs:
+    """The input matrix B: constant entries in a template, q-dependent ones computed vectorized.
+
+    q-dependent columns: a point force on a rotating body off its origin (θ entry
+    ``dirᵀ(R s)^⊥``) and a prismatic joint actuator (force along ``u = R_a axis`` on body b at
+    ``p_b``, reaction on body a at the same point: θ_b entry ``u·(R_b s_b)^⊥``, θ_a entry
+    ``−u·(p_b − r_a)^⊥``, x/y entries ``±u``).
+    """
+
+    def __init__(
+        self,
+        const: list[tuple[int, int, float]],
+        forces: list[tuple[int, Point, tuple[float, float]]],
+        prismatic: list[tuple[int, Point, Point, tuple[float, float]]],
+        index: dict[str, tuple[int, int, int]],
+        n: int,
+        k: int,
+    ) -> None:
+        self.n, self.k = n, k
+
+        def side(p: Point) -> _Side:
+            if p.body == GROUND:
+                return _Side(n, n, n, p.local[0], p.local[1])
+            ix, iy, ith = index[p.body]
+            return _Side(ix, iy, ith if ith >= 0 else n, p.local[0], p.local[1])
+
+        def flat(i: int | IntArray, col: int | IntArray) -> IntArray:
+            i_ = np.asarray(i, dtype=np.intp)
+            return np.where(i_ < n, i_ * k + np.asarray(col, dtype=np.intp), n * k).astype(np.intp)
+
+        buf = np.zeros(n * k + 1)
+        for i, col, val in const:
+            if i < n:
+                buf[i * k + col] += val
+        self.NF, self.NP = len(forces), len(prismatic)
+        sides = [side(p) for _, p, _ in forces] + [side(a) for _, a, _, _ in prismatic]
+        sides += [side(b) for _, _, b, _ in prismatic]
+        self.I3, self.SL, self.SLp = _side_arrays(sides)
+        fcol = np.array([c for c, _, _ in forces], dtype=np.intp)
+        self.fdir = np.array([d for _, _, d in forces], dtype=np.float64).reshape(-1, 2).T
+        nf, npr = self.NF, self.NP
+        if nf:
+            # constant x, y entries of the point forces
+            for c_, sd, dr in zip(fcol, sides[:nf], self.fdir.T, strict=True):
+                for i, val in ((sd.ix, dr[0]), (sd.iy, dr[1])):
+                    if i < n:
+                        buf[i * k + c_] += val
+        pcol = np.array([c for c, _, _, _ in prismatic], dtype=np.intp)
+        ax = np.array([u for _, _, _, u in prismatic], dtype=np.float64).reshape(-1, 2).T
+        self.AX, self.AXp = ax, np.stack([-ax[1], ax[0]]).reshape(2, npr)
+        ia, ib = self.I3[:, nf : nf + npr], self.I3[:, nf + npr :]
+        parts = [flat(self.I3[2, :nf], fcol)]
+        if npr:
+            parts += [flat(ib[0], pcol), flat(ib[1], pcol), flat(ib[2], pcol)]
+            parts += [flat(ia[0], pcol), flat(ia[1], pcol), flat(ia[2], pcol)]
+        self.var_idx = np.concatenate(parts).astype(np.intp)
+        real = self.var_idx[self.var_idx < n * k]
+        self.var_unique = bool(np.unique(real).size == real.size)
+        self.B0 = buf
+        self.varies = bool(nf or npr)
+
+    def matrix(self, q: FloatArray) -> FloatArray:
+        """``B(q)``, shape (n, k)."""
+        n, k = self.n, self.k
+        buf = self.B0.copy()
+        if self.varies:
+            nf, npr = self.NF, self.NP
+            qe = np.concatenate((q, _ZERO1))
+            Q = qe[self.I3]
+            c = np.cos(Q[2])
+            s = np.sin(Q[2])
+            rsp = c * self.SLp - s * self.SL
+            vals = [(self.fdir * rsp[:, :nf]).sum(axis=0)]
+            if npr:
+                a_, b_ = slice(nf, nf + npr), slice(nf + npr, nf + 2 * npr)
+                ca, sa = c[a_], s[a_]
+                u = ca * self.AX + sa * self.AXp  # R_a axis
+                rsb = c[b_] * self.SL[:, b_] + s[b_] * self.SLp[:, b_]
+                lever = Q[:2, b_] + rsb - Q[:2, a_]  # p_b − r_a
+                tb = (u * rsp[:, b_]).sum(axis=0)
+                ta = -(u[0] * -lever[1] + u[1] * lever[0])
+                vals.append(np.concatenate([u[0], u[1], tb, -u[0], -u[1], ta]))
+            allv = np.concatenate(vals)
+            if self.var_unique:
+                buf[self.var_idx] += allv
+            else:
+                np.add.at(buf, self.var_idx, allv)
+        return buf[: n * k].reshape(n, k)

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from ...errors import InputError, ModelError, NonFiniteError, ShapeError, UnknownNameError
 from .._protocol import ConstraintSpec, ConstraintTerms, FloatArray, Geometry, Model, ModelTerms
@@ -123,68 +123,6 @@ class _Kin:
         A[row, ith] += coef
 
 
-class _RevoluteBatch:
-    """Vectorized evaluation of all revolute joints (the common case, e.g. A02 with N = 40).
-
-    Coordinates are addressed in ``q_ext = (q, 0)``: the ground's x, y, θ and a point mass's θ
-    point at the extra zero entry (index n), whose Jacobian column is discarded.
-    """
-
-    def __init__(self, joints: tuple[Joint, ...], index: dict[str, tuple[int, int, int]], n: int) -> None:
-        revs = [j for j in joints if type(j) is Revolute]
-        self.names = [j.name for j in revs]
-        self.position = {name: k for k, name in enumerate(self.names)}
-        self.n = n
-
-        def idx(body: str) -> tuple[int, int, int]:
-            if body == GROUND:
-                return (n, n, n)
-            ix, iy, ith = index[body]
-            return (ix, iy, ith if ith >= 0 else n)
-
-        ia = np.array([idx(j.a.body) for j in revs], dtype=np.intp).reshape(-1, 3)
-        ib = np.array([idx(j.b.body) for j in revs], dtype=np.intp).reshape(-1, 3)
-        self.ia, self.ib = ia, ib
-        self.sa = np.array([j.a.local for j in revs], dtype=float).reshape(-1, 2)
-        self.sb = np.array([j.b.local for j in revs], dtype=float).reshape(-1, 2)
-
-    def fill(
-        self,
-        q: FloatArray,
-        qd: FloatArray,
-        rows: NDArray[np.intp],
-        use: NDArray[np.bool_],
-        A: FloatArray,
-        Ad: FloatArray,
-        phi: FloatArray,
-        gamma: FloatArray,
-    ) -> None:
-        """Write the rows of the used revolute joints (first row index ``rows``).
-
-        Fancy-index ``+=`` is safe: within one side (a or b) the pairs (row, column) are
-        distinct except in the discarded extra column n.
-        """
-        qe = np.append(q, 0.0)
-        ve = np.append(qd, 0.0)
-        r0, r1 = rows, rows + 1
-        for sign, ind, loc in ((1.0, self.ia[use], self.sa[use]), (-1.0, self.ib[use], self.sb[use])):
-            th = qe[ind[:, 2]]
-            om = ve[ind[:, 2]]
-            c, s = np.cos(th), np.sin(th)
-            rx = c * loc[:, 0] - s * loc[:, 1]
-            ry = s * loc[:, 0] + c * loc[:, 1]
-            phi[r0] += sign * (qe[ind[:, 0]] + rx)
-            phi[r1] += sign * (qe[ind[:, 1]] + ry)
-            A[r0, ind[:, 0]] += sign
-            A[r1, ind[:, 1]] += sign
-            A[r0, ind[:, 2]] += -sign * ry
-            A[r1, ind[:, 2]] += sign * rx
-            Ad[r0, ind[:, 2]] += -sign * om * rx
-            Ad[r1, ind[:, 2]] += -sign * om * ry
-            gamma[r0] += -sign * om * om * rx
-            gamma[r1] += -sign * om * om * ry
-
-
 @dataclass(frozen=True, eq=False)
 class PlanarModel(Model):
     """Planar multibody system in absolute coordinates ``(x, y, θ)`` per body.
@@ -231,7 +169,6 @@ class PlanarModel(Model):
     _index: dict[str, tuple[int, int, int]] = field(init=False, repr=False, compare=False)
     _mdiag: FloatArray = field(init=False, repr=False, compare=False)
     _point_map: dict[str, Point] = field(init=False, repr=False, compare=False)
-    _rev: _RevoluteBatch = field(init=False, repr=False, compare=False)
     # compiled evaluation (built once; caches are not compared and hold no state of a run)
     _plan: _compiled.Plan = field(init=False, repr=False, compare=False)
     _layouts: dict[frozenset[str], _compiled.Layout] = field(init=False, repr=False, compare=False)
@@ -239,7 +176,8 @@ class PlanarModel(Model):
     _coordinate_names: tuple[str, ...] = field(init=False, repr=False, compare=False)
     _M: FloatArray = field(init=False, repr=False, compare=False)
     _fg: FloatArray = field(init=False, repr=False, compare=False)
-    _B: FloatArray | None = field(init=False, repr=False, compare=False)
+    _forces_c: _compiled.Forces = field(init=False, repr=False, compare=False)
+    _inputs: _compiled.Inputs = field(init=False, repr=False, compare=False)
     _stiff: bool = field(init=False, repr=False, compare=False)
     _damped: bool = field(init=False, repr=False, compare=False)
 
@@ -310,7 +248,6 @@ class PlanarModel(Model):
             check_point(p, f"point {pname!r}")
             pmap[pname] = p
         s(self, "_point_map", pmap)
-        s(self, "_rev", _RevoluteBatch(self.joints, index, off))
         for pname in self.output_points:
             if pname not in pmap:
                 raise UnknownNameError(f"output_points: unknown point {pname!r}; known: {sorted(pmap)}")
@@ -375,11 +312,12 @@ class PlanarModel(Model):
         s(self, "_fg", fg)
         s(self, "_stiff", any(fe.stiffness != 0.0 for fe in self.forces))
         s(self, "_damped", any(fe.damping != 0.0 for fe in self.forces))
-        s(self, "_B", None)
-        if not any(self._actuator_varies(a) for a in self.actuators):
-            B = self._input_matrix(np.zeros(off))
-            B.flags.writeable = False
-            s(self, "_B", B)
+        s(self, "_forces_c", _compiled.Forces(
+            [fe for fe in self.forces if isinstance(fe, Spring)],
+            [fe for fe in self.forces if isinstance(fe, RotationalSpring)],
+            index, off,
+        ))  # fmt: skip
+        s(self, "_inputs", self._compile_inputs())
         if self.default_active_names is None:
             dflt = frozenset(j.name for j in self.joints if j.kind != "unilateral")
             s(self, "default_active_names", dflt)
@@ -512,12 +450,11 @@ class PlanarModel(Model):
         return pb - pa, vb - va, D
 
     def conservative_force(self, q: ArrayLike) -> FloatArray:
-        if not self._stiff:
-            _vec(q, "q", self.n)
-            return self._fg.copy()
-        return self._conservative_force(q)
+        qv = _vec(q, "q", self.n)
+        return self._forces_c.conservative(self._fg, qv) if self._stiff else self._fg.copy()
 
-    def _conservative_force(self, q: ArrayLike) -> FloatArray:
+    def _reference_conservative_force(self, q: ArrayLike) -> FloatArray:
+        """:meth:`conservative_force` element by element (reference for tests)."""
         kin = self._kin(q)
         f = self._gravity_force()
         for fe in self.forces:
@@ -541,10 +478,14 @@ class PlanarModel(Model):
         return f
 
     def potential_energy(self, q: ArrayLike) -> float:
+        qv = _vec(q, "q", self.n)
+        V = -float(self._fg @ qv)
+        return V + self._forces_c.potential(qv) if self._stiff else V
+
+    def _reference_potential_energy(self, q: ArrayLike) -> float:
+        """:meth:`potential_energy` element by element (reference for tests)."""
         kin = self._kin(q)
         V = -float(self._fg @ kin.q)
-        if not self._stiff:
-            return V
         for fe in self.forces:
             if fe.stiffness == 0.0:
                 continue
@@ -559,9 +500,11 @@ class PlanarModel(Model):
         return V
 
     def passive_force(self, t: float, q: ArrayLike, qd: ArrayLike) -> FloatArray:
-        return self._passive_force(q, qd)
+        qv, v = self._state_arrays(q, qd)
+        return self._forces_c.passive(qv, v) if self._damped else np.zeros(self.n)
 
-    def _passive_force(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
+    def _reference_passive_force(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
+        """:meth:`passive_force` element by element (reference for tests)."""
         kin = self._kin(q, qd)
         f = np.zeros(self.n)
         for fe in self.forces:
@@ -583,22 +526,38 @@ class PlanarModel(Model):
                 f += row[0]
         return f
 
-    def _actuator_varies(self, act: Actuator) -> bool:
-        """Whether the column of ``act`` in B depends on q (else it is cached at build time)."""
-        if isinstance(act, Torque):
-            return False
-        if isinstance(act, JointActuator):
-            return not isinstance(self.joint(act.joint), Revolute)
-        p = act.point
-        return p.body != GROUND and self._index[p.body][2] >= 0 and p.local != (0.0, 0.0)
+    def _compile_inputs(self) -> _compiled.Inputs:
+        """Constant entries of B and the index arrays of its q-dependent ones."""
+        const: list[tuple[int, int, float]] = []
+        forces: list[tuple[int, Point, tuple[float, float]]] = []
+        prismatic: list[tuple[int, Point, Point, tuple[float, float]]] = []
+        jmap = {j.name: j for j in self.joints}
+
+        def torque(col: int, a: str, b: str) -> None:
+            for body, sgn in ((b, 1.0), (a, -1.0)):
+                if body != GROUND:
+                    const.append((self._index[body][2], col, sgn))
+
+        for col, act in enumerate(self.actuators):
+            if isinstance(act, Torque):
+                torque(col, act.body_a, act.body_b)
+            elif isinstance(act, JointActuator):
+                jt = jmap[act.joint]
+                if isinstance(jt, Prismatic):
+                    prismatic.append((col, jt.a, jt.b, jt.axis))
+                else:
+                    assert isinstance(jt, Revolute)
+                    torque(col, jt.a.body, jt.b.body)
+            else:
+                d = (float(act.direction[0]), float(act.direction[1]))
+                forces.append((col, act.point, d))
+        return _compiled.Inputs(const, forces, prismatic, self._index, self.n, self.k)
 
     def input_matrix(self, q: ArrayLike) -> FloatArray:
-        if self._B is not None:
-            _vec(q, "q", self.n)
-            return self._B.copy()
-        return self._input_matrix(q)
+        return self._inputs.matrix(_vec(q, "q", self.n))
 
-    def _input_matrix(self, q: ArrayLike) -> FloatArray:
+    def _reference_input_matrix(self, q: ArrayLike) -> FloatArray:
+        """:meth:`input_matrix` element by element (reference for tests)."""
         kin = self._kin(q)
         B = np.zeros((self.n, self.k))
         jmap = {j.name: j for j in self.joints}
@@ -636,37 +595,25 @@ class PlanarModel(Model):
     ) -> tuple[ConstraintTerms, FloatArray]:
         act = self.resolve_active(active)
         n = self.n
-        rev = self._rev
         sel = [j for j in self.joints if j.name in act]
         m = sum(j.dim for j in sel)
         if m == 0:
             e = np.zeros(0)
             return ConstraintTerms(np.zeros((0, n)), e, e.copy(), e.copy(), np.zeros(0, dtype=bool)), np.zeros((0, n))
-        A = np.zeros((m, n + 1))  # the extra column collects the terms of ground / point-mass θ
-        Ad = np.zeros((m, n + 1))
+        A = np.zeros((m, n))
+        Ad = np.zeros((m, n))
         phi = np.zeros(m)
         gamma = np.zeros(m)
         phit = np.zeros(m)
-        rows = np.zeros(len(rev.names), dtype=np.intp)
-        use = np.zeros(len(rev.names), dtype=bool)
         r = 0
         for j in sel:
-            k = rev.position.get(j.name)
-            if k is not None:
-                rows[k] = r
-                use[k] = True
-            else:
-                ph, Aj, Adj, gj, ptj = j.terms(kin, float(t))
-                A[r : r + j.dim, :n] = Aj
-                Ad[r : r + j.dim, :n] = Adj
-                phi[r : r + j.dim] = ph
-                gamma[r : r + j.dim] = gj
-                phit[r : r + j.dim] = ptj
+            ph, Aj, Adj, gj, ptj = j.terms(kin, float(t))
+            A[r : r + j.dim] = Aj
+            Ad[r : r + j.dim] = Adj
+            phi[r : r + j.dim] = ph
+            gamma[r : r + j.dim] = gj
+            phit[r : r + j.dim] = ptj
             r += j.dim
-        if use.any():
-            rev.fill(kin.q, kin.qd, rows[use], use, A, Ad, phi, gamma)
-        A = A[:, :n]
-        Ad = Ad[:, :n]
         return ConstraintTerms(A, gamma, phi, A @ kin.qd + phit, np.ones(m, dtype=bool)), Ad
 
     def resolve_active(self, active: Iterable[str] | str | None) -> frozenset[str]:
@@ -709,9 +656,9 @@ class PlanarModel(Model):
         self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
     ) -> ConstraintTerms:
         qv, v = self._state_arrays(q, qd)
-        return _compiled.constraint_terms(self, self._layout(active), t, qv, v)
+        return _compiled.constraint_terms(self, self._layout(active), t, qv, v)[0]
 
-    def reference_constraint_terms(
+    def _reference_constraint_terms(
         self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
     ) -> ConstraintTerms:
         """:meth:`constraint_terms` from the per-joint formulas (:meth:`Joint.terms`), slow.
@@ -725,6 +672,15 @@ class PlanarModel(Model):
         self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
     ) -> FloatArray:
         """Exact ``Ȧ`` along ``qd`` (closed form), shape (m, n)."""
+        qv, v = self._state_arrays(q, qd)
+        Ad = _compiled.constraint_terms(self, self._layout(active), t, qv, v, adot=True)[1]
+        assert Ad is not None
+        return Ad
+
+    def _reference_constraint_jacobian_dot(
+        self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
+    ) -> FloatArray:
+        """:meth:`constraint_jacobian_dot` from the per-joint formulas (reference, slow)."""
         return self._stack(t, self._kin(q, qd), active)[1]
 
     def evaluate(
@@ -734,10 +690,10 @@ class PlanarModel(Model):
         lay = self._layout(active)
         return ModelTerms(
             M=self._M.copy(),
-            h=self._conservative_force(qv) if self._stiff else self._fg.copy(),
-            f_passive=self._passive_force(qv, v) if self._damped else np.zeros(self.n),
-            B=self._B.copy() if self._B is not None else self._input_matrix(qv),
-            constraints=_compiled.constraint_terms(self, lay, t, qv, v),
+            h=self._forces_c.conservative(self._fg, qv) if self._stiff else self._fg.copy(),
+            f_passive=self._forces_c.passive(qv, v) if self._damped else np.zeros(self.n),
+            B=self._inputs.matrix(qv),
+            constraints=_compiled.constraint_terms(self, lay, t, qv, v)[0],
         )
 
     # ------------------------------------------------------------------ outputs and geometry
