@@ -354,3 +354,15 @@ def test_assembly_of_spatial_models() -> None:
     np.testing.assert_allclose(m.point_position(s.q, "top", [0, 0, -0.1]), 0.0, atol=1e-10)
     with pytest.raises(AssemblyError):
         assemble(m, np.zeros(7))
+
+
+def test_inactive_joint_is_data_not_topology() -> None:
+    b = SpatialBuilder("switch")
+    b.add_body("a", mass=1.0, inertia=[1, 1, 1], position=[1, 0, 0])
+    b.add_spherical("pin", "ground", "a", point=[0, 0, 0])
+    b.add_point_on_plane("wall", "ground", "a", point=[1, 0, 0], normal=[1, 0, 0], active=False)
+    m = b.build()
+    assert m.default_active == {"a.norm", "pin"}
+    q = m.reference_configuration()
+    assert m.constraint_terms(0.0, q, np.zeros(7)).A.shape == (4, 7)
+    assert m.constraint_terms(0.0, q, np.zeros(7), active=m.constraint_names).A.shape == (5, 7)

@@ -133,6 +133,7 @@ class SpatialBuilder:
         self._springs: list[Spring] = []
         self._actuators: list[Actuator] = []
         self._outputs: list[OutputPoint] = []
+        self._inactive: set[str] = set()
 
     # ------------------------------------------------------------------ bodies
     def add_body(
@@ -227,8 +228,11 @@ class SpatialBuilder:
         vecs_a: list[FloatArray],
         vecs_b: list[FloatArray],
         axis: FloatArray,
+        active: bool = True,
     ) -> SpatialBuilder:
         self._check_name(name)
+        if not active:
+            self._inactive.add(name)
         self._ref(body_a)
         self._ref(body_b)
         if body_a == body_b:
@@ -251,33 +255,65 @@ class SpatialBuilder:
         return self
 
     # ------------------------------------------------------------------ joints
-    def add_spherical(self, name: str, body_a: str, body_b: str, *, point: ArrayLike) -> SpatialBuilder:
-        """Ball joint: the point of a and the point of b coincide (3 rows)."""
-        return self._add_joint("spherical", name, body_a, body_b, point, [], [], np.zeros(3))
+    # Every joint takes ``active=``: whether it is in the model's default active set.
+    def add_spherical(
+        self, name: str, body_a: str, body_b: str, *, point: ArrayLike, active: bool = True
+    ) -> SpatialBuilder:
+        """Ball joint: the point of a and the point of b coincide (3 rows, ``φ = p_b − p_a``)."""
+        return self._add_joint(
+            "spherical", name, body_a, body_b, point, [], [], np.zeros(3), active
+        )
 
     def add_revolute(
-        self, name: str, body_a: str, body_b: str, *, point: ArrayLike, axis: ArrayLike
+        self,
+        name: str,
+        body_a: str,
+        body_b: str,
+        *,
+        point: ArrayLike,
+        axis: ArrayLike,
+        active: bool = True,
     ) -> SpatialBuilder:
         """Hinge about ``axis`` through ``point`` (5 rows: points coincide, axes parallel)."""
         u = _unit(axis, f"joint {name!r}: axis")
         f, g = _perpendicular_pair(u)
-        return self._add_joint("revolute", name, body_a, body_b, point, [u, f, g], [u, f, g], u)
+        return self._add_joint(
+            "revolute", name, body_a, body_b, point, [u, f, g], [u, f, g], u, active
+        )
 
     def add_cylindrical(
-        self, name: str, body_a: str, body_b: str, *, point: ArrayLike, axis: ArrayLike
+        self,
+        name: str,
+        body_a: str,
+        body_b: str,
+        *,
+        point: ArrayLike,
+        axis: ArrayLike,
+        active: bool = True,
     ) -> SpatialBuilder:
         """Slide along and turn about ``axis`` (4 rows: axes parallel, b's point on a's axis)."""
         u = _unit(axis, f"joint {name!r}: axis")
         f, g = _perpendicular_pair(u)
-        return self._add_joint("cylindrical", name, body_a, body_b, point, [u, f, g], [u, f, g], u)
+        return self._add_joint(
+            "cylindrical", name, body_a, body_b, point, [u, f, g], [u, f, g], u, active
+        )
 
     def add_prismatic(
-        self, name: str, body_a: str, body_b: str, *, point: ArrayLike, axis: ArrayLike
+        self,
+        name: str,
+        body_a: str,
+        body_b: str,
+        *,
+        point: ArrayLike,
+        axis: ArrayLike,
+        active: bool = True,
     ) -> SpatialBuilder:
         """Slide along ``axis`` without relative rotation (5 rows)."""
         u = _unit(axis, f"joint {name!r}: axis")
         f, g = _perpendicular_pair(u)
-        return self._add_joint("prismatic", name, body_a, body_b, point, [u, f, g], [u, f, g], u)
+        return self._add_joint(
+            "prismatic", name, body_a, body_b, point, [u, f, g], [u, f, g], u, active
+        )
 
     def add_universal(
         self,
@@ -288,6 +324,7 @@ class SpatialBuilder:
         point: ArrayLike,
         axis_a: ArrayLike,
         axis_b: ArrayLike,
+        active: bool = True,
     ) -> SpatialBuilder:
         """Hooke joint: points coincide, ``axis_a`` (on a) stays ⊥ ``axis_b`` (on b) (4 rows).
 
@@ -302,20 +339,31 @@ class SpatialBuilder:
             raise ModelError(
                 f"joint {name!r}: axis_a and axis_b must be perpendicular, got cos = {ua @ ub:.3g}"
             )
-        return self._add_joint("universal", name, body_a, body_b, point, [ua], [ub], ua)
+        return self._add_joint("universal", name, body_a, body_b, point, [ua], [ub], ua, active)
 
-    def add_weld(self, name: str, body_a: str, body_b: str, *, point: ArrayLike) -> SpatialBuilder:
+    def add_weld(
+        self, name: str, body_a: str, body_b: str, *, point: ArrayLike, active: bool = True
+    ) -> SpatialBuilder:
         """Rigid connection (6 rows)."""
         E = list(np.eye(3))
-        return self._add_joint("weld", name, body_a, body_b, point, E, E, np.zeros(3))
+        return self._add_joint("weld", name, body_a, body_b, point, E, E, np.zeros(3), active)
 
     def add_point_on_plane(
-        self, name: str, body_a: str, body_b: str, *, point: ArrayLike, normal: ArrayLike
+        self,
+        name: str,
+        body_a: str,
+        body_b: str,
+        *,
+        point: ArrayLike,
+        normal: ArrayLike,
+        active: bool = True,
     ) -> SpatialBuilder:
         """b's point (``point`` at the reference) stays in the plane of a through ``point``
-        with normal ``normal`` (1 row)."""
+        with normal ``normal`` (1 row, ``φ = n_a·(p_b − p_a)``)."""
         nvec = _unit(normal, f"joint {name!r}: normal")
-        return self._add_joint("point_on_plane", name, body_a, body_b, point, [nvec], [], nvec)
+        return self._add_joint(
+            "point_on_plane", name, body_a, body_b, point, [nvec], [], nvec, active
+        )
 
     # ------------------------------------------------------------------ forces, outputs
     def add_spring(
@@ -398,7 +446,15 @@ class SpatialBuilder:
         return self
 
     def build(self) -> SpatialModel:
-        """The immutable :class:`SpatialModel`."""
+        """The immutable :class:`SpatialModel`.
+
+        Its default active set holds every constraint except the joints added with
+        ``active=False``.
+        """
+        default = None
+        if self._inactive:
+            names = [f"{b}.norm" for b in self._bodies] + [j.name for j in self._joints]
+            default = frozenset(n for n in names if n not in self._inactive)
         return SpatialModel(
             name=self.name,
             bodies=tuple(self._bodies.values()),
@@ -407,4 +463,5 @@ class SpatialBuilder:
             actuators=tuple(self._actuators),
             output_points=tuple(self._outputs),
             gravity=self.gravity,
+            default_active_names=default,
         )
