@@ -17,11 +17,15 @@ from nonmin.model import Model
 from nonmin.model.planar import PlanarBuilder
 
 __all__ = [
+    "arm2r_configuration",
     "crank_four_bar",
     "crank_four_bar_configuration",
+    "dual_arm_grasp_configuration",
     "dual_arm_with_fixture",
     "oblique_pendulum",
     "pendulum_configuration",
+    "smoothstep",
+    "wall_tip_path",
 ]
 
 
@@ -97,7 +101,8 @@ def dual_arm_with_fixture(
     Same geometry as :func:`nonmin.library.dual_arm_grasp`, plus the weld ``fixture`` (active by
     default) so that the object does not fall before the grasp, and the pin grasps
     ``grasp_L``, ``grasp_R`` (inactive by default). Returns the model and a configuration
-    with the arms folded away from the object (elbows down).
+    with the arms raised away from the object. Coordinates: ``L1, L2, R1, R2, object``
+    (x, y, θ each); the object's are the last three.
     """
     b = PlanarBuilder("dual_arm_fixture", gravity=(0.0, -g), description="dual-arm grasp with fixture")
     Ib = link**2 / 12.0
@@ -121,10 +126,74 @@ def dual_arm_with_fixture(
     model = b.build()
     # arms folded: shoulder angle, elbow angle (relative)
     q: list[float] = []
-    for s, sh, el in (("L", 1.2, -1.9), ("R", math.pi - 1.2, 1.9)):
+    for s, sh, el in (("L", 2.0, -1.0), ("R", math.pi - 2.0, 1.0)):
         p0 = bases[s]
         p1 = p0 + link * np.array([math.cos(sh), math.sin(sh)])
         p2 = p1 + link * np.array([math.cos(sh + el), math.sin(sh + el)])
         q += _bar(p0, p1) + _bar(p1, p2)
     q += [0.0, object_height, 0.0]
     return model, np.array(q)
+
+
+def arm2r_configuration(tip: np.ndarray, l1: float = 1.0, l2: float = 1.0) -> np.ndarray:
+    """Absolute coordinates ``(link1.x, link1.y, link1.θ, link2.x, link2.y, link2.θ)`` of the 2R
+    arm of :func:`nonmin.library.arm2r_wall` with its tip at ``tip`` (elbow with q2 > 0)."""
+    x, y = float(tip[0]), float(tip[1])
+    c2 = (x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2)
+    q2 = math.acos(max(-1.0, min(1.0, c2)))
+    q1 = math.atan2(y, x) - math.atan2(l2 * math.sin(q2), l1 + l2 * math.cos(q2))
+    a2 = q1 + q2
+    p1 = l1 * np.array([math.cos(q1), math.sin(q1)])
+    return np.array([0.5 * p1[0], 0.5 * p1[1], q1,
+                     p1[0] + 0.5 * l2 * math.cos(a2), p1[1] + 0.5 * l2 * math.sin(a2), a2])
+
+
+def smoothstep(s: float) -> float:
+    """Quintic 0 → 1 on [0, 1] with zero end velocity and acceleration (clamped outside)."""
+    s = min(max(s, 0.0), 1.0)
+    return s * s * s * (10.0 - 15.0 * s + 6.0 * s * s)
+
+
+def wall_tip_path(
+    t: float,
+    *,
+    start: tuple[float, float] = (1.0, 0.0),
+    wall_x: float = 1.5,
+    overshoot: float = 0.1,
+    slide: float = 0.5,
+    t_reach: float = 1.0,
+    t_settle: float = 0.4,
+    t_slide: float = 2.0,
+) -> np.ndarray:
+    """Tip path of the wall examples.
+
+    The tip heads for ``wall_x + overshoot`` (behind the wall, so contact surely happens) by
+    ``t_reach``; then its x returns to ``wall_x`` within ``t_settle`` (from then on the path is
+    consistent with the contact) while it slides up by ``slide`` during ``t_slide``.
+    """
+    s1 = smoothstep(t / t_reach)
+    s2 = smoothstep((t - t_reach) / t_settle)
+    s3 = smoothstep((t - t_reach) / t_slide)
+    x = start[0] + s1 * (wall_x + overshoot - start[0]) - s2 * overshoot
+    y = start[1] + slide * s3
+    return np.array([x, y])
+
+
+def dual_arm_grasp_configuration(model: Model, object_pose=(0.0, 0.8, 0.0), *, link: float = 0.8,
+                                 object_length: float = 0.6, base_distance: float = 2.0) -> np.ndarray:
+    """Configuration with the object at ``object_pose`` and both tips at its ends (elbows out)."""
+    xo, yo, th = (float(v) for v in object_pose)
+    half = 0.5 * object_length * np.array([math.cos(th), math.sin(th)])
+    ends = {"L": np.array([xo, yo]) - half, "R": np.array([xo, yo]) + half}
+    bases = {"L": np.array([-base_distance / 2, 0.0]), "R": np.array([base_distance / 2, 0.0])}
+    q: list[float] = []
+    for s, side in (("L", 1.0), ("R", -1.0)):
+        d = ends[s] - bases[s]
+        dist = float(np.hypot(*d))
+        a = dist / 2
+        h = math.sqrt(max(link * link - a * a, 0.0))
+        e = d / dist
+        elbow = bases[s] + a * e + side * h * np.array([-e[1], e[0]])
+        q += _bar(bases[s], elbow) + _bar(elbow, ends[s])
+    q += [xo, yo, th]
+    return np.array(q)

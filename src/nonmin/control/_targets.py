@@ -32,7 +32,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..core import position_correction, pseudo_inverse
+from ..core import position_correction, pseudo_inverse, range_basis
 from ..errors import AssemblyError, InputError, NonFiniteError, ShapeError
 from ..model import Model
 from ._common import FloatArray
@@ -125,22 +125,24 @@ def project_configuration(
     x = target.copy()
     scale = 1.0 + float(np.linalg.norm(target))
     res = np.inf
-    for _ in range(max_iter):
+    for it in range(max_iter):
         A, phi = _holonomic_rows(model, t, x, active)
         if fix.size:
             A = np.vstack([A, E])
             phi = np.concatenate([phi, x[fix] - target[fix]])
         if A.shape[0] == 0:
             return x
+        res = float(np.linalg.norm(phi))
+        if it == 0 and res <= tol * scale:
+            return x  # the target itself is feasible
         d = target - x
         b = phi + A @ d  # want A δ = −b, δ = Δ − d
         if metric == "euclidean":
-            delta = -(pseudo_inverse(A, rtol) @ b)
+            delta = -range_basis(A, rtol).solve(b)
         else:
             delta = position_correction(model.mass_matrix(x), A, b, rtol=rtol)
         step = d + delta
         x = x + step
-        res = float(np.linalg.norm(phi))
         if res <= tol * scale and float(np.linalg.norm(step)) <= 1e3 * tol * scale:
             break
     A, phi = _holonomic_rows(model, t, x, active)

@@ -107,6 +107,11 @@ class Tracker(ProjectedController):
     u_max: ArrayLike | None = field(default=None, kw_only=True)
     on_infeasible: InfeasiblePolicy = field(default="raise", kw_only=True)
     rtol: float | None = field(default=None, kw_only=True)
+    # memo of the projected reference for the last few (t, active set) pairs: the RK stages
+    # and the simulator's update call evaluate the same times; a pure cache, not state
+    _memo: dict[tuple[float, frozenset[str], tuple[bool, ...]], tuple[FloatArray, FloatArray, FloatArray]] = (
+        field(default_factory=dict, init=False, repr=False, compare=False)
+    )
 
     def __post_init__(self) -> None:
         self._validate_common()
@@ -143,6 +148,15 @@ class Tracker(ProjectedController):
         act = self.model.resolve_active(active)
         n = self.model.n
         qs, vs, as_ = self._ref(t)  # type: ignore[attr-defined]
+        signs: tuple[bool, ...] = ()
+        if q is not None:
+            signs = tuple(
+                float(q[list(b)] @ qs[list(b)]) < 0.0 for b in self._qblocks  # type: ignore[attr-defined]
+            )
+        key = (float(t), act, signs)
+        hit = self._memo.get(key)
+        if hit is not None:
+            return hit
         for arr, nm in ((qs, "q*"), (vs, "q̇*"), (as_, "q̈*")):
             if arr.shape != (n,) or not np.isfinite(arr).all():
                 raise InputError(f"reference {nm}({t}) must be finite with shape ({n},), got {arr!r}")
@@ -160,6 +174,9 @@ class Tracker(ProjectedController):
             )
         vs = project_velocity(self.model, qs, vs, t=t, active=act, rtol=self.rtol)
         as_ = project_acceleration(self.model, qs, vs, as_, t=t, active=act, rtol=self.rtol)
+        if len(self._memo) > 16:
+            self._memo.clear()
+        self._memo[key] = (qs, vs, as_)
         return qs, vs, as_
 
     # ------------------------------------------------------------------ law
