@@ -24,12 +24,12 @@ offset ``s``, ``p = r + R(ε) s = r + [εᵀQ_a(s)ε]_a``, ``∂p/∂ε = 2 Q(s)
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any, Literal, NamedTuple
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from ...errors import ModelError, UnknownNameError
 from .._protocol import (
@@ -187,19 +187,6 @@ class OutputPoint:
     point: FloatArray
 
 
-class _Lazy:
-    """Index-on-demand memo: ``lazy[r]`` computes ``fn(r)`` once."""
-
-    def __init__(self, fn: Callable[[int], _Kin]) -> None:
-        self._fn = fn
-        self._memo: dict[int, _Kin] = {}
-
-    def __getitem__(self, r: int) -> _Kin:
-        if r not in self._memo:
-            self._memo[r] = self._fn(r)
-        return self._memo[r]
-
-
 class _Kin(NamedTuple):
     """A world-frame 3-vector quantity x(q): value, Jacobian ∂x/∂q and its time derivative."""
 
@@ -219,6 +206,129 @@ def _dot(x: _Kin, y: _Kin, qd: FloatArray) -> tuple[float, FloatArray, FloatArra
     A = y.val @ x.J + x.val @ y.J
     Ad = yd @ x.J + y.val @ x.Jd + xd @ y.J + x.val @ y.Jd
     return float(x.val @ y.val), A, Ad
+
+
+@dataclass(frozen=True, eq=False)
+class _RowPlan:
+    """Every joint row written as ``φ = X·Y`` with ``X = Σ SX[r, k] x_k``, ``Y = Σ SY[r, k] x_k``
+    over world-frame attachment quantities ``x_k`` (body points ``r + R s``, body vectors
+    ``R s`` or constants), so that φ, A and Ȧ of all rows are evaluated at once:
+    ``A_r = Σ_k (SX[r,k] Y_r + SY[r,k] X_r)ᵀ ∂x_k/∂q`` and ``Ȧ_r`` by the product rule.
+    Coincident points are ``e_cᵀ (p_b − p_a)`` with constant unit vectors ``e_c``."""
+
+    att_body: NDArray[np.intp]  # (K,) body index, nb for ground/constants
+    att_Q: FloatArray  # (K, 3, 4, 4) point tensors (zero for ground)
+    att_const: FloatArray  # (K, 3) world value of ground attachments
+    att_point: FloatArray  # (K,) 1.0 for points of moving bodies
+    SX: FloatArray  # (Rj, K)
+    SY: FloatArray  # (Rj, K)
+    term_row: NDArray[np.intp]  # (T,) row of each (row, attachment) term
+    term_att: NDArray[np.intp]  # (T,) its attachment
+    term_sign: FloatArray  # (T,) its coefficient
+    term_side_x: NDArray[np.bool_]  # (T,) True when the attachment is in X (partner Y)
+    term_index: NDArray[np.intp]  # (T * 7,) flat indices into a (Rj, 7 (nb + 1)) array
+
+    @classmethod
+    def build(cls, model: SpatialModel) -> _RowPlan:
+        nb = len(model.bodies)
+        bodies: list[int] = []
+        Qs: list[FloatArray] = []
+        consts: list[FloatArray] = []
+        points: list[float] = []
+
+        def att(body: str, local: ArrayLike, point: bool) -> int:
+            i = model.body_index(body)
+            loc = np.asarray(local, dtype=float)
+            bodies.append(nb if i < 0 else i)
+            Qs.append(np.zeros((3, 4, 4)) if i < 0 else point_tensor(loc))
+            consts.append(loc if i < 0 else np.zeros(3))
+            points.append(1.0 if (point and i >= 0) else 0.0)
+            return len(bodies) - 1
+
+        rows: list[tuple[list[tuple[int, float]], list[tuple[int, float]]]] = []
+        for j in model.joints:
+            pa = att(j.body_a, j.point_a, True)
+            pb = att(j.body_b, j.point_b, True)
+            d = [(pb, 1.0), (pa, -1.0)]
+            va: dict[int, int] = {}
+            vb: dict[int, int] = {}
+
+            def A_(r: int, j: Joint = j, va: dict[int, int] = va) -> list[tuple[int, float]]:
+                if r not in va:
+                    va[r] = att(j.body_a, j.vectors_a[r], False)
+                return [(va[r], 1.0)]
+
+            def B_(r: int, j: Joint = j, vb: dict[int, int] = vb) -> list[tuple[int, float]]:
+                if r not in vb:
+                    vb[r] = att(j.body_b, j.vectors_b[r], False)
+                return [(vb[r], 1.0)]
+
+            kind = j.kind
+            if kind in ("spherical", "revolute", "universal", "weld"):
+                for c in range(3):
+                    rows.append(([(att(GROUND, np.eye(3)[c], False), 1.0)], d))
+            if kind in ("revolute", "cylindrical", "prismatic"):
+                rows.append((A_(1), B_(0)))
+                rows.append((A_(2), B_(0)))
+            if kind in ("cylindrical", "prismatic"):
+                rows.append((A_(1), d))
+                rows.append((A_(2), d))
+            if kind == "prismatic":
+                rows.append((A_(1), B_(2)))
+            if kind == "universal":
+                rows.append((A_(0), B_(0)))
+            if kind == "weld":
+                rows.append((A_(0), B_(1)))
+                rows.append((A_(1), B_(2)))
+                rows.append((A_(2), B_(0)))
+            if kind == "point_on_plane":
+                rows.append((A_(0), d))
+        K = len(bodies)
+        SX = np.zeros((len(rows), K))
+        SY = np.zeros((len(rows), K))
+        for r, (xs, ys) in enumerate(rows):
+            for k, sgn in xs:
+                SX[r, k] += sgn
+            for k, sgn in ys:
+                SY[r, k] += sgn
+        body_arr = np.array(bodies, dtype=np.intp)
+        t_row: list[int] = []
+        t_att: list[int] = []
+        t_sign: list[float] = []
+        t_x: list[bool] = []
+        for r, (xs, ys) in enumerate(rows):
+            for terms, is_x in ((xs, True), (ys, False)):
+                for k, sgn in terms:
+                    t_row.append(r)
+                    t_att.append(k)
+                    t_sign.append(sgn)
+                    t_x.append(is_x)
+        term_row = np.array(t_row, dtype=np.intp)
+        term_att = np.array(t_att, dtype=np.intp)
+        base = term_row * (7 * (nb + 1)) + 7 * body_arr[term_att]
+        return cls(
+            att_body=body_arr,
+            att_Q=np.array(Qs).reshape(K, 3, 4, 4),
+            att_const=np.array(consts).reshape(K, 3),
+            att_point=np.array(points),
+            SX=SX,
+            SY=SY,
+            term_row=term_row,
+            term_att=term_att,
+            term_sign=np.array(t_sign, dtype=float),
+            term_side_x=np.array(t_x, dtype=bool),
+            term_index=(base[:, None] + np.arange(7)).ravel(),
+        )
+
+    @staticmethod
+    def active_rows(specs: tuple[ConstraintSpec, ...], act: frozenset[str]) -> NDArray[np.intp]:
+        out: list[NDArray[np.intp]] = []
+        r = 0
+        for s in specs:
+            if s.name in act:
+                out.append(np.arange(r, r + s.dim))
+            r += s.dim
+        return np.concatenate(out) if out else np.zeros(0, dtype=np.intp)
 
 
 @dataclass(frozen=True, eq=False)
@@ -256,7 +366,9 @@ class SpatialModel(Model):
     _index: dict[str, int] = field(init=False, repr=False, compare=False)
     _names: tuple[str, ...] = field(init=False, repr=False, compare=False)
     _specs: tuple[ConstraintSpec, ...] = field(init=False, repr=False, compare=False)
-    _tensors: dict[str, tuple[Any, ...]] = field(init=False, repr=False, compare=False)
+    _plan: _RowPlan = field(init=False, repr=False, compare=False)
+    _mass: FloatArray = field(init=False, repr=False, compare=False)
+    _inertia: FloatArray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         idx = {b.name: i for i, b in enumerate(self.bodies)}
@@ -283,23 +395,6 @@ class SpatialModel(Model):
             for j in self.joints
         )
         object.__setattr__(self, "_specs", norms + joints)
-        object.__setattr__(
-            self,
-            "_tensors",
-            {
-                j.name: (
-                    point_tensor(j.point_a),
-                    point_tensor(j.point_b),
-                    [point_tensor(v) for v in j.vectors_a],
-                    [point_tensor(v) for v in j.vectors_b],
-                )
-                for j in self.joints
-            },
-        )
-        g = np.asarray(self.gravity, dtype=float)
-        if g.shape != (3,) or not np.isfinite(g).all():
-            raise ModelError(f"gravity must be a finite 3-vector, got {self.gravity!r}")
-        object.__setattr__(self, "gravity", (float(g[0]), float(g[1]), float(g[2])))
         for j in self.joints:
             self.body_index(j.body_a)
             self.body_index(j.body_b)
@@ -314,6 +409,9 @@ class SpatialModel(Model):
                 )
         if self.default_active_names is not None:
             self.resolve_active(self.default_active_names)
+        object.__setattr__(self, "_plan", _RowPlan.build(self))
+        object.__setattr__(self, "_mass", np.array([b.mass for b in self.bodies], dtype=float))
+        object.__setattr__(self, "_inertia", np.array([b.inertia for b in self.bodies], dtype=float))
 
     # ------------------------------------------------------------------ names and sizes
     @property
@@ -451,15 +549,28 @@ class SpatialModel(Model):
         raise InputError(f"frame must be 'body' or 'world', got {frame!r}")
 
     # ------------------------------------------------------------------ dynamics
+    def _G_all(self, E: FloatArray) -> FloatArray:
+        """``G(ε_i)`` of every body, shape (nb, 3, 4)."""
+        e0, e1, e2, e3 = E.T
+        return np.stack(
+            [
+                np.stack([-e1, e0, e3, -e2], axis=-1),
+                np.stack([-e2, -e3, e0, e1], axis=-1),
+                np.stack([-e3, e2, -e1, e0], axis=-1),
+            ],
+            axis=1,
+        )
+
     def mass_matrix(self, q: ArrayLike) -> FloatArray:
         qv = _as_vector(q, "q", self.n)
-        M = np.zeros((self.n, self.n))
-        for i, b in enumerate(self.bodies):
-            o = 7 * i
-            M[o : o + 3, o : o + 3] = b.mass * np.eye(3)
-            G = G_matrix(qv[o + 3 : o + 7])
-            M[o + 3 : o + 7, o + 3 : o + 7] = 4.0 * G.T @ b.inertia @ G
-        return M
+        nb = len(self.bodies)
+        G = self._G_all(qv.reshape(nb, 7)[:, 3:])
+        Me = 4.0 * np.matmul(np.swapaxes(G, 1, 2), np.matmul(self._inertia, G))  # (nb, 4, 4)
+        M = np.zeros((nb, 7, nb, 7))
+        idx = np.arange(nb)
+        M[idx, :3, idx, :3] = self._mass[:, None, None] * np.eye(3)
+        M[idx, 3:, idx, 3:] = Me
+        return M.reshape(self.n, self.n)
 
     def coriolis_matrix(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
         qv = _as_vector(q, "q", self.n)
@@ -478,12 +589,13 @@ class SpatialModel(Model):
         """``C q̇``; per body ``8 G(ε̇)ᵀ J G(ε) ε̇`` on the quaternion block."""
         qv = _as_vector(q, "q", self.n)
         v = _as_vector(qd, "qd", self.n)
-        out = np.zeros(self.n)
-        for i, b in enumerate(self.bodies):
-            o = 7 * i
-            ed = v[o + 3 : o + 7]
-            out[o + 3 : o + 7] = 8.0 * G_matrix(ed).T @ (b.inertia @ (G_matrix(qv[o + 3 : o + 7]) @ ed))
-        return out
+        nb = len(self.bodies)
+        G = self._G_all(qv.reshape(nb, 7)[:, 3:])
+        Gd = self._G_all(v.reshape(nb, 7)[:, 3:])
+        w = np.matmul(G, v.reshape(nb, 7)[:, 3:, None])  # ω'/2, (nb, 3, 1)
+        out = np.zeros((nb, 7))
+        out[:, 3:] = 8.0 * np.matmul(np.swapaxes(Gd, 1, 2), np.matmul(self._inertia, w))[..., 0]
+        return out.reshape(self.n)
 
     def _spring_line(self, q: FloatArray, qd: FloatArray, s: Spring) -> tuple[_Kin, float]:
         pa = self._kin(q, qd, s.body_a, s.point_a, True)
@@ -554,71 +666,68 @@ class SpatialModel(Model):
         return B
 
     # ------------------------------------------------------------------ constraints
-    def _joint_rows(
-        self, q: FloatArray, qd: FloatArray, j: Joint
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """φ, A, Ȧ of one joint, shapes (d,), (d, n), (d, n)."""
-        rows: list[tuple[float, FloatArray, FloatArray]] = []
-        kind = j.kind
-        Tpa, Tpb, Tva, Tvb = self._tensors[j.name]
-        va = _Lazy(lambda r: self._kin(q, qd, j.body_a, j.vectors_a[r], False, Tva[r]))
-        vb = _Lazy(lambda r: self._kin(q, qd, j.body_b, j.vectors_b[r], False, Tvb[r]))
-        pa = self._kin(q, qd, j.body_a, j.point_a, True, Tpa)
-        pb = self._kin(q, qd, j.body_b, j.point_b, True, Tpb)
-        d = _diff(pb, pa)
-        if kind in ("spherical", "revolute", "universal", "weld"):
-            for r in range(3):
-                rows.append((float(d.val[r]), d.J[r], d.Jd[r]))
-        if kind in ("revolute", "cylindrical", "prismatic"):
-            rows.append(_dot(va[1], vb[0], qd))
-            rows.append(_dot(va[2], vb[0], qd))
-        if kind in ("cylindrical", "prismatic"):
-            rows.append(_dot(va[1], d, qd))
-            rows.append(_dot(va[2], d, qd))
-        if kind == "prismatic":
-            rows.append(_dot(va[1], vb[2], qd))
-        if kind == "universal":
-            rows.append(_dot(va[0], vb[0], qd))
-        if kind == "weld":
-            rows.append(_dot(va[0], vb[1], qd))
-            rows.append(_dot(va[1], vb[2], qd))
-            rows.append(_dot(va[2], vb[0], qd))
-        if kind == "point_on_plane":
-            rows.append(_dot(va[0], d, qd))
-        phi = np.array([r[0] for r in rows])
-        A = np.array([r[1] for r in rows])
-        Ad = np.array([r[2] for r in rows])
-        return phi, A, Ad
-
     def _all_rows(
         self, q: FloatArray, qd: FloatArray, act: frozenset[str]
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """φ, A, Ȧ of the active rows (declaration order), shapes (m,), (m, n), (m, n)."""
+        plan = self._plan
+        nb = len(self.bodies)
         n = self.n
-        phis: list[FloatArray] = []
-        As: list[FloatArray] = []
-        Ads: list[FloatArray] = []
-        for i, b in enumerate(self.bodies):
-            if f"{b.name}.norm" not in act:
-                continue
-            o = 7 * i
-            e = q[o + 3 : o + 7]
-            A = np.zeros((1, n))
-            Ad = np.zeros((1, n))
-            A[0, o + 3 : o + 7] = e
-            Ad[0, o + 3 : o + 7] = qd[o + 3 : o + 7]
-            phis.append(np.array([0.5 * (float(e @ e) - 1.0)]))
-            As.append(A)
-            Ads.append(Ad)
-        for j in self.joints:
-            if j.name not in act:
-                continue
-            phi, A, Ad = self._joint_rows(q, qd, j)
-            phis.append(phi)
-            As.append(A)
-            Ads.append(Ad)
-        if not As:
-            return np.zeros(0), np.zeros((0, n)), np.zeros((0, n))
-        return np.concatenate(phis), np.vstack(As), np.vstack(Ads)
+        Q7 = q.reshape(nb, 7)
+        V7 = qd.reshape(nb, 7)
+        # pad a zero "ground body" at index nb
+        E = np.zeros((nb + 1, 4))
+        Ed = np.zeros((nb + 1, 4))
+        R = np.zeros((nb + 1, 3))
+        Rd = np.zeros((nb + 1, 3))
+        E[:nb], Ed[:nb] = Q7[:, 3:], V7[:, 3:]
+        R[:nb], Rd[:nb] = Q7[:, :3], V7[:, :3]
+        ek = E[plan.att_body]  # (K, 4)
+        edk = Ed[plan.att_body]
+        Qe = np.matmul(plan.att_Q, ek[:, None, :, None])[..., 0]  # (K, 3, 4)
+        Qed = np.matmul(plan.att_Q, edk[:, None, :, None])[..., 0]
+        pt = plan.att_point[:, None]
+        val = np.matmul(Qe, ek[:, :, None])[..., 0] + pt * R[plan.att_body] + plan.att_const
+        vel = 2.0 * np.matmul(Qe, edk[:, :, None])[..., 0] + pt * Rd[plan.att_body]
+        K = val.shape[0]
+        Jloc = np.zeros((K, 3, 7))
+        Jloc[:, :, :3] = plan.att_point[:, None, None] * np.eye(3)
+        Jloc[:, :, 3:] = 2.0 * Qe
+        Jdloc = np.zeros((K, 3, 7))
+        Jdloc[:, :, 3:] = 2.0 * Qed
+        X, Y = plan.SX @ val, plan.SY @ val
+        Xd, Yd = plan.SX @ vel, plan.SY @ vel
+        # per term (row r, attachment k, sign σ, side): partner value and velocity
+        side = plan.term_side_x[:, None]
+        r = plan.term_row
+        c = plan.term_sign[:, None] * np.where(side, Y[r], X[r])  # (T, 3)
+        cd = plan.term_sign[:, None] * np.where(side, Yd[r], Xd[r])
+        Jt = Jloc[plan.term_att]  # (T, 3, 7)
+        Aloc = np.matmul(c[:, None, :], Jt)[:, 0, :]  # (T, 7)
+        Adloc = np.matmul(cd[:, None, :], Jt)[:, 0, :] + np.matmul(
+            c[:, None, :], Jdloc[plan.term_att]
+        )[:, 0, :]
+        rj = plan.SX.shape[0]
+        width = 7 * (nb + 1)
+        size = rj * width
+        A_j = np.bincount(plan.term_index, Aloc.ravel(), size).reshape(rj, width)[:, :n]
+        Ad_j = np.bincount(plan.term_index, Adloc.ravel(), size).reshape(rj, width)[:, :n]
+        phi_j = np.einsum("ra,ra->r", X, Y)
+        # norm rows
+        A_n = np.zeros((nb, n))
+        Ad_n = np.zeros((nb, n))
+        idx = np.arange(nb)
+        for c in range(4):
+            A_n[idx, 7 * idx + 3 + c] = Q7[:, 3 + c]
+            Ad_n[idx, 7 * idx + 3 + c] = V7[:, 3 + c]
+        phi_n = 0.5 * (np.einsum("bj,bj->b", Q7[:, 3:], Q7[:, 3:]) - 1.0)
+        phi = np.concatenate((phi_n, phi_j))
+        A: FloatArray = np.vstack((A_n, A_j))
+        Ad: FloatArray = np.vstack((Ad_n, Ad_j))
+        if len(act) == len(self._specs):
+            return phi, A, Ad
+        rows = plan.active_rows(self._specs, act)
+        return phi[rows], A[rows], Ad[rows]
 
     def constraint_terms(
         self,
