@@ -43,6 +43,9 @@ BACKENDS = ("auto", "numpy", "numba")
 PARALLEL_MIN_BATCH = 256
 
 _state: dict[str, Any] = {"name": "auto", "kernels": None, "tried": False}
+_UNRESOLVED = object()
+#: The kernels module when the compiled backend is in use, None for NumPy (resolved lazily).
+_active: Any = _UNRESOLVED
 
 
 def _check_name(name: object) -> str:
@@ -83,8 +86,14 @@ def set_backend(name: str) -> str:
     if new == "numba" and _load() is None:
         raise missing_dependency("numba", "fast", "the compiled backend of nonmin.core")
     old: str = _state["name"]
-    _state["name"] = new
+    _set(new)
     return old
+
+
+def _set(name: str) -> None:
+    global _active
+    _state["name"] = name
+    _active = _UNRESOLVED
 
 
 def get_backend() -> str:
@@ -101,14 +110,14 @@ def use_backend(name: str) -> Iterator[None]:
     try:
         yield
     finally:
-        _state["name"] = old
+        _set(old)
 
 
 def _init_from_env() -> None:
     env = os.environ.get("NONMIN_BACKEND", "auto").strip().lower() or "auto"
     if env not in BACKENDS:
         raise InputError(f"environment variable NONMIN_BACKEND must be one of {BACKENDS}, got {env!r}")
-    _state["name"] = env
+    _set(env)
 
 
 _init_from_env()
@@ -122,6 +131,12 @@ def _prep(x: Any, name: str) -> FloatArray:
     if type(x) is _ND and x.dtype is _F64 and x.flags.c_contiguous:
         return x
     return np.ascontiguousarray(V.as_float_array(x, name))
+
+
+def _resolve() -> Any:
+    global _active
+    _active = None if _state["name"] == "numpy" else _load()
+    return _active
 
 
 _NO_MU = np.ones(1)
@@ -152,21 +167,29 @@ def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | N
     inputs are not regular (shapes, non-finite entries, asymmetric M, M̄ not positive definite):
     the NumPy path then raises the typed error.
     """
-    kern = _state["kernels"] if _state["tried"] else _load()
-    if kern is None or _state["name"] == "numpy":
+    kern = _active
+    if kern is _UNRESOLVED:
+        kern = _resolve()
+    if kern is None:
         return None
-    Mm = _prep(M, "M")
-    hv = _prep(h, "h")
-    Am = _prep(A, "A")
-    gv = _prep(adot_qd, "adot_qd")
+    # Coerce once (no copy for float64 C-contiguous arrays); finiteness and symmetry are checked
+    # inside the kernel.
+    Mm = M if type(M) is _ND and M.dtype is _F64 and M.flags.c_contiguous else _prep(M, "M")
+    hv = h if type(h) is _ND and h.dtype is _F64 and h.flags.c_contiguous else _prep(h, "h")
+    Am = A if type(A) is _ND and A.dtype is _F64 and A.flags.c_contiguous else _prep(A, "A")
+    gv = (
+        adot_qd
+        if type(adot_qd) is _ND and adot_qd.dtype is _F64 and adot_qd.flags.c_contiguous
+        else _prep(adot_qd, "adot_qd")
+    )
     has_f = f is not None
     fv = _prep(f, "f") if has_f else hv
     has_mu = mu is not None
     if Mm.ndim == 2 and hv.ndim == 1 and Am.ndim == 2 and gv.ndim == 1 and fv.ndim == 1:
         # ------------------------------------------------------------ single state
-        n = Mm.shape[0]
+        n, n2 = Mm.shape
         m, nA = Am.shape
-        if Mm.shape[1] != n or hv.shape[0] != n or nA != n or gv.shape[0] != m or n == 0:
+        if n2 != n or hv.shape[0] != n or nA != n or gv.shape[0] != m or n == 0:
             return None
         if has_f and fv.shape[0] != n:
             return None
