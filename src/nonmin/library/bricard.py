@@ -28,8 +28,8 @@ manifold. At a point a distance ‖φ‖ off it (an explicit Runge–Kutta stage
 1e-9 .. 1e-6 m) the redundant singular value of A is about 0.04 ‖φ‖ σ_max, so with the default
 cutoff (1e-10) the rank flips to m at the stages and the step-size control collapses
 (measured: dopri5 at rtol 1e-9 needs 5599 steps and ~290 s for 1 s of motion). Pass a cutoff
-above that noise, e.g. ``simulate(..., rank_rtol=1e-6)`` (69 steps, 2.9 s for 1 s; 575 steps,
-~33 s for the 10 s benchmark, closure 4e-16 m, energy drift 1.7e-9 J).
+above that noise, e.g. ``simulate(..., rank_rtol=1e-6)`` (69 steps, 2.2 s for 1 s; 575 steps,
+15 s for the 10 s benchmark, closure 4e-16 m, energy drift 1.7e-9 J; 2 shared cores, load ~10).
 """
 
 from __future__ import annotations
