@@ -37,7 +37,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..core import coriolis_bar, projector_derivative
+from ..core import pseudo_inverse
 from ..errors import InputError
 from ..model import Model
 from ._base import LawOutput, ProjectedController
@@ -198,9 +198,13 @@ class Tracker(ProjectedController):
         lam = float(self.lambda_)
         Mb, mu = mbar(ev)
         if ev.A.shape[0]:
+            # Λ = −A⁺Ȧ, Ṗ = ΛP + PΛᵀ (Remark 1), C̄ = PCP + PM(ΛP + PΛᵀ) − μΛP (eq. (Cbar2));
+            # the same formulas as nonmin.core.projector_derivative / coriolis_bar, sharing P
+            # and one pseudo-inverse.
             Adot = self.model.constraint_jacobian_dot(t, q, qd, active)
-            Pdot = projector_derivative(ev.A, Adot, rtol=self.rtol)
-            Cbar = coriolis_bar(ev.M, self.model.coriolis_matrix(q, qd), ev.A, Adot, mu, rtol=self.rtol)
+            LP = -(pseudo_inverse(ev.A, self.rtol) @ Adot) @ P
+            Pdot = LP + LP.T
+            Cbar = P @ self.model.coriolis_matrix(q, qd) @ P + P @ ev.M @ Pdot - mu * LP
         else:
             Pdot = np.zeros_like(P)
             Cbar = self.model.coriolis_matrix(q, qd)
