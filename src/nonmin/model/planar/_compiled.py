@@ -293,6 +293,8 @@ class Layout:
             np.add.at(buf, np.concatenate(const_idx), np.concatenate(const_val))
         buf[m * n] = 0.0
         self.A0 = buf
+        #: ``[M.ravel(), A0]`` for :func:`constraint_terms_and_mass` (set on first use)
+        self.MA0: FloatArray | None = None
         self.var_idx = np.concatenate(var_idx) if var_idx else np.zeros(0, dtype=np.intp)
         real = self.var_idx[self.var_idx < m * n]
         #: variable entries may share a position (e.g. a joint between two points of one body)
@@ -306,12 +308,36 @@ def constraint_terms(
 ) -> tuple[ConstraintTerms, FloatArray | None]:
     """Stacked ``(A, γ, φ, A qd + φ_t, holonomic)`` of the layout's active set, and ``Ȧ``
     (shape (m, n)) when ``adot`` is true (else None)."""
+    return _constraints(model, lay, t, q, qd, lay.A0.copy(), adot)
+
+
+def constraint_terms_and_mass(
+    model: PlanarModel, lay: Layout, t: float, q: FloatArray, qd: FloatArray, M: FloatArray
+) -> tuple[ConstraintTerms, FloatArray]:
+    """:func:`constraint_terms` and a fresh copy of the constant mass matrix ``M``.
+
+    Both are views of one new buffer (a copy of ``[M, A template]``): one allocation instead of
+    two, which for large n also spares the allocator returning and re-faulting pages between
+    calls.
+    """
+    big = lay.MA0
+    if big is None or big.size != M.size + lay.A0.size:
+        big = np.concatenate((M.ravel(), lay.A0))
+        lay.MA0 = big
+    nn = M.size
+    buf = big.copy()
+    return _constraints(model, lay, t, q, qd, buf[nn:], False)[0], buf[:nn].reshape(M.shape)
+
+
+def _constraints(
+    model: PlanarModel, lay: Layout, t: float, q: FloatArray, qd: FloatArray, buf: FloatArray, adot: bool
+) -> tuple[ConstraintTerms, FloatArray | None]:
+    """Fill ``buf`` (a copy of the A template, length m·n + 1) and return the terms."""
     n, m = lay.n, lay.m
     if m == 0:
         e = np.zeros(0)
         Ad0 = np.zeros((0, n)) if adot else None
         return ConstraintTerms(np.zeros((0, n)), e, e.copy(), e.copy(), np.zeros(0, dtype=bool)), Ad0
-    buf = lay.A0.copy()
     dvals: list[FloatArray] = []
     phi = np.zeros(m)
     gamma = np.zeros(m)

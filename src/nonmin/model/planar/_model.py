@@ -687,13 +687,13 @@ class PlanarModel(Model):
         self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
     ) -> ModelTerms:
         qv, v = self._state_arrays(q, qd)
-        lay = self._layout(active)
+        ct, M = _compiled.constraint_terms_and_mass(self, self._layout(active), t, qv, v, self._M)
         return ModelTerms(
-            M=self._M.copy(),
+            M=M,
             h=self._forces_c.conservative(self._fg, qv) if self._stiff else self._fg.copy(),
             f_passive=self._forces_c.passive(qv, v) if self._damped else np.zeros(self.n),
             B=self._inputs.matrix(qv),
-            constraints=_compiled.constraint_terms(self, lay, t, qv, v)[0],
+            constraints=ct,
         )
 
     # ------------------------------------------------------------------ outputs and geometry
