@@ -366,3 +366,27 @@ def test_inactive_joint_is_data_not_topology() -> None:
     q = m.reference_configuration()
     assert m.constraint_terms(0.0, q, np.zeros(7)).A.shape == (4, 7)
     assert m.constraint_terms(0.0, q, np.zeros(7), active=m.constraint_names).A.shape == (5, 7)
+
+
+def test_free_body_follows_euler_equations() -> None:
+    """No joints: r̈ = g and ω̇' = −J⁻¹(ω' × J ω') (torque-free Euler equations)."""
+    from nonmin.core import forward_dynamics
+
+    J = np.array([[0.3, 0.02, 0.01], [0.02, 0.5, -0.03], [0.01, -0.03, 0.6]])
+    m = SpatialBuilder("free", gravity=(0.0, 0.0, -9.81)).add_body(
+        "b", mass=2.0, inertia=J, quaternion=[0.9, 0.1, -0.3, 0.2]
+    ).build()
+    assert m.constraint_names == ("b.norm",)
+    rng = np.random.default_rng(13)
+    q = m.reference_configuration()
+    e = q[3:]
+    w = rng.normal(size=3) * 5.0
+    qd = np.concatenate((rng.normal(size=3), 0.5 * G_matrix(e).T @ w))
+    ev = m.evaluate(0.0, q, qd)
+    qdd = forward_dynamics(ev.M, ev.h, ev.constraints.A, ev.constraints.gamma)
+    np.testing.assert_allclose(qdd[:3], [0.0, 0.0, -9.81], atol=1e-12)
+    np.testing.assert_allclose(
+        2.0 * G_matrix(e) @ qdd[3:], -np.linalg.solve(J, np.cross(w, J @ w)), atol=1e-10
+    )
+    geo = m.geometry(q)
+    assert geo.segments.shape == (0, 2, 3) and geo.frames.shape == (1, 4, 3)
