@@ -537,8 +537,9 @@ def simulate(
 
             q1, qd1 = stab.project(model, t_new, res.state.y[:n].copy(), res.state.y[n:].copy(),
                                    system.active, rank_rtol)
-            p1 = system.point(t_new, q1, qd1)
-            new_g = [_guard_value(system, w, p1) for w in watches]
+            # the full evaluation at the step end is needed only for guards or recording
+            p1 = system.point(t_new, q1, qd1) if (watches or t_out is None) else None
+            new_g = [_guard_value(system, w, p1) for w in watches] if p1 is not None else []
             fired = [
                 i for i, w in enumerate(watches)
                 if (_crossed(gvals[i], new_g[i], w.direction) and id(w.event) not in disarmed)
@@ -572,7 +573,7 @@ def simulate(
                 # events within the location tolerance fire together (user events first)
                 group = [i for s_i, i in roots if s_i <= best_s + 4 * EVENT_XTOL]
                 group.sort(key=lambda i: (watches[i].kind != "user", i))
-                pe = at(best_s) if best_s < h else p1
+                pe = at(best_s) if (best_s < h or p1 is None) else p1
                 te = t_start + best_s
                 _sample_t_eval(rec, t_out, out_i, t_start, te, at, system)
                 out_i = _advance_out(t_out, out_i, te)
@@ -628,7 +629,7 @@ def simulate(
             # no event: accept the step
             _sample_t_eval(rec, t_out, out_i, t_start, t_new, at, system)
             out_i = _advance_out(t_out, out_i, t_new)
-            if t_out is None:
+            if t_out is None and p1 is not None:
                 rec.add(p1, system.active)
             t = t_new
             gvals = new_g
