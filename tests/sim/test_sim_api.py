@@ -224,3 +224,25 @@ def test_bad_inputs_raise_typed_errors(kwargs: dict, error: type, match: str) ->
 def test_integrator_objects_are_accepted() -> None:
     tr = simulate(make_pendulum(), (0.0, 0.1), [1.0, 0.0], method=RK4(dt=0.02))
     assert tr.n_steps == 5
+
+
+def test_plot_delegates_to_viz() -> None:
+    pytest.importorskip("matplotlib")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    tr = simulate(make_ball(), (0.0, 0.6), [0.0, 1.0], dt=0.01, restitution=0.5)
+    fig = tr.plot(title="ball")
+    assert fig.__class__.__name__ == "Figure"
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+
+
+def test_progress_output_only_when_asked(capsys) -> None:  # type: ignore[no-untyped-def]
+    simulate(make_pendulum(), (0.0, 0.05), [1.0, 0.0], dt=0.01, progress=False)
+    assert capsys.readouterr().err == ""
+    simulate(make_pendulum(), (0.0, 0.05), [1.0, 0.0], dt=0.01)  # auto: stderr is not a TTY here
+    assert capsys.readouterr().err == ""
+    simulate(make_pendulum(), (0.0, 0.05), [1.0, 0.0], dt=0.01, progress=True)
+    assert capsys.readouterr().err != ""

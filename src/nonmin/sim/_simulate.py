@@ -377,7 +377,9 @@ def simulate(
     restitution : float or dict, default 0.0
         Newton restitution of automatic contact impacts (per constraint name with a dict).
     t_eval : array_like, optional
-        Record only at these times (increasing, inside ``t_span``); default: every step.
+        Record at these times (non-decreasing, inside ``t_span``) plus the two samples (before
+        and after the transition) of every event; default: every accepted step. Values between
+        step ends come from a partial step of the integrator from the step start.
     max_steps : int
         Fail after this many accepted steps.
     throw : bool, default True
@@ -757,6 +759,8 @@ def _apply(
             if ct.A.shape[0]:
                 qd = impact_map(model.mass_matrix(q), ct.A, qd, restitution=tr.restitution,
                                 rtol=system.rank_rtol)
+            if tr.restitution > 0.0:  # a bounce: unilateral constraints separate again
+                new = new - frozenset(nm for nm in tr.names if model.constraint(nm).kind == "unilateral")
             act = new
         elif isinstance(tr, Deactivate):
             act = act - frozenset(tr.names)
