@@ -1,6 +1,7 @@
 """A spatial 3-link chain with skewed revolute axes and general inertias: the spatial
 (unit-quaternion, absolute-coordinate) model agrees with Pinocchio's reduced-coordinate
-articulated-body algorithm in joint accelerations and in kinetic and potential energy."""
+articulated-body algorithm in joint accelerations (with joint torques through B) and in
+kinetic and potential energy."""
 
 from __future__ import annotations
 
@@ -46,7 +47,8 @@ def test_chain_spatial_vs_pinocchio(seed: int) -> None:
     q = rng.normal(size=3)
     v = rng.normal(size=3) * 2.0
     pin.forwardKinematics(model, data, q, v)
-    ddq = pin.aba(model, data, q, v, np.zeros(3))
+    tau = rng.normal(size=3)
+    ddq = pin.aba(model, data, q, v, tau)
     T = pin.computeKineticEnergy(model, data, q, v)
     V = pin.computePotentialEnergy(model, data, q)
 
@@ -67,6 +69,7 @@ def test_chain_spatial_vs_pinocchio(seed: int) -> None:
         axes.append(u)
         parent = "ground" if i == 0 else f"b{i - 1}"
         b.add_revolute(f"j{i}", parent, f"b{i}", point=pose.translation, axis=u)
+        b.add_actuator(f"tau{i}", f"j{i}")
     sm = b.build()
     qs = sm.reference_configuration()
     qds = np.array(qd)
@@ -77,7 +80,7 @@ def test_chain_spatial_vs_pinocchio(seed: int) -> None:
     assert sm.potential_energy(qs) == pytest.approx(V, abs=AGREE)
 
     ev = sm.evaluate(0.0, qs, qds)
-    qdd = forward_dynamics(ev.M, ev.h, ev.constraints.A, ev.constraints.gamma)
+    qdd = forward_dynamics(ev.M, ev.h, ev.constraints.A, ev.constraints.gamma, ev.B @ tau)
     # joint accelerations from the absolute ones: θ̈_i = u_i·(ω̇_i − ω̇_{i−1}) (world frame)
     prev = np.zeros(3)
     theta_dd = []
