@@ -390,3 +390,18 @@ def test_free_body_follows_euler_equations() -> None:
     )
     geo = m.geometry(q)
     assert geo.segments.shape == (0, 2, 3) and geo.frames.shape == (1, 4, 3)
+
+
+def test_replace_bodies_is_validated() -> None:
+    import dataclasses
+
+    m = _rich_model(np.random.default_rng(14))
+    heavier = tuple(dataclasses.replace(b, mass=2 * b.mass) for b in m.bodies)
+    m2 = m.replace(bodies=heavier)
+    q = m.reference_configuration()
+    np.testing.assert_allclose(m2.mass_matrix(q)[:3, :3], 2 * m.mass_matrix(q)[:3, :3])
+    bad = (dataclasses.replace(m.bodies[0], inertia=np.diag([1.0, 1.0, 3.0])), *m.bodies[1:])
+    with pytest.raises(ModelError, match="triangle"):
+        m.replace(bodies=bad)
+    with pytest.raises(ModelError, match="mass"):
+        m.replace(bodies=(dataclasses.replace(m.bodies[0], mass=-1.0), *m.bodies[1:]))

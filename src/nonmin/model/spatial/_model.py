@@ -376,6 +376,12 @@ class SpatialModel(Model):
             raise ModelError(f"body names must be unique, got {[b.name for b in self.bodies]}")
         if not self.bodies:
             raise ModelError("a spatial model needs at least one body")
+        from ._builder import check_inertia  # validates replace(bodies=...) variants too
+
+        for b in self.bodies:
+            if not (np.isfinite(b.mass) and b.mass > 0.0):
+                raise ModelError(f"body {b.name!r}: mass must be a finite number > 0, got {b.mass!r}")
+            check_inertia(b.inertia, f"body {b.name!r}: inertia")
         object.__setattr__(self, "_index", idx)
         object.__setattr__(
             self,
