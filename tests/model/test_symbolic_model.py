@@ -211,3 +211,19 @@ def test_missing_sympy_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "sympy", None)  # makes `import sympy` fail
     with pytest.raises(MissingDependencyError, match=r"nonmin\[sympy\]"):
         SymbolicModel.from_energy("p", q=[x], qd=[xd], T=xd**2 / 2, V=0)
+
+
+def test_pickle_round_trip(slider_pendulum: SymbolicModel) -> None:
+    """Models travel to worker processes: the compiled functions are rebuilt on unpickling."""
+    import pickle
+
+    m = slider_pendulum.replace(params={"m": 0.7})
+    m2 = pickle.loads(pickle.dumps(m))
+    rng = np.random.default_rng(5)
+    q, qd = rng.normal(size=(2, 4))
+    np.testing.assert_array_equal(m2.mass_matrix(q), m.mass_matrix(q))
+    a = m.constraint_terms(0.2, q, qd, active=m.constraint_names)
+    b = m2.constraint_terms(0.2, q, qd, active=m.constraint_names)
+    np.testing.assert_array_equal(a.A, b.A)
+    np.testing.assert_array_equal(a.gamma, b.gamma)
+    assert m2.params == m.params

@@ -122,6 +122,28 @@ class _Compiled:
     outputs: Mapping[str, Any]
     shapes: Mapping[str, tuple[int, ...]]
     fn: Mapping[str, Callable[..., Any]]
+    exprs: Mapping[str, Any]
+
+    # lambdified functions do not pickle: drop them and compile again on unpickling
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["fn"] = None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        args = [state["t"], list(state["q"]), list(state["qd"]), list(state["param_symbols"])]
+        state["fn"] = _lambdify_all(args, state["exprs"])
+        self.__dict__.update(state)
+
+
+def _lambdify_all(args: list[Any], exprs: Mapping[str, Any]) -> dict[str, Callable[..., Any]]:
+    """``sympy.lambdify(..., cse=True)`` of every non-empty expression."""
+    sp = _sympy()
+    return {
+        key: sp.lambdify(args, e, modules="numpy", cse=True)
+        for key, e in exprs.items()
+        if 0 not in e.shape
+    }
 
 
 def _as_matrix(sp: Any, x: Any, what: str) -> Any:
@@ -263,13 +285,8 @@ def _compile(
         "passive": Pm,
     }
     exprs.update({f"out:{k}": v for k, v in out_exprs.items()})
-    fn: dict[str, Callable[..., Any]] = {}
-    shapes: dict[str, tuple[int, ...]] = {}
-    for key, e in exprs.items():
-        shapes[key] = tuple(e.shape)
-        if 0 in e.shape:
-            continue
-        fn[key] = sp.lambdify(args, e, modules="numpy", cse=True)
+    shapes = {key: tuple(e.shape) for key, e in exprs.items()}
+    fn = _lambdify_all(args, exprs)
     comp = _Compiled(
         q=q_t,
         qd=qd_t,
@@ -291,6 +308,7 @@ def _compile(
         outputs=out_exprs,
         shapes=shapes,
         fn=fn,
+        exprs=exprs,
     )
     return comp, pvals
 
