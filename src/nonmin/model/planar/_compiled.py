@@ -218,8 +218,13 @@ class Layout:
         ).reshape(3, S)
         sx: FloatArray = np.array([s.sx for s in sides], dtype=np.float64)
         sy: FloatArray = np.array([s.sy for s in sides], dtype=np.float64)
-        self.SL = np.stack([sx, sy]) if S else np.zeros((2, 0))
-        self.SLp = np.stack([-sy, sx]) if S else np.zeros((2, 0))
+        self.SL = np.stack([sx, sy]).reshape(2, S)
+        self.SLp = np.stack([-sy, sx]).reshape(2, S)
+        #: q_ext ⊕ qd_ext indices (6, S): x, y, θ, ẋ, ẏ, θ̇ of each side's body
+        self.I6 = np.concatenate([self.I3, self.I3 + (n + 1)]).astype(np.intp)
+        #: ``c·K1 + s·K2 = [R s; (R s)^⊥; −R s]`` (6, S)
+        self.K1 = np.concatenate([self.SL, self.SLp, -self.SL])
+        self.K2 = np.concatenate([self.SLp, -self.SL, -self.SLp])
 
         const_idx: list[IntArray] = []
         const_val: list[FloatArray] = []
@@ -235,7 +240,7 @@ class Layout:
             const_val += [sgn, sgn]
             # θ entries: sign·(R s)^⊥ — x row gets sign·rsp_x, y row sign·rsp_y
             var_idx += [_flat(r2, ith[: 2 * P], m, n), _flat(r2 + 1, ith[: 2 * P], m, n)]
-            self.pin_sign = np.concatenate([sgn, sgn])
+            self.pin_sign2 = np.stack([sgn, sgn])
         # ---------------------------------------------------------------- lines
         self.line_rows = np.array([row for row, _ in lines], dtype=np.intp)
         if NL:
@@ -339,44 +344,42 @@ def _constraints(
         Ad0 = np.zeros((0, n)) if adot else None
         return ConstraintTerms(np.zeros((0, n)), e, e.copy(), e.copy(), np.zeros(0, dtype=bool)), Ad0
     dvals: list[FloatArray] = []
-    phi = np.zeros(m)
-    gamma = np.zeros(m)
+    PG = np.zeros((2, m))  # rows: φ, γ
+    phi, gamma = PG[0], PG[1]
     P, NL, NR = lay.P, lay.NL, lay.NR
     if lay.S:
-        qe = np.concatenate((q, _ZERO1))
-        ve = np.concatenate((qd, _ZERO1))
-        Q = qe[lay.I3]  # (3, S): x, y, θ of each side's body
-        V = ve[lay.I3]
-        c = np.cos(Q[2])
-        s = np.sin(Q[2])
-        rs = c * lay.SL + s * lay.SLp  # R s, (2, S)
-        rsp = c * lay.SLp - s * lay.SL  # (R s)^⊥
-        p = Q[:2] + rs  # point positions
-        om = V[2]
-        om2rs = (om * om) * rs
+        X = np.concatenate((q, _ZERO1, qd, _ZERO1))[lay.I6]  # (6, S): x, y, θ, ẋ, ẏ, θ̇
+        c = np.cos(X[2])
+        s = np.sin(X[2])
+        RR = c * lay.K1 + s * lay.K2
+        rs, rsp, nrs = RR[:2], RR[2:4], RR[4:]  # R s, (R s)^⊥, −R s
+        p = X[:2] + rs  # point positions
+        om = X[5]
+        om2nrs = (om * om) * nrs  # −θ̇² R s (the acceleration of the point at zero q̈)
         vals: list[FloatArray] = []
         if P:
             P2 = 2 * P
-            phi[lay.pin_rows] = (p[:, :P] - p[:, P:P2]).ravel()
-            gamma[lay.pin_rows] = (om2rs[:, P:P2] - om2rs[:, :P]).ravel()
-            vals.append((rsp[:, :P2] * lay.pin_sign.reshape(2, P2)).ravel())
+            # φ = p_a − p_b and γ = −θ̇_a² R_a s_a + θ̇_b² R_b s_b in one subtraction
+            W = np.concatenate((p, om2nrs))
+            PG[:, lay.pin_rows] = (W[:, :P] - W[:, P:P2]).reshape(2, P2)
+            vals.append((rsp[:, :P2] * lay.pin_sign2).ravel())
             if adot:  # d/dt of sign·(R s)^⊥ is −sign·θ̇ R s
-                dvals.append((-(om[:P2] * rs[:, :P2]) * lay.pin_sign.reshape(2, P2)).ravel())
+                dvals.append((om[:P2] * nrs[:, :P2] * lay.pin_sign2).ravel())
         if NL or NR:
-            v = V[:2] + om * rsp  # point velocities
+            v = X[3:5] + om * rsp  # point velocities
         if NL:
             o = 2 * P
             a_, b_ = slice(o, o + NL), slice(o + NL, o + 2 * NL)
             ca, sa, oma = c[a_], s[a_], om[a_]
             nrm = ca * lay.UP + sa * lay.UPp  # n = R_a u^⊥
-            nperp = np.stack([-nrm[1], nrm[0]])
+            nperp = ca * lay.UPp - sa * lay.UP  # n^⊥
             d = p[:, b_] - p[:, a_]
             dd = v[:, b_] - v[:, a_]
             dn = (nrm * d).sum(axis=0)
             phi[lay.line_rows] = dn
             gamma[lay.line_rows] = (
                 2.0 * oma * (nperp * dd).sum(axis=0)
-                + (nrm * (om2rs[:, a_] - om2rs[:, b_])).sum(axis=0)
+                + (nrm * (om2nrs[:, b_] - om2nrs[:, a_])).sum(axis=0)
                 - oma * oma * dn
             )
             nb = (nrm * rsp[:, b_]).sum(axis=0)
@@ -401,7 +404,7 @@ def _constraints(
             k = lay.rod_coef
             L = lay.rod_len
             phi[lay.rod_rows] = lay.rod_sign * ((d * d).sum(axis=0) - L * L) / (2.0 * L)
-            gamma[lay.rod_rows] = k * ((dd * dd).sum(axis=0) + (d * (om2rs[:, a_] - om2rs[:, b_])).sum(axis=0))
+            gamma[lay.rod_rows] = k * ((dd * dd).sum(axis=0) + (d * (om2nrs[:, b_] - om2nrs[:, a_])).sum(axis=0))
             kd = k * d
             tb = (kd * rsp[:, b_]).sum(axis=0)
             ta = (kd * rsp[:, a_]).sum(axis=0)
