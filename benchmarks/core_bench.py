@@ -162,7 +162,9 @@ def terms(mech: Mechanism) -> dict[str, np.ndarray]:
 
 
 def timeit_median(fn: Callable[[], Any], *, target_s: float, repeats: int) -> dict[str, float]:
-    """Median and minimum over ``repeats`` of the mean time per call of ``fn`` (seconds).
+    """Median and minimum over ``repeats`` of the mean wall time per call of ``fn`` (seconds),
+    and the median process CPU time per call (all threads; less sensitive to other jobs on a
+    shared machine for single-threaded calls).
 
     The number of calls per repeat is chosen so that one repeat takes about ``target_s``.
     """
@@ -172,16 +174,29 @@ def timeit_median(fn: Callable[[], Any], *, target_s: float, repeats: int) -> di
     one = max(time.perf_counter() - t0, 1e-7)
     number = max(1, int(target_s / one))
     samples = []
+    cpu = []
     for _ in range(repeats):
+        c0 = time.process_time()
         t0 = time.perf_counter()
         for _ in range(number):
             fn()
         samples.append((time.perf_counter() - t0) / number)
-    return {"median": statistics.median(samples), "min": min(samples), "number": number}
+        cpu.append((time.process_time() - c0) / number)
+    return {
+        "median": statistics.median(samples),
+        "min": min(samples),
+        "cpu_median": statistics.median(cpu),
+        "number": number,
+    }
 
 
 def _us(t: dict[str, float], per: int = 1) -> dict[str, float]:
-    return {"median_us": 1e6 * t["median"] / per, "min_us": 1e6 * t["min"] / per, "calls": t["number"]}
+    return {
+        "median_us": 1e6 * t["median"] / per,
+        "min_us": 1e6 * t["min"] / per,
+        "cpu_median_us": 1e6 * t["cpu_median"] / per,
+        "calls": t["number"],
+    }
 
 
 def machine_info() -> dict[str, Any]:
@@ -379,22 +394,28 @@ def markdown(results: dict[str, Any]) -> str:
         f", at end {', '.join(f'{x:.2f}' for x in info['loadavg_end'])} — the machine is shared, "
         "so absolute times are noisy; ratios come from the same run.",
         "",
-        "**Single call** (µs, median over repeats; state 0 of each mechanism). "
-        "`ratio` = nonmin (numba) forward_dynamics / Pinocchio constraintDynamics.",
+        "**Single call** (µs of wall time, median over repeats; state 0 of each mechanism). "
+        "`ratio` = nonmin (numba) forward_dynamics / Pinocchio constraintDynamics, from wall "
+        "times and, in parentheses, from process CPU times (less disturbed by other jobs). "
+        "`max rel. Δq̈` = largest difference to Pinocchio's q̈ over the checked states.",
         "",
         "| mechanism | n | rank A | nonmin fd (numba) | nonmin f_c (numba) | nonmin fd (NumPy) "
-        "| pin constraintDynamics | pin KKT forwardDynamics | ratio | max rel. Δq̈ vs pin |",
+        "| pin constraintDynamics | pin KKT forwardDynamics | ratio (CPU) | max rel. Δq̈ vs pin |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in results["mechanisms"]:
         s = r["single"]
         nb = s["nonmin_numba_forward_dynamics"]["median_us"]
         pc = s["pin_constraintDynamics"]["median_us"]
+        cpu_ratio = (
+            s["nonmin_numba_forward_dynamics"]["cpu_median_us"]
+            / s["pin_constraintDynamics"]["cpu_median_us"]
+        )
         lines.append(
             f"| {r['mechanism']} | {r['n']} | {r['rank']} | {_f(nb)} | "
             f"{_f(s['nonmin_numba_constraint_force']['median_us'])} | "
             f"{_f(s['nonmin_numpy_forward_dynamics']['median_us'])} | {_f(pc)} | "
-            f"{_f(s['pin_kkt_forwardDynamics']['median_us'])} | {nb / pc:.2f} | "
+            f"{_f(s['pin_kkt_forwardDynamics']['median_us'])} | {nb / pc:.2f} ({cpu_ratio:.2f}) | "
             f"{r['accuracy']['max_rel_diff_numba_vs_pin_constraintDynamics']:.1e} |"
         )
     lines += [
@@ -435,18 +456,21 @@ def write_csv(results: dict[str, Any], path: Path) -> None:
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["mechanism", "kind", "n", "m", "rank", "mode", "N", "method",
-                    "median_us_per_state", "min_us_per_state", "calls_per_repeat"])  # fmt: skip
+                    "median_us_per_state", "min_us_per_state", "cpu_median_us_per_state",
+                    "calls_per_repeat"])  # fmt: skip
         for r in results["mechanisms"]:
             base = [r["mechanism"], r["kind"], r["n"], r["m"], r["rank"]]
             for meth, t in r["single"].items():
                 w.writerow([*base, "single", 1, meth, f"{t['median_us']:.4g}",
-                            f"{t['min_us']:.4g}", t["calls"]])  # fmt: skip
+                            f"{t['min_us']:.4g}", f"{t['cpu_median_us']:.4g}",
+                            t["calls"]])  # fmt: skip
             for b in r["batched"]:
                 for meth, t in b.items():
                     if meth == "N":
                         continue
                     w.writerow([*base, "batched", b["N"], meth, f"{t['median_us']:.4g}",
-                                f"{t['min_us']:.4g}", t["calls"]])  # fmt: skip
+                                f"{t['min_us']:.4g}", f"{t['cpu_median_us']:.4g}",
+                                t["calls"]])  # fmt: skip
 
 
 def update_readme(table: str, command: str) -> None:

@@ -250,6 +250,19 @@ def _solve_batch(kern: ModuleType, Mm: FloatArray, hv: FloatArray, Am: FloatArra
             x = np.broadcast_to(x, bshape + core)
         return np.ascontiguousarray(x.reshape((N, *core)))
 
+    if N == 1 and (not has_mu or np.ndim(mu_v) == 0):  # one state: the (cheaper) single path
+        one = solve(
+            flat(Mm, (n, n))[0], flat(hv, (n,))[0], flat(Am, (m, n))[0], flat(gv, (m,))[0],
+            flat(fv, (n,))[0] if has_f else None, mu_v if has_mu else None, rtol, what,
+        )  # fmt: skip
+        if one is None:
+            return None
+        if what != ALL:
+            return one.reshape((*bshape, n))
+        q1, f1, P1, L1, r1, mu1 = one
+        return (q1.reshape((*bshape, n)), f1.reshape((*bshape, n)), P1.reshape((*bshape, n, n)),
+                L1.reshape((*bshape, n, n)), r1.reshape(bshape),
+                mu1 if has_mu else mu1.reshape(bshape))  # fmt: skip
     Mb = flat(Mm, (n, n))
     hb = flat(hv, (n,))
     Ab = flat(Am, (m, n))
