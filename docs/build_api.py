@@ -59,7 +59,7 @@ def build(out: Path | str = DEFAULT_OUT, modules: Sequence[str] = MODULES) -> Pa
         footer_text=f"nonmin {nonmin.__version__}",
     )
     # only the listed modules: "!" patterns exclude everything else pdoc would walk into
-    specs = list(modules) + [r"!nonmin\.cli", r"!nonmin\.validation.*"]
+    specs = [*modules, r"!nonmin\.cli", r"!nonmin\.validation.*"]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         pdoc.pdoc(*specs, output_directory=out)
