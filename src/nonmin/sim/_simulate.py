@@ -636,7 +636,11 @@ def simulate(
             t = t_new
             gvals = new_g
             changed = not (np.array_equal(q1, res.state.y[:n]) and np.array_equal(qd1, res.state.y[n:]))
-            state = StepperState(t, np.concatenate((q1, qd1)), None if changed else res.state.f, res.state.h)
+            f_next = None if changed else res.state.f
+            if f_next is None and p1 is not None and controller is None:
+                # the full evaluation at the (projected) step end is F(t, y) of the next step
+                f_next = np.concatenate((qd1, p1.qdd))
+            state = StepperState(t, np.concatenate((q1, qd1)), f_next, res.state.h)
             if controller is not None and hasattr(controller, "update"):
                 system.cstate = controller.update(t, q1, qd1, system.cstate, active=system.active)
             bar.update(t)
