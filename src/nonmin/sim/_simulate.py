@@ -38,8 +38,6 @@ from ..core.linalg import range_basis
 from ..errors import (
     InputError,
     NonFiniteError,
-    NonminError,
-    NotPositiveDefiniteError,
     ShapeError,
     SimulationError,
     UnknownNameError,
@@ -566,7 +564,10 @@ def simulate(
                     elif new_g[i] == 0.0:
                         s_root = h
                     else:
-                        s_root = float(brentq(gfun, 0.0, h, xtol=EVENT_XTOL, rtol=1e-15, maxiter=200))
+                        try:
+                            s_root = float(brentq(gfun, 0.0, h, xtol=EVENT_XTOL, rtol=1e-15, maxiter=200))
+                        except ValueError:  # re-evaluated end values lost the sign change
+                            s_root = h
                         # take the bracket end on the far side of the crossing
                         s_root = _past_root(gfun, s_root, h, gvals[i])
                     roots.append((s_root, i))
@@ -644,7 +645,7 @@ def simulate(
             if controller is not None and hasattr(controller, "update"):
                 system.cstate = controller.update(t, q1, qd1, system.cstate, active=system.active)
             bar.update(t)
-    except (SimulationError, NotPositiveDefiniteError, NonminError, FloatingPointError) as exc:
+    except Exception as exc:  # throw=False: any failure ends the run with a partial result
         if throw:
             bar.close()
             raise
