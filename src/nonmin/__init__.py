@@ -8,6 +8,7 @@ P = I − A⁺A and adds a virtual mass μQ so that M̄ = PMP + μQ stays SPD wh
 from . import core as core
 from . import errors as errors
 
+#: Version of the installed nonmin package.
 __version__ = "0.1.0"
 
 __all__ = ["__version__", "core", "errors"]

@@ -47,6 +47,7 @@ def _hybrid_force(
     return ForceControl(motion, dict(forces), u_min=u_min, u_max=u_max)
 
 
+#: Controller factories by name (the ``[controller] type`` of scenario files).
 CONTROLLERS: dict[str, Callable[..., Any]] = {
     "regulator": _regulator,
     "tracker": _tracker,

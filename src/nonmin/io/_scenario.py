@@ -20,6 +20,7 @@ __all__ = ["SCENARIO_SCHEMA", "Scenario", "load_scenario", "resolve_entry_point"
 _NUM = (float, int)
 _NUMLIST = Key((list,), item_types=_NUM)
 
+#: The schema of scenario files: every section and key, its type and help text.
 SCENARIO_SCHEMA = Section(
     keys={
         "name": Key((str,), help="scenario name"),

@@ -38,6 +38,7 @@ from ..errors import InputError, ShapeError, UnknownNameError
 FloatArray = NDArray[np.float64]
 
 ConstraintKind = Literal["holonomic", "rheonomic", "nonholonomic", "unilateral"]
+#: The constraint kinds a :class:`ConstraintSpec` may have.
 CONSTRAINT_KINDS: tuple[str, ...] = get_args(ConstraintKind)
 
 __all__ = [

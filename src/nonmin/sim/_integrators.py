@@ -327,6 +327,7 @@ def _dp_dense(t0: float, h: float, y0: FloatArray, y1: FloatArray, K: FloatArray
     return interp
 
 
+#: Integrators by name (``method=`` of :func:`nonmin.sim.simulate`).
 METHODS: dict[str, type[Integrator]] = {
     "rk4": RK4,
     "dopri5": DormandPrince5,

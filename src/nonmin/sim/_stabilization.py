@@ -160,6 +160,7 @@ class Projection(Stabilization):
         return q, qd
 
 
+#: Constraint stabilizations by name (``stabilization=`` of :func:`nonmin.sim.simulate`).
 STABILIZATIONS: dict[str, type[Stabilization]] = {
     "none": NoStabilization,
     "baumgarte": Baumgarte,

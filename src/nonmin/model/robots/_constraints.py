@@ -48,6 +48,7 @@ __all__ = ["FRAME_CONSTRAINT_TYPES", "FrameConstraint", "JointCoupling", "RobotC
 FrameConstraintType = Literal[
     "point", "weld", "hinge", "planar_point", "planar_weld", "point_on_plane", "contact"
 ]
+#: Frame-constraint type -> number of rows (see the table above).
 FRAME_CONSTRAINT_TYPES: dict[str, int] = {
     "point": 3,
     "weld": 6,

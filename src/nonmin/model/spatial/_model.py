@@ -60,6 +60,7 @@ GROUND = "ground"
 JointKind = Literal[
     "spherical", "revolute", "prismatic", "cylindrical", "universal", "weld", "point_on_plane"
 ]
+#: The joint kinds of the spatial builder.
 JOINT_KINDS: tuple[str, ...] = (
     "spherical", "revolute", "prismatic", "cylindrical", "universal", "weld", "point_on_plane"
 )
