@@ -228,8 +228,15 @@ def solve_dynamics(
 ) -> DynamicsSolution:
     """Accelerations and constraint forces in one factorization (corrected eqs. (ddq_sim), (fc_R)).
 
-    See :func:`forward_dynamics` for the arguments. Returns a :class:`DynamicsSolution` with
-    ``qdd``, ``f_c``, ``P``, ``rank``, ``mu`` and the Cholesky factor of M̄.
+    Parameters
+    ----------
+    M, h, A, adot_qd, f, mu, rtol
+        As in :func:`forward_dynamics`.
+
+    Returns
+    -------
+    DynamicsSolution
+        ``qdd``, ``f_c``, ``P``, ``rank``, ``mu`` and the Cholesky factor ``L`` of M̄.
     """
     fast = _fast.solve(M, h, A, adot_qd, f, mu, rtol, _fast.ALL)  # compiled backend (_fast)
     if fast is not None:

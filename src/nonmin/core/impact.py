@@ -31,6 +31,9 @@ def impact_map(
 ) -> FloatArray:
     """Post-impact velocity when the constraints ``A qd = 0`` become active.
 
+    Not in the paper: ERRATA, "Impact map at constraint activation" (plastic map
+    ``qd⁺ = M̄⁻¹PM qd⁻``, extended with Newton's restitution).
+
     Parameters
     ----------
     M : array_like, shape (..., n, n)

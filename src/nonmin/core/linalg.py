@@ -155,6 +155,17 @@ def pseudo_inverse(A: FloatArray, rtol: float | None = None) -> FloatArray:
 
     Rank is decided as in :func:`range_basis`; the pseudo-inverse itself is that of ``A``
     (not of the equilibrated matrix), computed from an SVD of ``A`` truncated to that rank.
+
+    Parameters
+    ----------
+    A : ndarray, shape (..., m, n)
+    rtol : float, optional
+        Rank tolerance (default :data:`DEFAULT_RTOL`).
+
+    Returns
+    -------
+    ndarray, shape (..., n, m)
+        A⁺.
     """
     basis = range_basis(A, rtol)
     m, n = A.shape[-2], A.shape[-1]

@@ -61,6 +61,20 @@ def lambda_matrix(A: ArrayLike, Adot: ArrayLike, *, rtol: float | None = None) -
     """``Λ = −A⁺Ȧ`` (paper, Remark 1), shape (..., n, n).
 
     A⁺ is the pseudo-inverse of A truncated to its numerical rank. ``PΛ = 0``; ``Λᵀ P = 0``.
+
+    Parameters
+    ----------
+    A : array_like, shape (..., m, n)
+        Constraint matrix.
+    Adot : array_like, shape (..., m, n)
+        Its time derivative Ȧ.
+    rtol : float, optional
+        Rank tolerance (see :mod:`nonmin.core.linalg`).
+
+    Returns
+    -------
+    ndarray, shape (..., n, n)
+        Λ.
     """
     from .linalg import pseudo_inverse
 
@@ -74,6 +88,20 @@ def projector_derivative(A: ArrayLike, Adot: ArrayLike, *, rtol: float | None = 
 
     Valid where the rank of A is locally constant (ERRATA 6): P is discontinuous where it
     changes. Shape (..., n, n).
+
+    Parameters
+    ----------
+    A : array_like, shape (..., m, n)
+        Constraint matrix.
+    Adot : array_like, shape (..., m, n)
+        Its time derivative Ȧ.
+    rtol : float, optional
+        Rank tolerance (see :mod:`nonmin.core.linalg`).
+
+    Returns
+    -------
+    ndarray, shape (..., n, n)
+        Ṗ (symmetric).
     """
     Am = V.matrix(A, "A")
     Lam = lambda_matrix(Am, Adot, rtol=rtol)
