@@ -105,7 +105,13 @@ def get_backend() -> str:
 
 @contextmanager
 def use_backend(name: str) -> Iterator[None]:
-    """Context manager: evaluate with backend ``name`` inside the block, then restore."""
+    """Context manager: evaluate with backend ``name`` inside the block, then restore.
+
+    Parameters
+    ----------
+    name : {"auto", "numpy", "numba"}
+        Backend used inside the ``with`` block (see :func:`set_backend`).
+    """
     old = set_backend(name)
     try:
         yield
