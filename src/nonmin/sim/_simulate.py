@@ -377,7 +377,8 @@ def simulate(
     t_eval : array_like, optional
         Record at these times (non-decreasing, inside ``t_span``) plus the two samples (before
         and after the transition) of every event; default: every accepted step. Values between
-        step ends come from a partial step of the integrator from the step start.
+        step ends come from the method's continuous extension (dopri5) or from a partial step
+        of the integrator from the step start (rk4, midpoint), then the stabilization.
     max_steps : int
         Fail after this many accepted steps.
     throw : bool, default True
@@ -535,6 +536,16 @@ def simulate(
                 qq, vv = stab.project(model, _t + s, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
                 return system.point(_t + s, qq, vv)
 
+            dense = res.dense
+
+            def out_at(s: float, _d: Any = dense, _t: float = t_start) -> _Point:
+                """Output sample: the continuous extension when the method has one, else a partial step."""
+                if _d is None:
+                    return at(s)
+                yy = _d(_t + s)
+                qq, vv = stab.project(model, _t + s, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
+                return system.point(_t + s, qq, vv)
+
             q1, qd1 = stab.project(model, t_new, res.state.y[:n].copy(), res.state.y[n:].copy(),
                                    system.active, rank_rtol)
             # the full evaluation at the step end is needed only for guards or recording
@@ -578,7 +589,7 @@ def simulate(
                 group.sort(key=lambda i: (watches[i].kind != "user", i))
                 pe = at(best_s) if (best_s < h or p1 is None) else p1
                 te = t_start + best_s
-                _sample_t_eval(rec, t_out, out_i, t_start, te, at, system)
+                _sample_t_eval(rec, t_out, out_i, t_start, te, out_at, system)
                 out_i = _advance_out(t_out, out_i, te)
                 rec.add(pe, system.active)
                 terminal = False
@@ -630,7 +641,7 @@ def simulate(
                     break
                 continue
             # no event: accept the step
-            _sample_t_eval(rec, t_out, out_i, t_start, t_new, at, system)
+            _sample_t_eval(rec, t_out, out_i, t_start, t_new, out_at, system)
             out_i = _advance_out(t_out, out_i, t_new)
             if t_out is None and p1 is not None:
                 rec.add(p1, system.active)
