@@ -2,13 +2,70 @@
 
 Keeps all n dependent coordinates, eliminates constraint forces with the orthogonal projector
 P = I − A⁺A and adds a virtual mass μQ so that M̄ = PMP + μQ stays SPD where A loses rank
-(F. Aghili, "Non-Minimal Systems with Switching Topology: Dynamics and Controls").
+(F. Aghili, "Non-Minimal Systems with Switching Topology: Dynamics and Controls", with the
+corrections listed in ``docs/theory.md``).
+
+Subpackages
+-----------
+core        pure NumPy kernels (P, M̄, C̄, forward dynamics, constraint forces, impact map)
+model       the model protocol and its sources (functions, planar, spatial, SymPy, robots)
+library     named mechanisms with consistent initial states (IFToMM benchmarks and more)
+sim         simulation through singular configurations and switching topology
+control     controllers in dependent coordinates (regulation, tracking, hybrid force)
+viz         plots and animations (extra ``plot``)
+io          scenario files
+errors      the exception tree
+
+The most used names are re-exported here: :func:`simulate`, :class:`Trajectory`,
+:func:`load_trajectory`, :class:`Event`, :class:`Activate`, :class:`Deactivate`,
+:class:`Reset`, :class:`Model`, :class:`State`, :func:`assemble`, :func:`check_model`,
+:func:`forward_dynamics`, :func:`constraint_force`, :func:`impact_map`.
 """
 
+from . import control as control
 from . import core as core
 from . import errors as errors
+from . import library as library
+from . import model as model
+from . import sim as sim
+from .core import constraint_force as constraint_force
+from .core import forward_dynamics as forward_dynamics
+from .core import impact_map as impact_map
+from .model import Model as Model
+from .model import State as State
+from .model import assemble as assemble
+from .model import check_model as check_model
+from .sim import Activate as Activate
+from .sim import Deactivate as Deactivate
+from .sim import Event as Event
+from .sim import Reset as Reset
+from .sim import Trajectory as Trajectory
+from .sim import load_trajectory as load_trajectory
+from .sim import simulate as simulate
 
-#: Version of the installed nonmin package.
+#: Package version.
 __version__ = "0.1.0"
 
-__all__ = ["__version__", "core", "errors"]
+__all__ = [
+    "Activate",
+    "Deactivate",
+    "Event",
+    "Model",
+    "Reset",
+    "State",
+    "Trajectory",
+    "__version__",
+    "assemble",
+    "check_model",
+    "constraint_force",
+    "control",
+    "core",
+    "errors",
+    "forward_dynamics",
+    "impact_map",
+    "library",
+    "load_trajectory",
+    "model",
+    "sim",
+    "simulate",
+]

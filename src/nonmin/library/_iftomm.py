@@ -12,7 +12,6 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.integrate import solve_ivp
 
 from ..errors import InputError
 from ..model.planar import PlanarBuilder
@@ -132,6 +131,8 @@ def n_four_bar_reference(
 
     def rhs(_t: float, y: np.ndarray) -> list[float]:
         return [y[1], -g * c * math.cos(y[0]) / inertia]
+
+    from scipy.integrate import solve_ivp
 
     sol = solve_ivp(rhs, (0.0, max(float(ts.max()), 1e-9)), [math.pi / 2, -1.0], method="DOP853",
                     t_eval=ts, rtol=rtol, atol=atol)

@@ -8,7 +8,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.integrate import solve_ivp
 
 from ..errors import InputError, ModelError
 from ..model import assemble
@@ -175,6 +174,8 @@ def crossed_four_bar_reference(
     def rhs(_t: float, y: FloatArray) -> list[float]:
         m, dm, dV = mass_and_slope(float(y[0]))
         return [float(y[1]), -(0.5 * dm * y[1] ** 2 + dV) / m]
+
+    from scipy.integrate import solve_ivp
 
     sol = solve_ivp(rhs, (0.0, max(float(ts.max()), 1e-9)), [theta0, omega0], method="DOP853",
                     t_eval=ts, rtol=rtol, atol=atol)
