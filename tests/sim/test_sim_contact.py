@@ -149,3 +149,43 @@ def test_contact_false_ignores_unilateral_constraints() -> None:
     tr = simulate(make_ball(), (0.0, 0.6), [0.0, 1.0], dt=1e-3, contact=False)
     assert tr.events == ()
     assert tr.q[-1, 1] < 0  # falls through the floor
+
+
+def test_library_arm2r_wall_impact_and_release() -> None:
+    """The same checks on H3's planar arm2r_wall (absolute coordinates, 4 joint rows + wall)."""
+    library = pytest.importorskip("nonmin.library")
+    mech = library.get("arm2r_wall")
+    model = mech.model
+    u_amp = np.array([10.0, -6.0])
+
+    def ctrl(t, q, qd, state=None, *, active=None):  # type: ignore[no-untyped-def]
+        return u_amp * np.cos(2.0 * t)
+
+    tr = simulate(mech, (0.0, 0.45), dt=1e-3, controller=ctrl, t_eval=np.linspace(0.0, 0.45, 46))
+    names = [e.name for e in tr.events]
+    assert names == ["impact:wall", "release:wall"]
+    imp, rel = tr.events
+    # impact: the classical (KKT) impact law with every constraint active after the impact
+    M = model.mass_matrix(imp.q_before)
+    A = model.constraint_terms(imp.t, imp.q_before, imp.qd_before, imp.active_after).A
+    MiAt = np.linalg.solve(M, A.T)
+    expected = imp.qd_before - MiAt @ np.linalg.solve(A @ MiAt, A @ imp.qd_before)
+    assert np.allclose(imp.qd_after, expected, atol=1e-10)
+
+    # release: the wall multiplier of the KKT system crosses zero there
+    def wall_lambda(t: float, q: np.ndarray, qd: np.ndarray) -> float:
+        terms = model.evaluate(t, q, qd, imp.active_after)
+        ct = terms.constraints
+        m = ct.A.shape[0]
+        K = np.block([[terms.M, -ct.A.T], [ct.A, np.zeros((m, m))]])
+        f = terms.h + terms.f_passive + terms.B @ ctrl(t, q, qd)
+        lam = np.linalg.solve(K, np.concatenate((f, -ct.gamma)))[model.n :]
+        return float(lam[model.row_slices(imp.active_after)["wall"]][0])
+
+    inside = (tr.t > imp.t) & (tr.t < rel.t)
+    lam = np.array([wall_lambda(t, q, qd) for t, q, qd in zip(tr.t[inside], tr.q[inside], tr.qd[inside], strict=True)])
+    assert np.all(np.sign(lam) == np.sign(lam[0])) and abs(lam[0]) > 0
+    assert abs(wall_lambda(rel.t, rel.q_before, rel.qd_before)) < 1e-7 * np.max(np.abs(lam))
+    gap = tr.outputs(model)["gap"].ravel()
+    assert gap.min() > -1e-10
+    assert tr.phi_norm.max() < 1e-10
