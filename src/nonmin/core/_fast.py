@@ -11,7 +11,8 @@ Choosing the backend
 ``"auto"`` (default) uses numba when it can be imported, ``"numpy"`` always uses NumPy,
 ``"numba"`` demands numba (``MissingDependencyError`` naming the extra ``fast`` otherwise).
 The initial choice comes from the environment variable ``NONMIN_BACKEND`` (read at import);
-:func:`set_backend` changes it for the process, :func:`use_backend` for a ``with`` block.
+:func:`set_backend` changes it for the process, :func:`use_backend` for a ``with`` block (the
+setting is process-wide, not per thread).
 
 The compiled path keeps the boundary contract: it accepts the same inputs, checks finiteness and
 the symmetry of M inside the kernel with the same decision rule, and whenever a state is not
@@ -142,6 +143,8 @@ def _prep(x: Any, name: str) -> FloatArray:
 def _resolve() -> Any:
     global _active
     _active = None if _state["name"] == "numpy" else _load()
+    if _active is None and _state["name"] == "numba":  # NONMIN_BACKEND=numba without numba
+        raise missing_dependency("numba", "fast", "NONMIN_BACKEND=numba (compiled nonmin.core)")
     return _active
 
 
