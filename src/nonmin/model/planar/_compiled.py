@@ -24,11 +24,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ...core import get_backend
 from ...errors import ModelError
 from .._protocol import ConstraintTerms, FloatArray
 from ._elements import (
@@ -155,6 +156,23 @@ class Plan:
     def layout(self, active: frozenset[str]) -> Layout:
         """The :class:`Layout` of an active set (names already validated)."""
         return Layout(self, active)
+
+
+_KERNELS: dict[str, Any] = {}
+
+
+def _kernel() -> Any:
+    """The compiled pin/line/rod kernel, or None (NumPy backend chosen, or numba missing)."""
+    if get_backend() == "numpy":
+        return None
+    if "k" not in _KERNELS:
+        try:
+            from . import _fast_kernels
+        except ImportError:  # numba not installed: the NumPy path
+            _KERNELS["k"] = None
+        else:
+            _KERNELS["k"] = _fast_kernels.pin_line_rod
+    return _KERNELS["k"]
 
 
 def _known(s: _Side | None) -> _Side:
@@ -300,6 +318,13 @@ class Layout:
         self.A0 = buf
         #: ``[M.ravel(), A0]`` for :func:`constraint_terms_and_mass` (set on first use)
         self.MA0: FloatArray | None = None
+        # packed inputs of the compiled kernel (``_fast_kernels.pin_line_rod``)
+        self.k_rows = np.concatenate([prow, self.line_rows, self.rod_rows]).astype(np.intp)
+        self.k_prm = np.array(
+            [v for _, p in lines for v in (p.ux, p.uy)]
+            + [v for _, p in rods for v in (p.coef, p.length, p.sign)],
+            dtype=np.float64,
+        )
         self.var_idx = np.concatenate(var_idx) if var_idx else np.zeros(0, dtype=np.intp)
         real = self.var_idx[self.var_idx < m * n]
         #: variable entries may share a position (e.g. a joint between two points of one body)
@@ -347,7 +372,13 @@ def _constraints(
     PG = np.zeros((2, m))  # rows: φ, γ
     phi, gamma = PG[0], PG[1]
     P, NL, NR = lay.P, lay.NL, lay.NR
-    if lay.S:
+    kern = None if adot or not lay.S else _kernel()
+    if kern is not None:
+        kern(
+            np.concatenate((q, _ZERO1, qd, _ZERO1)), lay.I6, lay.SL, lay.k_prm, lay.k_rows, lay.var_idx,
+            P, NL, NR, buf, PG,
+        )  # fmt: skip
+    elif lay.S:
         X = np.concatenate((q, _ZERO1, qd, _ZERO1))[lay.I6]  # (6, S): x, y, θ, ẋ, ẏ, θ̇
         c = np.cos(X[2])
         s = np.sin(X[2])
