@@ -15,8 +15,8 @@ actuator forces with ``Γ = (PB)⁺`` (ERRATA 4). This module holds the pieces t
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, field, replace
-from typing import Any, Literal, NamedTuple
+from dataclasses import dataclass, replace
+from typing import Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -301,7 +301,6 @@ class ControlState:
     infeasible_steps: int = 0
     min_sigma_pb: float = float("inf")
     max_abs_u: tuple[float, ...] = ()
-    extra: Any = field(default=None)
 
     @classmethod
     def initial(cls, k: int) -> ControlState:
