@@ -161,18 +161,18 @@ class Plan:
 _KERNELS: dict[str, Any] = {}
 
 
-def _kernel() -> Any:
-    """The compiled pin/line/rod kernel, or None (NumPy backend chosen, or numba missing)."""
+def _kernel(name: str = "pin_line_rod") -> Any:
+    """A compiled kernel of :mod:`._fast_kernels`, or None (NumPy backend, or numba missing)."""
     if get_backend() == "numpy":
         return None
-    if "k" not in _KERNELS:
+    if name not in _KERNELS:
         try:
             from . import _fast_kernels
         except ImportError:  # numba not installed: the NumPy path
-            _KERNELS["k"] = None
+            _KERNELS[name] = None
         else:
-            _KERNELS["k"] = _fast_kernels.pin_line_rod
-    return _KERNELS["k"]
+            _KERNELS[name] = getattr(_fast_kernels, name)
+    return _KERNELS[name]
 
 
 def _known(s: _Side | None) -> _Side:
@@ -658,7 +658,7 @@ class Inputs:
         sides += [side(b) for _, _, b, _ in prismatic]
         self.I3, self.SL, self.SLp = _side_arrays(sides)
         fcol = np.array([c for c, _, _ in forces], dtype=np.intp)
-        self.fdir = np.array([d for _, _, d in forces], dtype=np.float64).reshape(-1, 2).T
+        self.fdir = np.ascontiguousarray(np.array([d for _, _, d in forces], dtype=np.float64).reshape(-1, 2).T)
         nf, npr = self.NF, self.NP
         if nf:
             # constant x, y entries of the point forces
@@ -667,7 +667,7 @@ class Inputs:
                     if i < n:
                         buf[i * k + c_] += val
         pcol = np.array([c for c, _, _, _ in prismatic], dtype=np.intp)
-        ax = np.array([u for _, _, _, u in prismatic], dtype=np.float64).reshape(-1, 2).T
+        ax = np.ascontiguousarray(np.array([u for _, _, _, u in prismatic], dtype=np.float64).reshape(-1, 2).T)
         self.AX, self.AXp = ax, np.stack([-ax[1], ax[0]]).reshape(2, npr)
         ia, ib = self.I3[:, nf : nf + npr], self.I3[:, nf + npr :]
         parts = [flat(self.I3[2, :nf], fcol)]
@@ -684,7 +684,11 @@ class Inputs:
         """``B(q)``, shape (n, k)."""
         n, k = self.n, self.k
         buf = self.B0.copy()
-        if self.varies:
+        kern = _kernel("inputs") if self.varies else None
+        if kern is not None:
+            kern(np.concatenate((q, _ZERO1)), self.I3, self.SL, self.fdir, self.AX, self.NF, self.NP,
+                 self.var_idx, buf)  # fmt: skip
+        elif self.varies:
             nf, npr = self.NF, self.NP
             qe = np.concatenate((q, _ZERO1))
             Q = qe[self.I3]

@@ -150,3 +150,49 @@ def pin_line_rod(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG):  # type: ig
     for k in range(n_var):
         buf[var_idx[k]] += vals[k]
     return m
+
+
+@njit(cache=True)
+def inputs(x, I3, SL, fdir, AX, nf, npr, var_idx, buf):  # type: ignore[no-untyped-def]
+    """Add the q-dependent entries of B to ``buf`` (same order and formulas as ``Inputs.matrix``).
+
+    ``x = (q, 0)``; sides: the ``nf`` point forces, then the ``npr`` prismatic a sides, then
+    their b sides; ``fdir`` (2, nf) force directions, ``AX`` (2, npr) prismatic axes.
+    """
+    n_var = var_idx.shape[0]
+    vals = np.empty(n_var)
+    for k in range(nf):
+        th = x[I3[2, k]]
+        c = math.cos(th)
+        s = math.sin(th)
+        sx = SL[0, k]
+        sy = SL[1, k]
+        vals[k] = fdir[0, k] * (c * -sy - s * sx) + fdir[1, k] * (c * sx - s * sy)
+    j = nf
+    for i in range(npr):
+        a = nf + i
+        b = nf + npr + i
+        tha = x[I3[2, a]]
+        ca = math.cos(tha)
+        sa = math.sin(tha)
+        ax = AX[0, i]
+        ay = AX[1, i]
+        ux = ca * ax + sa * -ay  # R_a axis
+        uy = ca * ay + sa * ax
+        thb = x[I3[2, b]]
+        cb = math.cos(thb)
+        sb = math.sin(thb)
+        sx = SL[0, b]
+        sy = SL[1, b]
+        lx = (x[I3[0, b]] + (cb * sx + sb * -sy)) - x[I3[0, a]]  # p_b − r_a
+        ly = (x[I3[1, b]] + (cb * sy + sb * sx)) - x[I3[1, a]]
+        tb = ux * (cb * -sy - sb * sx) + uy * (cb * sx - sb * sy)
+        vals[j + i] = ux
+        vals[j + npr + i] = uy
+        vals[j + 2 * npr + i] = tb
+        vals[j + 3 * npr + i] = -ux
+        vals[j + 4 * npr + i] = -uy
+        vals[j + 5 * npr + i] = -(ux * -ly + uy * lx)
+    for k in range(n_var):
+        buf[var_idx[k]] += vals[k]
+    return n_var
