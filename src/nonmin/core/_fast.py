@@ -40,8 +40,11 @@ __all__ = ["BACKENDS", "get_backend", "set_backend", "use_backend"]
 #: Accepted backend names.
 BACKENDS = ("auto", "numpy", "numba")
 
-#: Batches at least this large run on numba's parallel driver (smaller ones serially).
-PARALLEL_MIN_BATCH = 256
+#: Batches at least this large run on numba's parallel driver (smaller ones serially): below, the
+#: fork/join cost is not amortized, and on a loaded machine the parallel region waits for a thread
+#: that is not scheduled (measured: 8 µs/state at N = 1000 against 1.5 µs serially under load).
+#: ``numba.set_num_threads(1)`` (or ``NUMBA_NUM_THREADS=1``) makes every batch serial.
+PARALLEL_MIN_BATCH = 4096
 
 _state: dict[str, Any] = {"name": "auto", "kernels": None, "tried": False}
 _UNRESOLVED = object()
@@ -222,6 +225,16 @@ def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | N
         rank = np.asarray(int(out[2 * n]), dtype=np.intp)
         mu_used = mu_v if has_mu else np.asarray(out[2 * n + 1])
         return out[:n], out[n : 2 * n], P, L, rank, mu_used
+    if (
+        Mm.ndim == 3 and hv.ndim == 2 and Am.ndim == 3 and gv.ndim == 2 and fv.ndim == 2
+        and Mm.shape[0] == hv.shape[0] == Am.shape[0] == gv.shape[0] == fv.shape[0] == 1
+        and (not has_mu or np.ndim(mu) == 0)
+    ):  # a batch of one state: the (cheaper) single-state path  # fmt: skip
+        one = solve(Mm[0], hv[0], Am[0], gv[0], fv[0] if has_f else None, mu, rtol, what)
+        if one is None or what != ALL:
+            return None if one is None else one[None]
+        return (one[0][None], one[1][None], one[2][None], one[3][None], one[4][None],
+                one[5] if has_mu else one[5][None])  # fmt: skip
     return _solve_batch(kern, Mm, hv, Am, gv, fv, has_f, mu, rtol, what)
 
 
@@ -259,19 +272,6 @@ def _solve_batch(kern: ModuleType, Mm: FloatArray, hv: FloatArray, Am: FloatArra
             x = np.broadcast_to(x, bshape + core)
         return np.ascontiguousarray(x.reshape((N, *core)))
 
-    if N == 1 and (not has_mu or np.ndim(mu_v) == 0):  # one state: the (cheaper) single path
-        one = solve(
-            flat(Mm, (n, n))[0], flat(hv, (n,))[0], flat(Am, (m, n))[0], flat(gv, (m,))[0],
-            flat(fv, (n,))[0] if has_f else None, mu_v if has_mu else None, rtol, what,
-        )  # fmt: skip
-        if one is None:
-            return None
-        if what != ALL:
-            return one.reshape((*bshape, n))
-        q1, f1, P1, L1, r1, mu1 = one
-        return (q1.reshape((*bshape, n)), f1.reshape((*bshape, n)), P1.reshape((*bshape, n, n)),
-                L1.reshape((*bshape, n, n)), r1.reshape(bshape),
-                mu1 if has_mu else mu1.reshape(bshape))  # fmt: skip
     Mb = flat(Mm, (n, n))
     hb = flat(hv, (n,))
     Ab = flat(Am, (m, n))
