@@ -20,8 +20,18 @@ ROOT = Path(__file__).resolve().parents[2]
 TUTORIALS = ROOT / "docs" / "tutorials"
 #: Wall-clock limit per tutorial [s] (generous: 8 processes share 2 cores during development).
 TIME_LIMIT = 90.0
-EXPECTED = ("01_planar_mechanism.md", "02_switching_events.md", "03_control_closed_chain.md",
-            "04_urdf_loop_closure.md")
+#: Tutorial -> phrases its output must contain: the claims its prose makes about the run.
+CLAIMS = {
+    "01_planar_mechanism.md": ["PASSED", "rank A = 7, trace P = 2.000", "status='success'",
+                               "slider x in [-1.000, 1.000] m"],
+    "02_switching_events.md": ["impact:wall", "latch    activate ['latch']",
+                               "release  deactivate ['latch']", "rank A = 5", "(change "],
+    "03_control_closed_chain.md": ["actuation condition holds: True", "-> [0.4 1.5] (goal [0.4 1.5])",
+                                   "InfeasibleActuationError: at t = 0: actuation is infeasible"],
+    "04_urdf_loop_closure.md": ["A: 3 rows, rank 2", "qdd = [nan nan nan]",
+                                "max |q1 - q2| = 0.0e+00", "brake    6 rows"],
+}
+EXPECTED = tuple(CLAIMS)
 
 
 def python_blocks(text: str) -> list[str]:
@@ -59,7 +69,8 @@ def test_tutorial_runs(name: str, tmp_path: Path) -> None:
     )
     elapsed = time.perf_counter() - start
     assert proc.returncode == 0, f"{name} failed after {elapsed:.1f} s:\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}"
-    assert proc.stdout.strip(), f"{name} printed nothing"
+    for phrase in CLAIMS[name]:
+        assert phrase in proc.stdout, f"{name}: output lacks {phrase!r}:\n{proc.stdout}"
     # every tutorial saves at least one figure; the files must be non-empty PNGs
     pngs = list(tmp_path.glob("*.png"))
     assert pngs, f"{name} wrote no figure"
