@@ -15,6 +15,10 @@ indices of its variable entries. One evaluation then computes the kinematics of 
 points with a few vectorized operations and scatters them into ``A``, ``γ`` and ``φ``; the
 formulas are those of :mod:`._elements` (the per-joint reference implementation).
 
+With numba installed and the compiled backend of :mod:`nonmin.core` selected (the default
+``"auto"``), the pin/line/rod block and the q-dependent entries of B run in one kernel each
+(:mod:`._fast_kernels`, same formulas and entry order); otherwise NumPy.
+
 Coordinates are addressed in ``q_ext = (q, 0)``: the ground's ``x, y, θ`` and a point mass's
 ``θ`` point at the extra zero entry ``n``. Entries of ``A`` in that column are discarded by
 sending them to a dump slot after the ``m·n`` entries of the flat buffer.

@@ -132,6 +132,16 @@ class PlanarModel(Model):
     Constraints (joints) are named; each is holonomic, rheonomic (drivers) or unilateral, and
     which of them are active is data (``active`` argument of every evaluation).
 
+    Evaluation is compiled (:mod:`._compiled`): the joints are decomposed into row primitives
+    with index arrays when the model is built, and the row layout of each active set is cached
+    (per frozenset, in a field that is neither compared nor part of the model's value), so
+    :meth:`evaluate` and :meth:`constraint_terms` validate the state once and run a handful of
+    array operations, or one numba kernel when the compiled backend of :mod:`nonmin.core` is
+    in use (extra ``fast``; ``nonmin.core.set_backend("numpy")`` switches it off). Constant
+    parts (M, gravity, constant columns of B) are computed once; every call returns new arrays.
+    The per-joint formulas of :meth:`Joint.terms` remain the reference (``_reference_*``
+    methods; tests demand agreement to 1e-13).
+
     Attributes
     ----------
     name : str
