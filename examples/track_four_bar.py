@@ -34,7 +34,7 @@ def main(argv: list[str] | None = None) -> None:
 
     ref = Reference.from_functions(lambda t: crank_four_bar_configuration(model, crank(t)))
     q0 = crank_four_bar_configuration(model, 0.6)
-    t1, dt = (0.1, 1e-2) if args.quick else (4.0, 2e-3)
+    t1, dt = (0.1, 1e-2) if args.quick else (4.0, 4e-3)
     fig, ax = figure(2, size=(7, 6))
     for method in ("passivity", "computed_torque"):
         trk = Tracker(model, ref, Kp=400.0, Kd=40.0, lambda_=10.0, method=method)

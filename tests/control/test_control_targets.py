@@ -33,7 +33,7 @@ def test_quaternion_target_does_not_unwind() -> None:
     final = {}
     for blocks in ([(3, 4, 5, 6)], []):
         reg = Regulator(model, target=target, Kp=40.0, Kd=8.0, quaternion_blocks=blocks)
-        traj = simulate(model, (0.0, 2.0), q0, method="rk4", dt=5e-3, controller=reg)
+        traj = simulate(model, (0.0, 2.0), q0, method="rk4", dt=1e-2, controller=reg)
         angle = np.unwrap(2.0 * np.unwrap(np.arctan2(traj.q[:, 6], traj.q[:, 3])))
         final[bool(blocks)] = (angle[-1], np.abs(angle).max())
     assert final[True][0] == pytest.approx(alpha, abs=1e-3)
