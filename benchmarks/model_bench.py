@@ -5,7 +5,9 @@ Timed, each from Python, in one run:
 
 * ``model.evaluate(t, q, qd, active)`` — M, h, f_passive, B and the constraint terms
   (A, γ, φ, velocity residual) at the mechanism's initial state and default active set:
-  crossed four-bar, IFToMM A02 with N = 2 and N = 40, five-bar, 2R arm at the wall;
+  crossed four-bar, IFToMM A02 with N = 2 and N = 40, five-bar, 2R arm at the wall (also with
+  the wall contact active: a point-on-line row), A01 (a rod), slider-crank (prismatic joint
+  and actuator);
 * ``model.constraint_terms(...)`` alone;
 * ``simulate(mechanism, (0, T), method="rk4", dt=1e-3)`` — wall time per simulated second
   for the crossed four-bar and A02 N = 2 (includes the core solve and the simulator's own work).
@@ -18,6 +20,8 @@ Usage::
     python benchmarks/model_bench.py                  # prints a Markdown table
     python benchmarks/model_bench.py --label after --json benchmarks/results/model_after.json
     python benchmarks/model_bench.py --quick          # few repeats (smoke test)
+    python benchmarks/model_bench.py --report benchmarks/results/model_before.json \
+        benchmarks/results/model_after.json            # tables into MODEL.md
 
 Results of the runs quoted in ``benchmarks/MODEL.md`` are in ``benchmarks/results/model_*.json``.
 """
@@ -38,12 +42,16 @@ from typing import Any
 
 HERE = Path(__file__).resolve().parent
 
-CASES: list[tuple[str, str, dict[str, Any]]] = [
-    ("crossed_four_bar", "crossed_four_bar", {}),
-    ("A02 N=2", "A02_n_four_bar", {"N": 2}),
-    ("A02 N=40", "A02_n_four_bar", {"N": 40}),
-    ("five_bar", "five_bar", {}),
-    ("arm2r_wall", "arm2r_wall", {}),
+#: (label, library name, parameters, all constraints active instead of the default set)
+CASES: list[tuple[str, str, dict[str, Any], bool]] = [
+    ("crossed_four_bar", "crossed_four_bar", {}, False),
+    ("A02 N=2", "A02_n_four_bar", {"N": 2}, False),
+    ("A02 N=40", "A02_n_four_bar", {"N": 40}, False),
+    ("five_bar", "five_bar", {}, False),
+    ("arm2r_wall", "arm2r_wall", {}, False),
+    ("arm2r_wall, wall active", "arm2r_wall", {}, True),
+    ("A01_pendulum (rod)", "A01_pendulum", {}, False),
+    ("slider_crank", "slider_crank", {}, False),
 ]
 SIM_CASES: list[tuple[str, str, dict[str, Any]]] = [
     ("crossed_four_bar", "crossed_four_bar", {}),
@@ -96,10 +104,11 @@ def run(repeat: int, sim_T: float) -> dict[str, Any]:
     from nonmin.sim import simulate
 
     rows = []
-    for label, name, kw in CASES:
+    for label, name, kw, everything in CASES:
         mech = library.get(name, **kw)
         m, s = mech.model, mech.state
-        t, q, qd, act = float(s.t), s.q, s.qd, s.active
+        t, q, qd = float(s.t), s.q, s.qd
+        act = frozenset(m.constraint_names) if everything else s.active
         ev = median_us(lambda m=m, t=t, q=q, qd=qd, act=act: m.evaluate(t, q, qd, act), repeat)
         ct = median_us(lambda m=m, t=t, q=q, qd=qd, act=act: m.constraint_terms(t, q, qd, act), repeat)
         rows.append(
@@ -165,6 +174,21 @@ def markdown(res: dict[str, Any], label: str) -> str:
     return "\n".join(lines)
 
 
+MODEL_MD = HERE / "MODEL.md"
+START, END = "<!-- results:start -->", "<!-- results:end -->"
+
+
+def report(paths: list[Path]) -> None:
+    """Rewrite the results section of ``benchmarks/MODEL.md`` from result JSON files."""
+    blocks = []
+    for p in paths:
+        res = json.loads(p.read_text())
+        blocks.append(markdown(res, res.get("label", p.stem)))
+    text = MODEL_MD.read_text()
+    i0, i1 = text.index(START) + len(START), text.index(END)
+    MODEL_MD.write_text(text[:i0] + "\n" + "\n\n".join(blocks) + "\n" + text[i1:])
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=2000)
@@ -172,7 +196,12 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--quick", action="store_true", help="few repeats, short simulation")
     ap.add_argument("--label", default="run")
     ap.add_argument("--json", type=Path, default=None, help="write the results to this JSON file")
+    ap.add_argument("--report", type=Path, nargs="+", default=None, metavar="JSON",
+                    help="only rewrite the results section of MODEL.md from these result files")
     args = ap.parse_args(argv)
+    if args.report:
+        report(args.report)
+        return
     repeat, sim_T = (100, 0.1) if args.quick else (args.repeat, args.sim_T)
     res = run(repeat, sim_T)
     res["label"] = args.label
