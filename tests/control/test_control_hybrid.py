@@ -68,7 +68,7 @@ def test_passivity_set_point_lyapunov_non_increasing() -> None:
     trk = Tracker(model, target, Kp=100.0, Kd=20.0, lambda_=5.0)
     traj = simulate(model, (0.0, 1.5), pendulum_configuration(-1.2), method="dopri5",
                     rtol=1e-10, atol=1e-12, controller=trk)
-    W = np.array([trk.lyapunov(t, q, qd) for t, q, qd in zip(traj.t, traj.q, traj.qd)])
+    W = np.array([trk.lyapunov(q, qd, t=t) for t, q, qd in zip(traj.t, traj.q, traj.qd)])
     assert np.max(np.diff(W)) <= 1e-9 * W[0]
     assert np.abs(traj.q[-1] - target).max() < 1e-6
 

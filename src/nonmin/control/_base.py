@@ -147,6 +147,15 @@ class ProjectedController(Controller):
         """Actuator forces ``u``, shape (k,), after saturation."""
         return self.info(t, q, qd, state, active=active).u
 
+    def lyapunov(
+        self, q: ArrayLike, qd: ArrayLike, *, t: float = 0.0, active: Iterable[str] | None = None
+    ) -> float:
+        """The control law's Lyapunov function at ``(t, q, qd)`` (NaN if it has none)."""
+        qv, v = state_vectors(self.model, q, qd)
+        act = self.model.resolve_active(active)
+        ev = evaluate(self.model, float(t), qv, v, act, self.rtol)
+        return float(self.law(float(t), qv, v, ev, act).lyapunov)
+
     def initial_state(self) -> ControlState:
         """Fresh bookkeeping state (no step seen, no saturation)."""
         return ControlState.initial(self.model.k)

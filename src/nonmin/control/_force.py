@@ -33,7 +33,6 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -199,8 +198,3 @@ class ForceControl(ProjectedController):
         act = self.model.resolve_active(active)
         names = [nm for nm in self.forces if nm in act]
         return constraint_force_components(self.model, t, q, f_c, names, active=act, rtol=self.rtol)
-
-    def lyapunov(self, *args: Any, **kwargs: Any) -> float:
-        """The motion controller's Lyapunov function."""
-        return self.motion.lyapunov(*args, **kwargs)  # type: ignore[attr-defined, no-any-return]
-

@@ -34,10 +34,8 @@ from ._common import (
     Evaluation,
     FloatArray,
     InfeasiblePolicy,
-    evaluate,
     gain_matrix,
     mbar,
-    state_vectors,
 )
 from ._targets import (
     Metric,
@@ -215,10 +213,7 @@ class Regulator(ProjectedController):
     ) -> float:
         """``V = ½ qdᵀ M̄ qd + ½ eᵀ Kp e`` (paper eq. (V)); non-increasing along the closed loop
         for σ = 0, no saturation and a dissipative passive force."""
-        qv, v = state_vectors(self.model, q, qd)
-        act = self.model.resolve_active(active)
-        ev = evaluate(self.model, t, qv, v, act, self.rtol)
-        return self.law(t, qv, v, ev, act).lyapunov
+        return super().lyapunov(q, qd, t=t, active=active)
 
     def describe(self) -> dict[str, Any]:
         """Plain summary of the gains and options."""

@@ -45,10 +45,8 @@ from ._common import (
     Evaluation,
     FloatArray,
     InfeasiblePolicy,
-    evaluate,
     gain_matrix,
     mbar,
-    state_vectors,
 )
 from ._targets import (
     Metric,
@@ -215,12 +213,3 @@ class Tracker(ProjectedController):
         f_par = P @ (Mb @ qr_dd + Cbar @ qr_d - ev.f_g - ev.f_p - Kd @ sv - Kp @ e)
         W = 0.5 * float(sv @ Mb @ sv) + 0.5 * float(e @ Kp @ e)
         return LawOutput(f_par, qs, e, W)
-
-    def lyapunov(
-        self, t: float, q: ArrayLike, qd: ArrayLike, *, active: Iterable[str] | None = None
-    ) -> float:
-        """``W = ½ sᵀ M̄ s + ½ eᵀ Kp e`` (passivity law; NaN for computed torque)."""
-        qv, v = state_vectors(self.model, q, qd)
-        act = self.model.resolve_active(active)
-        ev = evaluate(self.model, t, qv, v, act, self.rtol)
-        return self.law(t, qv, v, ev, act).lyapunov
