@@ -17,7 +17,6 @@ pytest.importorskip("numba")
 from core_testlib import KINDS, random_A, random_spd
 
 from nonmin.core import (
-    _fast,
     constraint_force,
     forward_dynamics,
     get_backend,
@@ -126,7 +125,7 @@ def _batch(n: int, m: int, N: int, seed: int = 3):
     return np.array(Ms), np.array(hs), np.array(As), np.array(gs), np.array(fs)
 
 
-@pytest.mark.parametrize("N", [1, 7, _fast.PARALLEL_MIN_BATCH])  # the last: parallel driver
+@pytest.mark.parametrize("N", [1, 7, 40])
 def test_single_equals_batch_bitwise(N):
     M, h, A, g, f = _batch(6, 4, N)
     with use_backend("numba"):
@@ -147,6 +146,36 @@ def test_single_equals_batch_bitwise(N):
         assert _close(sol.qdd[i], ref.qdd[i])
         assert _close(sol.f_c[i], ref.f_c[i], floor=_fc_scale(M[i], ref.qdd[i], h[i], f[i]))
     assert np.array_equal(sol.rank, ref.rank)
+
+
+def test_parallel_driver_bitwise():
+    """The parallel driver (used for N ≥ PARALLEL_MIN_BATCH) on uneven chunks equals the serial
+    one and the single calls bitwise."""
+    from nonmin.core import _fast_kernels as K
+    from nonmin.core.linalg import DEFAULT_RTOL, SPD_RTOL
+
+    M, h, A, g, f = _batch(5, 3, 41, seed=8)
+    outs = []
+    for nchunks in (None, 3, 2):
+        N = M.shape[0]
+        qdd, fc = np.empty((N, 5)), np.empty((N, 5))
+        P, L = np.empty((N, 5, 5)), np.empty((N, 5, 5))
+        st, rk, mu, ra = np.empty(N, np.int64), np.empty(N, np.intp), np.empty(N), np.empty(N)
+        args = (M, h, f, True, A, g, np.ones(1), False, DEFAULT_RTOL, SPD_RTOL, 1e-9, qdd, fc,
+                P, L, True, st, rk, mu, ra)  # fmt: skip
+        if nchunks is None:
+            K.solve_batch_serial(*args)
+        else:
+            K.solve_batch_parallel(*args, nchunks)
+        assert not st.any()
+        outs.append((qdd, fc, P, L, rk, mu))
+    for other in outs[1:]:
+        for a, b in zip(outs[0], other):
+            assert np.array_equal(a, b)
+    with use_backend("numba"):
+        for i in (0, 13, 14, 27, 40):
+            one = solve_dynamics(M[i], h[i], A[i], g[i], f[i])
+            assert np.array_equal(one.qdd, outs[0][0][i]) and np.array_equal(one.L, outs[0][3][i])
 
 
 def test_batch_shapes_and_broadcasting():

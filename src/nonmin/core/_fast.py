@@ -126,7 +126,9 @@ def use_backend(name: str) -> Iterator[None]:
 def _init_from_env() -> None:
     env = os.environ.get("NONMIN_BACKEND", "auto").strip().lower() or "auto"
     if env not in BACKENDS:
-        raise InputError(f"environment variable NONMIN_BACKEND must be one of {BACKENDS}, got {env!r}")
+        raise InputError(
+            f"environment variable NONMIN_BACKEND must be one of {BACKENDS}, got {env!r}"
+        )
     _set(env)
 
 
@@ -152,15 +154,16 @@ def _resolve() -> Any:
 
 
 _NO_MU = np.ones(1)
-_PARAMS: dict[tuple[bool, float], FloatArray] = {}
+_NO_PL = np.empty((1, 1))
+_PARAMS: dict[tuple[bool, float, bool], FloatArray] = {}
 
 
-def _params(has_f: bool, tol: float) -> FloatArray:
-    """Cached parameter vector ``[has_f, mu, has_mu, rtol, spd_rtol, sym_rtol]`` (mu not given)."""
-    key = (has_f, tol)
+def _params(has_f: bool, tol: float, want_pl: bool) -> FloatArray:
+    """Cached ``[has_f, mu, has_mu, rtol, spd_rtol, sym_rtol, want_pl]`` (mu not given)."""
+    key = (has_f, tol, want_pl)
     p = _PARAMS.get(key)
     if p is None:
-        p = np.array([float(has_f), 1.0, 0.0, tol, SPD_RTOL, V.SYMMETRY_RTOL])
+        p = np.array([float(has_f), 1.0, 0.0, tol, SPD_RTOL, V.SYMMETRY_RTOL, float(want_pl)])
         if len(_PARAMS) < 64:
             _PARAMS[key] = p
     return p
@@ -206,21 +209,23 @@ def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | N
         if has_f and fv.shape[0] != n:
             return None
         tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
+        want_pl = what == ALL
         if has_mu:
             mu_v = V.positive_scalar_or_batch(mu, "mu")
             if mu_v.ndim:
                 return None
-            params = np.array([float(has_f), float(mu_v), 1.0, tol, SPD_RTOL, V.SYMMETRY_RTOL])
+            params = np.array([float(has_f), float(mu_v), 1.0, tol, SPD_RTOL, V.SYMMETRY_RTOL,
+                               float(want_pl)])  # fmt: skip
         else:
-            params = _params(has_f, tol)
+            params = _params(has_f, tol, want_pl)
         out = np.empty(2 * n + 3)
-        if what != ALL:
-            if kern.solve_one(Mm, hv, fv, Am, gv, params, out):
+        if not want_pl:
+            if kern.solve_one(Mm, hv, fv, Am, gv, params, out, _NO_PL, _NO_PL):
                 return None
             return out[:n] if what == QDD else out[n : 2 * n]
         P = np.empty((n, n))
         L = np.empty((n, n))
-        if kern.solve_one_pl(Mm, hv, fv, Am, gv, params, out, P, L):
+        if kern.solve_one(Mm, hv, fv, Am, gv, params, out, P, L):
             return None
         rank = np.asarray(int(out[2 * n]), dtype=np.intp)
         mu_used = mu_v if has_mu else np.asarray(out[2 * n + 1])

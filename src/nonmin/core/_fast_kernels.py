@@ -338,32 +338,19 @@ def solve_state(M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
 
 
 @njit(cache=True)
-def solve_one(M, h, f, A, gam, params, out):
+def solve_one(M, h, f, A, gam, params, out, P, L):
     """Single state (2-D ``M``, ``A``), with few arguments to keep the call overhead small.
 
-    ``params = [has_f, mu, has_mu, rtol, spd_rtol, sym_rtol]``; writes
-    ``out = [qdd (n), f_c (n), rank, mu, pivot_ratio]`` and returns the status.
+    ``params = [has_f, mu, has_mu, rtol, spd_rtol, sym_rtol, want_pl]``; writes
+    ``out = [qdd (n), f_c (n), rank, mu, pivot_ratio]`` (and ``P``, ``L`` if ``want_pl``; pass
+    any 2-D arrays otherwise) and returns the status. One entry point for both uses: each
+    compiled entry point costs seconds of compilation on first use.
     """
     n = M.shape[0]
     work = np.empty(_work_size(n, A.shape[0]))
     st, r, mu, ratio = solve_state(
         M, h, f, params[0] != 0.0, A, gam, params[1], params[2] != 0.0, params[3], params[4],
-        params[5], out[:n], out[n : 2 * n], M, M, False, work,
-    )  # fmt: skip
-    out[2 * n] = r
-    out[2 * n + 1] = mu
-    out[2 * n + 2] = ratio
-    return st
-
-
-@njit(cache=True)
-def solve_one_pl(M, h, f, A, gam, params, out, P, L):
-    """:func:`solve_one` that also writes the projector ``P`` and the Cholesky factor ``L``."""
-    n = M.shape[0]
-    work = np.empty(_work_size(n, A.shape[0]))
-    st, r, mu, ratio = solve_state(
-        M, h, f, params[0] != 0.0, A, gam, params[1], params[2] != 0.0, params[3], params[4],
-        params[5], out[:n], out[n : 2 * n], P, L, True, work,
+        params[5], out[:n], out[n : 2 * n], P, L, params[6] != 0.0, work,
     )  # fmt: skip
     out[2 * n] = r
     out[2 * n + 1] = mu
