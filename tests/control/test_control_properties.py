@@ -76,3 +76,41 @@ def test_public_surface() -> None:
         if name != "CONTROLLERS":
             assert getattr(control, name).__doc__, f"{name} has no docstring"
     assert set(control.names()) >= {"regulator", "tracker", "hybrid_force"}
+
+
+@given(n=st.integers(3, 6), seed=st.integers(0, 2**31 - 1))
+def test_force_control_sets_the_commanded_rows_and_keeps_the_motion(n: int, seed: int) -> None:
+    """For random linear constraints, inertia and full actuation: the constraint force carried by
+    the commanded row equals λ* and P f equals the motion controller's f_∥ (checked against an
+    independent KKT solve)."""
+    from nonmin.control import ForceControl, Regulator
+    from nonmin.model import FunctionConstraint, FunctionModel
+
+    rng = np.random.default_rng(seed)
+    m = int(rng.integers(1, n - 1))
+    A = rng.normal(size=(m, n))
+    L = rng.normal(size=(n, n))
+    M = L @ L.T + n * np.eye(n)
+    cons = [
+        FunctionConstraint.holonomic(
+            f"c{i}", phi=lambda q, a=A[i]: [a @ q], jacobian=lambda q, a=A[i]: a[None, :],
+            adot_qd=lambda q, qd: [0.0])
+        for i in range(m)
+    ]
+    model = FunctionModel(
+        name="random", coordinate_names=tuple(f"q{i}" for i in range(n)), mass=lambda q: M,
+        coriolis=lambda q, qd: np.zeros((n, n)), conservative=lambda q: -q,
+        potential=lambda q: 0.5 * q @ q, constraints=cons,
+        actuator_names=tuple(f"u{i}" for i in range(n)), input_matrix_fn=lambda q: np.eye(n))
+    P = np.eye(n) - np.linalg.pinv(A) @ A
+    q = P @ rng.normal(size=n)
+    qd = P @ rng.normal(size=n)
+    lam_star = float(rng.normal())
+    ctl = ForceControl(Regulator(model, target=np.zeros(n), Kp=2.0, Kd=1.0), {"c0": lam_star})
+    info = ctl.info(0.0, q, qd)
+    f = info.u  # B = I
+    # KKT: [M Aᵀ; A 0] [qdd; −λ] = [f + f_g; 0]  (f_c = Aᵀλ)
+    K = np.block([[M, -A.T], [A, np.zeros((m, m))]])
+    sol = np.linalg.solve(K, np.concatenate([f - q, np.zeros(m)]))
+    assert sol[n] == pytest.approx(lam_star, abs=1e-9 * (1 + abs(lam_star)))
+    np.testing.assert_allclose(P @ f, info.f_par, atol=1e-9 * (1 + np.abs(f).max()))
