@@ -4,6 +4,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -18,6 +19,16 @@ def test_quick_start_executes(capsys):
     ns: dict = {}
     exec(compile(blocks[0], "README-quickstart", "exec"), ns)
     assert np.allclose(ns["qdd"], [0.0, -9.81])
+    traj = ns["traj"]
+    assert traj.status.value == "success"
+    # the printed numbers in the README must be what the code prints
+    printed = capsys.readouterr().out.strip().splitlines()[-1]
+    claimed = [ln for ln in blocks[0].splitlines() if ln.startswith("# [")][0][2:]
+    # qdd and status verbatim; energy drift to the two printed digits; closure at round-off
+    p_tok, c_tok = printed.split(), claimed.split()
+    assert p_tok[:4] == c_tok[:4], (printed, claimed)
+    assert float(p_tok[4]) == pytest.approx(float(c_tok[4]), rel=0.1), (printed, claimed)
+    assert float(p_tok[6]) < 1e-13 and float(c_tok[6]) < 1e-13
 
 
 def test_ci_runs_readme_test_command():

@@ -57,6 +57,29 @@ def _legend(ax: Any, names: Sequence[str] | None, count: int) -> None:
         ax.legend(list(names)[:count], fontsize=7, ncol=min(count, 6), loc="upper right")
 
 
+def _singularity_distance(traj: Any, model: Model) -> np.ndarray | None:
+    """σ_r/σ₁ of the (equilibrated) active A at every sample, r = the largest rank met.
+
+    Dips towards 0 show the configurations where A loses rank (singular or change points),
+    which the sampled rank itself rarely hits exactly.
+    """
+    from ..core import range_basis
+
+    q = _field(traj, "q")
+    rank = _field(traj, "rank")
+    if q is None or rank is None or rank.size == 0 or int(np.max(rank)) == 0:
+        return None
+    rmax = int(np.max(rank))
+    actives = getattr(traj, "active", None)
+    out = np.empty(len(q))
+    for i, qi in enumerate(q):
+        act = actives[i] if actives is not None else None
+        A = model.constraint_jacobian(float(traj.t[i]), qi, act)
+        s = range_basis(A).s
+        out[i] = s[rmax - 1] / s[0] if s.size >= rmax and s[0] > 0 else 0.0
+    return out
+
+
 def plot_trajectory(traj: Any, model: Model | None = None, *, title: str | None = None) -> Any:
     """Plot a :class:`~nonmin.sim.Trajectory`: coordinates, velocities, constraint forces,
     rank of A with cond(M̄) and μ, energy and constraint residuals, with events marked.
@@ -112,7 +135,10 @@ def plot_trajectory(traj: Any, model: Model | None = None, *, title: str | None 
         ax2.semilogy(t, np.maximum(cond, 1.0), color="C1", lw=1, label="cond(M̄)")
     if mu is not None:
         ax2.semilogy(t, np.maximum(np.abs(mu), 1e-300), color="C2", lw=1, label="μ")
-    ax2.set_ylabel("cond(M̄), μ")
+    ratio = _singularity_distance(traj, model) if model is not None else None
+    if ratio is not None:
+        ax2.semilogy(t, np.maximum(ratio, 1e-17), color="C3", lw=1, label="σ_r/σ₁ of A")
+    ax2.set_ylabel("cond(M̄), μ, σ_r/σ₁")
     ax2.legend(fontsize=7, loc="upper right")
     ax = axes[4]
     energy = _field(traj, "energy")
