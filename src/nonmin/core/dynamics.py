@@ -24,7 +24,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from .. import _validation as V
 from . import _fast
@@ -52,7 +52,7 @@ def _mbar(M: FloatArray, P: FloatArray, mu: FloatArray) -> FloatArray:
     return P @ M @ P + np.asarray(mu)[..., None, None] * Q
 
 
-def _optimal_mu(PMP: FloatArray, M: FloatArray, rank: FloatArray) -> FloatArray:
+def _optimal_mu(PMP: FloatArray, M: FloatArray, rank: ArrayLike) -> FloatArray:
     n = M.shape[-1]
     dof = n - np.asarray(rank)
     tr_pmp = np.trace(PMP, axis1=-2, axis2=-1)
@@ -101,7 +101,7 @@ class DynamicsSolution(NamedTuple):
     qdd: FloatArray
     f_c: FloatArray
     P: FloatArray
-    rank: FloatArray
+    rank: NDArray[np.intp]
     mu: FloatArray
     L: FloatArray
 

@@ -8,7 +8,7 @@ All kernels are batched over leading dimensions.
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from .. import _validation as V
 from ..errors import InfeasibleActuationError
@@ -23,7 +23,9 @@ __all__ = [
 ]
 
 
-def nullspace_projector(A: ArrayLike, *, rtol: float | None = None) -> tuple[FloatArray, FloatArray]:
+def nullspace_projector(
+    A: ArrayLike, *, rtol: float | None = None
+) -> tuple[FloatArray, NDArray[np.intp]]:
     """Orthogonal projector onto the null space of the constraint matrix.
 
     ``P = I − A⁺A`` (paper, definition before eq. (eq_(I-P)ddq)); ``P² = P = Pᵀ``, ``A P = 0``.

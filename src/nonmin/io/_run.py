@@ -37,7 +37,7 @@ def simulate_kwargs(sc: Scenario) -> dict[str, Any]:
         if key not in params:
             raise ScenarioError(
                 f"{sc.path}: key 'simulate.options.{key}': not a keyword of nonmin.sim.simulate; "
-                f"expected one of {sorted(p for p in params if params[p].kind == p.KEYWORD_ONLY)}"
+                f"expected one of {sorted(k for k, v in params.items() if v.kind == v.KEYWORD_ONLY)}"
             )
     return kw
 
@@ -184,6 +184,8 @@ def run_scenario(
 
 def write_outputs(result: ScenarioResult, out: Path) -> dict[str, Path]:
     """Write trajectory file, CSV, plots and animation as the [output] table asks."""
+    from ..sim import Trajectory
+
     sc, model, traj = result.scenario, result.model, result.trajectory
     opts = sc.section("output")
     out.mkdir(parents=True, exist_ok=True)
@@ -193,7 +195,7 @@ def write_outputs(result: ScenarioResult, out: Path) -> dict[str, Path]:
     lib = sc.section("model").get("library")
     if lib:
         source.update(library=lib, params=dict(sc.section("model").get("params", {})))
-    if hasattr(traj, "metadata") and dataclasses.is_dataclass(traj):
+    if isinstance(traj, Trajectory):
         traj = dataclasses.replace(traj, metadata={**traj.metadata, "source": source, "scenario_name": sc.name})
         result.trajectory = traj
     files["trajectory"] = Path(traj.save(out / traj_name) or (out / traj_name))

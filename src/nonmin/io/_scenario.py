@@ -169,6 +169,7 @@ class Scenario:
             )
         params = dict(m.get("params", {}))
         src = sources[0]
+        obj: Any
         try:
             if src == "library":
                 from .. import library
