@@ -395,13 +395,15 @@ def markdown(results: dict[str, Any]) -> str:
         "so absolute times are noisy; ratios come from the same run.",
         "",
         "**Single call** (µs of wall time, median over repeats; state 0 of each mechanism). "
-        "`ratio` = nonmin (numba) forward_dynamics / Pinocchio constraintDynamics, from wall "
-        "times and, in parentheses, from process CPU times (less disturbed by other jobs). "
+        "`ratio` = nonmin (numba) forward_dynamics / Pinocchio constraintDynamics from the wall "
+        "medians; `ratio CPU` from the medians of process CPU time; `ratio min` from the "
+        "fastest repeats (the two last are less disturbed by other jobs on a shared machine). "
         "`max rel. Δq̈` = largest difference to Pinocchio's q̈ over the checked states.",
         "",
         "| mechanism | n | rank A | nonmin fd (numba) | nonmin f_c (numba) | nonmin fd (NumPy) "
-        "| pin constraintDynamics | pin KKT forwardDynamics | ratio (CPU) | max rel. Δq̈ vs pin |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| pin constraintDynamics | pin KKT forwardDynamics | ratio | ratio CPU | ratio min "
+        "| max rel. Δq̈ vs pin |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in results["mechanisms"]:
         s = r["single"]
@@ -411,22 +413,28 @@ def markdown(results: dict[str, Any]) -> str:
             s["nonmin_numba_forward_dynamics"]["cpu_median_us"]
             / s["pin_constraintDynamics"]["cpu_median_us"]
         )
+        min_ratio = (
+            s["nonmin_numba_forward_dynamics"]["min_us"] / s["pin_constraintDynamics"]["min_us"]
+        )
         lines.append(
             f"| {r['mechanism']} | {r['n']} | {r['rank']} | {_f(nb)} | "
             f"{_f(s['nonmin_numba_constraint_force']['median_us'])} | "
             f"{_f(s['nonmin_numpy_forward_dynamics']['median_us'])} | {_f(pc)} | "
-            f"{_f(s['pin_kkt_forwardDynamics']['median_us'])} | {nb / pc:.2f} ({cpu_ratio:.2f}) | "
+            f"{_f(s['pin_kkt_forwardDynamics']['median_us'])} | {nb / pc:.2f} | {cpu_ratio:.2f} | "
+            f"{min_ratio:.2f} | "
             f"{r['accuracy']['max_rel_diff_numba_vs_pin_constraintDynamics']:.1e} |"
         )
     lines += [
         "",
-        "**Batched** (µs per state, median): nonmin = one call on arrays of N states; "
-        "Pinocchio = Python loop of constraintDynamics over the N states. "
-        "`ratio` = nonmin (numba) forward_dynamics / Pinocchio loop.",
+        "**Batched** (µs per state, median of wall time): nonmin = one call on arrays of N "
+        "states (numba: parallel over the 2 cores for N ≥ 256); Pinocchio = Python loop of "
+        "constraintDynamics over the N states. `CPU` = process CPU time per state (summed over "
+        "threads: the work done, whatever the load). `ratio` = nonmin (numba) forward_dynamics "
+        "/ Pinocchio loop (wall).",
         "",
-        "| mechanism | N | nonmin fd (numba) | nonmin f_c (numba) | nonmin fd (NumPy) "
-        "| pin constraintDynamics loop | ratio |",
-        "|---|---:|---:|---:|---:|---:|---:|",
+        "| mechanism | N | nonmin fd (numba) | CPU | nonmin f_c (numba) | nonmin fd (NumPy) "
+        "| pin constraintDynamics loop | CPU | ratio |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in results["mechanisms"]:
         for b in r["batched"]:
@@ -434,9 +442,10 @@ def markdown(results: dict[str, Any]) -> str:
             pl = b["pin_constraintDynamics_loop"]["median_us"]
             lines.append(
                 f"| {r['mechanism']} | {b['N']} | {_f(nb)} | "
+                f"{_f(b['nonmin_numba_forward_dynamics']['cpu_median_us'])} | "
                 f"{_f(b['nonmin_numba_constraint_force']['median_us'])} | "
                 f"{_f(b['nonmin_numpy_forward_dynamics']['median_us'])} | {_f(pl)} | "
-                f"{nb / pl:.2f} |"
+                f"{_f(b['pin_constraintDynamics_loop']['cpu_median_us'])} | {nb / pl:.2f} |"
             )
     jit = results.get("jit")
     if jit:
