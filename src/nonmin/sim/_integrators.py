@@ -32,12 +32,14 @@ __all__ = [
     "DormandPrince5",
     "ImplicitMidpoint",
     "Integrator",
+    "Projector",
     "StepResult",
     "StepperState",
 ]
 
 FloatArray = NDArray[np.float64]
 RHS = Callable[[float, FloatArray], FloatArray]
+Projector = Callable[[float, FloatArray], FloatArray]
 
 
 class StepperState(NamedTuple):
@@ -119,8 +121,14 @@ class Integrator(ABC):
         """
 
     @abstractmethod
-    def step(self, fun: RHS, state: StepperState, t_bound: float) -> StepResult:
-        """Take one accepted step, never beyond ``t_bound``."""
+    def step(
+        self, fun: RHS, state: StepperState, t_bound: float, project: Projector | None = None
+    ) -> StepResult:
+        """Take one accepted step, never beyond ``t_bound``.
+
+        ``project(t, y) -> y`` (optional) is the stabilization's projection; adaptive methods
+        measure their error estimate on projected solutions (see :class:`DormandPrince5`).
+        """
 
 
 @dataclass(frozen=True)
@@ -140,7 +148,9 @@ class RK4(Integrator):
         k4 = fun(t + h, y + h * k3)
         return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
-    def step(self, fun: RHS, state: StepperState, t_bound: float) -> StepResult:
+    def step(
+        self, fun: RHS, state: StepperState, t_bound: float, project: Projector | None = None
+    ) -> StepResult:
         h = _clip(state.t, state.h, t_bound)
         y1 = self.advance(fun, state.t, state.y, state.f, h)
         t1 = t_bound if h == t_bound - state.t else state.t + h
@@ -181,7 +191,9 @@ class ImplicitMidpoint(Integrator):
             f"iterations at t = {t:.12g} with dt = {h:.3g}; reduce dt"
         )
 
-    def step(self, fun: RHS, state: StepperState, t_bound: float) -> StepResult:
+    def step(
+        self, fun: RHS, state: StepperState, t_bound: float, project: Projector | None = None
+    ) -> StepResult:
         h = _clip(state.t, state.h, t_bound)
         y1 = self.advance(fun, state.t, state.y, state.f, h)
         t1 = t_bound if h == t_bound - state.t else state.t + h
@@ -224,6 +236,11 @@ class DormandPrince5(Integrator):
 
     Error per step is measured in the RMS norm of ``err_i / (atol + rtol·max(|y0_i|, |y1_i|))``
     and the step is accepted when it is ≤ 1; the next step is ``h·min(5, max(0.2, 0.9·err^(-1/5)))``.
+    When the driver passes a projection (post-step stabilization), ``err`` is the difference of
+    the *projected* 5th- and 4th-order solutions: the error of what is kept. Near a change point
+    the raw estimate is dominated by huge off-manifold stage accelerations (∝ 1/σ_min(A)) that
+    the projection removes; measured on the crossed four-bar (rtol 1e-8, first change point):
+    raw estimate → steps collapse to 1e-10 s; projected → 20 steps, min step 1.3e-3 s.
 
     Parameters
     ----------
@@ -274,7 +291,9 @@ class DormandPrince5(Integrator):
         h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** (1 / 5)
         return float(min(100 * h0, h1, self.h_max))
 
-    def step(self, fun: RHS, state: StepperState, t_bound: float) -> StepResult:
+    def step(
+        self, fun: RHS, state: StepperState, t_bound: float, project: Projector | None = None
+    ) -> StepResult:
         t, y = state.t, state.y
         f0 = fun(t, y) if state.f is None else state.f
         h = state.h
@@ -293,6 +312,8 @@ class DormandPrince5(Integrator):
             K = self._stages(fun, t, y, f0, h)
             y1 = y + h * (_DP_B @ K)
             err_vec = h * (_DP_E @ K)
+            if project is not None:
+                err_vec = project(t + h, y1) - project(t + h, y1 - err_vec)
             scale = self.atol + self.rtol * np.maximum(np.abs(y), np.abs(y1))
             err = float(np.sqrt(np.mean((err_vec / scale) ** 2)))
             if not np.isfinite(err):

@@ -515,13 +515,20 @@ def simulate(
         watches = _watches(events, system.active, unilateral)
         gvals = [_guard_value(system, w, p) for w in watches]
         state = integ.init(system.rhs, t, np.concatenate((q, qd)), h0)
+        project_y = None
+        if isinstance(stab, Projection) and integ.adaptive:
+
+            def project_y(tt: float, yy: FloatArray) -> FloatArray:
+                qq, vv = stab.project(model, tt, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
+                return np.concatenate((qq, vv))
+
         recent_events: list[float] = []
         disarmed: set[int] = set()
         while t < t1:
             if n_steps >= max_steps:
                 raise SimulationError(f"max_steps = {max_steps} reached at t = {t:.12g}")
             y_start, f_start, t_start = state.y, state.f, state.t
-            res = integ.step(system.rhs, state, t1)
+            res = integ.step(system.rhs, state, t1, project_y)
             n_rejected += res.n_rejected
             n_steps += 1
             h = res.h
