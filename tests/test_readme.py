@@ -23,7 +23,7 @@ def test_quick_start_executes(capsys):
     assert traj.status.value == "success"
     # the printed numbers in the README must be what the code prints
     printed = capsys.readouterr().out.strip().splitlines()[-1]
-    claimed = [ln for ln in blocks[0].splitlines() if ln.startswith("# [")][0][2:]
+    claimed = next(ln for ln in blocks[0].splitlines() if ln.startswith("# ["))[2:]
     # qdd and status verbatim; energy drift to the two printed digits; closure at round-off
     p_tok, c_tok = printed.split(), claimed.split()
     assert p_tok[:4] == c_tok[:4], (printed, claimed)
@@ -34,5 +34,5 @@ def test_quick_start_executes(capsys):
 def test_ci_runs_readme_test_command():
     readme = (ROOT / "README.md").read_text()
     cmds = re.findall(r"```bash\n(.*?)```", readme, flags=re.S)
-    test_cmd = [c.strip() for c in cmds if "pytest" in c and "pip install" in c][0]
+    test_cmd = next(c.strip() for c in cmds if "pytest" in c and "pip install" in c)
     assert test_cmd in (ROOT / ".ci" / "run").read_text()

@@ -100,7 +100,7 @@ class RangeBasis(NamedTuple):
     def solve(self, b: FloatArray) -> FloatArray:
         """Minimum-norm solution ``x = (DA)⁺ D b`` of ``A x = b``; b shape (..., m) -> (..., n)."""
         if self.U.shape[-2] == 0:
-            return np.zeros(np.broadcast_shapes(b.shape[:-1], self.U.shape[:-2]) + (self.n,))
+            return np.zeros((*np.broadcast_shapes(b.shape[:-1], self.U.shape[:-2]), self.n))
         c = np.einsum("...mk,...m->...k", self.U, self.d * b) * self.inv_s
         return np.einsum("...kn,...k->...n", self.Vh, c)
 
@@ -130,12 +130,12 @@ def range_basis(A: FloatArray, rtol: float | None = None) -> RangeBasis:
     if m == 0 or n == 0:
         k = 0
         return RangeBasis(
-            U=np.zeros(batch + (m, k)),
-            s=np.zeros(batch + (k,)),
-            Vh=np.zeros(batch + (k, n)),
-            keep=np.zeros(batch + (k,), dtype=bool),
-            inv_s=np.zeros(batch + (k,)),
-            d=np.zeros(batch + (m,)),
+            U=np.zeros((*batch, m, k)),
+            s=np.zeros((*batch, k)),
+            Vh=np.zeros((*batch, k, n)),
+            keep=np.zeros((*batch, k), dtype=bool),
+            inv_s=np.zeros((*batch, k)),
+            d=np.zeros((*batch, m)),
             rank=np.zeros(batch, dtype=np.intp),
             n=n,
         )
@@ -170,7 +170,7 @@ def pseudo_inverse(A: FloatArray, rtol: float | None = None) -> FloatArray:
     basis = range_basis(A, rtol)
     m, n = A.shape[-2], A.shape[-1]
     if m == 0 or n == 0:
-        return np.zeros(A.shape[:-2] + (n, m))
+        return np.zeros((*A.shape[:-2], n, m))
     U, s, Vh = np.linalg.svd(A, full_matrices=False)
     idx = np.arange(s.shape[-1])
     keep = idx < basis.rank[..., None]
@@ -215,9 +215,9 @@ def cho_solve(L: FloatArray, b: FloatArray) -> FloatArray:
     """
     n = L.shape[-1]
     shape = np.broadcast_shapes(L.shape[:-2], b.shape[:-1])
-    L = np.broadcast_to(L, shape + (n, n))
-    y = np.empty(shape + (n,))
-    b = np.broadcast_to(b, shape + (n,))
+    L = np.broadcast_to(L, (*shape, n, n))
+    y = np.empty((*shape, n))
+    b = np.broadcast_to(b, (*shape, n))
     for i in range(n):  # forward substitution L y = b, vectorized over the batch
         y[..., i] = (b[..., i] - np.einsum("...j,...j->...", L[..., i, :i], y[..., :i])) / L[..., i, i]
     x = np.empty_like(y)

@@ -54,7 +54,7 @@ def _writer(path: Path, fps: float) -> Any:
 
     suffix = path.suffix.lower()
     if suffix == ".gif":
-        return animation.PillowWriter(fps=int(round(fps)))
+        return animation.PillowWriter(fps=round(fps))
     if suffix == ".mp4":
         import matplotlib as mpl
 
@@ -64,7 +64,7 @@ def _writer(path: Path, fps: float) -> Any:
             raise missing_dependency("imageio-ffmpeg", "video", "Writing MP4 animations") from None
         mpl.rcParams["animation.ffmpeg_path"] = imageio_ffmpeg.get_ffmpeg_exe()
         return animation.FFMpegWriter(
-            fps=int(round(fps)), codec="libx264", extra_args=["-pix_fmt", "yuv420p"]
+            fps=round(fps), codec="libx264", extra_args=["-pix_fmt", "yuv420p"]
         )
     raise InputError(f"animation file must end in .gif or .mp4, got {path.name!r}")
 
