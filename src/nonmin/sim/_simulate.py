@@ -20,6 +20,21 @@ small to resolve (separation speed ≤ ``impact_velocity_threshold`` or predicte
 handled by truncation). While active the guard is the normal force ``λ = (A⁺)ᵀ f_c`` restricted
 to the contact row (compressive ≥ 0, no multipliers in the dynamics); it is released when λ
 crosses zero *and* the released gap acceleration is separating (no chattering).
+
+Default stabilization, chosen by measurement (library models, RK4, dt = 1e-3 s, 10 s;
+max |q − q_ref| against the exact 1-DOF references, energy drift max|E − E0|):
+
+=================  ===============================  ===============================
+stabilization      crossed four-bar                 A02 N four-bar (N = 2)
+=================  ===============================  ===============================
+projection (mass)  8.0e-6, 2.2e-5 J, on branch      6.4e-11, 6.9e-10 J
+projection (eucl)  1.7e-2, 2.5e-2 J                 1.2e-7, 4.5e-8 J
+baumgarte (10,10)  blows up at t = 1.985 s          4.0e-8, 1.7e-8 J
+none               leaves the branch (53, 34 J)     blows up at t = 3.17 s
+=================  ===============================  ===============================
+
+With dt = 5e-4 s the crossed four-bar gives 9.0e-7 and 2.4e-6 J. ``‖φ‖∞ ≤ 2.2e-15``
+throughout with the projection.
 """
 
 from __future__ import annotations
