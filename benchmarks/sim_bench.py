@@ -177,9 +177,11 @@ def a02_mechanism(n: int, t_final: float | None = None) -> BarMechanism:
     masses = np.ones(nb)
     inertias = np.full(nb, 1.0 / 12.0)
     ground = np.array([[float(i), 0.0] for i in range(n + 1)])
-    # bars 0..n: cranks (start at A_i); bars n+1..2n: couplers B_{i-1} -> B_i
+    # bars 0..n: cranks (start at A_i); bars n+1..2n: couplers B_{i-1} -> B_i. Spanning tree
+    # for the tree-based engines: the couplers form one serial chain hanging from crank 0, and
+    # loop i is closed between the tip of coupler i and the tip of crank i.
     parents: list[tuple[str, int]] = [("ground", i) for i in range(n + 1)]
-    parents += [("bar", i - 1) for i in range(1, n + 1)]
+    parents += [("bar", 0)] + [("bar", n + i - 1) for i in range(2, n + 1)]
     closures = tuple((n + i, i) for i in range(1, n + 1))
     angles0 = np.array([np.pi / 2] * (n + 1) + [0.0] * n)
     rates0 = np.array([-1.0] * (n + 1) + [0.0] * n)
@@ -451,8 +453,8 @@ def run_exudyn(mech: BarMechanism, dt: float, *, spectral_radius: float = 0.9,
             x, y, a, vx, vy, w = com0[i]
             nd = mbs.AddNode(NodeRigidBody2D(referenceCoordinates=[x, y, a],
                                              initialVelocities=[vx, vy, w]))
-            ob = mbs.AddObject(ObjectRigidBody2D(nodeNumber=nd, physicsMass=mech.masses[i],
-                                                 physicsInertia=mech.inertias[i]))
+            ob = mbs.AddObject(ObjectRigidBody2D(nodeNumber=nd, physicsMass=float(mech.masses[i]),
+                                                 physicsInertia=float(mech.inertias[i])))
             mm = mbs.AddMarker(MarkerBodyMass(bodyNumber=ob))
             mbs.AddLoad(LoadMassProportional(markerNumber=mm, loadVector=[0.0, -G, 0.0]))
             half = 0.5 * mech.lengths[i]
@@ -483,12 +485,18 @@ def run_exudyn(mech: BarMechanism, dt: float, *, spectral_radius: float = 0.9,
         s.timeIntegration.verboseMode = 0
         s.timeIntegration.generalizedAlpha.spectralRadius = spectral_radius
         s.timeIntegration.generalizedAlpha.computeInitialAccelerations = True
-        s.solutionSettings.writeSolutionToFile = False
-        s.solutionSettings.sensorsWritePeriod = SAMPLE_DT
-        s.displayStatistics = False
+        if hasattr(s, "solution"):  # Exudyn ≥ 1.13 names (the old ones are deprecated)
+            s.solution.file.write = False
+            s.solution.sensors.writePeriod = SAMPLE_DT
+            s.show.statistics = False
+            s.show.computationTime = False
+        else:
+            s.solutionSettings.writeSolutionToFile = False
+            s.solutionSettings.sensorsWritePeriod = SAMPLE_DT
+            s.displayStatistics = False
+            s.displayComputationTime = False
         if sparse if sparse is not None else mech.nb > 10:
             s.linearSolverType = exu.LinearSolverType.EigenSparse
-        s.displayComputationTime = False
         return sc, mbs, sens_q, sens_v, s
 
     walls = []
@@ -642,8 +650,25 @@ def run_pinocchio(mech: BarMechanism, dt: float, *, kp: float = 100.0, mu: float
 
     model = pin.Model()
     model.gravity.linear = np.array([0.0, -G, 0.0])
-    jid: list[int] = []
+    # Pinocchio's algorithms (CRBA, constraintDynamics) assume the joints are numbered depth
+    # first (every subtree is a contiguous index range): add the bars in DFS order.
+    children: dict[int, list[int]] = {}
     for i, (kind, k) in enumerate(mech.parents):
+        if kind == "bar":
+            children.setdefault(k, []).append(i)
+    order: list[int] = []
+
+    def visit(i: int) -> None:
+        order.append(i)
+        for c in children.get(i, []):
+            visit(c)
+
+    for i, (kind, _) in enumerate(mech.parents):
+        if kind == "ground":
+            visit(i)
+    jid = [0] * mech.nb
+    for i in order:
+        kind, k = mech.parents[i]
         if kind == "ground":
             px, py = mech.ground[k]
             placement = pin.SE3(pin.utils.rotate("z", mech.angles0[i]), np.array([px, py, 0.0]))
@@ -658,7 +683,8 @@ def run_pinocchio(mech: BarMechanism, dt: float, *, kp: float = 100.0, mu: float
         model.appendBodyToJoint(
             j, pin.Inertia(mech.masses[i], np.array([0.5 * mech.lengths[i], 0.0, 0.0]), inertia),
             pin.SE3.Identity())
-        jid.append(j)
+        jid[i] = j
+    qidx = np.array([model.joints[jid[i]].idx_q for i in range(mech.nb)])
     data = model.createData()
     cms = []
     for i, j in mech.closures:
@@ -674,8 +700,9 @@ def run_pinocchio(mech: BarMechanism, dt: float, *, kp: float = 100.0, mu: float
     prox = pin.ProximalSettings(1e-12, mu, 50)
     pin.initConstraintDynamics(model, data, cms, cdatas)
     q0 = np.zeros(model.nq)
-    v0 = np.array([mech.rates0[i] - (mech.rates0[k] if kind == "bar" else 0.0)
-                   for i, (kind, k) in enumerate(mech.parents)])
+    v0 = np.zeros(model.nv)
+    v0[qidx] = [mech.rates0[i] - (mech.rates0[k] if kind == "bar" else 0.0)
+                for i, (kind, k) in enumerate(mech.parents)]
     tau = np.zeros(model.nv)
     nsteps = round(mech.t_final / dt)
     every = max(1, round(SAMPLE_DT / dt))
@@ -706,7 +733,7 @@ def run_pinocchio(mech: BarMechanism, dt: float, *, kp: float = 100.0, mu: float
             status = "diverged"
             break
     t = np.arange(nsamp) * every * dt
-    angles, rates = _tree_to_absolute(mech, qh, vh)
+    angles, rates = _tree_to_absolute(mech, qh[:, qidx], vh[:, qidx])
     com = mech.com_state(angles, rates)
     return RunResult("pinocchio", f"prox-constraintDynamics Kp={kp:g}", mech.name, dt, t, com,
                      walls if status == "ok" else [], status)
@@ -991,7 +1018,34 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--engines", default="exudyn,mujoco,pinocchio,nonmin")
     ap.add_argument("--json", default=str(HERE / "results" / "sim_bench.json"))
     ap.add_argument("--markdown", default=str(HERE / "SIM.md"))
+    ap.add_argument("--combine", nargs="+", default=None, metavar="JSON",
+                    help="merge result files of earlier runs (e.g. one per mechanism run in "
+                    "parallel) into --json and --markdown, running nothing")
     args = ap.parse_args(argv)
+    if args.combine:
+        parts = [json.loads(Path(f).read_text(encoding="utf-8")) for f in args.combine]
+        merged = dict(parts[0])
+        mechs_m: dict[str, Any] = {}
+        for part in parts:  # later files replace earlier rows of the same engine
+            for name, block in part["mechanisms"].items():
+                old_block = mechs_m.get(name)
+                if old_block is None:
+                    mechs_m[name] = dict(block)
+                    continue
+                engines_new = {r["engine"] for r in block["rows"]}
+                rows = [r for r in old_block["rows"] if r["engine"] not in engines_new]
+                old_block["rows"] = rows + block["rows"]
+        for block in mechs_m.values():
+            block["comparison"] = compare(block["rows"])
+        merged["mechanisms"] = mechs_m
+        merged["command"] = " ; ".join(p["command"] for p in parts)
+        merged["load_before"] = [p["load_before"] for p in parts]
+        merged["load_after"] = [p["load_after"] for p in parts]
+        merged["discussion"] = _discussion()
+        Path(args.json).write_text(json.dumps(merged, indent=1, default=float), encoding="utf-8")
+        write_markdown(Path(args.markdown), merged)
+        print(f"wrote {args.json} and {args.markdown}")
+        return 0
     repeat = 1 if args.quick else args.repeat
     engines = set(args.engines.split(","))
     mechs: list[BarMechanism] = []
@@ -1009,7 +1063,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "command": "python " + " ".join([Path(sys.argv[0]).name, *(argv or sys.argv[1:])]),
         "date_utc": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "machine": machine_info(), "repeat": repeat, "quick": args.quick,
-        "mechanisms": {},
+        "mechanisms": {}, "discussion": _discussion(),
     }
     for mech in mechs:
         cfgs = [c for c in default_configs(mech, args.quick) if c[0] in engines]
@@ -1024,6 +1078,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     write_markdown(Path(args.markdown), results)
     print(f"wrote {args.json} and {args.markdown}")
     return 0
+
+
+def _discussion() -> list[str]:
+    path = HERE / "results" / "sim_bench_discussion.md"
+    return path.read_text(encoding="utf-8").splitlines() if path.exists() else []
 
 
 def library_four_bar_params() -> FourBarParams:
