@@ -141,7 +141,6 @@ class Projection(Stabilization):
         ct = model.constraint_terms(t, q, qd, active)
         hol = ct.holonomic
         eye = np.eye(q.shape[0]) if self.metric == "euclidean" else None
-        moved = False
         if hol.any():
             prev = np.inf
             for _ in range(self.max_iter):
@@ -150,11 +149,10 @@ class Projection(Stabilization):
                 if err <= self.tol or err == 0.0 or err > 0.5 * prev:
                     break  # converged, or no progress: round-off floor reached
                 prev = err
+                # M at the uncorrected q: the corrections are at the integrator's error level,
+                # so the metric change is of second order
                 q = q + _correction(M if eye is None else eye, ct.A[hol], phi, rtol)
-                moved = True
                 ct = model.constraint_terms(t, q, qd, active)
-            if moved and eye is None:
-                M = model.mass_matrix(q)
         if self.velocity and ct.A.shape[0]:
             qd = qd + _correction(M if eye is None else eye, ct.A, ct.velocity, rtol)
         return q, qd
