@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from conftest import (
     crossed_branch_point,
@@ -12,6 +14,7 @@ from conftest import (
     make_crossed_four_bar,
     make_pendulum,
 )
+from nonmin.core import impact_map
 from nonmin.errors import InputError
 from nonmin.sim import Baumgarte, Projection, simulate
 
@@ -88,3 +91,24 @@ def test_stabilization_objects_validate() -> None:
         Projection(metric="manhattan")
     with pytest.raises(InputError, match="alpha"):
         Baumgarte(alpha=-1.0)
+
+
+@given(
+    th1=st.floats(0.2, 2.9),
+    scale=st.floats(1e-6, 1e-2),
+    seed=st.integers(0, 2**31 - 1),
+)
+def test_projection_is_the_mass_metric_projection(th1: float, scale: float, seed: int) -> None:
+    """Velocity step == core.impact_map (plastic); position step lands on φ = 0 at round-off."""
+    model = make_crossed_four_bar()
+    q0, qd0 = crossed_initial_state(th1=th1, rate=2.0)
+    rng = np.random.default_rng(seed)
+    q = q0 + scale * rng.standard_normal(3)
+    qd = qd0 + scale * rng.standard_normal(3)
+    act = model.default_active
+    q1, qd1 = Projection().project(model, 0.0, q, qd, act, None)
+    ct = model.constraint_terms(0.0, q1, qd1, act)
+    assert np.max(np.abs(ct.phi)) < 1e-13
+    assert np.max(np.abs(ct.velocity)) < 1e-12
+    expected = impact_map(model.mass_matrix(q), ct.A, qd)
+    assert np.allclose(qd1, expected, rtol=1e-9, atol=1e-12)
