@@ -100,3 +100,12 @@ def test_significant_digits_formula() -> None:
     assert exact == math.inf
     with pytest.raises(ShapeError):
         significant_digits(ref, ref[:1], rtol=1.0, atol=1.0)
+
+
+def test_record_round_trip() -> None:
+    rec = ValidationRecord("x", (Check("a", 1e-9, 1e-8, "<=", "m"), Check("b", True, True, "=="),
+                                 Check("c", math.inf, 1.0, "<="), Check("d", "text")),
+                           settings={"dt": 1e-3}, wall_time=2.0, notes="n", quick=True)
+    back = ValidationRecord.from_dict(rec.to_dict())
+    assert back.to_dict() == rec.to_dict()
+    assert not back.check("c").passed

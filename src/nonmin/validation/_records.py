@@ -126,6 +126,19 @@ class ValidationRecord:
                 return c
         raise KeyError(name)
 
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ValidationRecord:
+        """Inverse of :meth:`to_dict` (e.g. to rewrite a report from saved results)."""
+        checks = tuple(
+            Check(c["name"], _from_json(c["value"]), _from_json(c["target"]), c["comparison"],
+                  c.get("unit", ""))
+            for c in d.get("checks", ())
+        )
+        return cls(name=d["name"], checks=checks, settings=dict(d.get("settings", {})),
+                   reference=d.get("reference", ""), wall_time=float(d.get("wall_time", math.nan)),
+                   quick=bool(d.get("quick", False)), notes=d.get("notes", ""),
+                   error=d.get("error", ""))
+
     def to_dict(self) -> dict[str, Any]:
         return {
             "name": self.name,
@@ -151,6 +164,12 @@ def _jsonable(x: Any) -> Any:
     if isinstance(x, list | tuple):
         return [_jsonable(v) for v in x]
     return str(x)
+
+
+def _from_json(x: Any) -> Any:
+    if isinstance(x, str) and x in ("inf", "-inf", "nan"):
+        return float(x)
+    return x
 
 
 def _fmt(x: Any) -> str:
