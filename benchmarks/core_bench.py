@@ -161,32 +161,42 @@ def terms(mech: Mechanism) -> dict[str, np.ndarray]:
 # --------------------------------------------------------------------------- timing
 
 
-def timeit_median(fn: Callable[[], Any], *, target_s: float, repeats: int) -> dict[str, float]:
-    """Median and minimum over ``repeats`` of the mean wall time per call of ``fn`` (seconds),
-    and the median process CPU time per call (all threads; less sensitive to other jobs on a
-    shared machine for single-threaded calls).
+def time_group(
+    fns: dict[str, Callable[[], Any]], *, target_s: float, repeats: int
+) -> dict[str, dict[str, float]]:
+    """Time several functions with *interleaved* repeats (the order rotates every repeat), so
+    that they see the same background load.
 
-    The number of calls per repeat is chosen so that one repeat takes about ``target_s``.
-    """
-    fn()  # warm-up (JIT, caches)
-    t0 = time.perf_counter()
-    fn()
-    one = max(time.perf_counter() - t0, 1e-7)
-    number = max(1, int(target_s / one))
-    samples = []
-    cpu = []
-    for _ in range(repeats):
-        c0 = time.process_time()
+    Each function is warmed up once, then called ``number`` times per repeat (chosen so that a
+    repeat lasts about ``target_s``). Returns, per function, the median and minimum over the
+    repeats of the wall time per call and the median process CPU time per call (seconds; CPU
+    time is summed over threads and is less sensitive to other jobs on a shared machine)."""
+    numbers = {}
+    for name, fn in fns.items():
+        fn()  # warm-up (JIT, caches)
         t0 = time.perf_counter()
-        for _ in range(number):
-            fn()
-        samples.append((time.perf_counter() - t0) / number)
-        cpu.append((time.process_time() - c0) / number)
+        fn()
+        numbers[name] = max(1, int(target_s / max(time.perf_counter() - t0, 1e-7)))
+    wall: dict[str, list[float]] = {k: [] for k in fns}
+    cpu: dict[str, list[float]] = {k: [] for k in fns}
+    names = list(fns)
+    for rep in range(repeats):
+        for name in names[rep % len(names):] + names[: rep % len(names)]:
+            fn, number = fns[name], numbers[name]
+            c0 = time.process_time()
+            t0 = time.perf_counter()
+            for _ in range(number):
+                fn()
+            wall[name].append((time.perf_counter() - t0) / number)
+            cpu[name].append((time.process_time() - c0) / number)
     return {
-        "median": statistics.median(samples),
-        "min": min(samples),
-        "cpu_median": statistics.median(cpu),
-        "number": number,
+        k: {
+            "median": statistics.median(wall[k]),
+            "min": min(wall[k]),
+            "cpu_median": statistics.median(cpu[k]),
+            "number": numbers[k],
+        }
+        for k in fns
     }
 
 
@@ -278,6 +288,7 @@ def bench_mechanism(
 ) -> dict[str, Any]:
     """Accuracy check and timings for one mechanism (see module docstring)."""
     import nonmin.core as core
+    from nonmin.core.dynamics import _solve_dynamics_numpy as numpy_path
 
     pin = _pin()
     n_states = max(max(sizes), n_check)
@@ -323,54 +334,72 @@ def bench_mechanism(
         "pin_prox_settings": PROX,
     }
 
-    # ---- single call (state 0)
+    # ---- single call (state 0); all methods timed with interleaved repeats
     q0, v0, t0 = mech.q[0], mech.v[0], tau[0]
     M0, h0, A0, g0 = M[0], h[0], A[0], gam[0]
-    single: dict[str, Any] = {}
-    with core.use_backend("numba"):
-        single["nonmin_numba_forward_dynamics"] = _us(
-            timeit_median(lambda: core.forward_dynamics(M0, h0, A0, g0, t0), target_s=target_s,
-                          repeats=repeats))  # fmt: skip
-        single["nonmin_numba_constraint_force"] = _us(
-            timeit_median(lambda: core.constraint_force(M0, h0, A0, g0, t0), target_s=target_s,
-                          repeats=repeats))  # fmt: skip
-    with core.use_backend("numpy"):
-        single["nonmin_numpy_forward_dynamics"] = _us(
-            timeit_median(lambda: core.forward_dynamics(M0, h0, A0, g0, t0), target_s=target_s,
-                          repeats=repeats))  # fmt: skip
-    single["pin_constraintDynamics"] = _us(
-        timeit_median(lambda: pin.constraintDynamics(model, data, q0, v0, t0, cms, cds, prox),
-                      target_s=target_s, repeats=repeats))  # fmt: skip
     pin.computeAllTerms(model, data, q0, v0)
-    single["pin_kkt_forwardDynamics"] = _us(
-        timeit_median(lambda: pin.forwardDynamics(model, data, t0, A0, g0, 0.0),
-                      target_s=target_s, repeats=repeats))  # fmt: skip
-    rec["single"] = single
+    data_kkt = model.createData()
+    pin.computeAllTerms(model, data_kkt, q0, v0)
+
+    # The backend is numba for the whole run (set in main); the NumPy backend is timed through
+    # the function forward_dynamics itself falls back to, so no backend switch is timed.
+    def numba_fd() -> Any:
+        return core.forward_dynamics(M0, h0, A0, g0, t0)
+
+    def numba_fc() -> Any:
+        return core.constraint_force(M0, h0, A0, g0, t0)
+
+    def numpy_fd() -> Any:
+        return numpy_path(M0, h0, A0, g0, t0, None, None).qdd
+
+    group = time_group(
+        {
+            "nonmin_numba_forward_dynamics": numba_fd,
+            "nonmin_numba_constraint_force": numba_fc,
+            "nonmin_numpy_forward_dynamics": numpy_fd,
+            "pin_constraintDynamics": lambda: pin.constraintDynamics(
+                model, data, q0, v0, t0, cms, cds, prox
+            ),
+            "pin_kkt_forwardDynamics": lambda: pin.forwardDynamics(
+                model, data_kkt, t0, A0, g0, 0.0
+            ),
+        },
+        target_s=target_s,
+        repeats=repeats,
+    )
+    rec["single"] = {k: _us(v) for k, v in group.items()}
 
     # ---- batched: one nonmin call on N states; Pinocchio: Python loop over the N states
     batched = []
     for N in sizes:
         Mb, hb, Ab, gb, tb = M[:N], h[:N], A[:N], gam[:N], tau[:N]
-        row: dict[str, Any] = {"N": N}
-        with core.use_backend("numba"):
-            row["nonmin_numba_forward_dynamics"] = _us(
-                timeit_median(lambda: core.forward_dynamics(Mb, hb, Ab, gb, tb),  # noqa: B023
-                              target_s=target_s, repeats=repeats), N)  # fmt: skip
-            row["nonmin_numba_constraint_force"] = _us(
-                timeit_median(lambda: core.constraint_force(Mb, hb, Ab, gb, tb),  # noqa: B023
-                              target_s=target_s, repeats=repeats), N)  # fmt: skip
-        with core.use_backend("numpy"):
-            row["nonmin_numpy_forward_dynamics"] = _us(
-                timeit_median(lambda: core.forward_dynamics(Mb, hb, Ab, gb, tb),  # noqa: B023
-                              target_s=target_s, repeats=max(3, repeats // 2)), N)  # fmt: skip
         qs, vs = mech.q[:N], mech.v[:N]
+
+        def b_numba_fd() -> Any:
+            return core.forward_dynamics(Mb, hb, Ab, gb, tb)  # noqa: B023
+
+        def b_numba_fc() -> Any:
+            return core.constraint_force(Mb, hb, Ab, gb, tb)  # noqa: B023
+
+        def b_numpy_fd() -> Any:
+            return numpy_path(Mb, hb, Ab, gb, tb, None, None).qdd  # noqa: B023
 
         def pin_loop() -> None:
             for k in range(N):  # noqa: B023
                 pin.constraintDynamics(model, data, qs[k], vs[k], tb[k], cms, cds, prox)  # noqa: B023
 
-        row["pin_constraintDynamics_loop"] = _us(
-            timeit_median(pin_loop, target_s=target_s, repeats=max(3, repeats // 2)), N)  # fmt: skip
+        group = time_group(
+            {
+                "nonmin_numba_forward_dynamics": b_numba_fd,
+                "nonmin_numba_constraint_force": b_numba_fc,
+                "nonmin_numpy_forward_dynamics": b_numpy_fd,
+                "pin_constraintDynamics_loop": pin_loop,
+            },
+            target_s=target_s,
+            repeats=max(3, repeats // 2) if N >= 1000 else repeats,
+        )
+        row: dict[str, Any] = {"N": N}
+        row.update({k: _us(v, N) for k, v in group.items()})
         batched.append(row)
     rec["batched"] = batched
     return rec
@@ -394,7 +423,8 @@ def markdown(results: dict[str, Any]) -> str:
         f", at end {', '.join(f'{x:.2f}' for x in info['loadavg_end'])} — the machine is shared, "
         "so absolute times are noisy; ratios come from the same run.",
         "",
-        "**Single call** (µs of wall time, median over repeats; state 0 of each mechanism). "
+        "**Single call** (µs of wall time, median over repeats interleaved between the methods; "
+        "state 0 of each mechanism). "
         "`ratio` = nonmin (numba) forward_dynamics / Pinocchio constraintDynamics from the wall "
         "medians; `ratio CPU` from the medians of process CPU time; `ratio min` from the "
         "fastest repeats (the two last are less disturbed by other jobs on a shared machine). "
@@ -427,7 +457,7 @@ def markdown(results: dict[str, Any]) -> str:
     lines += [
         "",
         "**Batched** (µs per state, median of wall time): nonmin = one call on arrays of N "
-        "states (numba: parallel over the 2 cores for N ≥ 256); Pinocchio = Python loop of "
+        "states (numba: parallel over the 2 cores for N ≥ 4096); Pinocchio = Python loop of "
         "constraintDynamics over the N states. `CPU` = process CPU time per state (summed over "
         "threads: the work done, whatever the load). `ratio` = nonmin (numba) forward_dynamics "
         "/ Pinocchio loop (wall).",
@@ -507,6 +537,9 @@ def main(argv: list[str] | None = None) -> int:
         mechs = [("planar", 3), ("planar", 6), ("planar", 12), ("planar", 20), ("planar", 30),
                  ("spatial", 6), ("spatial", 12), ("spatial", 20), ("spatial", 30)]  # fmt: skip
         sizes, target_s, repeats, n_check = [1, 10, 100, 1000, 10000], 0.05, 7, 200
+    import nonmin.core as core
+
+    core.set_backend("numba")
     info = machine_info()
     results: dict[str, Any] = {"machine": info, "quick": args.quick, "mechanisms": []}
     print("first-call (JIT) times ...", flush=True)
