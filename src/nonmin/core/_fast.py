@@ -169,6 +169,11 @@ def _params(has_f: bool, tol: float, want_pl: bool) -> FloatArray:
     return p
 
 
+#: Parameter vectors for the default rtol and no μ, indexed ``[has_f][want_pl]``.
+_DEFAULT_PARAMS = tuple(
+    tuple(_params(bool(hf), DEFAULT_RTOL, bool(pl)) for pl in (0, 1)) for hf in (0, 1)
+)
+
 #: ``what`` codes of :func:`solve`.
 QDD, FC, ALL = 0, 1, 2
 
@@ -198,7 +203,10 @@ def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | N
         else _prep(adot_qd, "adot_qd")
     )
     has_f = f is not None
-    fv = _prep(f, "f") if has_f else hv
+    if has_f:
+        fv = f if type(f) is _ND and f.dtype is _F64 and f.flags.c_contiguous else _prep(f, "f")
+    else:
+        fv = hv
     has_mu = mu is not None
     if Mm.ndim == 2 and hv.ndim == 1 and Am.ndim == 2 and gv.ndim == 1 and fv.ndim == 1:
         # ------------------------------------------------------------ single state
@@ -208,16 +216,18 @@ def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | N
             return None
         if has_f and fv.shape[0] != n:
             return None
-        tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
         want_pl = what == ALL
-        if has_mu:
+        if rtol is None and not has_mu:
+            params = _DEFAULT_PARAMS[has_f][want_pl]
+        elif has_mu:
+            tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
             mu_v = V.positive_scalar_or_batch(mu, "mu")
             if mu_v.ndim:
                 return None
             params = np.array([float(has_f), float(mu_v), 1.0, tol, SPD_RTOL, V.SYMMETRY_RTOL,
                                float(want_pl)])  # fmt: skip
         else:
-            params = _params(has_f, tol, want_pl)
+            params = _params(has_f, resolve_rtol(rtol), want_pl)
         out = np.empty(2 * n + 3)
         if not want_pl:
             if kern.solve_one(Mm, hv, fv, Am, gv, params, out, _NO_PL, _NO_PL):
