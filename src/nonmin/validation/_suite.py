@@ -66,7 +66,7 @@ RELEASE_FORCE_TOL = 1e-6
 #: Simulator settings per benchmark (full, quick).
 SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
     "A01": {
-        "full": {"method": "rk4", "dt": 1e-2, "stabilization": "projection"},
+        "full": {"method": "rk4", "dt": 2.5e-3, "stabilization": "projection"},
         "quick": {"method": "rk4", "dt": 5e-3, "stabilization": "projection"},
     },
     "A02_N2": {
@@ -86,7 +86,7 @@ SETTINGS: dict[str, dict[str, dict[str, Any]]] = {
         "quick": {"method": "dopri5", "rtol": 1e-8, "atol": 1e-10, "stabilization": "projection"},
     },
     "crossed_four_bar": {
-        "full": {"method": "rk4", "dt": 5e-4, "stabilization": "projection"},
+        "full": {"method": "rk4", "dt": 2.5e-4, "stabilization": "projection"},
         "quick": {"method": "rk4", "dt": 5e-4, "stabilization": "projection"},
     },
     "arm2r_wall": {
