@@ -1,7 +1,8 @@
 """Numba-compiled kernels of the projection dynamics (imported lazily by :mod:`._fast`).
 
 One per-state routine, :func:`solve_state`, does the whole evaluation of
-:func:`nonmin.core.solve_dynamics` for one ``(M, h, A, γ, f)`` without allocating; the single-call
+:func:`nonmin.core.solve_dynamics` for one ``(M, h, A, γ, f)`` in caller-provided scratch
+(:func:`scratch`; a batch driver allocates it once per chunk of states); the single-call
 driver :func:`solve_one` and the batched drivers :func:`solve_batch_serial` /
 :func:`solve_batch_parallel` all call it, so a state gives bitwise the same result whichever
 driver evaluates it.
@@ -52,14 +53,11 @@ _EPS = float(np.finfo(np.float64).eps)
 _TINY = float(np.finfo(np.float64).tiny)
 
 
-def work_size(n: int, m: int) -> int:
-    """Length of the float scratch vector :func:`solve_state` needs."""
-    return m * (n + 1) + 5 * m * n + m * m + n * n + 3 * n + 2 * m
-
-
 @njit(cache=True)
-def _work_size(n: int, m: int) -> int:
-    return m * (n + 1) + 5 * m * n + m * m + n * n + 3 * n + 2 * m
+def scratch(n, m):
+    """Scratch arrays of :func:`solve_state` for ``n`` coordinates and ``m`` rows."""
+    return (np.empty((m, n + 1)), np.empty((5, m, n)), np.empty((m, m)), np.empty((n, n)),
+            np.empty(3 * n + 2 * m))  # fmt: skip
 
 
 #: No fast-math flags: strict IEEE arithmetic, so the compiled per-state routine gives bitwise the
@@ -70,24 +68,28 @@ _FM: set[str] = set()
 
 @njit(cache=True, fastmath=_FM)
 def solve_state(M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
-                qdd, fc, P, L, want_pl, work):  # fmt: skip
-    """Evaluate one state; returns ``(status, rank, mu, pivot_ratio)``. See module docstring."""
+                qdd, fc, P, L, want_pl, B, S, G, W, vec):  # fmt: skip
+    """Evaluate one state; returns ``(status, rank, mu, pivot_ratio)``. See module docstring.
+
+    Scratch (from :func:`scratch`, reusable across states): ``B`` (m, n+1), ``S`` (5, m, n),
+    ``G`` (m, m), ``W`` (n, n), ``vec`` (3n + 2m).
+    """
     n = M.shape[0]
     m = A.shape[0]
     # ---------------------------------------------------------------- 1. input checks
-    acc = 0.0
+    bad = False  # x − x is 0 for finite x, NaN for ±inf and NaN (a boolean OR: no FP reordering)
     for i in range(n):
         for j in range(n):
-            acc += M[i, j] * 0.0
-        acc += h[i] * 0.0
+            bad |= M[i, j] - M[i, j] != 0.0
+        bad |= h[i] - h[i] != 0.0
     if has_f:
         for i in range(n):
-            acc += f[i] * 0.0
+            bad |= f[i] - f[i] != 0.0
     for i in range(m):
         for j in range(n):
-            acc += A[i, j] * 0.0
-        acc += gam[i] * 0.0
-    if acc != acc:  # some entry is NaN or ±inf
+            bad |= A[i, j] - A[i, j] != 0.0
+        bad |= gam[i] - gam[i] != 0.0
+    if bad:
         return NONFINITE, 0, 0.0, 0.0
     asym = 0.0
     for i in range(n):
@@ -104,33 +106,17 @@ def solve_state(M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
                     scale = a
         if asym > sym_rtol * max(scale, _TINY):
             return ASYMMETRIC, 0, 0.0, 0.0
-    # ---------------------------------------------------------------- scratch views
-    o = 0
-    B = work[o : o + m * (n + 1)].reshape((m, n + 1))
-    o += m * (n + 1)
-    V = work[o : o + m * n].reshape((m, n))  # kept right singular vectors (rows)
-    o += m * n
-    Kt = work[o : o + m * n].reshape((m, n))  # (M Vᵀ)ᵀ = V M
-    o += m * n
-    Tt = work[o : o + m * n].reshape((m, n))  # G V, G = V M Vᵀ
-    o += m * n
-    Et = work[o : o + m * n].reshape((m, n))
-    o += m * n
-    Ft = work[o : o + m * n].reshape((m, n))
-    o += m * n
-    G = work[o : o + m * m].reshape((m, m))
-    o += m * m
-    W = work[o : o + n * n].reshape((n, n))  # M̄, then its Cholesky factor (lower)
-    o += n * n
-    g = work[o : o + n]
-    o += n
-    wv = work[o : o + n]
-    o += n
-    u = work[o : o + n]
-    o += n
-    sig = work[o : o + m]
-    o += m
-    cv = work[o : o + m]
+    # ---------------------------------------------------------------- scratch
+    V = S[0]  # kept right singular vectors (rows)
+    Kt = S[1]  # (M Vᵀ)ᵀ = V M
+    Tt = S[2]  # G V, G = V M Vᵀ
+    Et = S[3]
+    Ft = S[4]
+    g = vec[:n]
+    wv = vec[n : 2 * n]
+    u = vec[2 * n : 3 * n]
+    sig = vec[3 * n : 3 * n + m]
+    cv = vec[3 * n + m : 3 * n + 2 * m]
     # ---------------------------------------------------------------- 2. equilibration
     big = 0.0
     for i in range(m):
@@ -347,10 +333,10 @@ def solve_one(M, h, f, A, gam, params, out, P, L):
     compiled entry point costs seconds of compilation on first use.
     """
     n = M.shape[0]
-    work = np.empty(_work_size(n, A.shape[0]))
+    B, S, G, W, vec = scratch(n, A.shape[0])
     st, r, mu, ratio = solve_state(
         M, h, f, params[0] != 0.0, A, gam, params[1], params[2] != 0.0, params[3], params[4],
-        params[5], out[:n], out[n : 2 * n], P, L, params[6] != 0.0, work,
+        params[5], out[:n], out[n : 2 * n], P, L, params[6] != 0.0, B, S, G, W, vec,
     )  # fmt: skip
     out[2 * n] = r
     out[2 * n + 1] = mu
@@ -361,13 +347,13 @@ def solve_one(M, h, f, A, gam, params, out, P, L):
 @njit(cache=True)
 def _run_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
                qdd, fc, P, L, want_pl, status, rank, mu_out, ratio):  # fmt: skip
-    work = np.empty(_work_size(M.shape[1], A.shape[1]))
+    B, S, G, W, vec = scratch(M.shape[1], A.shape[1])
     nmu = mu_in.shape[0]
     for b in range(lo, hi):
         st, r, mu, rt = solve_state(
             M[b], h[b], f[b], has_f, A[b], gam[b], mu_in[b if nmu > 1 else 0], has_mu, rtol,
             spd_rtol, sym_rtol, qdd[b], fc[b], P[b if want_pl else 0], L[b if want_pl else 0],
-            want_pl, work,
+            want_pl, B, S, G, W, vec,
         )  # fmt: skip
         status[b] = st
         rank[b] = r
