@@ -873,6 +873,7 @@ NONMIN_CONFIGS: dict[str, list[PeerSpec]] = {
     "crossed_four_bar": [
         ("nonmin", {"method": "rk4", "dt": 1e-3}),
         ("nonmin", {"method": "rk4", "dt": 5e-4}),
+        ("nonmin", {"method": "rk4", "dt": 2.5e-4}),
         ("nonmin", {"method": "dopri5", "rtol": 1e-8, "atol": 1e-10}),
     ],
     "A02_N2": [
