@@ -8,6 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from conftest import (
+    G,
     crossed_branch_point,
     crossed_initial_state,
     joint_C,
@@ -16,6 +17,7 @@ from conftest import (
 )
 from nonmin.core import impact_map
 from nonmin.errors import InputError
+from nonmin.model import FunctionConstraint, FunctionModel
 from nonmin.sim import Baumgarte, Projection, simulate
 
 PHI_TOL = 1e-10
@@ -112,3 +114,24 @@ def test_projection_is_the_mass_metric_projection(th1: float, scale: float, seed
     assert np.max(np.abs(ct.velocity)) < 1e-12
     expected = impact_map(model.mass_matrix(q), ct.A, qd)
     assert np.allclose(qd1, expected, rtol=1e-9, atol=1e-12)
+
+
+def test_rheonomic_constraint_is_followed_and_projected() -> None:
+    """x(t) = sin t imposed by a driving constraint; y falls freely."""
+    drive = FunctionConstraint.rheonomic(
+        "drive",
+        phi=lambda t, q: [q[0] - np.sin(t)],
+        jacobian=lambda t, q: [[1.0, 0.0]],
+        phi_t=lambda t, q: [-np.cos(t)],
+        gamma=lambda t, q, qd: [np.sin(t)],  # A qdd + γ = 0  ⇔  ẍ = −sin t
+    )
+    model = FunctionModel(
+        name="driven", coordinate_names=("x", "y"), mass=lambda q: np.eye(2),
+        coriolis=lambda q, qd: np.zeros((2, 2)), conservative=lambda q: [0.0, -G],
+        potential=lambda q: G * q[1], constraints=(drive,),
+    )
+    tr = simulate(model, (0.0, 2.0), [0.0, 0.0], [0.5, 0.0], dt=0.01)  # qd0 inconsistent: projected
+    assert np.allclose(tr.q[:, 0], np.sin(tr.t), atol=1e-12)
+    assert np.allclose(tr.qd[:, 0], np.cos(tr.t), atol=1e-12)
+    assert np.allclose(tr.q[:, 1], -0.5 * G * tr.t**2, atol=1e-9)
+    assert tr.velocity_residual_norm.max() < 1e-12
