@@ -76,3 +76,20 @@ def test_tutorial_runs(name: str, tmp_path: Path) -> None:
     assert pngs, f"{name} wrote no figure"
     for png in pngs:
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_refresh_tool_rewrites_output_blocks(tmp_path: Path) -> None:
+    """docs/refresh_tutorials.py replaces a text block only when it directly follows code."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("nonmin_docs_refresh", ROOT / "docs" / "refresh_tutorials.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    page = (
+        "# t\n```python\nx = 6 * 7\nprint(x)\n```\n\n```text\nstale\n```\n"
+        "prose\n```python\nprint(x + 1)\n```\nmore prose\n```text\nkept\n```\n"
+    )
+    new = mod.refresh(page, tmp_path)
+    assert "```text\n42\n```" in new
+    assert "```text\nkept\n```" in new and "stale" not in new
