@@ -271,11 +271,14 @@ class DormandPrince5(Integrator):
     the raw estimate is dominated by huge off-manifold stage accelerations (∝ 1/σ_min(A)) that
     the projection removes; measured on the crossed four-bar (rtol 1e-8, first change point):
     raw estimate → steps collapse to 1e-10 s; projected → 20 steps, min step 1.3e-3 s.
-    Limitation (measured, crossed four-bar 10 s, 22 change points): rtol 1e-8 passes
-    (878 steps, q error 2.4e-5, energy drift 4.6e-5 J, with ``Projection(velocity_rtol=1e-4)``)
-    but rtol 1e-10 underflows at t = 3.3 s: error control cannot see past the 1/σ_min blow-up of
-    off-manifold stage values at a change point. Fixed-step ``"rk4"`` with the projection is
-    the robust choice there (dt = 2.5e-4 s: q error 3.7e-8, drift 5.6e-8 J).
+    Limitation (measured, 10 s, library models, atol = rtol/100): the crossed four-bar (22
+    change points) passes at rtol 1e-6 / 1e-8 / 1e-9 (343 / 872 / 1328 steps, q error
+    2.0e-4 / 2.4e-5 / 4.2e-6, energy drift 1.3e-3 / 4.0e-5 / 6.6e-6 J) but rtol 1e-10 underflows
+    at t = 3.3 s; A02 (N = 2) passes at rtol 1e-8 (459 steps, q error 8.7e-7) but not at 1e-9
+    (the first singular configuration, t = 0.714 s). Error control cannot see past the
+    1/σ_min blow-up of off-manifold stage values exactly at a singular configuration.
+    Fixed-step ``"rk4"`` with the projection is the robust choice there (crossed four-bar,
+    dt = 2.5e-4 s: q error 3.7e-8, drift 5.6e-8 J).
 
     Parameters
     ----------
