@@ -109,3 +109,21 @@ def test_record_round_trip() -> None:
     back = ValidationRecord.from_dict(rec.to_dict())
     assert back.to_dict() == rec.to_dict()
     assert not back.check("c").passed
+
+
+def test_module_cli_assembles_saved_records(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    import json
+
+    from nonmin.validation.__main__ import main
+
+    good = ValidationRecord("g", (Check("x", 1.0, 2.0, "<="),), wall_time=1.0)
+    bad = ValidationRecord("b", (Check("x", 3.0, 2.0, "<="),), wall_time=1.0)
+    f1, f2 = tmp_path / "g.json", tmp_path / "b.json"
+    f1.write_text(json.dumps(good.to_dict()))
+    f2.write_text(json.dumps([bad.to_dict()]))
+    notes = tmp_path / "notes.md"
+    notes.write_text("Runs made one per process.")
+    report = tmp_path / "v.md"
+    assert main(["--assemble", str(f1), "--report", str(report), "--notes-file", str(notes)]) == 0
+    assert "Runs made one per process." in report.read_text()
+    assert main(["--assemble", str(f1), str(f2)]) == 1

@@ -275,6 +275,7 @@ def write_report(
     path: str | os.PathLike[str] = "docs/validation.md",
     *,
     command: str = "nonmin validate --full --report docs/validation.md",
+    notes: str = "",
 ) -> Path:
     """Write the validation report as Markdown.
 
@@ -284,6 +285,8 @@ def write_report(
     path : path-like, default ``"docs/validation.md"``
     command : str
         The command that regenerates the report (written at the top).
+    notes : str
+        Markdown written after the machine section (how the runs were made, findings).
 
     Returns
     -------
@@ -314,6 +317,9 @@ def write_report(
     for k, v in info.items():
         out.append(f"- {k}: {v}")
     out.append("")
+    if notes:
+        out.append(notes.rstrip())
+        out.append("")
     n_pass = sum(r.passed for r in records)
     out.append(f"## Summary: {n_pass}/{len(records)} benchmarks meet every target")
     out.append("")
