@@ -31,7 +31,7 @@ from nonmin.sim import (
 
 def test_public_api_is_pinned() -> None:
     assert set(sim.__all__) == {
-        "DEFAULT_DT", "METHODS", "RK4", "STABILIZATIONS", "Activate", "Baumgarte", "Deactivate",
+        "ADAPTIVE_RANK_RTOL", "DEFAULT_DT", "METHODS", "RK4", "STABILIZATIONS", "Activate", "Baumgarte", "Deactivate",
         "DormandPrince5", "Event", "EventRecord", "ImplicitMidpoint", "Integrator",
         "NoStabilization", "Projection", "Reset", "Stabilization", "Status", "StepResult",
         "StepperState", "Trajectory", "load_trajectory", "simulate",

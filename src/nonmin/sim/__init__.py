@@ -26,6 +26,7 @@ from ._integrators import ImplicitMidpoint as ImplicitMidpoint
 from ._integrators import Integrator as Integrator
 from ._integrators import StepperState as StepperState
 from ._integrators import StepResult as StepResult
+from ._simulate import ADAPTIVE_RANK_RTOL as ADAPTIVE_RANK_RTOL
 from ._simulate import DEFAULT_DT as DEFAULT_DT
 from ._simulate import simulate as simulate
 from ._stabilization import STABILIZATIONS as STABILIZATIONS
@@ -38,6 +39,7 @@ from ._trajectory import Trajectory as Trajectory
 from ._trajectory import load_trajectory as load_trajectory
 
 __all__ = [
+    "ADAPTIVE_RANK_RTOL",
     "DEFAULT_DT",
     "METHODS",
     "RK4",

@@ -276,7 +276,10 @@ class DormandPrince5(Integrator):
     2.0e-4 / 2.4e-5 / 4.2e-6, energy drift 1.3e-3 / 4.0e-5 / 6.6e-6 J) but rtol 1e-10 underflows
     at t = 3.3 s; A02 (N = 2) passes at rtol 1e-8 (459 steps, q error 8.7e-7) but not at 1e-9
     (the first singular configuration, t = 0.714 s). Error control cannot see past the
-    1/σ_min blow-up of off-manifold stage values exactly at a singular configuration.
+    1/σ_min blow-up of off-manifold stage values exactly at a singular configuration — with
+    the rank tolerance of A at 1e-10. :func:`~nonmin.sim.simulate` therefore uses 1e-6 with
+    adaptive methods (``ADAPTIVE_RANK_RTOL``), with which rtol 1e-10 passes both (A02: q error
+    2.4e-7, crossed four-bar: 1.2e-7).
     Fixed-step ``"rk4"`` with the projection is the robust choice there (crossed four-bar,
     dt = 2.5e-4 s: q error 3.7e-8, drift 5.6e-8 J).
 
