@@ -8,8 +8,8 @@ immutable :class:`Trajectory` result that saves to one self-describing file.
 
 Which method (measured on the library mechanisms, see ``_simulate`` and ``_integrators``):
 ``"rk4"`` + mass-metric ``"projection"`` (the defaults) is the robust choice through singular
-configurations and change points; ``"dopri5"`` is efficient for regular motions, events and
-contact (dense output) but its error control struggles at change points at tight tolerances;
+configurations and change points; ``"dopri5"`` is efficient (dense output, error control) and
+passes them with the simulator's adaptive rank tolerance :data:`ADAPTIVE_RANK_RTOL`;
 ``"midpoint"`` keeps the energy error bounded on regular motions but cannot cross an exact
 change point.
 """

@@ -116,9 +116,10 @@ class Projection(Stabilization):
         Within ``σ_min/σ_max < velocity_rtol`` of a change point the velocity is projected onto
         the larger null space that contains both branch tangents, instead of onto a direction
         that round-off in q decides. Useful with error-controlled methods (measured on the
-        crossed four-bar with dopri5 at rtol 1e-10: with 1e-4 the first change point is passed
-        in 72 steps with 6e-10 error; with the default the step collapses to 3e-11 s and the
-        energy is lost); harmful with fixed-step RK4 (2 J energy kick), so not the default.
+        crossed four-bar with dopri5 at rtol 1e-10 and rank_rtol 1e-10: with 1e-4 the first
+        change point is passed in 72 steps with 6e-10 error; without, the step collapses to
+        3e-11 s — the adaptive rank tolerance of :func:`simulate` now cures that too); harmful
+        with fixed-step RK4 (2 J energy kick), so not the default.
     """
 
     tol: float = 0.0
