@@ -19,7 +19,9 @@ Per state (``n`` coordinates, ``m`` constraint rows):
    directions the right singular vectors; the same rotations applied to the augmented column give
    ``Uᵀ D γ``. Rows with ``σ_i ≤ rtol · σ_max`` are dropped (same rank policy as
    :func:`nonmin.core.range_basis`; Jacobi and LAPACK's ``gesdd`` can disagree only on a
-   singular value within round-off of the cutoff);
+   singular value within round-off of the cutoff). Difference: a row whose norm has fallen to
+   ``≤ eps · ‖DA‖_F`` (e.g. the difference of two duplicated rows) is not rotated any more — its
+   σ is round-off, far below any cutoff ``rtol ≥ 1e-15``, and rotating it would only chase noise;
 4. with ``V`` (r × n) the kept unit rows: ``Q = VᵀV``, ``PMP = M − QM − MQ + QMQ`` by rank-r
    updates (``K = MVᵀ``, ``G = VK``; no n × n × n products), ``μ = tr(PMP)/(n − r)``
    (``tr(M)/n`` if ``r = n``; 1 if not positive), ``M̄ = PMP + μQ`` (lower triangle);
