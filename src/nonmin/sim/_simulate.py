@@ -83,15 +83,6 @@ ADAPTIVE_RANK_RTOL = 1e-6
 #: Absolute tolerance (s) of event location (Brent's method).
 EVENT_XTOL = 1e-13
 
-_KNOWN_EXTRA = (
-    "rank_rtol",
-    "impact_velocity_threshold",
-    "zeno_max_events",
-    "zeno_window",
-    "project_initial",
-    "h0",
-    "event_rearm",
-)
 
 
 # --------------------------------------------------------------------------- evaluation
@@ -363,7 +354,14 @@ def simulate(
     max_steps: int = 10_000_000,
     throw: bool = True,
     progress: bool | None = None,
-    **options: Any,
+    rank_rtol: float | None = None,
+    impact_velocity_threshold: float = 1e-6,
+    zeno_max_events: int = 20,
+    zeno_window: float = 1e-6,
+    event_rearm: float = 1e-9,
+    project_initial: bool | None = None,
+    h0: float | None = None,
+    **unknown: Any,
 ) -> Trajectory:
     """Simulate a constrained mechanical system through singularities and topology switches.
 
@@ -408,15 +406,24 @@ def simulate(
         Raise on failure; with False return the partial trajectory with ``status`` failed.
     progress : bool or None
         Progress bar (None: only when stderr is a terminal).
-    **options
-        ``rank_rtol`` (rank tolerance of A; default: the core's 1e-10 for fixed-step methods,
-        :data:`ADAPTIVE_RANK_RTOL` = 1e-6 for adaptive ones), ``impact_velocity_threshold`` (m/s, default 1e-6),
-        ``zeno_max_events`` / ``zeno_window`` (raise :class:`ZenoError` when more than that many
-        events fire within that time window; defaults 20 and 1e-6 s), ``project_initial``
-        (project the initial state onto the constraints; default True with projection),
-        ``h0`` (first step of adaptive methods), ``event_rearm`` (a user event that fired
-        cannot fire again until ``|guard| > event_rearm``, default 1e-9: guards that stay at 0
-        after their transition, e.g. a constraint that was just activated, do not chatter).
+    rank_rtol : float, optional
+        Rank tolerance of A (relative, on the row-equilibrated A); default: the core's 1e-10
+        for fixed-step methods, :data:`ADAPTIVE_RANK_RTOL` = 1e-6 for adaptive ones.
+    impact_velocity_threshold : float, default 1e-6
+        A bounce whose separation speed (m/s along the gap) is at most this becomes a plastic,
+        persistent contact (the Zeno accumulation point is truncated there). Bounces whose
+        predicted flight time is below two fixed steps are treated the same way.
+    zeno_max_events, zeno_window : int, float
+        Raise :class:`~nonmin.errors.ZenoError` when more than ``zeno_max_events`` events fire
+        within ``zeno_window`` seconds (defaults 20 and 1e-6 s).
+    event_rearm : float, default 1e-9
+        A user event that fired cannot fire again until ``|guard| > event_rearm``: guards that
+        stay at 0 after their transition (a constraint that was just activated) do not chatter.
+    project_initial : bool, optional
+        Project the initial state onto the active constraints (default: True with the
+        projection stabilization, False otherwise).
+    h0 : float, optional
+        First step of adaptive methods (default: Hairer's starting-step heuristic).
 
     Returns
     -------
@@ -429,11 +436,11 @@ def simulate(
     SimulationError, ZenoError, NotPositiveDefiniteError
         When the integration cannot go on (unless ``throw=False``).
     """
-    unknown = sorted(set(options).difference(_KNOWN_EXTRA))
     if unknown:
-        raise InputError(
-            f"simulate: unknown keyword argument(s) {unknown}; known extra options: {list(_KNOWN_EXTRA)}"
-        )
+        import inspect
+
+        known = [k for k, v in inspect.signature(simulate).parameters.items() if v.kind == v.KEYWORD_ONLY]
+        raise InputError(f"simulate: unknown keyword argument(s) {sorted(unknown)}; known: {known}")
     # ---------------------------------------------------------------- model / mechanism
     if not isinstance(model, Model):
         mech = model
@@ -463,12 +470,12 @@ def simulate(
         dt = _positive(dt, "dt")
     integ = _resolve_method(method, dt, _positive(rtol, "rtol"), _positive(atol, "atol"))
     if integ.adaptive:
-        h0 = float(options.get("h0", 0.0))
+        h_init = 0.0 if h0 is None else _positive(h0, "h0")
         if dt is not None and hasattr(integ, "h_max"):
             integ = type(integ)(**{**integ.__dict__, "h_max": dt})
     else:
         step = getattr(integ, "dt", None) or dt or DEFAULT_DT
-        h0 = _positive(step, "dt")
+        h_init = _positive(step, "dt")
     events = tuple(events)
     for ev in events:
         if not isinstance(ev, Event):
@@ -492,14 +499,19 @@ def simulate(
         raise InputError(f"controller must be callable, got {type(controller).__name__}")
     if int(max_steps) < 1:
         raise InputError(f"max_steps must be ≥ 1, got {max_steps!r}")
-    rank_rtol = options.get("rank_rtol")
     if rank_rtol is None and integ.adaptive:
         rank_rtol = ADAPTIVE_RANK_RTOL
-    v_thresh = float(options.get("impact_velocity_threshold", 1e-6))
-    zeno_max = int(options.get("zeno_max_events", 20))
-    zeno_window = float(options.get("zeno_window", 1e-6))
-    rearm_tol = float(options.get("event_rearm", 1e-9))
-    project_initial = bool(options.get("project_initial", isinstance(stab, Projection)))
+    elif rank_rtol is not None and not (0.0 < float(rank_rtol) < 1.0):
+        raise InputError(f"rank_rtol must lie in (0, 1), got {rank_rtol!r}")
+    v_thresh = float(impact_velocity_threshold)
+    if not v_thresh >= 0.0:
+        raise InputError(f"impact_velocity_threshold must be ≥ 0, got {impact_velocity_threshold!r}")
+    zeno_max = int(zeno_max_events)
+    zeno_window = _positive(zeno_window, "zeno_window")
+    rearm_tol = float(event_rearm)
+    if not rearm_tol >= 0.0:
+        raise InputError(f"event_rearm must be ≥ 0, got {event_rearm!r}")
+    project_initial = isinstance(stab, Projection) if project_initial is None else bool(project_initial)
 
     cstate = controller.initial_state() if hasattr(controller, "initial_state") else None
     unilateral = tuple(c.name for c in model.constraints if c.kind == "unilateral") if contact else ()
@@ -510,7 +522,7 @@ def simulate(
             "t_span": [t0, t1],
             "method": integ.name or type(integ).__name__,
             "integrator": repr(integ),
-            "dt": h0 if not integ.adaptive else dt,
+            "dt": h_init if not integ.adaptive else dt,
             "rtol": rtol,
             "atol": atol,
             "stabilization": repr(stab),
@@ -540,7 +552,7 @@ def simulate(
         out_i = 0 if t_out is None else int(np.searchsorted(t_out, t0, side="right"))
         watches = _watches(events, system.active, unilateral)
         gvals = [_guard_value(system, w, p) for w in watches]
-        state = integ.init(system.rhs, t, np.concatenate((q, qd)), h0)
+        state = integ.init(system.rhs, t, np.concatenate((q, qd)), h_init)
         project_y = None
         if isinstance(stab, Projection) and integ.adaptive:
 
@@ -635,7 +647,7 @@ def simulate(
                     forced = w.kind == "impact" and gvals[i] <= 0.0
                     qn, qdn, new_active, label, term_i, cap_i = _apply(
                         system, w, p, 0.0 if forced else restitution, v_thresh,
-                        h0 if not integ.adaptive else 0.0,
+                        h_init if not integ.adaptive else 0.0,
                     )
                     if isinstance(stab, Projection) and new_active:
                         qn, qdn = stab.project(model, te, qn, qdn, new_active, rank_rtol)
