@@ -68,7 +68,7 @@ def scratch(n, m):
 _FM: set[str] = set()
 
 
-@njit(cache=True, fastmath=_FM)
+@njit(cache=True, fastmath=_FM, inline="always")  # numba-level inlining: no call, no refcounts
 def solve_state(M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
                 qdd, fc, P, L, want_pl, B, S, G, W, vec):  # fmt: skip
     """Evaluate one state; returns ``(status, rank, mu, pivot_ratio)``. See module docstring.
