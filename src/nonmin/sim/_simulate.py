@@ -581,20 +581,27 @@ def simulate(
                 qq, vv = stab.project(model, _t + s, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
                 return system.point(_t + s, qq, vv)
 
+            q1, qd1 = stab.project(model, t_new, res.state.y[:n].copy(), res.state.y[n:].copy(),
+                                   system.active, rank_rtol)
+            # the full evaluation at the step end is needed only for guards or recording
+            p1 = system.point(t_new, q1, qd1) if (watches or t_out is None) else None
             dense = res.dense
+            end_tol = 1e-12 * max(1.0, abs(t_new))
 
-            def out_at(s: float, _d: Any = dense, _t: float = t_start) -> _Point:
-                """Output sample: the continuous extension when the method has one, else a partial step."""
+            def out_at(
+                s: float, _d: Any = dense, _t: float = t_start, _h: float = h, _q: Any = q1,
+                _v: Any = qd1, _p: Any = p1, _tn: float = t_new, _tol: float = end_tol,
+            ) -> _Point:
+                """Output sample: the step end itself, the continuous extension when the method
+                has one, else a partial step."""
+                if abs(s - _h) <= _tol:
+                    return _p if _p is not None else system.point(_tn, _q, _v)
                 if _d is None:
                     return at(s)
                 yy = _d(_t + s)
                 qq, vv = stab.project(model, _t + s, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
                 return system.point(_t + s, qq, vv)
 
-            q1, qd1 = stab.project(model, t_new, res.state.y[:n].copy(), res.state.y[n:].copy(),
-                                   system.active, rank_rtol)
-            # the full evaluation at the step end is needed only for guards or recording
-            p1 = system.point(t_new, q1, qd1) if (watches or t_out is None) else None
             new_g = [_guard_value(system, w, p1) for w in watches] if p1 is not None else []
             fired = [
                 i for i, w in enumerate(watches)
