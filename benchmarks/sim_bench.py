@@ -975,8 +975,12 @@ def write_markdown(path: Path, results: dict[str, Any]) -> None:
              "Machine: " + ", ".join(f"{k}={v}" for k, v in info.items() if k != "versions"),
              "", "Versions: " + ", ".join(f"{k} {v}" for k, v in info["versions"].items()), "",
              f"Load average (1, 5, 15 min) before: {results['load_before']}, after: "
-             f"{results['load_after']}. Wall times: median of {results['repeat']} timed runs "
-             "after one warm-up run, all engines in the same process; setup excluded. "
+             f"{results['load_after']}. Wall times: median of the timed runs after one warm-up "
+             "run (`wall_runs_s` in the JSON: "
+             + ("2–3 per row, merged from the separate runs listed above"
+                if results.get("combined") else f"{results['repeat']} per row")
+             + f"; nonmin runs longer than {LONG_RUN_S:g} s are timed once, without warm-up); "
+             "setup (model building, compilation) excluded. "
              f"Branch tolerance {BRANCH_TOL} rad; samples every {SAMPLE_DT} s.", "",
              "Definitions: closure = largest separation of two bar ends that a joint keeps "
              "together [m]; dE = max |E(t) − E(0)| [J]; err = max |B(t) − B_ref(t)| of the "
@@ -1039,7 +1043,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         for block in mechs_m.values():
             block["comparison"] = compare(block["rows"])
         merged["mechanisms"] = mechs_m
-        merged["command"] = " ; ".join(p["command"] for p in parts)
+        merged["command"] = " ; ".join([*(p["command"] for p in parts),
+                                        "python " + " ".join([Path(sys.argv[0]).name,
+                                                              *(argv or sys.argv[1:])])])
+        merged["combined"] = True
+        merged["date_utc"] = ", ".join(p["date_utc"] for p in parts)
         merged["load_before"] = [p["load_before"] for p in parts]
         merged["load_after"] = [p["load_after"] for p in parts]
         merged["discussion"] = _discussion()
