@@ -59,3 +59,51 @@ def test_every_schema_key_is_documented():
 
     for path, key in walk(SCENARIO_SCHEMA):
         assert f"`{key}`" in doc, f"docs/scenarios.md does not document {path}"
+
+
+EXAMPLES = ROOT / "examples"
+
+
+def test_planar_description_and_urdf_constraints_build(tmp_path):
+    from nonmin.io import run_scenario
+
+    sc = load_scenario(EXAMPLES / "slider_crank_planar.toml")
+    res = run_scenario(sc, tmp_path / "sc", t_final=0.2, progress=False, write=False)
+    traj = res.trajectory
+    assert traj.status.value == "success" and traj.phi_norm.max() < 1e-10
+    assert res.model.n == 9 and "motor" in res.model.constraint_names
+    pytest.importorskip("pinocchio")
+    sc = load_scenario(EXAMPLES / "fourbar_urdf.toml")
+    res = run_scenario(sc, tmp_path / "fb", t_final=0.2, progress=False, write=False)
+    m = res.model
+    assert m.constraint("closure").dim == 3
+    assert set(res.trajectory.rank.tolist()) == {2}  # a 3D point closure of a planar loop: rank 2
+    assert res.trajectory.energy_drift < 1e-6
+
+
+@pytest.mark.parametrize(
+    ("items", "fragment"),
+    [
+        ('[[model.planar.items]]\ncall = "explode"\n', "model.planar.items[0].call: expected one of"),
+        ('[[model.planar.items]]\ncall = "body"\nname = "b"\nmass = 1.0\n', "missing key(s) ['inertia']"),
+        ('[[model.planar.items]]\ncall = "body"\nname = "b"\nmass = 1.0\ninertia = 1.0\ncolour = "red"\n',
+         "unknown key(s) ['colour']"),
+        ('[[model.planar.items]]\ncall = "body"\nname = "b"\nmass = -1.0\ninertia = 1.0\n', "items[0]"),
+    ],
+)
+def test_bad_planar_descriptions(tmp_path, items, fragment):
+    p = _write(tmp_path, "[model.planar]\n" + items)
+    sc = load_scenario(p)
+    with pytest.raises(ScenarioError) as info:
+        sc.build_model()
+    assert str(p) in str(info.value) and fragment in str(info.value), str(info.value)
+
+
+def test_bad_frame_constraint(tmp_path):
+    p = _write(
+        tmp_path,
+        '[model]\nurdf = "x.urdf"\n[[model.constraints]]\ntype = "glue"\nname = "c"\n',
+    )
+    (tmp_path / "x.urdf").write_text("<robot name='x'><link name='a'/></robot>")
+    with pytest.raises(ScenarioError, match=r"model.constraints\[0\].type: expected one of"):
+        load_scenario(p).build_model()

@@ -21,6 +21,16 @@ _NUM = (float, int)
 _NUMLIST = Key((list,), item_types=_NUM)
 
 #: The schema of scenario files: every section and key, its type and help text.
+_DESCRIPTION = Section(
+    keys={
+        "name": Key((str,)),
+        "description": Key((str,)),
+        "gravity": _NUMLIST,
+    },
+    array_sections={"items": Section(keys={"call": Key((str,), required=True)}, open_keys=True)},
+    help="builder calls in order: call = method name, other keys = its arguments",
+)
+
 SCENARIO_SCHEMA = Section(
     keys={
         "name": Key((str,), help="scenario name"),
@@ -37,9 +47,17 @@ SCENARIO_SCHEMA = Section(
                 "urdf": Key((str,), help="URDF file (relative to the scenario file)"),
                 "mjcf": Key((str,), help="MJCF file (relative to the scenario file)"),
                 "root_joint": Key((str,), choices=("fixed", "freeflyer"), help="URDF base"),
+                "inactive": Key(
+                    (list,), item_types=(str,), help="[[model.constraints]] names starting inactive"
+                ),
             },
             sections={
-                "params": Section(open_keys=True, help="keyword arguments of the model source")
+                "params": Section(open_keys=True, help="keyword arguments of the model source"),
+                "planar": _DESCRIPTION,
+                "spatial": _DESCRIPTION,
+            },
+            array_sections={
+                "constraints": Section(keys={"type": Key((str,), required=True)}, open_keys=True)
             },
         ),
         "initial": Section(
@@ -49,6 +67,7 @@ SCENARIO_SCHEMA = Section(
                 "active": Key((list,), item_types=(str,), help="active constraint names"),
                 "t0": Key(_NUM),
                 "assemble": Key((bool,), help="assemble q, qd onto the constraints first"),
+                "fixed": Key((list,), item_types=(str,), help="coordinates assembly keeps"),
             }
         ),
         "simulate": Section(
@@ -161,11 +180,15 @@ class Scenario:
     def build_model(self) -> tuple[Any, Any]:
         """Return ``(model, default_state_or_None)`` from the [model] table."""
         m = self.section("model")
-        sources = [k for k in ("library", "entry_point", "urdf", "mjcf") if k in m]
+        sources = [k for k in ("library", "entry_point", "urdf", "mjcf", "planar", "spatial") if k in m]
         if len(sources) != 1:
             raise ScenarioError(
                 f"{self.path}: table [model] needs exactly one of 'library', 'entry_point', "
-                f"'urdf', 'mjcf', got {sources or 'none'}"
+                f"'urdf', 'mjcf', [model.planar], [model.spatial], got {sources or 'none'}"
+            )
+        if "constraints" in m and sources[0] not in ("urdf", "mjcf"):
+            raise ScenarioError(
+                f"{self.path}: [[model.constraints]] applies to 'urdf'/'mjcf' models only"
             )
         params = dict(m.get("params", {}))
         src = sources[0]
@@ -175,6 +198,13 @@ class Scenario:
                 from .. import library
 
                 obj = library.get(m["library"], **params)
+            elif src in ("planar", "spatial"):
+                from ._describe import build_planar, build_spatial
+
+                build = build_planar if src == "planar" else build_spatial
+                obj = build(m[src], self.path)
+                if src == "spatial":
+                    return obj, obj.state(obj.reference_configuration())
             elif src == "entry_point":
                 fn = resolve_entry_point(m["entry_point"], self.path, "model.entry_point")
                 obj = fn(**params)
@@ -184,6 +214,15 @@ class Scenario:
                 path = self.resolve_path(m[src])
                 if not path.exists():
                     raise ScenarioError(f"{self.path}: key 'model.{src}': file not found: {path}")
+                from ._describe import frame_constraints
+
+                cons = frame_constraints(m.get("constraints", []), self.path)
+                if cons:
+                    params["constraints"] = cons
+                    inactive = set(m.get("inactive", []))
+                    params.setdefault(
+                        "default_active", [c.name for c in cons if c.name not in inactive]
+                    )
                 if src == "urdf":
                     kw = dict(params)
                     if m.get("root_joint") == "freeflyer":
@@ -237,7 +276,12 @@ class Scenario:
         if ini.get("assemble", False):
             from ..model import assemble
 
-            state = assemble(model, state.q, state.qd, t=state.t, active=state.active)
+            try:
+                state = assemble(
+                    model, state.q, state.qd, t=state.t, active=state.active, fixed=ini.get("fixed")
+                )
+            except NonminError as exc:
+                raise ScenarioError(f"{self.path}: table [initial]: {exc}") from None
         return state
 
 
