@@ -31,6 +31,7 @@ _DESCRIPTION = Section(
     help="builder calls in order: call = method name, other keys = its arguments",
 )
 
+#: The schema of scenario files: every section and key, its type and help text.
 SCENARIO_SCHEMA = Section(
     keys={
         "name": Key((str,), help="scenario name"),
