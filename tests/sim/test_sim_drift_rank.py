@@ -26,3 +26,14 @@ def test_drift_rank_rtol_on_and_off_manifold():
     assert drift_rank_rtol(off, None) == DRIFT_RANK_FACTOR * 2e-7  # |φ|/‖a‖ = 2e-7 on row 2
     nonhol = off._replace(holonomic=np.array([False, False]))
     assert drift_rank_rtol(nonhol, 1e-8) == 1e-8
+
+
+def test_simulate_accepts_an_assembled_state():
+    from nonmin.model import assemble
+
+    mech = library.get("crossed_four_bar")
+    st = assemble(mech.model, mech.state.q, mech.state.qd)
+    traj = simulate(mech.model, (0.0, 0.05), st, method="rk4", dt=1e-3, progress=False)
+    assert traj.active[0] == st.active
+    np.testing.assert_array_equal(traj.q[0], st.q)
+    np.testing.assert_array_equal(traj.qd[0], st.qd)

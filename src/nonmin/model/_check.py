@@ -54,7 +54,7 @@ class ModelReport:
             lines.append(f"{it.name:44s} {it.value:11.3e} {it.tolerance:9.1e}  {res} {it.detail}")
         if self.t.size:
             lines.append(
-                f"along t ∈ [{self.t[0]:.3g}, {self.t[-1]:.3g}] s ({self.t.size} samples): rank A ∈ "
+                f"along t ∈ [{self.t[0]:.3g}, {self.t[-1]:.3g}] s ({self.t.size} samples): sampled rank A ∈ "
                 f"[{int(self.rank.min())}, {int(self.rank.max())}], cond(M̄) ∈ "
                 f"[{self.cond_mbar.min():.3g}, {self.cond_mbar.max():.3g}], μ ∈ "
                 f"[{self.mu.min():.3g}, {self.mu.max():.3g}]"
@@ -62,9 +62,15 @@ class ModelReport:
             if self.rank_drops:
                 shown = ", ".join(f"{t:.4g}" for t in self.rank_drops[:10])
                 more = f" (+{len(self.rank_drops) - 10} more)" if len(self.rank_drops) > 10 else ""
-                lines.append(f"rank of A drops at t = {shown}{more} s")
+                lines.append(
+                    f"rank of A drops at t = {shown}{more} s (σ_r/σ₁ of A has a local minimum "
+                    f"below {NEAR_SINGULAR:g} there: singular or change points, which samples "
+                    "rarely hit exactly)"
+                )
             else:
-                lines.append("rank of A constant along the trajectory")
+                lines.append("rank of A constant along the trajectory (no near-singular point)")
+            if self.cond_mbar.size and float(self.cond_mbar.max()) < 1.0 + 1e-9:
+                lines.append("cond(M̄) = 1: one degree of freedom, μ equal to the one eigenvalue of PMP")
         lines.append("PASSED" if self.passed else "FAILED")
         return "\n".join(lines)
 

@@ -58,7 +58,7 @@ from ..errors import (
     UnknownNameError,
     ZenoError,
 )
-from ..model import ConstraintTerms, Model
+from ..model import ConstraintTerms, Model, State
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
 from ._integrators import METHODS, Integrator, StepperState
 from ._progress import Progress
@@ -407,7 +407,9 @@ def simulate(
     t_span : (float, float) or float
         ``(t0, t1)`` with ``t0 < t1``; a single number means ``(0, t1)``.
     q0, qd0 : array_like, shape (n,)
-        Initial coordinates and velocities (qd0 defaults to zero).
+        Initial coordinates and velocities (qd0 defaults to zero). ``q0`` may also be a
+        :class:`nonmin.model.State` (e.g. from :func:`nonmin.model.assemble`), which then supplies
+        ``qd0`` and ``active`` too.
     active : iterable of str, optional
         Initially active constraints (default ``model.default_active``).
     method : str or Integrator, default "rk4"
@@ -492,6 +494,13 @@ def simulate(
                 qd0 = st.qd
             if active is None:
                 active = st.active
+    if isinstance(q0, State):  # e.g. the result of nonmin.model.assemble
+        st0 = q0
+        q0 = st0.q
+        if qd0 is None:
+            qd0 = st0.qd
+        if active is None:
+            active = st0.active
     n, k = model.n, model.k
     t0, t1 = _t_span(t_span)
     if q0 is None:
