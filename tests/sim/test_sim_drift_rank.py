@@ -35,5 +35,6 @@ def test_simulate_accepts_an_assembled_state():
     st = assemble(mech.model, mech.state.q, mech.state.qd)
     traj = simulate(mech.model, (0.0, 0.05), st, method="rk4", dt=1e-3, progress=False)
     assert traj.active[0] == st.active
-    np.testing.assert_array_equal(traj.q[0], st.q)
-    np.testing.assert_array_equal(traj.qd[0], st.qd)
+    # the initial projection onto the manifold moves a consistent state only at round-off
+    np.testing.assert_allclose(traj.q[0], st.q, atol=1e-12)
+    np.testing.assert_allclose(traj.qd[0], st.qd, atol=1e-12)
