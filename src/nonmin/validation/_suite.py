@@ -249,7 +249,7 @@ def a02_n_four_bar(n: int = 2, quick: bool = False) -> ValidationRecord:
         checks += [
             Check("energy drift max |E − E0|", traj.energy_drift, unit="J"),
             Check("max ‖φ‖∞ (closure)", float(np.max(traj.phi_norm)), unit="m"),
-            Check("min rank of A (rank drops at the singular configurations)",
+            Check("min rank of A at the output samples",
                   int(np.min(traj.rank))),
             Check("accepted steps", traj.n_steps),
         ]
