@@ -64,7 +64,8 @@ def scratch(n, m):
     """Scratch arrays of :func:`solve_state` for ``n`` coordinates and ``m`` rows."""
     return (np.empty((m, n + 1)), np.empty((m, n)), np.empty((m, n)), np.empty((m, n)),
             np.empty((m, n)), np.empty((m, n)), np.empty((m, m)), np.empty((n, n)),
-            np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m), np.empty(m))  # fmt: skip
+            np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m), np.empty(m),
+            np.empty(n))  # fmt: skip
 
 
 #: No fast-math flags: strict IEEE arithmetic, so the compiled per-state routine gives bitwise the
@@ -93,7 +94,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
     m = A.shape[1]
     n4 = n - n % 4
     nmu = mu_in.shape[0]
-    B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv = scratch(n, m)
+    B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv = scratch(n, m)
     for b in range(lo, hi):
         # ---------------------------------------------------------------- 1. input checks
         # Finiteness: x·0 is 0 for finite x and NaN for ±inf/NaN; the per-column sums cw[j] (each
@@ -324,8 +325,10 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                 if piv / dmax < rt:
                     rt = piv / dmax
             W[j, j] = ljj
+            rj = 1.0 / ljj  # one division per column, as LAPACK's dpotf2
+            dinv[j] = rj
             for i in range(j + 1, n):
-                x = W[i, j] / ljj
+                x = W[i, j] * rj
                 W[i, j] = x
                 cw[i] = x
             for i in range(j + 1, n):
@@ -361,12 +364,12 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             for i in range(n):
                 u[i] -= V[k, i] * c
         for k in range(n):  # L y = rhs, column-oriented (independent updates)
-            y = u[k] / W[k, k]
+            y = u[k] * dinv[k]
             u[k] = y
             for i in range(k + 1, n):
                 u[i] -= W[i, k] * y
         for i in range(n - 1, -1, -1):  # Lᵀ x = y, column-oriented (contiguous rows of L)
-            xi = u[i] / W[i, i]
+            xi = u[i] * dinv[i]
             qdd[b, i] = xi
             for k in range(i):
                 u[k] -= W[i, k] * xi
