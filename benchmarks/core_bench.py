@@ -29,6 +29,7 @@ Usage::
 
     python benchmarks/core_bench.py            # full run, rewrites the table in README.md
     python benchmarks/core_bench.py --quick    # small sizes, few repeats (smoke test)
+    python benchmarks/core_bench.py --batch-n12   # only nonmin's batched path, n = 12, N = 10⁴
 
 Results: ``benchmarks/results/core_bench.json`` and ``core_bench.csv``; Markdown table between
 the markers in ``benchmarks/README.md``.
@@ -525,11 +526,61 @@ def update_readme(table: str, command: str) -> None:
     README.write_text(text)
 
 
+def batch_n12(n_states: int = 10_000, repeats: int = 15) -> dict[str, Any]:
+    """Only nonmin's compiled batched path at n = 12 (planar and spatial chain), N states per
+    call: wall and process CPU time per state, serial and parallel driver (the default choice
+    for this N), with the load average. Nothing is written."""
+    import nonmin.core as core
+    from nonmin.core import _fast
+
+    core.set_backend("numba")
+    out: dict[str, Any] = {"machine": machine_info(), "N": n_states, "results": []}
+    for kind in ("planar", "spatial"):
+        T = terms(build_chain(kind, 12, n_states))
+        M, h, A, gam, tau = T["M"], T["h"], T["A"], T["gamma"], T["tau"]
+        for fn_name in ("forward_dynamics", "constraint_force"):
+            fn = getattr(core, fn_name)
+            drivers = {"default": _fast.PARALLEL_MIN_BATCH, "serial": 1 << 62}
+            fns = {}
+            for drv, threshold in drivers.items():
+
+                def call(threshold: int = threshold, fn: Any = fn, a: Any = (M, h, A, gam, tau)) -> Any:
+                    old = _fast.PARALLEL_MIN_BATCH
+                    _fast.PARALLEL_MIN_BATCH = threshold
+                    try:
+                        return fn(*a)
+                    finally:
+                        _fast.PARALLEL_MIN_BATCH = old
+
+                fns[drv] = call
+            group = time_group(fns, target_s=0.05, repeats=repeats)
+            for drv, t in group.items():
+                row = {"mechanism": f"{kind}-12", "function": fn_name, "driver": drv,
+                       **_us(t, n_states)}  # fmt: skip
+                out["results"].append(row)
+                print(
+                    f"{kind}-12 {fn_name:17s} {drv:8s} wall median {row['median_us']:.3f} "
+                    f"(min {row['min_us']:.3f}) us/state, CPU median "
+                    f"{row['cpu_median_us']:.3f} us/state", flush=True,
+                )  # fmt: skip
+    out["machine"]["loadavg_end"] = list(os.getloadavg())
+    print("load average start", out["machine"]["loadavg_start"], "end",
+          out["machine"]["loadavg_end"], "threads", out["machine"]["numba_threads"])  # fmt: skip
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="small sizes, few repeats")
     parser.add_argument("--no-readme", action="store_true", help="do not rewrite README.md")
+    parser.add_argument(
+        "--batch-n12", action="store_true",
+        help="only nonmin's batched path at n = 12 over 10^4 states (no files written)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
+    if args.batch_n12:
+        batch_n12()
+        return 0
     if args.quick:
         mechs = [("planar", 3), ("planar", 12), ("spatial", 6)]
         sizes, target_s, repeats, n_check = [1, 100, 1000], 0.01, 3, 20

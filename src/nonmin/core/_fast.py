@@ -295,7 +295,7 @@ def _solve_batch(kern: ModuleType, Mm: FloatArray, hv: FloatArray, Am: FloatArra
     mub = flat(mu_v, ()) if has_mu else _NO_MU
     want_pl = what == ALL
     qdd = np.empty((N, n))
-    fc = np.empty((N, n))
+    fc = np.empty((0 if what == QDD else N, n))  # empty: the kernel skips f_c
     if want_pl:
         P = np.empty((N, n, n))
         L = np.empty((N, n, n))

@@ -84,7 +84,8 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
 
     Inputs ``M`` (N, n, n), ``h``, ``f`` (N, n) (``f`` read only if ``has_f``), ``A``
     (N, m, n), ``gam`` (N, m), ``mu_in`` (N or 1; used if ``has_mu``). Outputs per state ``b``:
-    ``qdd[b]``, ``fc[b]``, ``P[b]``, ``L[b]`` (only if ``want_pl``), ``status[b]`` (a status
+    ``qdd[b]``, ``fc[b]`` (only if ``fc`` is not empty: pass shape (0, n) when only q̈ is
+    wanted), ``P[b]``, ``L[b]`` (only if ``want_pl``), ``status[b]`` (a status
     code), ``rank[b]``, ``mu_out[b]``, ``ratio[b]`` (smallest pivot ratio if
     :data:`SMALL_PIVOT`). The loop indexes the batch arrays directly (no per-state views, whose
     reference counting cost ~0.2 µs per state) and reuses one set of scratch arrays. See the
@@ -94,6 +95,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
     m = A.shape[1]
     n4 = n - n % 4
     nmu = mu_in.shape[0]
+    want_fc = fc.shape[0] > 0  # an empty fc: q̈ only
     B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv = scratch(n, m)
     for b in range(lo, hi):
         # ---------------------------------------------------------------- 1. input checks
@@ -373,14 +375,15 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             qdd[b, i] = xi
             for k in range(i):
                 u[k] -= W[i, k] * xi
-        for i in range(n):  # f_c = M qdd − g
-            cw[i] = 0.0
-        for j in range(n):
-            c = qdd[b, j]
+        if want_fc:
+            for i in range(n):  # f_c = M qdd − g
+                cw[i] = 0.0
+            for j in range(n):
+                c = qdd[b, j]
+                for i in range(n):
+                    cw[i] += M[b, j, i] * c
             for i in range(n):
-                cw[i] += M[b, j, i] * c
-        for i in range(n):
-            fc[b, i] = cw[i] - g[i]
+                fc[b, i] = cw[i] - g[i]
         if want_pl:
             for i in range(n):
                 for j in range(n):
