@@ -102,3 +102,46 @@ def test_console_script_entry_point():
     cmd = [exe] if exe else [sys.executable, "-m", "nonmin.cli"]
     res = subprocess.run([*cmd, "--version"], capture_output=True, text=True, timeout=60)
     assert res.returncode == 0 and "nonmin" in res.stdout
+
+
+def test_validate_quick_writes_report(tmp_path, capsys):
+    report = tmp_path / "validation.md"
+    code = main(["validate", "--report", str(report)])
+    out = capsys.readouterr().out
+    assert code == EXIT_OK, out
+    assert "A01" in out and "crossed four-bar" in out
+    text = report.read_text()
+    assert "# Validation report" in text and "pass" in text
+
+
+def test_entry_point_model_and_events(tmp_path, monkeypatch, capsys):
+    pkg = tmp_path / "mymodels.py"
+    pkg.write_text(
+        "from nonmin import library\n"
+        "def build(name='crossed_four_bar'):\n"
+        "    return library.get(name)\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    sc = tmp_path / "ep.toml"
+    sc.write_text(
+        'name = "entry point + events"\n'
+        '[model]\nentry_point = "mymodels:build"\n[model.params]\nname = "crossed_four_bar"\n'
+        '[simulate]\nt_final = 0.3\nmethod = "rk4"\ndt = 1e-3\noutput_dt = 0.01\n'
+        '[[events]]\nname = "cut D"\nat_time = 0.1\ntransition = "deactivate"\nconstraints = ["D"]\n'
+        '[output]\nplots = false\nanimation = false\n'
+    )
+    code = main(["run", str(sc), "--out", str(tmp_path / "o")])
+    assert code == EXIT_OK, capsys.readouterr().err
+    traj = load_trajectory(tmp_path / "o" / "trajectory.npz")
+    assert [e.name for e in traj.events] == ["cut D"]
+    assert traj.events[0].t == pytest.approx(0.1, abs=1e-10)
+    assert "D" in traj.active[0] and "D" not in traj.active[-1]
+    assert traj.rank[0] == 8 and traj.rank[-1] == 6  # the loop opened: two rows fewer
+
+
+def test_bad_entry_point(tmp_path, capsys):
+    sc = tmp_path / "bad.toml"
+    sc.write_text('[model]\nentry_point = "no_such_module_xyz:build"\n')
+    assert main(["run", str(sc)]) == EXIT_USAGE
+    err = capsys.readouterr().err
+    assert "model.entry_point" in err and "no_such_module_xyz" in err

@@ -174,6 +174,12 @@ _DEFAULT_PARAMS = tuple(
     tuple(_params(bool(hf), DEFAULT_RTOL, bool(pl)) for pl in (0, 1)) for hf in (0, 1)
 )
 
+#: In ``"auto"`` mode the compiled path is used up to this n; above it the NumPy path (LAPACK
+#: SVD) is faster: one A02 N = 40 evaluation (n = 243, A 242 × 243) took 267 ms compiled
+#: (Jacobi SVD) against 42 ms with NumPy (one BLAS thread). ``set_backend("numba")`` forces
+#: the compiled path at any n.
+AUTO_NUMBA_MAX_N = 64
+
 #: ``what`` codes of :func:`solve`.
 QDD, FC, ALL = 0, 1, 2
 
@@ -195,6 +201,8 @@ def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | N
     # Coerce once (no copy for float64 C-contiguous arrays); finiteness and symmetry are checked
     # inside the kernel.
     Mm = M if type(M) is _ND and M.dtype is _F64 and M.flags.c_contiguous else _prep(M, "M")
+    if Mm.ndim and Mm.shape[-1] > AUTO_NUMBA_MAX_N and _state["name"] == "auto":
+        return None  # large n: LAPACK's SVD beats the compiled Jacobi SVD (measured)
     hv = h if type(h) is _ND and h.dtype is _F64 and h.flags.c_contiguous else _prep(h, "h")
     Am = A if type(A) is _ND and A.dtype is _F64 and A.flags.c_contiguous else _prep(A, "A")
     gv = (
