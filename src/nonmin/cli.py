@@ -58,11 +58,15 @@ def _summary_row(name: str, traj: Any, wall: float) -> dict[str, Any]:
 
 
 def _format_rows(rows: Sequence[dict[str, Any]]) -> str:
-    head = f"{'scenario':18s} {'status':16s} {'t_end':>7s} {'|ΔE| max':>10s} {'‖φ‖ max':>10s} {'‖Aqd‖ max':>10s} {'rank A':>7s} {'events':>6s} {'wall':>7s}"
+    w = max([len("scenario"), *(len(str(r["scenario"])) for r in rows)])
+    head = (
+        f"{'scenario':{w}s} {'status':16s} {'t_end':>7s} {'|ΔE| max':>10s} {'‖φ‖ max':>10s} "
+        f"{'‖Aqd‖ max':>10s} {'rank A':>7s} {'events':>6s} {'wall':>7s}"
+    )
     lines = [head, "-" * len(head)]
     for r in rows:
         lines.append(
-            f"{r['scenario']:18s} {r['status']:16s} {r['t_end']:7.3g} {r['energy_drift']:10.2e} "
+            f"{r['scenario']:{w}s} {r['status']:16s} {r['t_end']:7.3g} {r['energy_drift']:10.2e} "
             f"{r['max_phi']:10.2e} {r['max_Aqd']:10.2e} {r['rank']:>7s} {r['events']:6d} {r['wall_s']:6.1f}s"
         )
     return "\n".join(lines)
