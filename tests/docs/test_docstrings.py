@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import importlib.util
 import inspect
 import re
 from functools import cache
@@ -23,21 +24,18 @@ import pytest
 
 from nonmin.errors import MissingDependencyError
 
-PUBLIC_PACKAGES = (
-    "nonmin",
-    "nonmin.core",
-    "nonmin.model",
-    "nonmin.model.planar",
-    "nonmin.model.spatial",
-    "nonmin.model.symbolic",
-    "nonmin.model.robots",
-    "nonmin.library",
-    "nonmin.sim",
-    "nonmin.control",
-    "nonmin.viz",
-    "nonmin.io",
-    "nonmin.errors",
-)
+
+def _documented_packages() -> tuple[str, ...]:
+    """The public packages, as listed once in docs/build_api.py (the API site's module list)."""
+    path = Path(__file__).resolve().parents[2] / "docs" / "build_api.py"
+    spec = importlib.util.spec_from_file_location("nonmin_docs_build_api_modules", path)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return tuple(mod.MODULES)
+
+
+PUBLIC_PACKAGES = _documented_packages()
 
 #: Functions of nonmin.core that implement an equation of the paper (or its corrected form).
 CORE_KERNELS = (
