@@ -143,18 +143,17 @@ def run_scenario(
     """Build the model, state, controller and events of a scenario, simulate, write outputs."""
     from ..sim import simulate
 
-    model, default_state = sc.build_model()
+    model, default_state, horizon = sc.build_source()
     state = sc.initial_state(model, default_state)
     kw = simulate_kwargs(sc)
     sim = sc.section("simulate")
     t_override = t_final
-    t_final = float(sim.get("t_final", getattr(default_state, "t", 0.0) + 1.0))
-    if "t_final" not in sim:
-        lib = sc.section("model").get("library")
-        if lib:
-            from .. import library
-
-            t_final = float(library.get(lib, **dict(sc.section("model").get("params", {}))).t_final)
+    if "t_final" in sim:
+        t_final = float(sim["t_final"])
+    elif horizon is not None:
+        t_final = horizon
+    else:
+        t_final = state.t + 1.0
     if t_override is not None:
         t_final = float(t_override)
     if "output_dt" in sim:

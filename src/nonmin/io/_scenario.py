@@ -180,6 +180,12 @@ class Scenario:
     # ------------------------------------------------------------------ building
     def build_model(self) -> tuple[Any, Any]:
         """Return ``(model, default_state_or_None)`` from the [model] table."""
+        model, state, _ = self.build_source()
+        return model, state
+
+    def build_source(self) -> tuple[Any, Any, float | None]:
+        """``(model, default_state_or_None, horizon_or_None)`` from the [model] table, built once;
+        the horizon is a mechanism's benchmark ``t_final`` (library or entry point)."""
         m = self.section("model")
         sources = [k for k in ("library", "entry_point", "urdf", "mjcf", "planar", "spatial") if k in m]
         if len(sources) != 1:
@@ -205,7 +211,7 @@ class Scenario:
                 build = build_planar if src == "planar" else build_spatial
                 obj = build(m[src], self.path)
                 if src == "spatial":
-                    return obj, obj.state(obj.reference_configuration())
+                    return obj, obj.state(obj.reference_configuration()), None
             elif src == "entry_point":
                 fn = resolve_entry_point(m["entry_point"], self.path, "model.entry_point")
                 obj = fn(**params)
@@ -236,14 +242,15 @@ class Scenario:
         except TypeError as exc:
             raise ScenarioError(f"{self.path}: table [model.params]: {exc}") from None
         if hasattr(obj, "model") and hasattr(obj, "state"):
-            return obj.model, obj.state
+            horizon = getattr(obj, "t_final", None)
+            return obj.model, obj.state, None if horizon is None else float(horizon)
         from ..model import Model
 
         if not isinstance(obj, Model):
             raise ScenarioError(
                 f"{self.path}: key 'model.{src}': expected a Model or Mechanism, got {type(obj).__name__}"
             )
-        return obj, None
+        return obj, None, None
 
     def initial_state(self, model: Any, default: Any) -> Any:
         """The initial :class:`~nonmin.model.State` from [initial] (over the default one)."""
