@@ -41,6 +41,22 @@ def test_a02_n2_quick_passes_the_first_singular_configuration() -> None:
     assert rec.check("max |B0 − B0_ref| over the run").value < 1e-8  # type: ignore[operator]
 
 
+def test_a02_horizontal_times_lie_on_the_reduction() -> None:
+    """The located singular configurations are where the reduction's crank is horizontal."""
+    import numpy as np
+
+    from nonmin.validation._references import a02_parallelogram_reference
+    from nonmin.validation._suite import _a02_horizontal_times
+
+    t40 = _a02_horizontal_times(40, 20.0)
+    assert t40.size == 20  # the N = 40 crank turns over: one horizontal passage per half turn
+    assert abs(t40[0] - 0.7215) < 1e-3
+    theta, _ = a02_parallelogram_reference(40, np.concatenate([[0.0], t40]))
+    assert np.max(np.abs(np.sin(theta[1:]))) < 1e-9
+    assert _a02_horizontal_times(2, 10.0).size == 10
+    assert _a02_horizontal_times(40, 0.05).size == 0
+
+
 def test_a03_quick() -> None:
     _assert_passed(a03_andrews(quick=True))
 
