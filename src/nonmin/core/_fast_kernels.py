@@ -55,6 +55,8 @@ ASYMMETRIC = 4
 #: Maximum number of Jacobi sweeps (convergence is quadratic; m ≤ 30 needs < 10).
 MAX_SWEEPS = 60
 
+_NO_T = np.zeros((1, 1))
+_ONE_MU = np.ones(1)
 _EPS = float(np.finfo(np.float64).eps)
 _TINY = float(np.finfo(np.float64).tiny)
 
@@ -68,6 +70,88 @@ def scratch(n, m):
             np.empty(n))  # fmt: skip
 
 
+#: Safety factor of the certified-QR rank decision (see :func:`_lq_certified`).
+QR_MARGIN = 10.0
+
+
+@njit(cache=True)
+def _lq_certified(B, m, n, rtol, Wq, Hv, V, Li, cv, beta):  # type: ignore[no-untyped-def]
+    """LQ factorization ``D A = L Q`` of ``B[:, :n]`` (m ≤ n, every row nonzero), if full rank
+    is certain.
+
+    Householder reflections from the right (row-oriented: contiguous rows); ``Wq`` (m, n) and
+    ``Hv`` (m, n, the reflectors) are scratch. Certification: ``σ_max ≤ ‖L‖_F`` and
+    ``σ_min ≥ 1/‖L⁻¹‖_F`` bound the condition number of ``D A``; if
+    ``‖L‖_F ‖L⁻¹‖_F · QR_MARGIN · rtol < 1`` every singular value is above ``rtol · σ_max`` and
+    the SVD's rule would keep all m rows. Then writes ``V = Q`` (orthonormal rows spanning the
+    row space), ``cv = L⁻¹ D γ`` (``D γ = B[:, n]``), so ``(D A)⁺ D γ = Vᵀ cv``, and returns
+    True. Returns False (nothing usable written) when the bound fails.
+    """
+    for i in range(m):
+        for k in range(n):
+            Wq[i, k] = B[i, k]
+    for j in range(m):
+        s = 0.0
+        for k in range(j, n):
+            s += Wq[j, k] * Wq[j, k]
+        if s == 0.0:
+            return False
+        nrm = math.sqrt(s)
+        x0 = Wq[j, j]
+        alpha = -nrm if x0 >= 0.0 else nrm
+        for k in range(j, n):
+            Hv[j, k] = Wq[j, k]
+        v0 = x0 - alpha
+        Hv[j, j] = v0
+        bj = 2.0 / (s - x0 * x0 + v0 * v0)
+        beta[j] = bj
+        Wq[j, j] = alpha
+        for k in range(j + 1, n):
+            Wq[j, k] = 0.0
+        for i in range(j + 1, m):
+            d = 0.0
+            for k in range(j, n):
+                d += Wq[i, k] * Hv[j, k]
+            d *= bj
+            for k in range(j, n):
+                Wq[i, k] -= d * Hv[j, k]
+    fl = 0.0
+    for i in range(m):
+        for k in range(i + 1):
+            fl += Wq[i, k] * Wq[i, k]
+    fi = 0.0
+    for c in range(m):  # L⁻¹ column by column (forward substitution), lower triangle of Li
+        for i in range(c, m):
+            s = 1.0 if i == c else 0.0
+            for k in range(c, i):
+                s -= Wq[i, k] * Li[k, c]
+            x = s / Wq[i, i]
+            Li[i, c] = x
+            fi += x * x
+    if not (math.sqrt(fl) * math.sqrt(fi) * QR_MARGIN * rtol < 1.0):
+        return False
+    for i in range(m):
+        s = 0.0
+        for k in range(i + 1):
+            s += Li[i, k] * B[k, n]
+        cv[i] = s
+    # Q = [I_m 0] H_m ⋯ H_1 (the reflectors are symmetric): E ← E H_j for j = m−1 … 0
+    for i in range(m):
+        for k in range(n):
+            V[i, k] = 1.0 if i == k else 0.0
+    for j in range(m - 1, -1, -1):
+        bj = beta[j]
+        for i in range(m):
+            d = 0.0
+            for k in range(j, n):
+                d += V[i, k] * Hv[j, k]
+            if d != 0.0:
+                d *= bj
+                for k in range(j, n):
+                    V[i, k] -= d * Hv[j, k]
+    return True
+
+
 #: No fast-math flags: strict IEEE arithmetic, so the compiled per-state routine gives bitwise the
 #: same result whichever driver (single, serial batch, parallel batch) inlines it. (With
 #: ``reassoc`` the vectorizer may order sums differently per call site: measured mismatches.)
@@ -79,7 +163,7 @@ _FM: set[str] = set()
 
 @njit(cache=True, fastmath=_FM, inline="always")  # numba-level inlining: no call, no refcounts
 def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
-                qdd, fc, P, L, want_pl, status, rank, mu_out, ratio):  # fmt: skip
+                qdd, fc, P, L, want_pl, status, rank, mu_out, ratio, work, T, warm):  # fmt: skip
     """Evaluate states ``lo … hi−1`` of the batch arrays, one after the other.
 
     Inputs ``M`` (N, n, n), ``h``, ``f`` (N, n) (``f`` read only if ``has_f``), ``A``
@@ -96,7 +180,10 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
     n4 = n - n % 4
     nmu = mu_in.shape[0]
     want_fc = fc.shape[0] > 0  # an empty fc: q̈ only
-    B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv = scratch(n, m)
+    B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv = work
+    mw = m if warm else 0
+    Bw = np.empty((mw, n + 1))
+    Tn = np.empty((mw, mw))
     for b in range(lo, hi):
         # ---------------------------------------------------------------- 1. input checks
         # Finiteness: x·0 is 0 for finite x and NaN for ±inf/NaN; the per-column sums cw[j] (each
@@ -124,11 +211,16 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             ratio[b] = 0.0
             continue
         asym = 0.0
+        offd = 0.0  # largest off-diagonal |M_ij|: 0 for a diagonal M (planar bodies, point masses)
         for i in range(n):
             for j in range(i):
                 d = abs(M[b, i, j] - M[b, j, i])
                 if d > asym:
                     asym = d
+                a = abs(M[b, i, j]) + abs(M[b, j, i])
+                if a > offd:
+                    offd = a
+        diag = offd == 0.0
         if asym > 0.0:  # same decision as _validation.symmetric (max|M| only needed now)
             scale = 0.0
             for i in range(n):
@@ -171,85 +263,127 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             else:
                 for j in range(n + 1):
                     B[i, j] = 0.0
-        # ---------------------------------------------------------------- 3. Jacobi SVD
-        # Rows of norm ≤ eps·‖B‖_F are round-off (e.g. the difference of two duplicated rows): they
-        # are never rotated, else the sweeps would chase noise (their σ is far below any rtol).
-        frob2 = 0.0
-        for i in range(m):
-            for k in range(n):
-                frob2 += B[i, k] * B[i, k]
-        noise2 = _EPS * _EPS * frob2
-        for _sweep in range(MAX_SWEEPS):
-            rotated = False
-            for i in range(m - 1):
-                for j in range(i + 1, m):
-                    a0 = 0.0
-                    a1 = 0.0
-                    b0 = 0.0
-                    b1 = 0.0
-                    c0 = 0.0
-                    c1 = 0.0
-                    for k in range(0, n - n % 2, 2):
-                        x = B[i, k]
-                        y = B[j, k]
-                        x1 = B[i, k + 1]
-                        y1 = B[j, k + 1]
-                        a0 += x * x
-                        b0 += y * y
-                        c0 += x * y
-                        a1 += x1 * x1
-                        b1 += y1 * y1
-                        c1 += x1 * y1
-                    if n % 2:
-                        x = B[i, n - 1]
-                        y = B[j, n - 1]
-                        a0 += x * x
-                        b0 += y * y
-                        c0 += x * y
-                    aa = a0 + a1
-                    bb = b0 + b1
-                    cc = c0 + c1
-                    if aa <= noise2 or bb <= noise2 or abs(cc) <= _EPS * math.sqrt(aa * bb):
-                        continue
-                    rotated = True
-                    zeta = (bb - aa) / (2.0 * cc)
-                    if abs(zeta) > 1e150:
-                        t = 0.5 / zeta
-                    else:
-                        t = math.copysign(1.0, zeta) / (abs(zeta) + math.sqrt(1.0 + zeta * zeta))
-                    cs = 1.0 / math.sqrt(1.0 + t * t)
-                    sn = cs * t
-                    for k in range(n + 1):
-                        x = B[i, k]
-                        y = B[j, k]
-                        B[i, k] = cs * x - sn * y
-                        B[j, k] = sn * x + cs * y
-            if not rotated:
-                break
-        smax = 0.0
-        for i in range(m):
-            s0 = 0.0
-            s1 = 0.0
-            s2 = 0.0
-            s3 = 0.0
-            for k in range(0, n4, 4):
-                s0 += B[i, k] * B[i, k]
-                s1 += B[i, k + 1] * B[i, k + 1]
-                s2 += B[i, k + 2] * B[i, k + 2]
-                s3 += B[i, k + 3] * B[i, k + 3]
-            for k in range(n4, n):
-                s0 += B[i, k] * B[i, k]
-            sig[i] = math.sqrt((s0 + s1) + (s2 + s3))
-            if sig[i] > smax:
-                smax = sig[i]
+        # ---------------------------------------------------------------- 2b. certified QR
+        # When every row is live (m ≤ n), an LQ factorization D A = L Q (Householder reflections
+        # from the right on the rows; Q has orthonormal rows) decides the rank without the SVD if
+        # it is certainly full: σ_min/σ_max ≥ 1/(‖L‖_F ‖L⁻¹‖_F) > QR_MARGIN · rtol means every
+        # σ_i is kept by the SVD's rule too. Then V = Q and (D A)⁺ D γ = Qᵀ L⁻¹ D γ. Otherwise
+        # (near a singular configuration, redundant rows) the Jacobi SVD below decides.
+        qr_ok = False
         r = 0
-        for i in range(m):
-            if sig[i] > rtol * smax:
-                inv = 1.0 / sig[i]
+        if m <= n and m > 0:
+            live = 0
+            for i in range(m):
+                if sig[i] > thr:
+                    live += 1
+            if live == m:
+                qr_ok = _lq_certified(B, m, n, rtol, Et, Ft, V, G, cv, sig)
+                if qr_ok:
+                    r = m
+        if not qr_ok:
+            if warm:  # start from the previous state's rotation: B ← T B (T orthogonal, m × m)
+                for i in range(m):
+                    for k in range(n + 1):
+                        Bw[i, k] = 0.0
+                    for j in range(m):
+                        c = T[i, j]
+                        if c != 0.0:
+                            for k in range(n + 1):
+                                Bw[i, k] += c * B[j, k]
+                for i in range(m):
+                    for k in range(n + 1):
+                        B[i, k] = Bw[i, k]
+                    for j in range(m):
+                        Tn[i, j] = T[i, j]
+            # ---------------------------------------------------------------- 3. Jacobi SVD
+            # Rows of norm ≤ eps·‖B‖_F are round-off (e.g. the difference of two duplicated rows): they
+            # are never rotated, else the sweeps would chase noise (their σ is far below any rtol).
+            frob2 = 0.0
+            for i in range(m):
                 for k in range(n):
-                    V[r, k] = B[i, k] * inv
-                cv[r] = B[i, n] * inv  # (Uᵀ D γ)_i / σ_i
-                r += 1
+                    frob2 += B[i, k] * B[i, k]
+            noise2 = _EPS * _EPS * frob2
+            for _sweep in range(MAX_SWEEPS):
+                rotated = False
+                for i in range(m - 1):
+                    for j in range(i + 1, m):
+                        a0 = 0.0
+                        a1 = 0.0
+                        b0 = 0.0
+                        b1 = 0.0
+                        c0 = 0.0
+                        c1 = 0.0
+                        for k in range(0, n - n % 2, 2):
+                            x = B[i, k]
+                            y = B[j, k]
+                            x1 = B[i, k + 1]
+                            y1 = B[j, k + 1]
+                            a0 += x * x
+                            b0 += y * y
+                            c0 += x * y
+                            a1 += x1 * x1
+                            b1 += y1 * y1
+                            c1 += x1 * y1
+                        if n % 2:
+                            x = B[i, n - 1]
+                            y = B[j, n - 1]
+                            a0 += x * x
+                            b0 += y * y
+                            c0 += x * y
+                        aa = a0 + a1
+                        bb = b0 + b1
+                        cc = c0 + c1
+                        if aa <= noise2 or bb <= noise2 or abs(cc) <= _EPS * math.sqrt(aa * bb):
+                            continue
+                        rotated = True
+                        zeta = (bb - aa) / (2.0 * cc)
+                        if abs(zeta) > 1e150:
+                            t = 0.5 / zeta
+                        else:
+                            t = math.copysign(1.0, zeta) / (abs(zeta) + math.sqrt(1.0 + zeta * zeta))
+                        cs = 1.0 / math.sqrt(1.0 + t * t)
+                        sn = cs * t
+                        for k in range(n + 1):
+                            x = B[i, k]
+                            y = B[j, k]
+                            B[i, k] = cs * x - sn * y
+                            B[j, k] = sn * x + cs * y
+                        if warm:
+                            for k in range(m):
+                                x = Tn[i, k]
+                                y = Tn[j, k]
+                                Tn[i, k] = cs * x - sn * y
+                                Tn[j, k] = sn * x + cs * y
+                if not rotated:
+                    break
+            if warm:
+                for i in range(m):
+                    for j in range(m):
+                        T[i, j] = Tn[i, j]
+            smax = 0.0
+            for i in range(m):
+                s0 = 0.0
+                s1 = 0.0
+                s2 = 0.0
+                s3 = 0.0
+                for k in range(0, n4, 4):
+                    s0 += B[i, k] * B[i, k]
+                    s1 += B[i, k + 1] * B[i, k + 1]
+                    s2 += B[i, k + 2] * B[i, k + 2]
+                    s3 += B[i, k + 3] * B[i, k + 3]
+                for k in range(n4, n):
+                    s0 += B[i, k] * B[i, k]
+                sig[i] = math.sqrt((s0 + s1) + (s2 + s3))
+                if sig[i] > smax:
+                    smax = sig[i]
+            r = 0
+            for i in range(m):
+                if sig[i] > rtol * smax:
+                    inv = 1.0 / sig[i]
+                    for k in range(n):
+                        V[r, k] = B[i, k] * inv
+                    cv[r] = B[i, n] * inv  # (Uᵀ D γ)_i / σ_i
+                    r += 1
         # w = −(DA)⁺ D γ = −Σ_k v_k (u_kᵀ D γ)/σ_k
         for j in range(n):
             wv[j] = 0.0
@@ -259,6 +393,10 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                 wv[j] -= V[k, j] * c
         # ---------------------------------------------------------------- 4. PMP, μ, M̄
         for k in range(r):  # Kt = V M = Σ_j V[k, j] M[j, :]  (M symmetric; element-wise updates)
+            if diag:  # the same sums without the zero terms
+                for i in range(n):
+                    Kt[k, i] = 0.0 + V[k, i] * M[b, i, i]
+                continue
             for i in range(n):
                 Kt[k, i] = 0.0
             for j in range(n):
@@ -350,10 +488,14 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                 gi += f[b, i]
             g[i] = gi
             u[i] = gi
-        for j in range(n):  # u = g − M w  (element-wise updates; M symmetric)
-            c = wv[j]
+        if diag:
             for i in range(n):
-                u[i] -= M[b, j, i] * c
+                u[i] -= M[b, i, i] * wv[i]
+        else:
+            for j in range(n):  # u = g − M w  (element-wise updates; M symmetric)
+                c = wv[j]
+                for i in range(n):
+                    u[i] -= M[b, j, i] * c
         for k in range(r):  # cv ← V u
             s = 0.0
             for j in range(n):
@@ -378,10 +520,14 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
         if want_fc:
             for i in range(n):  # f_c = M qdd − g
                 cw[i] = 0.0
-            for j in range(n):
-                c = qdd[b, j]
+            if diag:
                 for i in range(n):
-                    cw[i] += M[b, j, i] * c
+                    cw[i] += M[b, i, i] * qdd[b, i]
+            else:
+                for j in range(n):
+                    c = qdd[b, j]
+                    for i in range(n):
+                        cw[i] += M[b, j, i] * c
             for i in range(n):
                 fc[b, i] = cw[i] - g[i]
         if want_pl:
@@ -416,7 +562,32 @@ def solve_one(M, h, f, A, gam, params, out, P, L):
         params[2] != 0.0, params[3], params[4], params[5], res[0:1], res[1:2],
         P.reshape((1, P.shape[0], P.shape[1])), L.reshape((1, L.shape[0], L.shape[1])),
         params[6] != 0.0, ist[0:1], ist[1:2], out[2 * n + 1 : 2 * n + 2],
-        out[2 * n + 2 : 2 * n + 3],
+        out[2 * n + 2 : 2 * n + 3], scratch(n, m), _NO_T, False,
+    )  # fmt: skip
+    out[2 * n] = ist[1]
+    return ist[0]
+
+
+@njit(cache=True)
+def solve_work(M, h, A, gam, rtol, spd_rtol, sym_rtol, want_pl, out, P, L, work, T, warm):  # type: ignore[no-untyped-def]
+    """Single state with caller-owned scratch (``work = scratch(n, m)``) and a warm start.
+
+    For integration loops: no allocation per call, and with ``warm`` true the Jacobi SVD
+    starts from ``T`` (m × m orthogonal, the accumulated rotation of the previous call, updated
+    in place; start with the identity), so a state close to the previous one converges in
+    fewer sweeps. The result is that of :func:`solve_one` up to round-off (same rank policy).
+    Writes ``out = [qdd (n), f_c (n), rank, mu, pivot_ratio]``; returns the status.
+    """
+    n = M.shape[0]
+    m = A.shape[0]
+    res = out[: 2 * n].reshape((2, n))
+    ist = np.empty(2, dtype=np.int64)
+    solve_range(
+        0, 1, M.reshape((1, n, n)), h.reshape((1, n)), h.reshape((1, n)), False,
+        A.reshape((1, m, n)), gam.reshape((1, m)), _ONE_MU, False, rtol, spd_rtol, sym_rtol,
+        res[0:1], res[1:2], P.reshape((1, P.shape[0], P.shape[1])),
+        L.reshape((1, L.shape[0], L.shape[1])), want_pl, ist[0:1], ist[1:2],
+        out[2 * n + 1 : 2 * n + 2], out[2 * n + 2 : 2 * n + 3], work, T, warm,
     )  # fmt: skip
     out[2 * n] = ist[1]
     return ist[0]
@@ -427,7 +598,8 @@ def solve_batch_serial(M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sy
                        qdd, fc, P, L, want_pl, status, rank, mu_out, ratio):  # fmt: skip
     """Batch of states (leading axis), one after the other."""
     solve_range(0, M.shape[0], M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
-                qdd, fc, P, L, want_pl, status, rank, mu_out, ratio)  # fmt: skip
+                qdd, fc, P, L, want_pl, status, rank, mu_out, ratio,
+                scratch(M.shape[1], A.shape[1]), _NO_T, False)  # fmt: skip
 
 
 @njit(cache=True, parallel=True)
@@ -439,7 +611,8 @@ def solve_batch_parallel(M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, 
         lo = (c * N) // nchunks
         hi = ((c + 1) * N) // nchunks
         solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
-                    qdd, fc, P, L, want_pl, status, rank, mu_out, ratio)  # fmt: skip
+                    qdd, fc, P, L, want_pl, status, rank, mu_out, ratio,
+                    scratch(M.shape[1], A.shape[1]), _NO_T, False)  # fmt: skip
 
 
 def num_threads() -> int:

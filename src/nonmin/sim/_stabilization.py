@@ -80,6 +80,14 @@ class Baumgarte(Stabilization):
         return ct.gamma + 2.0 * self.alpha * ct.velocity + self.beta * self.beta * ct.phi
 
 
+#: Position iterations of :class:`Projection` stop when every holonomic row satisfies
+#: ``|φ_i| ≤ ROUNDOFF_FLOOR · (1 + Σ_j |A_ij q_j|)`` — the size of φ_i's own round-off (φ is a
+#: difference of terms of size ``Σ_j |A_ij q_j|``), so another Gauss–Newton step could not reduce
+#: it. It spares the iteration that only detected the floor (measured: crossed four-bar, RK4,
+#: dt = 1e-2 s: 3.6 → 2.x solves per projection) and leaves ‖φ‖∞ at the same 1e-16…1e-15.
+ROUNDOFF_FLOOR = 4.0 * float(np.finfo(np.float64).eps)
+
+
 def _correction(M: FloatArray, A: FloatArray, r: FloatArray, rtol: float | None) -> FloatArray:
     """Minimum mass-metric correction ``Δ = Sᵀ(−A⁺r)``: minimizes ``½ΔᵀMΔ`` s.t. ``AΔ = −r``.
 
@@ -153,11 +161,14 @@ class Projection(Stabilization):
         eye = np.eye(q.shape[0]) if self.metric == "euclidean" else None
         if hol.any():
             prev = np.inf
+            aq = np.abs(q)
             for _ in range(self.max_iter):
                 phi = ct.phi[hol]
                 err = float(np.max(np.abs(phi)))
                 if err <= self.tol or err == 0.0 or err > 0.5 * prev:
                     break  # converged, or no progress: round-off floor reached
+                if np.all(np.abs(phi) <= ROUNDOFF_FLOOR * (1.0 + np.abs(ct.A[hol]) @ aq)):
+                    break  # every row at its round-off level: one more iteration cannot help
                 prev = err
                 # M at the uncorrected q: the corrections are at the integrator's error level,
                 # so the metric change is of second order

@@ -8,6 +8,7 @@ immutable :class:`PlanarModel` implementing :class:`nonmin.model.Model` with con
 
 from ._builder import PlanarBuilder as PlanarBuilder
 from ._builder import PointRef as PointRef
+from ._compiled import PlanarProgram as PlanarProgram
 from ._elements import GROUND as GROUND
 from ._elements import AngleDriver as AngleDriver
 from ._elements import Body as Body
@@ -37,6 +38,7 @@ __all__ = [
     "JointActuator",
     "PlanarBuilder",
     "PlanarModel",
+    "PlanarProgram",
     "Point",
     "PointForce",
     "PointOnLine",

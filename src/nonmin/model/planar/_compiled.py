@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -335,6 +335,65 @@ class Layout:
         self.var_unique = bool(np.unique(real).size == real.size)
         self.holonomic = np.ones(m, dtype=bool)
         self.has_rheo = bool(self.drivers) or bool(generic)
+
+
+class PlanarProgram(NamedTuple):
+    """The dynamics of a planar model under one active set, as data for compiled loops.
+
+    Returned by :meth:`PlanarModel.fast_program` (the :meth:`nonmin.model.Model.fast_program`
+    hook) when the whole evaluation is covered: constant ``M`` and generalized force ``f``
+    (gravity; ``C = 0``), no springs or dampers, and constraints made only of pin, line, rod
+    and constant angle-row primitives (revolute, weld, prismatic, point-on-line, rod, gear; no
+    angle drivers, no user-defined joints). :mod:`nonmin.sim`'s compiled loop evaluates it with
+    the same kernel (:func:`._fast_kernels.pin_line_rod`) and formulas as
+    :meth:`PlanarModel.evaluate`, so both give the same ``A``, ``γ``, ``φ``.
+
+    Attributes
+    ----------
+    n, m : int
+        Coordinates and constraint rows.
+    M : (n, n)
+        Constant mass matrix.
+    f : (n,)
+        Constant generalized force ``h = f_g`` (gravity); potential energy ``V = −fᵀq``.
+    A0 : (m·n + 1,)
+        Template of ``A`` (constant entries; the last slot collects ground entries).
+    I6, SL, prm, rows, var_idx, counts
+        Inputs of the pin/line/rod kernel (``counts = (P, NL, NR)``, ``I6`` of shape (6, S)).
+    angle_rows : (na,) int
+        Rows ``φ = G q − c`` (``γ = 0``).
+    G : (na, n)
+    angle_const : (na,)
+    """
+
+    n: int
+    m: int
+    M: FloatArray
+    f: FloatArray
+    A0: FloatArray
+    I6: IntArray
+    SL: FloatArray
+    prm: FloatArray
+    rows: IntArray
+    var_idx: IntArray
+    counts: IntArray
+    angle_rows: IntArray
+    G: FloatArray
+    angle_const: FloatArray
+
+
+def program(lay: Layout, M: FloatArray, f: FloatArray) -> PlanarProgram | None:
+    """The :class:`PlanarProgram` of a layout, or None if it has drivers or user-defined joints."""
+    if lay.m == 0 or lay.drivers or lay.generic:
+        return None
+    c = np.ascontiguousarray
+    return PlanarProgram(
+        n=lay.n, m=lay.m, M=c(M, dtype=np.float64), f=c(f, dtype=np.float64), A0=c(lay.A0),
+        I6=c(lay.I6, dtype=np.intp), SL=c(lay.SL), prm=c(lay.k_prm), rows=c(lay.k_rows, dtype=np.intp),
+        var_idx=c(lay.var_idx, dtype=np.intp), counts=np.array([lay.P, lay.NL, lay.NR], dtype=np.intp),
+        angle_rows=c(lay.angle_rows, dtype=np.intp), G=c(lay.G, dtype=np.float64).reshape(-1, lay.n),
+        angle_const=c(lay.angle_const, dtype=np.float64),
+    )  # fmt: skip
 
 
 def constraint_terms(

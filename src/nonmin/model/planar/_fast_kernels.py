@@ -19,6 +19,16 @@ from numba import njit
 def pin_line_rod(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG):  # type: ignore[no-untyped-def]
     """Fill ``PG = [φ; γ]`` (rows of the primitives) and add the variable entries of A to ``buf``.
 
+    Allocates its scratch; loops call :func:`pin_line_rod_work` with their own.
+    """
+    pin_line_rod_work(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG,
+                      np.empty((9, I6.shape[1])), np.empty(var_idx.shape[0]))  # fmt: skip
+
+
+@njit(cache=True)
+def pin_line_rod_work(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG, wk, vals):  # type: ignore[no-untyped-def]
+    """:func:`pin_line_rod` with caller-owned scratch ``wk`` (9, S) and ``vals`` (len(var_idx),).
+
     Parameters
     ----------
     x : (2n + 2,) ``(q, 0, qd, 0)``
@@ -29,15 +39,15 @@ def pin_line_rod(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG):  # type: ig
     var_idx : flat indices (into buf) of the variable entries of A, in the NumPy order
     """
     S = I6.shape[1]
-    rsx = np.empty(S)
-    rsy = np.empty(S)
-    px = np.empty(S)
-    py = np.empty(S)
-    vx = np.empty(S)
-    vy = np.empty(S)
-    om = np.empty(S)
-    cs = np.empty(S)
-    sn = np.empty(S)
+    rsx = wk[0]
+    rsy = wk[1]
+    px = wk[2]
+    py = wk[3]
+    vx = wk[4]
+    vy = wk[5]
+    om = wk[6]
+    cs = wk[7]
+    sn = wk[8]
     for k in range(S):
         th = x[I6[2, k]]
         c = math.cos(th)
@@ -61,7 +71,6 @@ def pin_line_rod(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG):  # type: ig
     gamma = PG[1]
     m = phi.shape[0]
     n_var = var_idx.shape[0]
-    vals = np.empty(n_var)
     j = 0
     # ------------------------------------------------------------------ pins
     P2 = 2 * P

@@ -647,6 +647,14 @@ class PlanarModel(Model):
                 self._layouts[act] = lay
         return lay
 
+    def fast_program(self, active: frozenset[str]) -> _compiled.PlanarProgram | None:
+        """The :class:`PlanarProgram` of ``active`` for compiled loops (see
+        :meth:`nonmin.model.Model.fast_program`), or None when the model has springs, dampers,
+        angle drivers or user-defined joints, or no active constraint."""
+        if self._stiff or self._damped:
+            return None
+        return _compiled.program(self._layout(active), self._M, self._fg)
+
     def _state_arrays(self, q: ArrayLike, qd: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """``q``, ``qd`` as float64 arrays of shape (n,), checked once (shape and finiteness)."""
         n = self.n

@@ -1,0 +1,368 @@
+"""Compiled (numba) fixed-step RK4 loop with mass-metric projection, for planar programs.
+
+Imported lazily by :mod:`._fastpath` (extra ``fast``). One call of :func:`rk4_planar` advances
+a :class:`nonmin.model.planar.PlanarProgram` by up to ``max_steps`` steps of exactly the
+algorithm of the general driver (:func:`nonmin.sim.simulate` with ``method="rk4"`` and
+``stabilization="projection"``), without returning to Python:
+
+1. RK4 stages ``F(t, y) = (qd, qdd)``, ``qdd`` from the drift-tolerant projection dynamics
+   (corrected eq. (ddq_sim)) by the core's compiled kernel
+   (:func:`nonmin.core._fast_kernels.solve_one`), with the drift-aware rank tolerance of
+   :func:`nonmin.sim._simulate.drift_rank_rtol`;
+2. the post-step projection of :class:`nonmin.sim.Projection` (Gauss–Newton in the mass metric
+   to the round-off floor, then the velocity correction = plastic impact map);
+3. samples at the requested times (partial RK4 steps from the step start, then the projection)
+   or at every step, with the diagnostics the :class:`~nonmin.sim.Trajectory` records.
+
+The model terms come from the same kernel (:func:`nonmin.model.planar._fast_kernels.pin_line_rod`)
+and formulas as :meth:`PlanarModel.evaluate`, so the compiled and the general driver agree to
+round-off (tested). Any kernel status other than OK (non-finite values, M̄ not positive
+definite) stops the loop *before* the failing step: the general driver then takes over from the
+last accepted state and raises the typed error (or recovers, exactly as it would have).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..core._fast_kernels import scratch, solve_work
+from ..model.planar._fast_kernels import pin_line_rod_work
+
+#: Return codes of :func:`rk4_planar`.
+DONE = 0  # reached t1 or the step budget of the call
+FAILED = 1  # a kernel status ≠ OK or a non-finite acceleration: hand over to the general driver
+
+
+#: Entries of the ``cfg`` parameter vector of :func:`rk4_planar`.
+BASE_RTOL, DRIFT_FACTOR, VEL_RTOL, PTOL, MAX_ITER, SPD_RTOL, SYM_RTOL, FLOOR = range(8)
+
+#: Status of a non-finite acceleration (the core kernel's codes are 0–4).
+NONFINITE_QDD = 5
+
+
+@njit(cache=True)
+def workspace(n, m, S, n_var, T):  # type: ignore[no-untyped-def]
+    """Scratch arrays of the loop (``S`` kernel sides, ``n_var`` variable entries of A) and the
+    warm-start rotation ``T`` (m × m) of the Jacobi SVD, carried from call to call."""
+    return (np.empty(2 * n + 2), np.empty(m * n + 1), np.empty((2, m)), np.empty((m, n)),
+            np.empty(m), np.zeros(n), np.empty(2 * n + 3), np.empty((n, n)), np.empty((n, n)),
+            np.empty(n), np.empty(n), scratch(n, m), T, np.empty((9, S)), np.empty(n_var),
+            np.empty(m))  # fmt: skip
+
+
+@njit(cache=True)
+def _evaluate(prog, q, qd, ws):  # type: ignore[no-untyped-def]
+    """``A = ws[3]``, ``φ = ws[2][0]``, ``γ = ws[2][1]`` of the program at ``(q, qd)``."""
+    _M, _f, A0, I6, SL, prm, rows, var_idx, counts, arows, G, ac = prog
+    x, buf, PG, A = ws[0], ws[1], ws[2], ws[3]
+    n = q.shape[0]
+    m = A.shape[0]
+    for i in range(n):
+        x[i] = q[i]
+        x[n + 1 + i] = qd[i]
+    x[n] = 0.0
+    x[2 * n + 1] = 0.0
+    for i in range(buf.shape[0]):
+        buf[i] = A0[i]
+    for i in range(m):
+        PG[0, i] = 0.0
+        PG[1, i] = 0.0
+    if I6.shape[1] > 0:
+        pin_line_rod_work(x, I6, SL, prm, rows, var_idx, counts[0], counts[1], counts[2], buf, PG,
+                          ws[13], ws[14])  # fmt: skip
+    for k in range(arows.shape[0]):
+        s = 0.0
+        for j in range(n):
+            s += G[k, j] * q[j]
+        PG[0, arows[k]] = s - ac[k]
+    for i in range(m):
+        for j in range(n):
+            A[i, j] = buf[i * n + j]
+
+
+@njit(cache=True)
+def _drift_rtol(A, phi, base, factor, nrm):  # type: ignore[no-untyped-def]
+    """:func:`nonmin.sim._simulate.drift_rank_rtol` (every row holonomic; scratch ``nrm``)."""
+    m, n = A.shape
+    if m == 0:
+        return base
+    big = 0.0
+    for i in range(m):
+        s = 0.0
+        for j in range(n):
+            s += A[i, j] * A[i, j]
+        nrm[i] = math.sqrt(s)
+        if nrm[i] > big:
+            big = nrm[i]
+    drift = -1.0
+    for i in range(m):
+        if nrm[i] > base * big:
+            d = abs(phi[i]) / nrm[i]
+            if d > drift:
+                drift = d
+    if drift < 0.0:
+        return base
+    return min(max(base, factor * drift), 1e-2)
+
+
+@njit(cache=True)
+def _matvec_rows(A, v, out):  # type: ignore[no-untyped-def]
+    m, n = A.shape
+    for i in range(m):
+        s = 0.0
+        for j in range(n):
+            s += A[i, j] * v[j]
+        out[i] = s
+
+
+@njit(cache=True)
+def _solve(prog, ws, cfg, h, gam, rtol, want_pl):  # type: ignore[no-untyped-def]
+    """The core kernel on the workspace's A (warm-started Jacobi SVD); result in ``ws[6]``."""
+    return solve_work(prog[0], h, ws[3], gam, rtol, cfg[SPD_RTOL], cfg[SYM_RTOL], want_pl, ws[6],
+                      ws[7], ws[8], ws[11], ws[12], True)  # fmt: skip
+
+
+@njit(cache=True)
+def _rhs(prog, ws, cfg, t, yy, kk):  # type: ignore[no-untyped-def]
+    """``kk = F(t, yy) = (qd, qdd)``; returns a status (0 = OK)."""
+    q, qd, out = ws[9], ws[10], ws[6]
+    n = q.shape[0]
+    for i in range(n):
+        q[i] = yy[i]
+        qd[i] = yy[n + i]
+    _evaluate(prog, q, qd, ws)
+    rtol = _drift_rtol(ws[3], ws[2][0], cfg[BASE_RTOL], cfg[DRIFT_FACTOR], ws[15])
+    st = _solve(prog, ws, cfg, prog[1], ws[2][1], rtol, False)
+    if st != 0:
+        return st
+    for i in range(n):
+        if not math.isfinite(out[i]):
+            return NONFINITE_QDD
+        kk[i] = yy[n + i]
+        kk[n + i] = out[i]
+    return 0
+
+
+@njit(cache=True)
+def _advance(prog, ws, cfg, t, yy, kk1, h, res, stages):  # type: ignore[no-untyped-def]
+    """One raw RK4 step of size h from ``(t, yy)`` with ``k1 = kk1`` given, into ``res``."""
+    k2, k3, k4, ys = stages
+    n2 = yy.shape[0]
+    for i in range(n2):
+        ys[i] = yy[i] + 0.5 * h * kk1[i]
+    st = _rhs(prog, ws, cfg, t + 0.5 * h, ys, k2)
+    if st != 0:
+        return st
+    for i in range(n2):
+        ys[i] = yy[i] + 0.5 * h * k2[i]
+    st = _rhs(prog, ws, cfg, t + 0.5 * h, ys, k3)
+    if st != 0:
+        return st
+    for i in range(n2):
+        ys[i] = yy[i] + h * k3[i]
+    st = _rhs(prog, ws, cfg, t + h, ys, k4)
+    if st != 0:
+        return st
+    for i in range(n2):
+        res[i] = yy[i] + (h / 6.0) * (kk1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+    return 0
+
+
+@njit(cache=True)
+def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
+    """:meth:`nonmin.sim.Projection.project` in the mass metric, in place on ``yy``."""
+    q, qd, out, PG, A, vres, zero = ws[9], ws[10], ws[6], ws[2], ws[3], ws[4], ws[5]
+    n = q.shape[0]
+    m = A.shape[0]
+    for i in range(n):
+        q[i] = yy[i]
+        qd[i] = yy[n + i]
+    _evaluate(prog, q, qd, ws)
+    prev = np.inf
+    for _ in range(int(cfg[MAX_ITER])):
+        err = 0.0
+        for i in range(m):
+            a = abs(PG[0, i])
+            if a > err:
+                err = a
+        if err <= cfg[PTOL] or err == 0.0 or err > 0.5 * prev:
+            break  # converged, or no progress: round-off floor reached
+        floor = True  # every row at its round-off level (see _stabilization.ROUNDOFF_FLOOR)
+        for i in range(m):
+            s = 0.0
+            for j in range(n):
+                s += abs(A[i, j]) * abs(yy[j])
+            if abs(PG[0, i]) > cfg[FLOOR] * (1.0 + s):
+                floor = False
+                break
+        if floor:
+            break
+        prev = err
+        st = _solve(prog, ws, cfg, zero, PG[0], cfg[BASE_RTOL], False)
+        if st != 0:
+            return st
+        for i in range(n):
+            q[i] = q[i] + out[i]
+        _evaluate(prog, q, qd, ws)
+    _matvec_rows(A, qd, vres)
+    st = _solve(prog, ws, cfg, zero, vres, cfg[VEL_RTOL], False)
+    if st != 0:
+        return st
+    for i in range(n):
+        yy[i] = q[i]
+        yy[n + i] = qd[i] + out[i]
+    return 0
+
+
+@njit(cache=True)
+def _point(prog, ws, cfg, tt, yy, recs, k, kk):  # type: ignore[no-untyped-def]
+    """The full evaluation recorded at a sample (row ``k`` of ``recs``); ``kk = F(tt, yy)``."""
+    rec_t, rec_q, rec_qd, rec_qdd, rec_fc, rec_rank, rec_cond, rec_mu, rec_energy, rec_phi, rec_vel = recs
+    M, f = prog[0], prog[1]
+    q, qd, out, PG, A, vres, Lm = ws[9], ws[10], ws[6], ws[2], ws[3], ws[4], ws[8]
+    n = q.shape[0]
+    m = A.shape[0]
+    for i in range(n):
+        q[i] = yy[i]
+        qd[i] = yy[n + i]
+    _evaluate(prog, q, qd, ws)
+    rtol = _drift_rtol(A, PG[0], cfg[BASE_RTOL], cfg[DRIFT_FACTOR], ws[15])
+    st = _solve(prog, ws, cfg, f, PG[1], rtol, True)
+    if st != 0:
+        return st
+    for i in range(n):
+        if not math.isfinite(out[i]):
+            return NONFINITE_QDD
+    rec_t[k] = tt
+    e_kin = 0.0
+    e_pot = 0.0
+    for i in range(n):
+        rec_q[k, i] = q[i]
+        rec_qd[k, i] = qd[i]
+        rec_qdd[k, i] = out[i]
+        rec_fc[k, i] = out[n + i]
+        kk[i] = qd[i]
+        kk[n + i] = out[i]
+        s = 0.0
+        for j in range(n):
+            s += M[i, j] * qd[j]
+        e_kin += qd[i] * s
+        e_pot += f[i] * q[i]
+    rec_rank[k] = int(out[2 * n])
+    rec_mu[k] = out[2 * n + 1]
+    sv = np.linalg.svd(Lm)[1]
+    rec_cond[k] = (sv[0] / sv[n - 1]) ** 2
+    rec_energy[k] = 0.5 * e_kin - e_pot
+    pn = 0.0
+    for i in range(m):
+        a = abs(PG[0, i])
+        if a > pn:
+            pn = a
+    rec_phi[k] = pn
+    _matvec_rows(A, qd, vres)
+    vn = 0.0
+    for i in range(m):
+        a = abs(vres[i])
+        if a > vn:
+            vn = a
+    rec_vel[k] = vn
+    return 0
+
+
+@njit(cache=True)
+def rk4_planar(prog, t, t1, dt, y, t_out, out_i, every, max_steps, cfg, recs, carry):  # type: ignore[no-untyped-def]
+    """Advance ``y = (q, qd)`` (in place) from ``t`` by at most ``max_steps`` RK4 steps.
+
+    ``prog = (M, f, A0, I6, SL, prm, rows, var_idx, counts, angle_rows, G, angle_const)`` (a
+    :class:`~nonmin.model.planar.PlanarProgram`'s arrays). ``t_out`` holds the requested
+    output times (``every`` false; ``out_i`` is the next one) or is ignored (``every`` true:
+    one sample per step end). ``cfg``: see :data:`BASE_RTOL` …; ``recs`` the 11 record arrays
+    (``t, q, qd, qdd, f_c, rank, cond, mu, energy, ‖φ‖∞, ‖A qd‖∞``) whose length must cover the
+    samples of ``max_steps`` steps. ``carry = (T, k1, flag)`` is the state carried between calls
+    (warm-start rotation, ``F(t, y)`` and ``flag[0] = 1`` when it is known), so a run split into
+    calls gives bitwise the result of one call. Returns ``(code, t, steps, n_rhs, n_rec, out_i)``; on
+    :data:`FAILED` the values describe the last accepted step (samples of the failed step are
+    not counted) and ``y`` is that step's state.
+    """
+    n = prog[0].shape[0]
+    m = (prog[2].shape[0] - 1) // n
+    T, k1, flag = carry
+    ws = workspace(n, m, prog[3].shape[1], prog[7].shape[0], T)
+    kp = np.empty(2 * n)
+    y1 = np.empty(2 * n)
+    yp = np.empty(2 * n)
+    stages = (np.empty(2 * n), np.empty(2 * n), np.empty(2 * n), np.empty(2 * n))
+    n_rhs = 0
+    n_rec = 0
+    steps = 0
+    have_k1 = flag[0] != 0  # k1 = F(t, y) known from the sample at the previous step end
+    n_out = t_out.shape[0]
+    while t < t1 and steps < max_steps:
+        rem = t1 - t
+        h = dt
+        if h >= rem or rem - h <= 1e-9 * h:
+            h = rem
+        st = 0
+        if not have_k1:
+            st = _rhs(prog, ws, cfg, t, y, k1)
+            n_rhs += 1
+        if st == 0:
+            st = _advance(prog, ws, cfg, t, y, k1, h, y1, stages)
+            n_rhs += 3
+        if st != 0:
+            flag[0] = 0
+            return FAILED, t, steps, n_rhs, n_rec, out_i
+        t_new = t1 if h == t1 - t else t + h
+        st = _project(prog, ws, cfg, y1)
+        if st != 0:
+            flag[0] = 0
+            return FAILED, t, steps, n_rhs, n_rec, out_i
+        k = n_rec
+        oi = out_i
+        at_end = False  # kp = F(t_new, y1) computed by a sample at the step end
+        if every:
+            st = _point(prog, ws, cfg, t_new, y1, recs, k, kp)
+            n_rhs += 1
+            k += 1
+            at_end = True
+        else:
+            end_tol = 1e-12 * max(1.0, abs(t_new))
+            while st == 0 and oi < n_out and t_out[oi] <= t_new:
+                s = t_out[oi] - t
+                if abs(s - h) <= end_tol:
+                    st = _point(prog, ws, cfg, t_new, y1, recs, k, kp)
+                    n_rhs += 1
+                    at_end = True
+                else:
+                    if s <= 0.0:
+                        for i in range(2 * n):
+                            yp[i] = y[i]
+                    else:
+                        st = _advance(prog, ws, cfg, t, y, k1, s, yp, stages)
+                        n_rhs += 3
+                    if st == 0:
+                        st = _project(prog, ws, cfg, yp)
+                    if st == 0:
+                        st = _point(prog, ws, cfg, t + s, yp, recs, k, stages[0])
+                        n_rhs += 1
+                recs[0][k] = t_out[oi]
+                k += 1
+                oi += 1
+        if st != 0:
+            flag[0] = 0
+            return FAILED, t, steps, n_rhs, n_rec, out_i
+        n_rec = k
+        out_i = oi
+        for i in range(2 * n):
+            y[i] = y1[i]
+        if at_end:
+            for i in range(2 * n):
+                k1[i] = kp[i]
+        have_k1 = at_end
+        t = t_new
+        steps += 1
+    flag[0] = 1 if have_k1 else 0
+    return DONE, t, steps, n_rhs, n_rec, out_i

@@ -1,0 +1,155 @@
+"""The compiled engine of simulate(): same results as the general driver, eligibility, handover."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nonmin import library
+from nonmin.core import use_backend
+from nonmin.errors import InputError, SimulationError
+from nonmin.model.planar import PlanarBuilder, PlanarProgram
+from nonmin.sim import Event, Reset, _fastpath, simulate
+
+pytest.importorskip("numba")
+
+FIELDS = ("q", "qd", "qdd", "f_c", "energy", "mu", "cond", "phi_norm", "velocity_residual_norm")
+
+
+def _both(mech: object, **kw: object) -> tuple[object, object]:
+    a = simulate(mech, engine="compiled", progress=False, **kw)  # type: ignore[arg-type]
+    b = simulate(mech, engine="python", progress=False, **kw)  # type: ignore[arg-type]
+    return a, b
+
+
+@pytest.mark.parametrize(
+    ("name", "kw"),
+    [("crossed_four_bar", {}), ("A02_n_four_bar", {"N": 2}), ("slider_crank", {}), ("five_bar", {}),
+     ("A01_pendulum", {})],
+)  # fmt: skip
+@pytest.mark.parametrize("sampled", [False, True])
+def test_compiled_equals_general_driver(name: str, kw: dict[str, int], sampled: bool) -> None:
+    mech = library.get(name, **kw)
+    te = np.linspace(0.0, 0.3, 31) if sampled else None
+    a, b = _both(mech, t_span=(0.0, 0.3), dt=2e-3, t_eval=te)
+    assert a.metadata["engine"] == "compiled" and b.metadata["engine"] == "python"
+    assert a.success and b.success
+    assert len(a) == len(b) == (31 if sampled else 151)
+    np.testing.assert_array_equal(a.t, b.t)
+    np.testing.assert_array_equal(a.rank, b.rank)
+    np.testing.assert_array_equal(a.active_mask, b.active_mask)
+    assert a.n_steps == b.n_steps == 150
+    scale = {f: max(1.0, float(np.max(np.abs(getattr(b, f))))) for f in FIELDS}
+    for f in FIELDS:  # round-off apart (qdd near a change point is the most sensitive)
+        err = float(np.max(np.abs(getattr(a, f) - getattr(b, f)))) / scale[f]
+        assert err < (1e-7 if f in ("qdd", "f_c") else 1e-9), (f, err)
+    assert float(np.max(a.phi_norm)) < 1e-13
+
+
+def test_compiled_chunking_is_deterministic(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The warm-start state is carried between chunks: any split gives bitwise the same run."""
+    mech = library.get("crossed_four_bar")
+    a = simulate(mech, (0.0, 0.6), dt=1e-3, engine="compiled", progress=False)
+    monkeypatch.setattr(_fastpath, "CHUNK_SECONDS", 1e-9)  # the smallest chunks (16 steps)
+    b = simulate(mech, (0.0, 0.6), dt=1e-3, engine="compiled", progress=False)
+    for f in ("q", "qd", "qdd", "f_c", "cond", "energy"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
+
+
+def test_compiled_keeps_the_crossed_four_bar_on_its_branch() -> None:
+    """A stretch with change points (flat configurations) at a coarse step, against the exact
+    branch solution the library ships."""
+    mech = library.get("crossed_four_bar")
+    te = np.linspace(0.0, 2.5, 251)
+    tr = simulate(mech, (0.0, 2.5), dt=5e-3, t_eval=te, engine="compiled", progress=False)
+    assert tr.metadata["engine"] == "compiled"
+    assert float(np.max(tr.phi_norm)) < 1e-13
+    assert float(np.max(np.abs(tr.energy - tr.energy[0]))) < 0.05
+    ref = library.crossed_four_bar_reference(te)
+    # the crank turns through θ = kπ (the flat, singular configurations) five times
+    assert int(np.sum(np.diff(np.floor(ref["theta"] / np.pi)) != 0)) == 5
+    assert float(np.max(np.abs(tr.q - ref["q"]))) < 0.05
+
+
+def test_auto_engine_choice() -> None:
+    mech = library.get("crossed_four_bar")
+    assert simulate(mech, 0.01, progress=False).metadata["engine"] == "compiled"
+    assert simulate(mech, 0.01, method="dopri5", progress=False).metadata["engine"] == "python"
+    assert simulate(mech, 0.01, stabilization="baumgarte", progress=False).metadata["engine"] == "python"
+    with use_backend("numpy"):
+        assert simulate(mech, 0.01, progress=False).metadata["engine"] == "python"
+    wall = library.get("arm2r_wall")  # unilateral contact: events need the general driver
+    assert simulate(wall, 0.01, progress=False).metadata["engine"] == "python"
+    assert simulate(wall, 0.01, contact=False, progress=False).metadata["engine"] == "compiled"
+
+
+def _spring_model() -> object:
+    b = PlanarBuilder("sprung")
+    b.body("bar", mass=1.0, inertia=0.1)
+    b.revolute("pin", ("ground", (0.0, 0.0)), ("bar", (-0.5, 0.0)))
+    b.rotational_spring("k", "ground", "bar", stiffness=3.0)
+    return b.build()
+
+
+@pytest.mark.parametrize(
+    ("kw", "needle"),
+    [({"method": "dopri5"}, "method must be 'rk4'"),
+     ({"stabilization": "none"}, "stabilization must be the mass-metric"),
+     ({"events": (Event(lambda t, q, qd, fc: t - 1.0, transition=Reset(lambda t, q, qd, a: (q, qd, a))),)},
+      "events are given"),
+     ({"controller": lambda t, q, qd, s, active=None: np.zeros(0)}, "a controller is given")],
+)  # fmt: skip
+def test_compiled_engine_names_what_prevents_it(kw: dict[str, object], needle: str) -> None:
+    mech = library.get("crossed_four_bar")
+    with pytest.raises(InputError, match=needle):
+        simulate(mech, 0.01, engine="compiled", progress=False, **kw)  # type: ignore[arg-type]
+
+
+def test_compiled_engine_refusals_for_model_backend_and_name() -> None:
+    model = _spring_model()
+    assert model.fast_program(model.default_active) is None  # type: ignore[attr-defined]
+    with pytest.raises(InputError, match="no compiled program"):
+        simulate(model, 0.01, np.array([0.5, 0.0, 0.0]), engine="compiled", progress=False)
+    mech = library.get("crossed_four_bar")
+    with use_backend("numpy"), pytest.raises(InputError, match="backend is 'numpy'"):
+        simulate(mech, 0.01, engine="compiled", progress=False)
+    with pytest.raises(InputError, match="engine must be one of"):
+        simulate(mech, 0.01, engine="fast", progress=False)
+
+
+def test_program_describes_the_model() -> None:
+    mech = library.get("slider_crank")
+    prog = mech.model.fast_program(mech.state.active)
+    assert isinstance(prog, PlanarProgram)
+    assert prog.n == mech.model.n and prog.m == mech.model.num_rows(mech.state.active)
+    np.testing.assert_array_equal(prog.M, mech.model.mass_matrix(mech.state.q))
+    np.testing.assert_array_equal(prog.f, mech.model.conservative_force(mech.state.q))
+
+
+def test_max_steps_hands_over_to_the_general_driver() -> None:
+    mech = library.get("crossed_four_bar")
+    with pytest.raises(SimulationError, match="max_steps = 40"):
+        simulate(mech, 1.0, dt=1e-3, max_steps=40, engine="compiled", progress=False)
+    a = simulate(mech, 1.0, dt=1e-3, max_steps=40, engine="compiled", throw=False, progress=False)
+    b = simulate(mech, 1.0, dt=1e-3, max_steps=40, engine="python", throw=False, progress=False)
+    assert not a.success and a.message == b.message
+    assert a.n_steps == b.n_steps == 40 and len(a) == len(b) == 41
+    np.testing.assert_allclose(a.q, b.q, atol=1e-12)
+
+
+@pytest.mark.filterwarnings("ignore:overflow")
+def test_kernel_failure_hands_over_and_raises_the_same_error() -> None:
+    """A state whose first RK4 stage overflows: the compiled loop stops before the step, the
+    general driver takes over and raises exactly what it raises on its own."""
+    mech = library.get("crossed_four_bar")
+    qd = mech.state.qd * 1e150
+    errs = []
+    for engine in ("compiled", "python"):
+        with pytest.raises(Exception) as info:
+            simulate(mech, 0.01, mech.state.q, qd, dt=1e-3, engine=engine, progress=False,
+                     project_initial=False)  # fmt: skip
+        errs.append(info.value)
+    assert type(errs[0]) is type(errs[1]) and str(errs[0]) == str(errs[1])
+    part = simulate(mech, 0.01, mech.state.q, qd, dt=1e-3, engine="compiled", throw=False,
+                    project_initial=False, progress=False)  # fmt: skip
+    assert not part.success and "compiled, then python" in part.metadata["engine"]
