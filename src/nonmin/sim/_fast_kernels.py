@@ -50,10 +50,10 @@ def workspace(n, m, S, n_var, T):  # type: ignore[no-untyped-def]
     return (np.empty(2 * n + 2), np.empty(m * n + 1), np.empty((2, m)), np.empty((m, n)),
             np.empty(m), np.zeros(n), np.empty(2 * n + 3), np.empty((n, n)), np.empty((n, n)),
             np.empty(n), np.empty(n), scratch(n, m), T, np.empty((9, S)), np.empty(n_var),
-            np.empty(m))  # fmt: skip
+            np.empty(m), np.empty((n, n)))  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _evaluate(prog, q, qd, ws):  # type: ignore[no-untyped-def]
     """``A = ws[3]``, ``φ = ws[2][0]``, ``γ = ws[2][1]`` of the program at ``(q, qd)``."""
     _M, _f, A0, I6, SL, prm, rows, var_idx, counts, arows, G, ac = prog
@@ -83,7 +83,7 @@ def _evaluate(prog, q, qd, ws):  # type: ignore[no-untyped-def]
             A[i, j] = buf[i * n + j]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _drift_rtol(A, phi, base, factor, nrm):  # type: ignore[no-untyped-def]
     """:func:`nonmin.sim._simulate.drift_rank_rtol` (every row holonomic; scratch ``nrm``)."""
     m, n = A.shape
@@ -108,7 +108,7 @@ def _drift_rtol(A, phi, base, factor, nrm):  # type: ignore[no-untyped-def]
     return min(max(base, factor * drift), 1e-2)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _matvec_rows(A, v, out):  # type: ignore[no-untyped-def]
     m, n = A.shape
     for i in range(m):
@@ -118,14 +118,14 @@ def _matvec_rows(A, v, out):  # type: ignore[no-untyped-def]
         out[i] = s
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _solve(prog, ws, cfg, h, gam, rtol, want_pl):  # type: ignore[no-untyped-def]
     """The core kernel on the workspace's A (warm-started Jacobi SVD); result in ``ws[6]``."""
     return solve_work(prog[0], h, ws[3], gam, rtol, cfg[SPD_RTOL], cfg[SYM_RTOL], want_pl, ws[6],
                       ws[7], ws[8], ws[11], ws[12], True)  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rhs(prog, ws, cfg, t, yy, kk):  # type: ignore[no-untyped-def]
     """``kk = F(t, yy) = (qd, qdd)``; returns a status (0 = OK)."""
     q, qd, out = ws[9], ws[10], ws[6]
@@ -218,11 +218,75 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
+def _cond_mbar(M, P, k, mu, Z):  # type: ignore[no-untyped-def]
+    """``cond(M̄)`` from ``P`` (rank k) without an n × n eigenproblem.
+
+    ``M̄ = PMP + μQ`` acts as ``μ`` on ``R(Aᵀ)`` and as ``S = Z M Zᵀ`` on ``N(A)`` (``Z``: k
+    orthonormal rows spanning ``R(P) = N(A)``), so its eigenvalues are ``μ`` and those of the
+    k × k matrix ``S``. ``Z`` comes from ``P`` by Gram–Schmidt with column pivoting (the
+    largest remaining column first; ``P`` is a projector, so its columns span ``N(A)``). Equals
+    ``(σ_max(L)/σ_min(L))²`` of the Cholesky factor (what the general driver records) up to
+    round-off.
+    """
+    n = M.shape[0]
+    if k <= 0:
+        return 1.0
+    for i in range(k):
+        best = -1.0
+        jb = 0
+        for j in range(n):  # ‖column j of P‖² minus its part along the rows found so far
+            s = 0.0
+            for a in range(n):
+                s += P[a, j] * P[a, j]
+            for l in range(i):
+                c = 0.0
+                for a in range(n):
+                    c += Z[l, a] * P[a, j]
+                s -= c * c
+            if s > best:
+                best = s
+                jb = j
+        for a in range(n):
+            Z[i, a] = P[a, jb]
+        for l in range(i):  # orthogonalize against the previous rows (twice: reorthogonalization)
+            for _ in range(2):
+                d = 0.0
+                for a in range(n):
+                    d += Z[l, a] * Z[i, a]
+                for a in range(n):
+                    Z[i, a] -= d * Z[l, a]
+        nz = 0.0
+        for a in range(n):
+            nz += Z[i, a] * Z[i, a]
+        nz = math.sqrt(nz)
+        for a in range(n):
+            Z[i, a] /= nz
+    S = np.empty((k, k))
+    for i in range(k):
+        for j in range(k):
+            s = 0.0
+            for a in range(n):
+                t = 0.0
+                for b in range(n):
+                    t += M[a, b] * Z[j, b]
+                s += Z[i, a] * t
+            S[i, j] = s
+    if k == 1:
+        lo = S[0, 0]
+        hi = S[0, 0]
+    else:
+        ev = np.linalg.eigvalsh(0.5 * (S + S.T))
+        lo = ev[0]
+        hi = ev[k - 1]
+    return max(mu, hi) / min(mu, lo)
+
+
+@njit(cache=True)
 def _point(prog, ws, cfg, tt, yy, recs, k, kk):  # type: ignore[no-untyped-def]
     """The full evaluation recorded at a sample (row ``k`` of ``recs``); ``kk = F(tt, yy)``."""
     rec_t, rec_q, rec_qd, rec_qdd, rec_fc, rec_rank, rec_cond, rec_mu, rec_energy, rec_phi, rec_vel = recs
     M, f = prog[0], prog[1]
-    q, qd, out, PG, A, vres, Lm = ws[9], ws[10], ws[6], ws[2], ws[3], ws[4], ws[8]
+    q, qd, out, PG, A, vres = ws[9], ws[10], ws[6], ws[2], ws[3], ws[4]
     n = q.shape[0]
     m = A.shape[0]
     for i in range(n):
@@ -253,8 +317,7 @@ def _point(prog, ws, cfg, tt, yy, recs, k, kk):  # type: ignore[no-untyped-def]
         e_pot += f[i] * q[i]
     rec_rank[k] = int(out[2 * n])
     rec_mu[k] = out[2 * n + 1]
-    sv = np.linalg.svd(Lm)[1]
-    rec_cond[k] = (sv[0] / sv[n - 1]) ** 2
+    rec_cond[k] = _cond_mbar(M, ws[7], n - int(out[2 * n]), out[2 * n + 1], ws[16])
     rec_energy[k] = 0.5 * e_kin - e_pot
     pn = 0.0
     for i in range(m):
@@ -330,7 +393,7 @@ def rk4_planar(prog, t, t1, dt, y, t_out, out_i, every, max_steps, cfg, recs, ca
             at_end = True
         else:
             end_tol = 1e-12 * max(1.0, abs(t_new))
-            while st == 0 and oi < n_out and t_out[oi] <= t_new:
+            while st == 0 and oi < n_out and t_out[oi] <= t_new + end_tol:
                 s = t_out[oi] - t
                 if abs(s - h) <= end_tol:
                     st = _point(prog, ws, cfg, t_new, y1, recs, k, kp)

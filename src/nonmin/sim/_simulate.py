@@ -789,8 +789,10 @@ def simulate(
                     break
                 continue
             # no event: accept the step
-            _sample_t_eval(rec, t_out, out_i, t_start, t_new, out_at, system)
-            out_i = _advance_out(t_out, out_i, t_new)
+            # requested times within end_tol after the step end are the step end (accumulated
+            # round-off in t must not turn them into partial steps of the next step)
+            _sample_t_eval(rec, t_out, out_i, t_start, t_new + end_tol, out_at, system)
+            out_i = _advance_out(t_out, out_i, t_new + end_tol)
             if t_out is None and p1 is not None:
                 rec.add(p1, system.active)
             t = t_new
