@@ -37,7 +37,7 @@ FAILED = 1  # a kernel status ≠ OK or a non-finite acceleration: hand over to 
 
 
 #: Entries of the ``cfg`` parameter vector of :func:`rk4_planar`.
-BASE_RTOL, DRIFT_FACTOR, VEL_RTOL, PTOL, MAX_ITER, SPD_RTOL, SYM_RTOL, FLOOR = range(8)
+BASE_RTOL, DRIFT_FACTOR, VEL_RTOL, PTOL, MAX_ITER, SPD_RTOL, SYM_RTOL, FLOOR, WARM = range(9)
 
 #: Status of a non-finite acceleration (the core kernel's codes are 0–4).
 NONFINITE_QDD = 5
@@ -121,8 +121,10 @@ def _matvec_rows(A, v, out):  # type: ignore[no-untyped-def]
 @njit(cache=True, inline="always")
 def _solve(prog, ws, cfg, h, gam, rtol, want_pl):  # type: ignore[no-untyped-def]
     """The core kernel on the workspace's A (warm-started Jacobi SVD); result in ``ws[6]``."""
-    return solve_work(prog[0], h, ws[3], gam, rtol, cfg[SPD_RTOL], cfg[SYM_RTOL], want_pl, ws[6],
-                      ws[7], ws[8], ws[11], ws[12], True)  # fmt: skip
+    # flags computed at run time: literal arguments would make numba compile solve_work once per
+    # literal combination (~20 s each on first use)
+    return solve_work(prog[0], h, ws[3], gam, rtol, cfg[SPD_RTOL], cfg[SYM_RTOL], want_pl != 0,
+                      ws[6], ws[7], ws[8], ws[11], ws[12], cfg[WARM] != 0.0)  # fmt: skip
 
 
 @njit(cache=True, inline="always")
@@ -135,7 +137,7 @@ def _rhs(prog, ws, cfg, t, yy, kk):  # type: ignore[no-untyped-def]
         qd[i] = yy[n + i]
     _evaluate(prog, q, qd, ws)
     rtol = _drift_rtol(ws[3], ws[2][0], cfg[BASE_RTOL], cfg[DRIFT_FACTOR], ws[15])
-    st = _solve(prog, ws, cfg, prog[1], ws[2][1], rtol, False)
+    st = _solve(prog, ws, cfg, prog[1], ws[2][1], rtol, 0)
     if st != 0:
         return st
     for i in range(n):
@@ -148,26 +150,22 @@ def _rhs(prog, ws, cfg, t, yy, kk):  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def _advance(prog, ws, cfg, t, yy, kk1, h, res, stages):  # type: ignore[no-untyped-def]
-    """One raw RK4 step of size h from ``(t, yy)`` with ``k1 = kk1`` given, into ``res``."""
-    k2, k3, k4, ys = stages
+    """One raw RK4 step of size h from ``(t, yy)`` with ``k1 = kk1`` given, into ``res``.
+
+    ``stages = (K, ys)``: ``K`` (3, 2n) receives k2, k3, k4 (one right-hand-side call site, so
+    the inlined evaluation is compiled once).
+    """
+    K, ys = stages
     n2 = yy.shape[0]
+    for s in range(3):
+        c = h if s == 2 else 0.5 * h
+        for i in range(n2):
+            ys[i] = yy[i] + c * (kk1[i] if s == 0 else K[s - 1, i])
+        st = _rhs(prog, ws, cfg, t + c, ys, K[s])
+        if st != 0:
+            return st
     for i in range(n2):
-        ys[i] = yy[i] + 0.5 * h * kk1[i]
-    st = _rhs(prog, ws, cfg, t + 0.5 * h, ys, k2)
-    if st != 0:
-        return st
-    for i in range(n2):
-        ys[i] = yy[i] + 0.5 * h * k2[i]
-    st = _rhs(prog, ws, cfg, t + 0.5 * h, ys, k3)
-    if st != 0:
-        return st
-    for i in range(n2):
-        ys[i] = yy[i] + h * k3[i]
-    st = _rhs(prog, ws, cfg, t + h, ys, k4)
-    if st != 0:
-        return st
-    for i in range(n2):
-        res[i] = yy[i] + (h / 6.0) * (kk1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+        res[i] = yy[i] + (h / 6.0) * (kk1[i] + 2.0 * K[0, i] + 2.0 * K[1, i] + K[2, i])
     return 0
 
 
@@ -180,9 +178,13 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
     for i in range(n):
         q[i] = yy[i]
         qd[i] = yy[n + i]
-    _evaluate(prog, q, qd, ws)
     prev = np.inf
-    for _ in range(int(cfg[MAX_ITER])):
+    it = 0
+    while True:  # evaluate, then (at most MAX_ITER times) correct
+        _evaluate(prog, q, qd, ws)
+        if it >= cfg[MAX_ITER]:
+            break
+        it += 1
         err = 0.0
         for i in range(m):
             a = abs(PG[0, i])
@@ -201,14 +203,13 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
         if floor:
             break
         prev = err
-        st = _solve(prog, ws, cfg, zero, PG[0], cfg[BASE_RTOL], False)
+        st = _solve(prog, ws, cfg, zero, PG[0], cfg[BASE_RTOL], 0)
         if st != 0:
             return st
         for i in range(n):
             q[i] = q[i] + out[i]
-        _evaluate(prog, q, qd, ws)
     _matvec_rows(A, qd, vres)
-    st = _solve(prog, ws, cfg, zero, vres, cfg[VEL_RTOL], False)
+    st = _solve(prog, ws, cfg, zero, vres, cfg[VEL_RTOL], 0)
     if st != 0:
         return st
     for i in range(n):
@@ -294,7 +295,7 @@ def _point(prog, ws, cfg, tt, yy, recs, k, kk):  # type: ignore[no-untyped-def]
         qd[i] = yy[n + i]
     _evaluate(prog, q, qd, ws)
     rtol = _drift_rtol(A, PG[0], cfg[BASE_RTOL], cfg[DRIFT_FACTOR], ws[15])
-    st = _solve(prog, ws, cfg, f, PG[1], rtol, True)
+    st = _solve(prog, ws, cfg, f, PG[1], rtol, 1)
     if st != 0:
         return st
     for i in range(n):
@@ -357,7 +358,7 @@ def rk4_planar(prog, t, t1, dt, y, t_out, out_i, every, max_steps, cfg, recs, ca
     kp = np.empty(2 * n)
     y1 = np.empty(2 * n)
     yp = np.empty(2 * n)
-    stages = (np.empty(2 * n), np.empty(2 * n), np.empty(2 * n), np.empty(2 * n))
+    stages = (np.empty((3, 2 * n)), np.empty(2 * n))
     n_rhs = 0
     n_rec = 0
     steps = 0
@@ -409,7 +410,7 @@ def rk4_planar(prog, t, t1, dt, y, t_out, out_i, every, max_steps, cfg, recs, ca
                     if st == 0:
                         st = _project(prog, ws, cfg, yp)
                     if st == 0:
-                        st = _point(prog, ws, cfg, t + s, yp, recs, k, stages[0])
+                        st = _point(prog, ws, cfg, t + s, yp, recs, k, stages[1])
                         n_rhs += 1
                 recs[0][k] = t_out[oi]
                 k += 1

@@ -167,7 +167,7 @@ def run(
     base = DEFAULT_RTOL if rank_rtol is None else float(rank_rtol)
     vtol = base if stab.velocity_rtol is None else max(float(stab.velocity_rtol), rank_rtol or 0.0)
     cfg = np.array([base, drift_factor, vtol, float(stab.tol), float(stab.max_iter), SPD_RTOL,
-                    _symmetry_rtol(), ROUNDOFF_FLOOR])  # fmt: skip
+                    _symmetry_rtol(), ROUNDOFF_FLOOR, 1.0])  # fmt: skip
     pr = (prog.M, prog.f, prog.A0, prog.I6, prog.SL, prog.prm, prog.rows, prog.var_idx,
           prog.counts, prog.angle_rows, prog.G, prog.angle_const)  # fmt: skip
     every = t_out is None

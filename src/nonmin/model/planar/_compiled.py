@@ -386,7 +386,11 @@ def program(lay: Layout, M: FloatArray, f: FloatArray) -> PlanarProgram | None:
     """The :class:`PlanarProgram` of a layout, or None if it has drivers or user-defined joints."""
     if lay.m == 0 or lay.drivers or lay.generic:
         return None
-    c = np.ascontiguousarray
+    def c(x: Any, dtype: Any = None) -> Any:
+        # fresh writable C-contiguous copies: read-only arrays (the model's M) would make numba
+        # compile every kernel they reach a second time, for a "readonly" array type
+        return np.array(x, dtype=dtype, order="C", copy=True)
+
     return PlanarProgram(
         n=lay.n, m=lay.m, M=c(M, dtype=np.float64), f=c(f, dtype=np.float64), A0=c(lay.A0),
         I6=c(lay.I6, dtype=np.intp), SL=c(lay.SL), prm=c(lay.k_prm), rows=c(lay.k_rows, dtype=np.intp),
