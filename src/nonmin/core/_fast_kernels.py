@@ -56,7 +56,6 @@ ASYMMETRIC = 4
 MAX_SWEEPS = 60
 
 _NO_T = np.zeros((1, 1))
-_ONE_MU = np.ones(1)
 _EPS = float(np.finfo(np.float64).eps)
 _TINY = float(np.finfo(np.float64).tiny)
 
@@ -543,48 +542,43 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
 
 
 @njit(cache=True)
-def solve_one(M, h, f, A, gam, params, out, P, L):
+def solve_one(M, h, f, A, gam, params, out, P, L):  # type: ignore[no-untyped-def]
     """Single state (2-D ``M``, ``A``), with few arguments to keep the call overhead small.
 
     ``params = [has_f, mu, has_mu, rtol, spd_rtol, sym_rtol, want_pl]``; writes
     ``out = [qdd (n), f_c (n), rank, mu, pivot_ratio]`` (and ``P``, ``L`` if ``want_pl``; pass
-    any 2-D arrays otherwise) and returns the status. One entry point for both uses: each
-    compiled entry point costs seconds of compilation on first use.
+    any 2-D arrays otherwise) and returns the status. A thin wrapper of :func:`solve_work`
+    (which holds the one compiled copy of the single-state evaluation: each compiled copy costs
+    ~15 s of compilation on first use).
     """
     n = M.shape[0]
     m = A.shape[0]
-    res = out[: 2 * n].reshape((2, n))
-    ist = np.empty(2, dtype=np.int64)
-    mu_in = params[1:2]
-    solve_range(
-        0, 1, M.reshape((1, n, n)), h.reshape((1, n)), f.reshape((1, f.shape[0])),
-        params[0] != 0.0, A.reshape((1, m, n)), gam.reshape((1, m)), mu_in,
-        params[2] != 0.0, params[3], params[4], params[5], res[0:1], res[1:2],
-        P.reshape((1, P.shape[0], P.shape[1])), L.reshape((1, L.shape[0], L.shape[1])),
-        params[6] != 0.0, ist[0:1], ist[1:2], out[2 * n + 1 : 2 * n + 2],
-        out[2 * n + 2 : 2 * n + 3], scratch(n, m), _NO_T, False,
-    )  # fmt: skip
-    out[2 * n] = ist[1]
-    return ist[0]
+    return solve_work(M, h, f, params[0] != 0.0, A, gam, params[1], params[2] != 0.0, params[3],
+                      params[4], params[5], params[6] != 0.0, out, P, L, scratch(n, m),
+                      np.zeros((1, 1)), m < 0)  # fmt: skip  (a run-time False: no literal type)
 
 
 @njit(cache=True)
-def solve_work(M, h, A, gam, rtol, spd_rtol, sym_rtol, want_pl, out, P, L, work, T, warm):  # type: ignore[no-untyped-def]
+def solve_work(M, h, f, has_f, A, gam, mu, has_mu, rtol, spd_rtol, sym_rtol, want_pl, out, P, L,
+               work, T, warm):  # type: ignore[no-untyped-def]  # fmt: skip
     """Single state with caller-owned scratch (``work = scratch(n, m)``) and a warm start.
 
     For integration loops: no allocation per call, and with ``warm`` true the Jacobi SVD
     starts from ``T`` (m × m orthogonal, the accumulated rotation of the previous call, updated
     in place; start with the identity), so a state close to the previous one converges in
-    fewer sweeps. The result is that of :func:`solve_one` up to round-off (same rank policy).
-    Writes ``out = [qdd (n), f_c (n), rank, mu, pivot_ratio]``; returns the status.
+    fewer sweeps. Same result as a cold start up to round-off (same rank policy). ``f`` is read
+    only if ``has_f``, ``mu`` only if ``has_mu``. Writes ``out = [qdd (n), f_c (n), rank, mu,
+    pivot_ratio]`` (``P`` and ``L`` if ``want_pl``); returns the status.
     """
     n = M.shape[0]
     m = A.shape[0]
     res = out[: 2 * n].reshape((2, n))
     ist = np.empty(2, dtype=np.int64)
+    mu_in = np.empty(1)
+    mu_in[0] = mu
     solve_range(
-        0, 1, M.reshape((1, n, n)), h.reshape((1, n)), h.reshape((1, n)), False,
-        A.reshape((1, m, n)), gam.reshape((1, m)), _ONE_MU, False, rtol, spd_rtol, sym_rtol,
+        0, 1, M.reshape((1, n, n)), h.reshape((1, n)), f.reshape((1, f.shape[0])), has_f,
+        A.reshape((1, m, n)), gam.reshape((1, m)), mu_in, has_mu, rtol, spd_rtol, sym_rtol,
         res[0:1], res[1:2], P.reshape((1, P.shape[0], P.shape[1])),
         L.reshape((1, L.shape[0], L.shape[1])), want_pl, ist[0:1], ist[1:2],
         out[2 * n + 1 : 2 * n + 2], out[2 * n + 2 : 2 * n + 3], work, T, warm,

@@ -123,8 +123,9 @@ def _solve(prog, ws, cfg, h, gam, rtol, want_pl):  # type: ignore[no-untyped-def
     """The core kernel on the workspace's A (warm-started Jacobi SVD); result in ``ws[6]``."""
     # flags computed at run time: literal arguments would make numba compile solve_work once per
     # literal combination (~20 s each on first use)
-    return solve_work(prog[0], h, ws[3], gam, rtol, cfg[SPD_RTOL], cfg[SYM_RTOL], want_pl != 0,
-                      ws[6], ws[7], ws[8], ws[11], ws[12], cfg[WARM] != 0.0)  # fmt: skip
+    return solve_work(prog[0], h, h, cfg[WARM] < 0.0, ws[3], gam, 1.0, cfg[WARM] < 0.0, rtol,
+                      cfg[SPD_RTOL], cfg[SYM_RTOL], want_pl != 0, ws[6], ws[7], ws[8], ws[11],
+                      ws[12], cfg[WARM] != 0.0)  # fmt: skip
 
 
 @njit(cache=True, inline="always")
