@@ -37,7 +37,7 @@ FAILED = 1  # a kernel status ≠ OK or a non-finite acceleration: hand over to 
 
 
 #: Entries of the ``cfg`` parameter vector of :func:`rk4_planar`.
-BASE_RTOL, DRIFT_FACTOR, VEL_RTOL, PTOL, MAX_ITER, SPD_RTOL, SYM_RTOL, FLOOR, WARM = range(9)
+BASE_RTOL, DRIFT_FACTOR, VEL_RTOL, PTOL, MAX_ITER, SPD_RTOL, SYM_RTOL, FLOOR, WARM, POS_CUT = range(10)
 
 #: Status of a non-finite acceleration (the core kernel's codes are 0–4).
 NONFINITE_QDD = 5
@@ -181,6 +181,7 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
         qd[i] = yy[n + i]
     prev = np.inf
     it = 0
+    cut = max(cfg[POS_CUT], cfg[BASE_RTOL])  # see _stabilization.POSITION_CUT_RTOL
     while True:  # evaluate, then (at most MAX_ITER times) correct
         _evaluate(prog, q, qd, ws)
         if it >= cfg[MAX_ITER]:
@@ -191,8 +192,8 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
             a = abs(PG[0, i])
             if a > err:
                 err = a
-        if err <= cfg[PTOL] or err == 0.0 or err > 0.5 * prev:
-            break  # converged, or no progress: round-off floor reached
+        if err <= cfg[PTOL] or err == 0.0:
+            break  # converged
         floor = True  # every row at its round-off level (see _stabilization.ROUNDOFF_FLOOR)
         for i in range(m):
             s = 0.0
@@ -203,8 +204,12 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
                 break
         if floor:
             break
+        if err > 0.5 * prev:
+            if cut == cfg[BASE_RTOL]:
+                break  # no progress at the full rank: round-off floor reached
+            cut = cfg[BASE_RTOL]  # stalled above the floor with the cutoff: a real residual
         prev = err
-        st = _solve(prog, ws, cfg, zero, PG[0], cfg[BASE_RTOL], 0)
+        st = _solve(prog, ws, cfg, zero, PG[0], cut, 0)
         if st != 0:
             return st
         for i in range(n):

@@ -32,7 +32,7 @@ from ..core._fast import AUTO_NUMBA_MAX_N, get_backend
 from ..core.linalg import DEFAULT_RTOL, SPD_RTOL
 from ..errors import InputError, MissingDependencyError
 from ._integrators import RK4
-from ._stabilization import ROUNDOFF_FLOOR, Projection
+from ._stabilization import POSITION_CUT_RTOL, ROUNDOFF_FLOOR, Projection
 
 FloatArray = NDArray[np.float64]
 
@@ -167,7 +167,7 @@ def run(
     base = DEFAULT_RTOL if rank_rtol is None else float(rank_rtol)
     vtol = base if stab.velocity_rtol is None else max(float(stab.velocity_rtol), rank_rtol or 0.0)
     cfg = np.array([base, drift_factor, vtol, float(stab.tol), float(stab.max_iter), SPD_RTOL,
-                    _symmetry_rtol(), ROUNDOFF_FLOOR, 1.0])  # fmt: skip
+                    _symmetry_rtol(), ROUNDOFF_FLOOR, 1.0, POSITION_CUT_RTOL])  # fmt: skip
     pr = (prog.M, prog.f, prog.A0, prog.I6, prog.SL, prog.prm, prog.rows, prog.var_idx,
           prog.counts, prog.angle_rows, prog.G, prog.angle_const)  # fmt: skip
     every = t_out is None

@@ -8,7 +8,9 @@ remedies, given as objects or registered names (:data:`STABILIZATIONS`):
   (:func:`nonmin.core.baumgarte_bias`), i.e. enforces ``φ̈ + 2αφ̇ + β²φ = 0``.
 * :class:`Projection` (``"projection"``): after every accepted step, Gauss–Newton iterations
   ``q ← q + Sᵀ(−A⁺φ)`` (:func:`nonmin.core.position_correction`, the minimum-kinetic-metric
-  step onto φ = 0) until ``‖φ‖∞ ≤ tol``, then the velocity correction
+  step onto φ = 0; the first ones without singular values below :data:`POSITION_CUT_RTOL`,
+  whose φ components near a singular configuration are round-off) until ``‖φ‖∞ ≤ tol``, then
+  the velocity correction
   ``qd ← qd + Sᵀ(−A⁺(A qd + φ_t))`` (same formula as position_correction, applied to the
   velocity residual); for scleronomic constraints this is exactly the plastic
   impact map ``M̄⁻¹PM qd`` (:func:`nonmin.core.impact_map`, ERRATA "Drift"), and it also handles
@@ -26,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..core import forward_dynamics
+from ..core.linalg import DEFAULT_RTOL
 from ..errors import InputError
 from ..model import ConstraintTerms, Model
 
@@ -86,6 +89,21 @@ class Baumgarte(Stabilization):
 #: it. It spares the iteration that only detected the floor (measured: crossed four-bar, RK4,
 #: dt = 1e-2 s: 3.6 → 2.x solves per projection) and leaves ‖φ‖∞ at the same 1e-16…1e-15.
 ROUNDOFF_FLOOR = 4.0 * float(np.finfo(np.float64).eps)
+
+
+#: Relative singular-value cutoff of the first Gauss–Newton steps of :class:`Projection`.
+#: Near a singular configuration some singular values of the equilibrated A are of the order of
+#: the distance to it (measured: 1e-7…1.5e-6 relative on A02 N = 40 at a step end 1.6e-6 s
+#: from a horizontal configuration), and the components of φ along them are round-off
+#: (1e-16…1e-15 there): the full-rank step divides that noise by them and moves q by ~1e-9
+#: along the branch-switching directions, 100 × farther than q is from the exact solution. As
+#: the tangent space turns by (that move)/(distance to the configuration), the velocity
+#: correction then tilts qd by ~1e-3 and the next RK4 step kicks the energy (+24.5 J in one
+#: step at RK4 dt = 2e-3). So the steps first use this cutoff (directions with smaller singular
+#: values keep the integrator's position); it is kept only while it converges, i.e. when the
+#: residual along those directions is at the round-off floor. If the iterations stall above
+#: the floor there (a real residual along them), they continue at the full rank.
+POSITION_CUT_RTOL = 1e-2
 
 
 def _correction(M: FloatArray, A: FloatArray, r: FloatArray, rtol: float | None) -> FloatArray:
@@ -162,17 +180,23 @@ class Projection(Stabilization):
         if hol.any():
             prev = np.inf
             aq = np.abs(q)
+            full = DEFAULT_RTOL if rtol is None else float(rtol)
+            cut = max(POSITION_CUT_RTOL, full)  # first without the near-singular directions
             for _ in range(self.max_iter):
                 phi = ct.phi[hol]
                 err = float(np.max(np.abs(phi)))
-                if err <= self.tol or err == 0.0 or err > 0.5 * prev:
-                    break  # converged, or no progress: round-off floor reached
+                if err <= self.tol or err == 0.0:
+                    break  # converged
                 if np.all(np.abs(phi) <= ROUNDOFF_FLOOR * (1.0 + np.abs(ct.A[hol]) @ aq)):
                     break  # every row at its round-off level: one more iteration cannot help
+                if err > 0.5 * prev:
+                    if cut == full:
+                        break  # no progress at the full rank: round-off floor reached
+                    cut = full  # stalled above the floor with the cutoff: a real residual
                 prev = err
                 # M at the uncorrected q: the corrections are at the integrator's error level,
                 # so the metric change is of second order
-                q = q + _correction(M if eye is None else eye, ct.A[hol], phi, rtol)
+                q = q + _correction(M if eye is None else eye, ct.A[hol], phi, cut)
                 ct = model.constraint_terms(t, q, qd, active)
         if self.velocity and ct.A.shape[0]:
             vtol = rtol if self.velocity_rtol is None else max(self.velocity_rtol, rtol or 0.0)
