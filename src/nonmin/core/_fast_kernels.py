@@ -74,7 +74,7 @@ QR_MARGIN = 10.0
 
 
 @njit(cache=True)
-def _lq_certified(B, m, n, rtol, Wq, Hv, V, Li, cv, beta):  # type: ignore[no-untyped-def]
+def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta):  # type: ignore[no-untyped-def]
     """LQ factorization ``D A = L Q`` of ``B[:, :n]`` (m ≤ n, every row nonzero), if full rank
     is certain.
 
@@ -82,9 +82,9 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, V, Li, cv, beta):  # type: ignore[no-un
     ``Hv`` (m, n, the reflectors) are scratch. Certification: ``σ_max ≤ ‖L‖_F`` and
     ``σ_min ≥ 1/‖L⁻¹‖_F`` bound the condition number of ``D A``; if
     ``‖L‖_F ‖L⁻¹‖_F · QR_MARGIN · rtol < 1`` every singular value is above ``rtol · σ_max`` and
-    the SVD's rule would keep all m rows. Then writes ``V = Q`` (orthonormal rows spanning the
-    row space), ``cv = L⁻¹ D γ`` (``D γ = B[:, n]``), so ``(D A)⁺ D γ = Vᵀ cv``, and returns
-    True. Returns False (nothing usable written) when the bound fails.
+    the SVD's rule would keep all m rows. Then writes ``cv = L⁻¹ D γ`` (``D γ = B[:, n]``), so
+    ``(D A)⁺ D γ = Qᵀ cv``, keeps the reflectors in ``Hv``/``beta`` (:func:`_lq_rows`,
+    :func:`_lq_min_norm`) and returns True. Returns False when the bound fails.
     """
     for i in range(m):
         for k in range(n):
@@ -134,21 +134,103 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, V, Li, cv, beta):  # type: ignore[no-un
         for k in range(i + 1):
             s += Li[i, k] * B[k, n]
         cv[i] = s
-    # Q = [I_m 0] H_m ⋯ H_1 (the reflectors are symmetric): E ← E H_j for j = m−1 … 0
-    for i in range(m):
+    return True
+
+
+@njit(cache=True)
+def _lq_rows(Hv, beta, m, n, first, count, E):  # type: ignore[no-untyped-def]
+    """Rows ``first … first+count−1`` of the orthogonal ``H_{m−1} ⋯ H_0`` into ``E[:count]``.
+
+    Rows ``0 … m−1`` are ``Q`` (an orthonormal basis of R(Aᵀ)), rows ``m … n−1`` an orthonormal
+    basis ``Z`` of N(A) (the reflectors are symmetric: ``E ← E H_j`` for j = m−1 … 0).
+    """
+    for i in range(count):
         for k in range(n):
-            V[i, k] = 1.0 if i == k else 0.0
+            E[i, k] = 1.0 if k == first + i else 0.0
     for j in range(m - 1, -1, -1):
         bj = beta[j]
-        for i in range(m):
+        for i in range(count):
             d = 0.0
             for k in range(j, n):
-                d += V[i, k] * Hv[j, k]
+                d += E[i, k] * Hv[j, k]
             if d != 0.0:
                 d *= bj
                 for k in range(j, n):
-                    V[i, k] -= d * Hv[j, k]
-    return True
+                    E[i, k] -= d * Hv[j, k]
+
+
+@njit(cache=True)
+def _lq_min_norm(Hv, beta, m, n, cv, w):  # type: ignore[no-untyped-def]
+    """``w = −Qᵀ cv = −H_0 ⋯ H_{m−1} [cv; 0]`` (= ``−(DA)⁺ D γ`` with ``cv = L⁻¹ D γ``)."""
+    for i in range(n):
+        w[i] = cv[i] if i < m else 0.0
+    for j in range(m - 1, -1, -1):
+        d = 0.0
+        for k in range(j, n):
+            d += Hv[j, k] * w[k]
+        d *= beta[j]
+        for k in range(j, n):
+            w[k] -= d * Hv[j, k]
+    for i in range(n):
+        w[i] = -w[i]
+
+
+@njit(cache=True)
+def _mbar_null(M, b, Z, k, diag, has_mu, mu_in, nmu, ZM, S, Y, W):  # type: ignore[no-untyped-def]
+    """μ and ``M̄ = μI + Zᵀ(S − μI)Z`` (lower triangle of ``W``) from the null-space basis.
+
+    ``Z`` (k × n, orthonormal rows spanning N(A)); ``S = Z M Zᵀ``, so ``PMP = ZᵀSZ``,
+    ``tr(PMP) = tr S`` and ``μ = tr S / k`` (the paper's choice, as in the V form). Scratch:
+    ``ZM`` (≥ k × n), ``S`` (≥ k × k), ``Y`` (≥ k × n). Returns ``(μ, max_i M̄_ii)``.
+    """
+    n = M.shape[1]
+    for a in range(k):  # ZM = Z M
+        if diag:
+            for j in range(n):
+                ZM[a, j] = Z[a, j] * M[b, j, j]
+        else:
+            for j in range(n):
+                ZM[a, j] = 0.0
+            for i in range(n):
+                c = Z[a, i]
+                for j in range(n):
+                    ZM[a, j] += c * M[b, i, j]
+    trs = 0.0
+    for a in range(k):
+        for c in range(k):
+            s = 0.0
+            for j in range(n):
+                s += ZM[a, j] * Z[c, j]
+            S[a, c] = s
+        trs += S[a, a]
+    if has_mu:
+        mu = mu_in[b] if nmu > 1 else mu_in[0]
+    else:
+        if k > 0:
+            mu = trs / k
+        else:
+            mu = 0.0
+            for i in range(n):
+                mu += M[b, i, i]
+            mu /= n
+        if not mu > 0.0:
+            mu = 1.0
+    for a in range(k):  # Y = (S − μI) Z
+        for j in range(n):
+            s = -mu * Z[a, j]
+            for c in range(k):
+                s += S[a, c] * Z[c, j]
+            Y[a, j] = s
+    dmax = -np.inf
+    for i in range(n):
+        for j in range(i + 1):
+            s = mu if i == j else 0.0
+            for a in range(k):
+                s += Z[a, i] * Y[a, j]
+            W[i, j] = s
+        if W[i, i] > dmax:
+            dmax = W[i, i]
+    return mu, dmax
 
 
 #: No fast-math flags: strict IEEE arithmetic, so the compiled per-state routine gives bitwise the
@@ -269,6 +351,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
         # σ_i is kept by the SVD's rule too. Then V = Q and (D A)⁺ D γ = Qᵀ L⁻¹ D γ. Otherwise
         # (near a singular configuration, redundant rows) the Jacobi SVD below decides.
         qr_ok = False
+        zmode = False
         r = 0
         if m <= n and m > 0:
             live = 0
@@ -276,9 +359,17 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                 if sig[i] > thr:
                     live += 1
             if live == m:
-                qr_ok = _lq_certified(B, m, n, rtol, Et, Ft, V, G, cv, sig)
+                qr_ok = _lq_certified(B, m, n, rtol, Et, Ft, G, cv, sig)
                 if qr_ok:
                     r = m
+                    # few degrees of freedom (n − m ≤ m): work with the null-space basis Z
+                    # (rows of Kt) — M̄ = μI + Zᵀ(S − μI)Z, S = Z M Zᵀ, P = ZᵀZ — instead of V
+                    zmode = n - m <= m
+                    if zmode:
+                        _lq_rows(Ft, sig, m, n, m, n - m, Kt)
+                        _lq_min_norm(Ft, sig, m, n, cv, wv)
+                    else:
+                        _lq_rows(Ft, sig, m, n, 0, m, V)
         if not qr_ok:
             if warm:  # start from the previous state's rotation: B ← T B (T orthogonal, m × m)
                 for i in range(m):
@@ -383,15 +474,17 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                         V[r, k] = B[i, k] * inv
                     cv[r] = B[i, n] * inv  # (Uᵀ D γ)_i / σ_i
                     r += 1
-        # w = −(DA)⁺ D γ = −Σ_k v_k (u_kᵀ D γ)/σ_k
-        for j in range(n):
-            wv[j] = 0.0
-        for k in range(r):
-            c = cv[k]
+        if not zmode:  # w = −(DA)⁺ D γ = −Σ_k v_k (u_kᵀ D γ)/σ_k
             for j in range(n):
-                wv[j] -= V[k, j] * c
+                wv[j] = 0.0
+            for k in range(r):
+                c = cv[k]
+                for j in range(n):
+                    wv[j] -= V[k, j] * c
         # ---------------------------------------------------------------- 4. PMP, μ, M̄
-        for k in range(r):  # Kt = V M = Σ_j V[k, j] M[j, :]  (M symmetric; element-wise updates)
+        if zmode:
+            mu, dmax = _mbar_null(M, b, Kt, n - r, diag, has_mu, mu_in, nmu, Et, G, Tt, W)
+        for k in range(r if not zmode else 0):  # Kt = V M (M symmetric; element-wise updates)
             if diag:  # the same sums without the zero terms
                 for i in range(n):
                     Kt[k, i] = 0.0 + V[k, i] * M[b, i, i]
@@ -402,51 +495,52 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                 c = V[k, j]
                 for i in range(n):
                     Kt[k, i] += c * M[b, j, i]
-        for k in range(r):  # G = V M Vᵀ (r × r), Tt = G V
+        if not zmode:
+            for k in range(r):  # G = V M Vᵀ (r × r), Tt = G V
+                for l in range(r):
+                    s = 0.0
+                    for j in range(n):
+                        s += V[k, j] * Kt[l, j]
+                    G[k, l] = s
             for l in range(r):
+                for j in range(n):
+                    Tt[l, j] = 0.0
+                for k in range(r):
+                    c = G[l, k]
+                    for j in range(n):
+                        Tt[l, j] += c * V[k, j]
+            tr_pmp = 0.0
+            tr_m = 0.0
+            for i in range(n):  # diag(PMP) = diag(M − QM − MQ + QMQ)
                 s = 0.0
-                for j in range(n):
-                    s += V[k, j] * Kt[l, j]
-                G[k, l] = s
-        for l in range(r):
-            for j in range(n):
-                Tt[l, j] = 0.0
-            for k in range(r):
-                c = G[l, k]
-                for j in range(n):
-                    Tt[l, j] += c * V[k, j]
-        tr_pmp = 0.0
-        tr_m = 0.0
-        for i in range(n):  # diag(PMP) = diag(M − QM − MQ + QMQ)
-            s = 0.0
-            for k in range(r):
-                s += (2.0 * Kt[k, i] - Tt[k, i]) * V[k, i]
-            tr_pmp += M[b, i, i] - s
-            tr_m += M[b, i, i]
-        if has_mu:
-            mu = mu_in[b] if nmu > 1 else mu_in[0]
-        else:
-            if r < n:
-                mu = tr_pmp / (n - r)
+                for k in range(r):
+                    s += (2.0 * Kt[k, i] - Tt[k, i]) * V[k, i]
+                tr_pmp += M[b, i, i] - s
+                tr_m += M[b, i, i]
+            if has_mu:
+                mu = mu_in[b] if nmu > 1 else mu_in[0]
             else:
-                mu = tr_m / n
-            if not mu > 0.0:
-                mu = 1.0
-        for k in range(r):
-            for j in range(n):
-                Et[k, j] = Kt[k, j] - mu * V[k, j]
-                Ft[k, j] = Kt[k, j] - Tt[k, j]
-        dmax = -np.inf
-        for i in range(n):  # M̄ = PMP + μQ = M − Vᵀ Et − Ftᵀ V (lower triangle, row by row)
-            for j in range(i + 1):
-                W[i, j] = M[b, i, j]
+                if r < n:
+                    mu = tr_pmp / (n - r)
+                else:
+                    mu = tr_m / n
+                if not mu > 0.0:
+                    mu = 1.0
             for k in range(r):
-                a = V[k, i]
-                c = Ft[k, i]
+                for j in range(n):
+                    Et[k, j] = Kt[k, j] - mu * V[k, j]
+                    Ft[k, j] = Kt[k, j] - Tt[k, j]
+            dmax = -np.inf
+            for i in range(n):  # M̄ = PMP + μQ = M − Vᵀ Et − Ftᵀ V (lower triangle, row by row)
                 for j in range(i + 1):
-                    W[i, j] -= a * Et[k, j] + c * V[k, j]
-            if W[i, i] > dmax:
-                dmax = W[i, i]
+                    W[i, j] = M[b, i, j]
+                for k in range(r):
+                    a = V[k, i]
+                    c = Ft[k, i]
+                    for j in range(i + 1):
+                        W[i, j] -= a * Et[k, j] + c * V[k, j]
+                if W[i, i] > dmax:
+                    dmax = W[i, i]
         # ---------------------------------------------------------------- 5. Cholesky
         # Right-looking (outer-product) form on the lower triangle: after column j, the trailing
         # rows are updated element-wise with a contiguous copy cw of the column.
@@ -495,17 +589,31 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                 c = wv[j]
                 for i in range(n):
                     u[i] -= M[b, j, i] * c
-        for k in range(r):  # cv ← V u
-            s = 0.0
-            for j in range(n):
-                s += V[k, j] * u[j]
-            cv[k] = s
-        for i in range(n):  # rhs = u − Vᵀ(V u) + μ w   (stored in u)
-            u[i] += mu * wv[i]
-        for k in range(r):
-            c = cv[k]
+        if zmode:  # rhs = Zᵀ(Z u) + μ w   (stored in u)
+            kz = n - r
+            for a in range(kz):
+                s = 0.0
+                for j in range(n):
+                    s += Kt[a, j] * u[j]
+                cv[a] = s
             for i in range(n):
-                u[i] -= V[k, i] * c
+                u[i] = mu * wv[i]
+            for a in range(kz):
+                c = cv[a]
+                for i in range(n):
+                    u[i] += Kt[a, i] * c
+        else:
+            for k in range(r):  # cv ← V u
+                s = 0.0
+                for j in range(n):
+                    s += V[k, j] * u[j]
+                cv[k] = s
+            for i in range(n):  # rhs = u − Vᵀ(V u) + μ w   (stored in u)
+                u[i] += mu * wv[i]
+            for k in range(r):
+                c = cv[k]
+                for i in range(n):
+                    u[i] -= V[k, i] * c
         for k in range(n):  # L y = rhs, column-oriented (independent updates)
             y = u[k] * dinv[k]
             u[k] = y
@@ -533,9 +641,14 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             for i in range(n):
                 for j in range(n):
                     s = 0.0
-                    for k in range(r):
-                        s += V[k, i] * V[k, j]
-                    P[b, i, j] = (1.0 if i == j else 0.0) - s
+                    if zmode:  # P = ZᵀZ
+                        for k in range(n - r):
+                            s += Kt[k, i] * Kt[k, j]
+                        P[b, i, j] = s
+                    else:  # P = I − VᵀV
+                        for k in range(r):
+                            s += V[k, i] * V[k, j]
+                        P[b, i, j] = (1.0 if i == j else 0.0) - s
                     L[b, i, j] = W[i, j] if j <= i else 0.0
 
 
