@@ -29,7 +29,7 @@ def test_library_public_names():
 def test_planar_public_names():
     assert set(planar.__all__) == {
         "GROUND", "AngleDriver", "Body", "ConstantSpeed", "Gear", "Joint", "JointActuator",
-        "PlanarBuilder", "PlanarModel", "Point", "PointForce", "PointOnLine", "PointRef",
+        "PlanarBuilder", "PlanarModel", "PlanarProgram", "Point", "PointForce", "PointOnLine", "PointRef",
         "Prismatic", "Revolute", "Rod", "RotationalSpring", "Spring", "Torque", "Weld",
     }
     for name in planar.__all__:
