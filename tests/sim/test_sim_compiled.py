@@ -78,6 +78,10 @@ def test_auto_engine_choice() -> None:
     assert simulate(mech, 0.01, stabilization="baumgarte", progress=False).metadata["engine"] == "python"
     with use_backend("numpy"):
         assert simulate(mech, 0.01, progress=False).metadata["engine"] == "python"
+    big = library.get("A02_n_four_bar", N=12)  # n = 75 > AUTO_NUMBA_MAX_N: LAPACK is faster
+    assert simulate(big, 0.002, progress=False).metadata["engine"] == "python"
+    with use_backend("numba"):  # forced
+        assert simulate(big, 0.002, progress=False).metadata["engine"] == "compiled"
     wall = library.get("arm2r_wall")  # unilateral contact: events need the general driver
     assert simulate(wall, 0.01, progress=False).metadata["engine"] == "python"
     assert simulate(wall, 0.01, contact=False, progress=False).metadata["engine"] == "compiled"

@@ -100,6 +100,11 @@ def _set(name: str) -> None:
     _active = _UNRESOLVED
 
 
+def backend_setting() -> str:
+    """The backend as set (``"auto"``, ``"numpy"`` or ``"numba"``), before resolution."""
+    return str(_state["name"])
+
+
 def get_backend() -> str:
     """The backend actually used now: ``"numpy"`` or ``"numba"``."""
     if _state["name"] == "numpy":

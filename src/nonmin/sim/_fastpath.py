@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..core._fast import AUTO_NUMBA_MAX_N, get_backend
+from ..core._fast import AUTO_NUMBA_MAX_N, backend_setting, get_backend
 from ..core.linalg import DEFAULT_RTOL, SPD_RTOL
 from ..errors import InputError, MissingDependencyError
 from ._integrators import RK4
@@ -118,10 +118,9 @@ def _ineligible(
         return f"automatic contact is on for unilateral constraints {list(unilateral)} (contact=True)"
     if not active:
         return "no constraint is active"
-    backend = get_backend()
-    if backend == "numpy":
+    if get_backend() == "numpy":
         return "the nonmin.core backend is 'numpy' (set_backend('auto') or 'numba')"
-    if backend == "auto" and model.n > AUTO_NUMBA_MAX_N:
+    if backend_setting() == "auto" and model.n > AUTO_NUMBA_MAX_N:
         return (f"n = {model.n} > {AUTO_NUMBA_MAX_N} with backend 'auto' (LAPACK is faster there; "
                 "set_backend('numba') forces it)")
     if _kernels() is None:
