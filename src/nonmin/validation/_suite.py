@@ -100,19 +100,19 @@ QUICK_T = {"A01": 2.5, "A02_N2": 1.0, "A02_N40": 0.05, "A03": 0.03, "A04": 0.05,
            "crossed_four_bar": 0.5, "arm2r_wall": 0.4}
 FULL_T = {"A02_N40": 20.0, "A04": 10.0}
 FULL_T_NOTE = {
-    "A02_N40": "The specified 20 s at RK4 dt = 2e-3 s: 10000 steps, 1606 s wall with one BLAS "
-    "thread at load ~2 (0.16 s per step). Step choice over 1.5 s (horizontal configurations at "
-    "0.7216 s and 1.2440 s), dt = 1e-3 / 2e-3 s: both stay in the mode (6.2e-13 / 1.4e-12 rad), "
-    "closure 7.1e-15 m, B0(1.5 s) within 2.3e-9 / 1.5e-8 m of the exact reduction and 1.2e-8 m "
-    "of each other, energy error 7.0e-8 / 1.8e-7 J before the second horizontal configuration "
-    "and 2.2e-6 / 1.4e-5 J after it (it lies 2.1e-5 s after a step end of both grids). Energy: "
-    "the engine gains or loses energy when a step ends very close to a horizontal "
-    "configuration. The 19th (t = 18.41200 s) lies 1.6e-6 s before a step end of both grids; "
-    "10-step runs started on the mode 5 steps before it (state from the exact reduction) gain "
-    "42 J at dt = 2e-3 s and 8.7 J at dt = 1e-3 s (E = 620.34 J), against 3e-8 to 1e-5 J at "
-    "the 2nd, 9th and 12th; the 2.19 J drift of this run is most likely such a jump (smaller dt "
-    "does not remove it). The mode, the closure and B0 (within 4.6e-5 m of the reduction; "
-    "IFToMM rule 1e-3 m) are kept through all 20 horizontal configurations.",
+    "A02_N40": "The specified 20 s at RK4 dt = 2e-3 s (general driver: 243 coordinates; 10000 "
+    "steps, 1367 s wall with one BLAS thread, 0.14 s per step). Step choice over 1.5 s "
+    "(horizontal configurations at 0.7216 s and 1.2440 s), dt = 1e-3 / 2e-3 s: both stay in the "
+    "mode, closure 7.1e-15 m, B0(1.5 s) within 2.3e-9 / 1.5e-8 m of the exact reduction and "
+    "1.2e-8 m of each other. Energy: an earlier build gained 2.19 J over the 20 s, from a step "
+    "ending 1.6e-6 s before the 19th horizontal configuration (t = 18.41200 s): near a "
+    "horizontal configuration 40 singular values of the equilibrated A are 1e-7…1.5e-6 and phi "
+    "along them is round-off, which the full-rank Gauss-Newton projection divided by them "
+    "(a 24.5 J kick in one step). The projection now makes its first steps without singular "
+    "values below 1e-2 (nonmin.sim._stabilization.POSITION_CUT_RTOL; full rank only if they "
+    "stall above the round-off floor): that step gains 2.1e-5 J and this run's drift is "
+    "2.8e-3 J (E = 620.34 J). Steps ending within ~1e-7 s of a configuration can still gain "
+    "energy (RK4 error of the right-hand side there; measured on N = 2).",
     "A04": "The specified 10 s. Earlier engine builds needed steps of ~2e-4 s here (stage "
     "points off the manifold made the redundant row's vanishing singular value look like a "
     "constraint); the drift-aware rank tolerance of nonmin.sim removed that: 374 DOPRI5 steps.",
