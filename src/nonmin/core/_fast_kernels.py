@@ -72,6 +72,10 @@ def scratch(n, m):
 #: Safety factor of the certified-QR rank decision (see :func:`_lq_certified`).
 QR_MARGIN = 10.0
 
+#: The certified LQ is tried from this many rows on; with fewer, the Jacobi SVD is as cheap
+#: (a pair or three of rows converge in 2–3 sweeps) and a failed certification is pure cost.
+QR_MIN_ROWS = 4
+
 
 @njit(cache=True)
 def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta):  # type: ignore[no-untyped-def]
@@ -353,7 +357,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
         qr_ok = False
         zmode = False
         r = 0
-        if m <= n and m > 0:
+        if QR_MIN_ROWS <= m <= n:
             live = 0
             for i in range(m):
                 if sig[i] > thr:
