@@ -53,7 +53,7 @@ def workspace(n, m, S, n_var, T):  # type: ignore[no-untyped-def]
             np.empty(m), np.empty((n, n)))  # fmt: skip
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _evaluate(prog, q, qd, ws):  # type: ignore[no-untyped-def]
     """``A = ws[3]``, ``φ = ws[2][0]``, ``γ = ws[2][1]`` of the program at ``(q, qd)``."""
     _M, _f, A0, I6, SL, prm, rows, var_idx, counts, arows, G, ac = prog
