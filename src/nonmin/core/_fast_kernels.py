@@ -289,22 +289,18 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             bad |= cw[j] != 0.0
         for i in range(m):
             bad |= gam[b, i] - gam[b, i] != 0.0
-        if bad:
-            status[b] = NONFINITE
-            rank[b] = 0
-            mu_out[b] = 0.0
-            ratio[b] = 0.0
-            continue
+        code = NONFINITE if bad else OK
         asym = 0.0
         offd = 0.0  # largest off-diagonal |M_ij|: 0 for a diagonal M (planar bodies, point masses)
-        for i in range(n):
-            for j in range(i):
-                d = abs(M[b, i, j] - M[b, j, i])
-                if d > asym:
-                    asym = d
-                a = abs(M[b, i, j]) + abs(M[b, j, i])
-                if a > offd:
-                    offd = a
+        if code == OK:
+            for i in range(n):
+                for j in range(i):
+                    d = abs(M[b, i, j] - M[b, j, i])
+                    if d > asym:
+                        asym = d
+                    a = abs(M[b, i, j]) + abs(M[b, j, i])
+                    if a > offd:
+                        offd = a
         diag = offd == 0.0
         if asym > 0.0:  # same decision as _validation.symmetric (max|M| only needed now)
             scale = 0.0
@@ -314,11 +310,13 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                     if a > scale:
                         scale = a
             if asym > sym_rtol * max(scale, _TINY):
-                status[b] = ASYMMETRIC
-                rank[b] = 0
-                mu_out[b] = 0.0
-                ratio[b] = 0.0
-                continue
+                code = ASYMMETRIC
+        if code != OK:  # invalid input: the caller re-runs the NumPy path, which raises
+            status[b] = code
+            rank[b] = 0
+            mu_out[b] = 0.0
+            ratio[b] = 0.0
+            continue
         # ---------------------------------------------------------------- 2. equilibration
         big = 0.0
         for i in range(m):

@@ -23,11 +23,12 @@ as with ``engine="python"``.
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
+from .._validation import SYMMETRY_RTOL
 from ..core._fast import AUTO_NUMBA_MAX_N, backend_setting, get_backend
 from ..core.linalg import DEFAULT_RTOL, SPD_RTOL
 from ..errors import InputError, MissingDependencyError
@@ -107,8 +108,7 @@ def _ineligible(
 ) -> str | None:  # fmt: skip
     if type(integ) is not RK4:
         return f"method must be 'rk4' (got {getattr(integ, 'name', type(integ).__name__)!r})"
-    if not (isinstance(stab, Projection) and type(stab) is Projection and stab.metric == "mass"
-            and stab.velocity):  # fmt: skip
+    if not (type(stab) is Projection and stab.metric == "mass" and stab.velocity):
         return f"stabilization must be the mass-metric 'projection' (got {stab!r})"
     if controller is not None:
         return "a controller is given"
@@ -128,18 +128,16 @@ def _ineligible(
     return None
 
 
-class FastResult:
+class FastResult(NamedTuple):
     """What the compiled engine did: new state, counters and recorded blocks."""
 
-    def __init__(self, t: float, y: FloatArray, steps: int, n_rhs: int, out_i: int, failed: bool,
-                 blocks: list[dict[str, Any]]) -> None:  # fmt: skip
-        self.t = t
-        self.y = y
-        self.steps = steps
-        self.n_rhs = n_rhs
-        self.out_i = out_i
-        self.failed = failed
-        self.blocks = blocks
+    t: float
+    y: FloatArray
+    steps: int
+    n_rhs: int
+    out_i: int
+    failed: bool
+    blocks: list[dict[str, Any]]
 
 
 def run(
@@ -164,9 +162,10 @@ def run(
     kern = _kernels()
     n = prog.n
     base = DEFAULT_RTOL if rank_rtol is None else float(rank_rtol)
-    vtol = base if stab.velocity_rtol is None else max(float(stab.velocity_rtol), rank_rtol or 0.0)
+    vr = stab.velocity_rank_rtol(rank_rtol)
+    vtol = base if vr is None else float(vr)
     cfg = np.array([base, drift_factor, vtol, float(stab.tol), float(stab.max_iter), SPD_RTOL,
-                    _symmetry_rtol(), ROUNDOFF_FLOOR, 1.0, POSITION_CUT_RTOL])  # fmt: skip
+                    SYMMETRY_RTOL, ROUNDOFF_FLOOR, 1.0, POSITION_CUT_RTOL])  # fmt: skip
     pr = (prog.M, prog.f, prog.A0, prog.I6, prog.SL, prog.prm, prog.rows, prog.var_idx,
           prog.counts, prog.angle_rows, prog.G, prog.angle_const)  # fmt: skip
     every = t_out is None
@@ -201,12 +200,6 @@ def run(
         if st > 0:
             chunk = int(min(max(16, chunk * CHUNK_SECONDS / max(elapsed, 1e-6)), 1 << 20))
     return FastResult(t, y, steps_total, rhs_total, out_i, failed, blocks)
-
-
-def _symmetry_rtol() -> float:
-    from .. import _validation
-
-    return float(_validation.SYMMETRY_RTOL)
 
 
 def _alloc(cap: int, n: int) -> tuple[FloatArray, ...]:

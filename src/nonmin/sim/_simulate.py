@@ -311,7 +311,7 @@ class _Recorder:
             "velocity_residual_norm": np.asarray(c["velocity_residual_norm"], dtype=float),
         }
 
-    def arrays(self, n: int, k: int) -> dict[str, Any]:
+    def arrays(self) -> dict[str, Any]:
         self._flush()
         if not self.blocks:
             return self._rows()
@@ -814,7 +814,7 @@ def simulate(
         message = f"{type(exc).__name__}: {exc}"
     finally:
         bar.close()
-    arrays = rec.arrays(n, k)
+    arrays = rec.arrays()
     return Trajectory(
         **arrays,
         constraint_names=model.constraint_names,

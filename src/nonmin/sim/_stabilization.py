@@ -162,6 +162,11 @@ class Projection(Stabilization):
         if not (self.tol >= 0 and self.max_iter >= 0):
             raise InputError(f"Projection: need tol ≥ 0 and max_iter ≥ 0, got {self.tol}, {self.max_iter}")
 
+    def velocity_rank_rtol(self, rtol: float | None) -> float | None:
+        """Rank tolerance of the velocity step given the simulation's ``rtol`` (None: core
+        default); the compiled engine uses the same rule."""
+        return rtol if self.velocity_rtol is None else max(self.velocity_rtol, rtol or 0.0)
+
     def project(
         self,
         model: Model,
@@ -199,8 +204,8 @@ class Projection(Stabilization):
                 q = q + _correction(M if eye is None else eye, ct.A[hol], phi, cut)
                 ct = model.constraint_terms(t, q, qd, active)
         if self.velocity and ct.A.shape[0]:
-            vtol = rtol if self.velocity_rtol is None else max(self.velocity_rtol, rtol or 0.0)
-            qd = qd + _correction(M if eye is None else eye, ct.A, ct.velocity, vtol)
+            qd = qd + _correction(M if eye is None else eye, ct.A, ct.velocity,
+                                  self.velocity_rank_rtol(rtol))  # fmt: skip
         return q, qd
 
 
