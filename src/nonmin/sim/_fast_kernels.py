@@ -11,8 +11,9 @@ algorithm of the general driver (:func:`nonmin.sim.simulate` with ``method="rk4"
    :func:`nonmin.sim._simulate.drift_rank_rtol`;
 2. the post-step projection of :class:`nonmin.sim.Projection` (Gauss–Newton in the mass metric
    to the round-off floor, then the velocity correction = plastic impact map);
-3. samples at the requested times (partial RK4 steps from the step start, then the projection)
-   or at every step, with the diagnostics the :class:`~nonmin.sim.Trajectory` records.
+3. samples at the requested times (the quintic Hermite interpolant of the projected step ends,
+   :func:`_hermite`, then the projection) or at every step, with the diagnostics the
+   :class:`~nonmin.sim.Trajectory` records.
 
 The model terms come from the same kernel (:func:`nonmin.model.planar._fast_kernels.pin_line_rod`)
 and formulas as :meth:`PlanarModel.evaluate`, so the compiled and the general driver agree to
@@ -168,6 +169,36 @@ def _advance(prog, ws, cfg, t, yy, kk1, h, res, stages):  # type: ignore[no-unty
     for i in range(n2):
         res[i] = yy[i] + (h / 6.0) * (kk1[i] + 2.0 * K[0, i] + 2.0 * K[1, i] + K[2, i])
     return 0
+
+
+@njit(cache=True)
+def _hermite(y0, f0, y1, f1, h, s, out):  # type: ignore[no-untyped-def]
+    """:func:`nonmin.sim._integrators.hermite_quintic` into ``out`` (same expressions)."""
+    n = y0.shape[0] // 2
+    t = s / h
+    t2 = t * t
+    t3 = t2 * t
+    t4 = t3 * t
+    t5 = t4 * t
+    b1 = 10.0 * t3 - 15.0 * t4 + 6.0 * t5
+    b2 = t - 6.0 * t3 + 8.0 * t4 - 3.0 * t5
+    b3 = -4.0 * t3 + 7.0 * t4 - 3.0 * t5
+    b4 = 0.5 * (t2 - 3.0 * t3 + 3.0 * t4 - t5)
+    b5 = 0.5 * (t3 - 2.0 * t4 + t5)
+    d1 = 30.0 * t2 - 60.0 * t3 + 30.0 * t4
+    d2 = 1.0 - 18.0 * t2 + 32.0 * t3 - 15.0 * t4
+    d3 = -12.0 * t2 + 28.0 * t3 - 15.0 * t4
+    d4 = t - 4.5 * t2 + 6.0 * t3 - 2.5 * t4
+    d5 = 1.5 * t2 - 4.0 * t3 + 2.5 * t4
+    hh = h * h
+    for i in range(n):
+        dq = y1[i] - y0[i]
+        v0 = f0[i]
+        v1 = f1[i]
+        a0 = f0[n + i]
+        a1 = f1[n + i]
+        out[i] = y0[i] + dq * b1 + h * (v0 * b2 + v1 * b3) + hh * (a0 * b4 + a1 * b5)
+        out[n + i] = (dq / h) * d1 + (v0 * d2 + v1 * d3) + h * (a0 * d4 + a1 * d5)
 
 
 @njit(cache=True)
@@ -368,7 +399,7 @@ def rk4_planar(prog, t, t1, dt, y, t_out, out_i, every, max_steps, cfg, recs, ca
     n_rhs = 0
     n_rec = 0
     steps = 0
-    have_k1 = flag[0] != 0  # k1 = F(t, y) known from the sample at the previous step end
+    have_k1 = flag[0] != 0  # k1 = F(t, y) known from the previous step's end
     n_out = t_out.shape[0]
     while t < t1 and steps < max_steps:
         rem = t1 - t
@@ -392,46 +423,49 @@ def rk4_planar(prog, t, t1, dt, y, t_out, out_i, every, max_steps, cfg, recs, ca
             return FAILED, t, steps, n_rhs, n_rec, out_i
         k = n_rec
         oi = out_i
-        at_end = False  # kp = F(t_new, y1) computed by a sample at the step end
-        if every:
-            st = _point(prog, ws, cfg, t_new, y1, recs, k, kp)
+        oe = oi  # the requested samples of this step: t_out[oi:oe]
+        end_tol = 1e-12 * max(1.0, abs(t_new))
+        if not every:
+            while oe < n_out and t_out[oe] <= t_new + end_tol:
+                oe += 1
+        n_s = 1 if every else oe - oi
+        last_end = every or (n_s > 0 and abs((t_out[oe - 1] - t) - h) <= end_tol)
+        have_kp = n_s > 0 or t_new < t1
+        if have_kp:  # kp = F(t_new, y1): the next step's k1 and the interpolant's end slope
+            if last_end:
+                st = _point(prog, ws, cfg, t_new, y1, recs, k + n_s - 1, kp)
+            else:
+                st = _rhs(prog, ws, cfg, t_new, y1, kp)
             n_rhs += 1
-            k += 1
-            at_end = True
-        else:
-            end_tol = 1e-12 * max(1.0, abs(t_new))
-            while st == 0 and oi < n_out and t_out[oi] <= t_new + end_tol:
-                s = t_out[oi] - t
-                if abs(s - h) <= end_tol:
-                    st = _point(prog, ws, cfg, t_new, y1, recs, k, kp)
+        for j in range(oi, oe):
+            if st != 0:
+                break
+            s = t_out[j] - t
+            row = k + j - oi
+            if abs(s - h) <= end_tol:
+                if row != k + n_s - 1:  # a duplicate of the step end
+                    st = _point(prog, ws, cfg, t_new, y1, recs, row, kp)
                     n_rhs += 1
-                    at_end = True
-                else:
-                    if s <= 0.0:
-                        for i in range(2 * n):
-                            yp[i] = y[i]
-                    else:
-                        st = _advance(prog, ws, cfg, t, y, k1, s, yp, stages)
-                        n_rhs += 3
-                    if st == 0:
-                        st = _project(prog, ws, cfg, yp)
-                    if st == 0:
-                        st = _point(prog, ws, cfg, t + s, yp, recs, k, stages[1])
-                        n_rhs += 1
-                recs[0][k] = t_out[oi]
-                k += 1
-                oi += 1
+            else:  # inside the step: Hermite interpolant, projected (as the general driver)
+                _hermite(y, k1, y1, kp, h, max(s, 0.0), yp)
+                st = _project(prog, ws, cfg, yp)
+                if st == 0:
+                    st = _point(prog, ws, cfg, t + s, yp, recs, row, stages[1])
+                    n_rhs += 1
+            recs[0][row] = t_out[j]
         if st != 0:
             flag[0] = 0
             return FAILED, t, steps, n_rhs, n_rec, out_i
+        k += n_s
+        oi = oe
         n_rec = k
         out_i = oi
         for i in range(2 * n):
             y[i] = y1[i]
-        if at_end:
+        if have_kp:
             for i in range(2 * n):
                 k1[i] = kp[i]
-        have_k1 = at_end
+        have_k1 = have_kp
         t = t_new
         steps += 1
     flag[0] = 1 if have_k1 else 0

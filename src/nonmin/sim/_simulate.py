@@ -42,6 +42,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -61,7 +62,7 @@ from ..errors import (
 from ..model import ConstraintTerms, Model, State
 from . import _fastpath
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
-from ._integrators import METHODS, Integrator, StepperState
+from ._integrators import METHODS, Integrator, StepperState, hermite_quintic
 from ._progress import Progress
 from ._stabilization import Projection, Stabilization, resolve_stabilization
 from ._trajectory import Status, Trajectory
@@ -457,8 +458,10 @@ def simulate(
     t_eval : array_like, optional
         Record at these times (non-decreasing, inside ``t_span``) plus the two samples (before
         and after the transition) of every event; default: every accepted step. Values between
-        step ends come from the method's continuous extension (dopri5) or from a partial step
-        of the integrator from the step start (rk4, midpoint), then the stabilization.
+        step ends come from the method's continuous extension (dopri5's own; for the fixed-step
+        rk4 and midpoint the quintic Hermite interpolant of ``q, qd, qdd`` at the projected
+        step ends, :func:`~nonmin.sim._integrators.hermite_quintic`), then the stabilization.
+        Events are still located on partial steps of the method itself.
     max_steps : int
         Fail after this many accepted steps.
     throw : bool, default True
@@ -661,6 +664,10 @@ def simulate(
         while t < t1:
             if n_steps >= max_steps:
                 raise SimulationError(f"max_steps = {max_steps} reached at t = {t:.12g}")
+            if state.f is None and not integ.adaptive and t_out is not None and out_i < t_out.size:
+                # F at the step start: the method needs it anyway, output samples inside the
+                # step need it for the continuous extension
+                state = state._replace(f=system.rhs(state.t, state.y))
             y_start, f_start, t_start = state.y, state.f, state.t
             res = integ.step(system.rhs, state, t1, project_y)
             n_rejected += res.n_rejected
@@ -679,17 +686,24 @@ def simulate(
 
             q1, qd1 = stab.project(model, t_new, res.state.y[:n].copy(), res.state.y[n:].copy(),
                                    system.active, rank_rtol)
-            # the full evaluation at the step end is needed only for guards or recording
-            p1 = system.point(t_new, q1, qd1) if (watches or t_out is None) else None
-            dense = res.dense
             end_tol = 1e-12 * max(1.0, abs(t_new))
+            dense = res.dense
+            inside = (dense is None and f_start is not None and t_out is not None
+                      and out_i < t_out.size and t_out[out_i] < t_new - end_tol)  # fmt: skip
+            # the full evaluation at the step end is needed for guards, recording, or the
+            # continuous extension of a fixed-step method (then it is also the next step's F)
+            p1 = system.point(t_new, q1, qd1) if (watches or t_out is None or inside) else None
+            if inside:
+                assert p1 is not None and f_start is not None
+                dense = partial(_fixed_step_dense, y_start, f_start, np.concatenate((q1, qd1)),
+                                np.concatenate((qd1, p1.qdd)), t_start, h)  # fmt: skip
 
             def out_at(
                 s: float, _d: Any = dense, _t: float = t_start, _h: float = h, _q: Any = q1,
                 _v: Any = qd1, _p: Any = p1, _tn: float = t_new, _tol: float = end_tol,
             ) -> _Point:
                 """Output sample: the step end itself, the continuous extension when the method
-                has one, else a partial step."""
+                has one (fixed-step methods: the Hermite interpolant), else a partial step."""
                 if abs(s - _h) <= _tol:
                     return _p if _p is not None else system.point(_tn, _q, _v)
                 if _d is None:
@@ -881,6 +895,13 @@ def _advance_out(t_out: FloatArray | None, i: int, t: float) -> int:
     return i
 
 
+def _fixed_step_dense(
+    y0: FloatArray, f0: FloatArray, y1: FloatArray, f1: FloatArray, t0: float, h: float, t: float
+) -> FloatArray:
+    """Continuous extension of a fixed step between its projected ends, at time ``t``."""
+    return hermite_quintic(y0, f0, y1, f1, h, t - t0)
+
+
 def _sample_t_eval(
     rec: _Recorder,
     t_out: FloatArray | None,
@@ -890,7 +911,7 @@ def _sample_t_eval(
     at: Callable[[float], _Point],
     system: _System,
 ) -> None:
-    """Record the requested output times in ``(t_start, t_end]`` (partial steps from t_start)."""
+    """Record the requested output times in ``(t_start, t_end]`` (from ``at``: continuous extension or partial step)."""
     if t_out is None:
         return
     while i < t_out.size and t_out[i] <= t_end:
