@@ -877,11 +877,11 @@ def default_configs(mech: BarMechanism, quick: bool) -> list[PeerSpec]:
 NONMIN_CONFIGS: dict[str, list[PeerSpec]] = {
     "crossed_four_bar": [
         *(("nonmin", {"method": "rk4", "dt": dt})
-          for dt in (2.5e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 4e-2)),
+          for dt in (2.5e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 2.5e-2, 3e-2, 4e-2)),
         ("nonmin", {"method": "dopri5", "rtol": 1e-8, "atol": 1e-10}),
     ],
     "A02_N2": [
-        *(("nonmin", {"method": "rk4", "dt": dt}) for dt in (1e-3, 2e-3, 5e-3, 1e-2, 2e-2)),
+        *(("nonmin", {"method": "rk4", "dt": dt}) for dt in (1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 4e-2, 5e-2)),
     ],
     # N = 40 (243 coordinates): the general driver (LAPACK SVD per right-hand side, ~0.16 s
     # per RK4 step) would need ~27 min for the 20 s; its full run is in docs/validation.md.

@@ -265,3 +265,46 @@ def test_backend_selection():
     assert get_backend() == before
     with pytest.raises(InputError, match="backend must be one of"):
         set_backend("cuda")
+
+
+@pytest.mark.parametrize("kind", [k for k in KINDS if k != "empty"])
+@pytest.mark.parametrize("shape", [(9, 8), (12, 5), (7, 3)])
+@pytest.mark.parametrize("diag", [False, True])
+def test_solve_again_reuses_the_factorization(kind, shape, diag):
+    """``solve_again`` (new h, f, γ on the factorization of the last ``solve_work``) equals a
+    fresh ``solve_work``, in every mode (certified LQ with V or with Z, warm Jacobi SVD), and
+    refuses a cold-started Jacobi factorization."""
+    from nonmin.core._fast_kernels import NO_FACTOR, OK, scratch, solve_again, solve_work
+
+    n, m = shape
+    rng = np.random.default_rng(n * 100 + m + 7 * diag)
+    A, _ = random_A(rng, kind, n, m)
+    A = np.ascontiguousarray(A)
+    M = np.diag(rng.uniform(0.5, 3.0, n)) if diag else random_spd(rng, n)
+    mm = A.shape[0]
+    for warm in (True, False):
+        work = scratch(n, mm)
+        T = np.eye(mm)
+        out = np.empty(2 * n + 3)
+        P = np.empty((n, n))
+        L = np.empty((n, n))
+        h0, g0 = rng.standard_normal(n), A @ rng.standard_normal(n)
+        assert solve_work(M, h0, h0, False, A, g0, 1.0, False, 1e-10, 1e-13, 1e-12, False, out, P, L,
+                          work, T, warm) == OK  # fmt: skip
+        h1, f1, g1 = rng.standard_normal(n), rng.standard_normal(n), A @ rng.standard_normal(n)
+        again = np.empty(2 * n + 3)
+        P2 = np.empty((n, n))
+        L2 = np.empty((n, n))
+        st = solve_again(M, h1, f1, True, g1, True, again, P2, L2, work)
+        if st == NO_FACTOR:
+            assert not warm  # only a cold Jacobi call leaves nothing to reuse
+            continue
+        assert st == OK
+        ref = np.empty(2 * n + 3)
+        assert solve_work(M, h1, f1, True, A, g1, 1.0, False, 1e-10, 1e-13, 1e-12, True, ref, P, L,
+                          scratch(n, mm), np.eye(mm), False) == OK  # fmt: skip
+        scale = float(np.max(np.abs(ref[:n]))) + 1.0
+        assert np.max(np.abs(again[:n] - ref[:n])) <= 1e-11 * scale, kind
+        assert np.max(np.abs(again[n : 2 * n] - ref[n : 2 * n])) <= 1e-11 * scale * np.max(np.abs(M))
+        assert again[2 * n] == ref[2 * n] and again[2 * n + 1] == pytest.approx(ref[2 * n + 1])
+        assert np.allclose(P2, P, atol=1e-12) and np.allclose(L2, L, atol=1e-12 * np.max(np.abs(L)))

@@ -211,3 +211,28 @@ def test_step_ending_next_to_a_singular_configuration_keeps_the_energy(
     couplers = q[:, [3 * (n + 1 + i) + 2 for i in range(n)]]
     assert np.max(np.abs(cranks - cranks[:, :1])) <= 1e-9  # still in the parallelogram mode
     assert np.max(np.abs(couplers)) <= 1e-9
+
+
+@pytest.mark.parametrize("size", [1e-8, 1e-6, 1e-4])
+def test_simplified_steps_land_where_gauss_newton_does(size: float) -> None:
+    """The projection's chord steps (A of the last linearization) converge to the point full
+    Gauss–Newton reaches, to round-off, from the perturbations a step leaves."""
+    from nonmin import library
+    from nonmin.core import position_correction
+
+    mech = library.get("crossed_four_bar")
+    model, act = mech.model, frozenset(mech.model.constraint_names)
+    rng = np.random.default_rng(11)
+    for _ in range(5):
+        q0 = mech.state.q + size * rng.standard_normal(mech.model.n)
+        qd0 = mech.state.qd.copy()
+        q, _qd = Projection().project(model, 0.0, q0.copy(), qd0, act, None)
+        ref = q0.copy()
+        M = model.mass_matrix(q0)
+        for _it in range(20):  # full Gauss–Newton, A taken afresh at every step
+            ct = model.constraint_terms(0.0, ref, qd0, act)
+            if np.max(np.abs(ct.phi)) < 1e-15:
+                break
+            ref = ref + position_correction(M, ct.A, ct.phi)
+        assert np.max(np.abs(model.constraint_terms(0.0, q, qd0, act).phi)) < 1e-14
+        assert np.max(np.abs(q - ref)) < 1e-12 + 1e-3 * size**2, (size, np.max(np.abs(q - ref)))

@@ -51,6 +51,7 @@ CHOL_FAIL = 1
 SMALL_PIVOT = 2
 NONFINITE = 3
 ASYMMETRIC = 4
+NO_FACTOR = 6  # solve_again without a reusable factorization (5 is the simulation loop's)
 
 #: Maximum number of Jacobi sweeps (convergence is quadratic; m ≤ 30 needs < 10).
 MAX_SWEEPS = 60
@@ -72,11 +73,19 @@ def scratch(n, m):
             np.empty((m, n)), np.empty((m, n)), np.empty((m, m)), np.empty((n, n)),
             np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m), np.empty(m),
             np.empty(n), np.empty((m, n + 1)), np.empty((m, m)), np.empty(2, dtype=np.int64),
-            np.empty(1))  # fmt: skip
+            np.empty(1), np.empty((m, m)), np.empty(m), np.zeros(8))  # fmt: skip
 
 
-#: Safety factor of the certified-QR rank decision (see :func:`_lq_certified`).
+#: Safety factor of the certified-QR rank decision (see :func:`_lq_certified`) for small
+#: tolerances, where the computed ‖L⁻¹‖_F carries relative errors up to ~eps·cond ≈ 1e-6.
 QR_MARGIN = 10.0
+
+#: Tolerances above this use no safety factor: eps·cond ≤ eps/rtol ≈ 1e-10 there, far below
+#: the bound's own slack (‖L‖_F ‖L⁻¹‖_F overestimates cond(D A) by 2–5× on the library
+#: mechanisms). The projection's first Gauss–Newton steps cut at rtol = 1e-2
+#: (:data:`nonmin.sim.POSITION_CUT_RTOL`): with the factor 10 they could never be certified
+#: (‖L‖_F ‖L⁻¹‖_F ≥ m) and always took the Jacobi SVD.
+QR_MARGIN_RTOL = 1e-6
 
 #: The certified LQ is tried from this many rows on; with fewer, the Jacobi SVD is as cheap
 #: (a pair or three of rows converge in 2–3 sweeps) and a failed certification is pure cost.
@@ -91,7 +100,8 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta):  # type: ignore[no-untyp
     Householder reflections from the right (row-oriented: contiguous rows); ``Wq`` (m, n) and
     ``Hv`` (m, n, the reflectors) are scratch. Certification: ``σ_max ≤ ‖L‖_F`` and
     ``σ_min ≥ 1/‖L⁻¹‖_F`` bound the condition number of ``D A``; if
-    ``‖L‖_F ‖L⁻¹‖_F · QR_MARGIN · rtol < 1`` every singular value is above ``rtol · σ_max`` and
+    ``‖L‖_F ‖L⁻¹‖_F · QR_MARGIN · rtol < 1`` (factor 1 for ``rtol > QR_MARGIN_RTOL``) every
+    singular value is above ``rtol · σ_max`` and
     the SVD's rule would keep all m rows. Then writes ``cv = L⁻¹ D γ`` (``D γ = B[:, n]``), so
     ``(D A)⁺ D γ = Qᵀ cv``, keeps the reflectors in ``Hv``/``beta`` (:func:`_lq_rows`,
     :func:`_lq_min_norm`) and returns True. Returns False when the bound fails.
@@ -137,7 +147,8 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta):  # type: ignore[no-untyp
             x = s / Wq[i, i]
             Li[i, c] = x
             fi += x * x
-    if not (math.sqrt(fl) * math.sqrt(fi) * QR_MARGIN * rtol < 1.0):
+    margin = QR_MARGIN if rtol <= QR_MARGIN_RTOL else 1.0
+    if not (math.sqrt(fl) * math.sqrt(fi) * margin * rtol < 1.0):
         return False
     for i in range(m):
         s = 0.0
@@ -252,6 +263,92 @@ def _mbar_null(M, b, Z, k, diag, has_mu, mu_in, nmu, ZM, S, Y, W):  # type: igno
 _FM: set[str] = set()
 
 
+@njit(cache=True, fastmath=_FM, inline="always")
+def _finish(b, M, h, f, has_f, qdd, fc, P, L, want_pl, n, r, zmode, diag, mu, wv, V, Kt, W, dinv,
+            g, u, cv, cw):  # type: ignore[no-untyped-def]  # fmt: skip
+    """Step 6 of :func:`solve_range` (right-hand side, the two triangular solves, ``f_c``,
+    ``P`` and ``L``) from a factorization: ``w = −(DA)⁺ D γ`` in ``wv``, the kept rows ``V``
+    (or the null-space rows ``Kt`` when ``zmode``), the Cholesky factor of ``M̄`` in ``W`` with
+    inverse pivots ``dinv``. Shared by :func:`solve_range` and :func:`solve_again`."""
+    want_fc = fc.shape[0] > 0
+    for i in range(n):
+        gi = h[b, i]
+        if has_f:
+            gi += f[b, i]
+        g[i] = gi
+        u[i] = gi
+    if diag:
+        for i in range(n):
+            u[i] -= M[b, i, i] * wv[i]
+    else:
+        for j in range(n):  # u = g − M w  (element-wise updates; M symmetric)
+            c = wv[j]
+            for i in range(n):
+                u[i] -= M[b, j, i] * c
+    if zmode:  # rhs = Zᵀ(Z u) + μ w   (stored in u)
+        kz = n - r
+        for a in range(kz):
+            s = 0.0
+            for j in range(n):
+                s += Kt[a, j] * u[j]
+            cv[a] = s
+        for i in range(n):
+            u[i] = mu * wv[i]
+        for a in range(kz):
+            c = cv[a]
+            for i in range(n):
+                u[i] += Kt[a, i] * c
+    else:
+        for k in range(r):  # cv ← V u
+            s = 0.0
+            for j in range(n):
+                s += V[k, j] * u[j]
+            cv[k] = s
+        for i in range(n):  # rhs = u − Vᵀ(V u) + μ w   (stored in u)
+            u[i] += mu * wv[i]
+        for k in range(r):
+            c = cv[k]
+            for i in range(n):
+                u[i] -= V[k, i] * c
+    for k in range(n):  # L y = rhs, column-oriented (independent updates)
+        y = u[k] * dinv[k]
+        u[k] = y
+        for i in range(k + 1, n):
+            u[i] -= W[i, k] * y
+    for i in range(n - 1, -1, -1):  # Lᵀ x = y, column-oriented (contiguous rows of L)
+        xi = u[i] * dinv[i]
+        qdd[b, i] = xi
+        for k in range(i):
+            u[k] -= W[i, k] * xi
+    if want_fc:
+        for i in range(n):  # f_c = M qdd − g
+            cw[i] = 0.0
+        if diag:
+            for i in range(n):
+                cw[i] += M[b, i, i] * qdd[b, i]
+        else:
+            for j in range(n):
+                c = qdd[b, j]
+                for i in range(n):
+                    cw[i] += M[b, j, i] * c
+        for i in range(n):
+            fc[b, i] = cw[i] - g[i]
+    if want_pl:
+        for i in range(n):
+            for j in range(n):
+                s = 0.0
+                if zmode:  # P = ZᵀZ
+                    for k in range(n - r):
+                        s += Kt[k, i] * Kt[k, j]
+                    P[b, i, j] = s
+                else:  # P = I − VᵀV
+                    for k in range(r):
+                        s += V[k, i] * V[k, j]
+                    P[b, i, j] = (1.0 if i == j else 0.0) - s
+                L[b, i, j] = W[i, j] if j <= i else 0.0
+
+
+
 @njit(cache=True, fastmath=_FM, inline="always")  # numba-level inlining: no call, no refcounts
 def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
                 qdd, fc, P, L, want_pl, status, rank, mu_out, ratio, work, T, warm):  # fmt: skip
@@ -270,8 +367,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
     m = A.shape[1]
     n4 = n - n % 4
     nmu = mu_in.shape[0]
-    want_fc = fc.shape[0] > 0  # an empty fc: q̈ only
-    B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, _ist, _mu1 = work
+    B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, _ist, _mu1, Li, dsc, info = work
     for b in range(lo, hi):
         # ---------------------------------------------------------------- 1. input checks
         # Finiteness: x·0 is 0 for finite x and NaN for ±inf/NaN; the per-column sums cw[j] (each
@@ -346,9 +442,11 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                 for j in range(n):
                     B[i, j] = A[b, i, j] * di
                 B[i, n] = di * gam[b, i]
+                dsc[i] = di
             else:
                 for j in range(n + 1):
                     B[i, j] = 0.0
+                dsc[i] = 0.0
         # ---------------------------------------------------------------- 2b. certified QR
         # When every row is live (m ≤ n), an LQ factorization D A = L Q (Householder reflections
         # from the right on the rows; Q has orthonormal rows) decides the rank without the SVD if
@@ -364,7 +462,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                 if sig[i] > thr:
                     live += 1
             if live == m:
-                qr_ok = _lq_certified(B, m, n, rtol, Et, Ft, G, cv, sig)
+                qr_ok = _lq_certified(B, m, n, rtol, Et, Ft, Li, cv, sig)
                 if qr_ok:
                     r = m
                     # few degrees of freedom (n − m ≤ m): work with the null-space basis Z
@@ -478,6 +576,9 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                     for k in range(n):
                         V[r, k] = B[i, k] * inv
                     cv[r] = B[i, n] * inv  # (Uᵀ D γ)_i / σ_i
+                    if warm:  # row r of (Σ⁻¹Uᵀ) for solve_again: B = Tn · (D A | D γ)
+                        for k in range(m):
+                            Li[r, k] = Tn[i, k] * inv
                     r += 1
         if not zmode:  # w = −(DA)⁺ D γ = −Σ_k v_k (u_kᵀ D γ)/σ_k
             for j in range(n):
@@ -577,86 +678,18 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
         rank[b] = r
         mu_out[b] = mu
         ratio[b] = rt if st == SMALL_PIVOT else 0.0
+        # what solve_again needs to reuse this factorization (the last state's)
+        info[0] = 1.0 if (st == OK and (qr_ok or warm)) else 0.0
+        info[1] = 1.0 if zmode else 0.0
+        info[2] = r
+        info[3] = 1.0 if diag else 0.0
+        info[4] = mu
+        info[5] = 1.0 if qr_ok else 0.0
         if st != OK:
             continue
         # ---------------------------------------------------------------- 6. right-hand side, solve
-        for i in range(n):
-            gi = h[b, i]
-            if has_f:
-                gi += f[b, i]
-            g[i] = gi
-            u[i] = gi
-        if diag:
-            for i in range(n):
-                u[i] -= M[b, i, i] * wv[i]
-        else:
-            for j in range(n):  # u = g − M w  (element-wise updates; M symmetric)
-                c = wv[j]
-                for i in range(n):
-                    u[i] -= M[b, j, i] * c
-        if zmode:  # rhs = Zᵀ(Z u) + μ w   (stored in u)
-            kz = n - r
-            for a in range(kz):
-                s = 0.0
-                for j in range(n):
-                    s += Kt[a, j] * u[j]
-                cv[a] = s
-            for i in range(n):
-                u[i] = mu * wv[i]
-            for a in range(kz):
-                c = cv[a]
-                for i in range(n):
-                    u[i] += Kt[a, i] * c
-        else:
-            for k in range(r):  # cv ← V u
-                s = 0.0
-                for j in range(n):
-                    s += V[k, j] * u[j]
-                cv[k] = s
-            for i in range(n):  # rhs = u − Vᵀ(V u) + μ w   (stored in u)
-                u[i] += mu * wv[i]
-            for k in range(r):
-                c = cv[k]
-                for i in range(n):
-                    u[i] -= V[k, i] * c
-        for k in range(n):  # L y = rhs, column-oriented (independent updates)
-            y = u[k] * dinv[k]
-            u[k] = y
-            for i in range(k + 1, n):
-                u[i] -= W[i, k] * y
-        for i in range(n - 1, -1, -1):  # Lᵀ x = y, column-oriented (contiguous rows of L)
-            xi = u[i] * dinv[i]
-            qdd[b, i] = xi
-            for k in range(i):
-                u[k] -= W[i, k] * xi
-        if want_fc:
-            for i in range(n):  # f_c = M qdd − g
-                cw[i] = 0.0
-            if diag:
-                for i in range(n):
-                    cw[i] += M[b, i, i] * qdd[b, i]
-            else:
-                for j in range(n):
-                    c = qdd[b, j]
-                    for i in range(n):
-                        cw[i] += M[b, j, i] * c
-            for i in range(n):
-                fc[b, i] = cw[i] - g[i]
-        if want_pl:
-            for i in range(n):
-                for j in range(n):
-                    s = 0.0
-                    if zmode:  # P = ZᵀZ
-                        for k in range(n - r):
-                            s += Kt[k, i] * Kt[k, j]
-                        P[b, i, j] = s
-                    else:  # P = I − VᵀV
-                        for k in range(r):
-                            s += V[k, i] * V[k, j]
-                        P[b, i, j] = (1.0 if i == j else 0.0) - s
-                    L[b, i, j] = W[i, j] if j <= i else 0.0
-
-
+        _finish(b, M, h, f, has_f, qdd, fc, P, L, want_pl, n, r, zmode, diag, mu, wv, V, Kt, W,
+                dinv, g, u, cv, cw)  # fmt: skip
 
 
 @njit(cache=True)
@@ -713,6 +746,64 @@ def solve_work(M, h, f, has_f, A, gam, mu, has_mu, rtol, spd_rtol, sym_rtol, wan
     )  # fmt: skip
     out[2 * n] = ist[1]
     return ist[0]
+
+
+@njit(cache=True)
+def solve_again(M, h, f, has_f, gam, want_pl, out, P, L, work):  # type: ignore[no-untyped-def]
+    """Solve again with the factorization the last :func:`solve_work` call left in ``work``.
+
+    Same ``A``, ``M``, rank tolerance and μ as that call (the caller guarantees it); new
+    ``h``, ``f`` and ``γ``. The result is linear in ``(h + f, γ)``: ``w = −(DA)⁺ D γ`` comes from
+    the kept factors (certified LQ: ``L⁻¹`` and the reflectors or ``V``; Jacobi SVD:
+    ``Σ⁻¹Uᵀ`` of the kept rows, recorded when the call was warm-started), then step 6 as in
+    :func:`solve_range`. Costs O(m² + mn + n²) instead of a factorization; used by the
+    simulation loop for the velocity projection and ``F(t, y)`` at the same projected ``q``,
+    and for the simplified Gauss–Newton steps of the projection. Writes ``out`` as
+    :func:`solve_work`; returns :data:`OK`, or :data:`NO_FACTOR` when ``work`` holds no
+    reusable factorization (a failed or cold-started Jacobi call).
+    """
+    n = M.shape[0]
+    m = gam.shape[0]
+    V, Kt, Ft, W, cw, g, wv, u = work[1], work[2], work[5], work[7], work[8], work[9], work[10], work[11]
+    sig, cv, dinv, Bw, Li, dsc, info = work[12], work[13], work[14], work[15], work[19], work[20], work[21]
+    if info[0] == 0.0:
+        return NO_FACTOR
+    zmode = info[1] != 0.0
+    r = int(info[2])
+    diag = info[3] != 0.0
+    mu = info[4]
+    for i in range(m):
+        Bw[i, 0] = dsc[i] * gam[i]  # D γ
+    if info[5] != 0.0:  # certified LQ: cv = L⁻¹ D γ
+        for i in range(m):
+            s = 0.0
+            for k in range(i + 1):
+                s += Li[i, k] * Bw[k, 0]
+            cv[i] = s
+    else:  # Jacobi: cv = Σ⁻¹Uᵀ D γ (kept rows)
+        for k in range(r):
+            s = 0.0
+            for c in range(m):
+                s += Li[k, c] * Bw[c, 0]
+            cv[k] = s
+    if zmode:
+        _lq_min_norm(Ft, sig, m, n, cv, wv)
+    else:
+        for j in range(n):
+            wv[j] = 0.0
+        for k in range(r):
+            c = cv[k]
+            for j in range(n):
+                wv[j] -= V[k, j] * c
+    res = out[: 2 * n].reshape((2, n))
+    _finish(0, M.reshape((1, n, n)), h.reshape((1, n)), f.reshape((1, f.shape[0])), has_f,
+            res[0:1], res[1:2], P.reshape((1, P.shape[0], P.shape[1])),
+            L.reshape((1, L.shape[0], L.shape[1])), want_pl, n, r, zmode, diag, mu, wv, V, Kt, W,
+            dinv, g, u, cv, cw)  # fmt: skip
+    out[2 * n] = r
+    out[2 * n + 1] = mu
+    out[2 * n + 2] = 0.0
+    return OK
 
 
 @njit(cache=True)

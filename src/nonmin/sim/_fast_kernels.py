@@ -29,7 +29,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ..core._fast_kernels import scratch, solve_work
+from ..core._fast_kernels import scratch, solve_again, solve_work
 from ..model.planar._fast_kernels import pin_line_rod_work
 
 #: Return codes of :func:`rk4_planar`.
@@ -38,7 +38,7 @@ FAILED = 1  # a kernel status ≠ OK or a non-finite acceleration: hand over to 
 
 
 #: Entries of the ``cfg`` parameter vector of :func:`rk4_planar`.
-BASE_RTOL, DRIFT_FACTOR, VEL_RTOL, PTOL, MAX_ITER, SPD_RTOL, SYM_RTOL, FLOOR, WARM, POS_CUT = range(10)
+BASE_RTOL, DRIFT_FACTOR, VEL_RTOL, PTOL, MAX_ITER, SPD_RTOL, SYM_RTOL, FLOOR, WARM, POS_CUT, CHORD = range(11)
 
 #: Status of a non-finite acceleration (the core kernel's codes are 0–4).
 NONFINITE_QDD = 5
@@ -47,11 +47,13 @@ NONFINITE_QDD = 5
 @njit(cache=True)
 def workspace(n, m, S, n_var, T):  # type: ignore[no-untyped-def]
     """Scratch arrays of the loop (``S`` kernel sides, ``n_var`` variable entries of A) and the
-    warm-start rotation ``T`` (m × m) of the Jacobi SVD, carried from call to call."""
+    warm-start rotation ``T`` (m × m) of the Jacobi SVD, carried from call to call. ``ws[17]``
+    and ``ws[18] = [valid, rtol]`` tag the factorization held in the core scratch ``ws[11]``
+    with the ``q`` and rank tolerance it was taken at (see :func:`_solve_at`)."""
     return (np.empty(2 * n + 2), np.empty(m * n + 1), np.empty((2, m)), np.empty((m, n)),
             np.empty(m), np.zeros(n), np.empty(2 * n + 3), np.empty((n, n)), np.empty((n, n)),
             np.empty(n), np.empty(n), scratch(n, m), T, np.empty((9, S)), np.empty(n_var),
-            np.empty(m), np.empty((n, n)))  # fmt: skip
+            np.empty(m), np.empty((n, n)), np.empty(n), np.zeros(2))  # fmt: skip
 
 
 @njit(cache=True)
@@ -121,12 +123,43 @@ def _matvec_rows(A, v, out):  # type: ignore[no-untyped-def]
 
 @njit(cache=True, inline="always")
 def _solve(prog, ws, cfg, h, gam, rtol, want_pl):  # type: ignore[no-untyped-def]
-    """The core kernel on the workspace's A (warm-started Jacobi SVD); result in ``ws[6]``."""
+    """The core kernel on the workspace's A at ``q = ws[9]`` (warm-started Jacobi SVD); result
+    in ``ws[6]``. The factorization stays in the scratch, tagged with ``q`` and ``rtol``."""
     # flags computed at run time: literal arguments would make numba compile solve_work once per
     # literal combination (~20 s each on first use)
-    return solve_work(prog[0], h, h, cfg[WARM] < 0.0, ws[3], gam, 1.0, cfg[WARM] < 0.0, rtol,
-                      cfg[SPD_RTOL], cfg[SYM_RTOL], want_pl != 0, ws[6], ws[7], ws[8], ws[11],
-                      ws[12], cfg[WARM] != 0.0)  # fmt: skip
+    st = solve_work(prog[0], h, h, cfg[WARM] < 0.0, ws[3], gam, 1.0, cfg[WARM] < 0.0, rtol,
+                    cfg[SPD_RTOL], cfg[SYM_RTOL], want_pl != 0, ws[6], ws[7], ws[8], ws[11],
+                    ws[12], cfg[WARM] != 0.0)  # fmt: skip
+    q, tag = ws[9], ws[18]
+    for i in range(q.shape[0]):
+        ws[17][i] = q[i]
+    tag[0] = 1.0 if st == 0 else 0.0
+    tag[1] = rtol
+    return st
+
+
+@njit(cache=True, inline="always")
+def _again(prog, ws, h, gam, want_pl):  # type: ignore[no-untyped-def]
+    """New ``h`` and ``γ`` on the factorization held (:func:`nonmin.core._fast_kernels.solve_again`)."""
+    # has_f = False computed at run time (see _solve)
+    return solve_again(prog[0], h, h, want_pl < 0, gam, want_pl != 0, ws[6], ws[7], ws[8], ws[11])
+
+
+@njit(cache=True, inline="always")
+def _solve_at(prog, ws, cfg, h, gam, rtol, want_pl):  # type: ignore[no-untyped-def]
+    """:func:`_solve`, or :func:`_again` when the factorization held was taken at this very
+    ``q`` with this ``rtol`` (M is constant: planar bodies): the velocity projection and the
+    evaluation of ``F`` at the projected state share one factorization."""
+    q, tag, fq = ws[9], ws[18], ws[17]
+    same = tag[0] != 0.0 and tag[1] == rtol
+    if same:
+        for i in range(q.shape[0]):
+            if fq[i] != q[i]:
+                same = False
+                break
+    if same:
+        return _again(prog, ws, h, gam, want_pl)
+    return _solve(prog, ws, cfg, h, gam, rtol, want_pl)
 
 
 @njit(cache=True, inline="always")
@@ -139,7 +172,7 @@ def _rhs(prog, ws, cfg, t, yy, kk):  # type: ignore[no-untyped-def]
         qd[i] = yy[n + i]
     _evaluate(prog, q, qd, ws)
     rtol = _drift_rtol(ws[3], ws[2][0], cfg[BASE_RTOL], cfg[DRIFT_FACTOR], ws[15])
-    st = _solve(prog, ws, cfg, prog[1], ws[2][1], rtol, 0)
+    st = _solve_at(prog, ws, cfg, prog[1], ws[2][1], rtol, 0)
     if st != 0:
         return st
     for i in range(n):
@@ -213,11 +246,10 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
     prev = np.inf
     it = 0
     cut = max(cfg[POS_CUT], cfg[BASE_RTOL])  # see _stabilization.POSITION_CUT_RTOL
-    while True:  # evaluate, then (at most MAX_ITER times) correct
+    lin = False  # a linearization (factorization of A) is held
+    fresh = False  # the last step was a Gauss–Newton step (A factorized at its q)
+    while True:  # evaluate, then correct (at most MAX_ITER linearizations)
         _evaluate(prog, q, qd, ws)
-        if it >= cfg[MAX_ITER]:
-            break
-        it += 1
         err = 0.0
         for i in range(m):
             a = abs(PG[0, i])
@@ -235,18 +267,30 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
                 break
         if floor:
             break
-        if err > 0.5 * prev:
-            if cut == cfg[BASE_RTOL]:
-                break  # no progress at the full rank: round-off floor reached
-            cut = cfg[BASE_RTOL]  # stalled above the floor with the cutoff: a real residual
-        prev = err
-        st = _solve(prog, ws, cfg, zero, PG[0], cut, 0)
+        # the same decisions as Projection.project
+        relin = (not lin) or cut == cfg[BASE_RTOL]
+        if lin and err > (0.5 if fresh else cfg[CHORD]) * prev:
+            if fresh:  # a Gauss–Newton step stalled
+                if cut == cfg[BASE_RTOL] and err >= prev:
+                    break  # no progress at the full rank: round-off floor reached
+                cut = cfg[BASE_RTOL]
+            relin = True
+        if relin:
+            if it >= cfg[MAX_ITER]:
+                break
+            it += 1
+            st = _solve(prog, ws, cfg, zero, PG[0], cut, 0)
+            lin = True
+        else:
+            st = _again(prog, ws, zero, PG[0], 0)
+        fresh = relin
         if st != 0:
             return st
+        prev = err
         for i in range(n):
             q[i] = q[i] + out[i]
     _matvec_rows(A, qd, vres)
-    st = _solve(prog, ws, cfg, zero, vres, cfg[VEL_RTOL], 0)
+    st = _solve_at(prog, ws, cfg, zero, vres, cfg[VEL_RTOL], 0)
     if st != 0:
         return st
     for i in range(n):
@@ -256,19 +300,30 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _cond_mbar(M, P, k, mu, Z):  # type: ignore[no-untyped-def]
-    """``cond(M̄)`` from ``P`` (rank k) without an n × n eigenproblem.
+def _cond_mbar(M, work, k, mu, P, Z):  # type: ignore[no-untyped-def]
+    """``cond(M̄)`` of the factorization held in the core scratch ``work`` (rank ``n − k``).
 
     ``M̄ = PMP + μQ`` acts as ``μ`` on ``R(Aᵀ)`` and as ``S = Z M Zᵀ`` on ``N(A)`` (``Z``: k
-    orthonormal rows spanning ``R(P) = N(A)``), so its eigenvalues are ``μ`` and those of the
-    k × k matrix ``S``. ``Z`` comes from ``P`` by Gram–Schmidt with column pivoting (the
-    largest remaining column first; ``P`` is a projector, so its columns span ``N(A)``). Equals
-    ``(σ_max(L)/σ_min(L))²`` of the Cholesky factor (what the general driver records) up to
-    round-off.
+    orthonormal rows spanning N(A)), so its eigenvalues are ``μ`` and those of the k × k ``S``.
+    In the kernel's null-space form ``S`` is already in the scratch; otherwise ``P = I − VᵀV``
+    is formed from the kept rows ``V`` and ``Z`` comes from ``P`` by Gram–Schmidt with column
+    pivoting (the largest remaining column first; ``P`` is a projector, so its columns span
+    N(A)). Equals ``(σ_max(L)/σ_min(L))²`` of the Cholesky factor (what the general driver
+    records) up to round-off.
     """
     n = M.shape[0]
     if k <= 0:
         return 1.0
+    if work[21][1] != 0.0:  # null-space form: S = Z M Zᵀ left in G by the kernel
+        return _cond_from_s(work[6][:k, :k].copy(), k, mu)
+    V = work[1]
+    r = n - k
+    for i in range(n):
+        for j in range(n):
+            s = 0.0
+            for a in range(r):
+                s += V[a, i] * V[a, j]
+            P[i, j] = (1.0 if i == j else 0.0) - s
     for i in range(k):
         best = -1.0
         jb = 0
@@ -309,6 +364,12 @@ def _cond_mbar(M, P, k, mu, Z):  # type: ignore[no-untyped-def]
                     t += M[a, b] * Z[j, b]
                 s += Z[i, a] * t
             S[i, j] = s
+    return _cond_from_s(S, k, mu)
+
+
+@njit(cache=True)
+def _cond_from_s(S, k, mu):  # type: ignore[no-untyped-def]
+    """``max(μ, λ_max(S)) / min(μ, λ_min(S))`` for the k × k symmetric ``S``."""
     if k == 1:
         lo = S[0, 0]
         hi = S[0, 0]
@@ -332,7 +393,7 @@ def _point(prog, ws, cfg, tt, yy, recs, k, kk):  # type: ignore[no-untyped-def]
         qd[i] = yy[n + i]
     _evaluate(prog, q, qd, ws)
     rtol = _drift_rtol(A, PG[0], cfg[BASE_RTOL], cfg[DRIFT_FACTOR], ws[15])
-    st = _solve(prog, ws, cfg, f, PG[1], rtol, 1)
+    st = _solve_at(prog, ws, cfg, f, PG[1], rtol, 0)
     if st != 0:
         return st
     for i in range(n):
@@ -355,7 +416,7 @@ def _point(prog, ws, cfg, tt, yy, recs, k, kk):  # type: ignore[no-untyped-def]
         e_pot += f[i] * q[i]
     rec_rank[k] = int(out[2 * n])
     rec_mu[k] = out[2 * n + 1]
-    rec_cond[k] = _cond_mbar(M, ws[7], n - int(out[2 * n]), out[2 * n + 1], ws[16])
+    rec_cond[k] = _cond_mbar(M, ws[11], n - int(out[2 * n]), out[2 * n + 1], ws[7], ws[16])
     rec_energy[k] = 0.5 * e_kin - e_pot
     pn = 0.0
     for i in range(m):
