@@ -139,12 +139,14 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta):  # type: ignore[no-untyp
         for k in range(i + 1):
             fl += Wq[i, k] * Wq[i, k]
     fi = 0.0
+    for i in range(m):  # reciprocal pivots (cv is scratch until the end)
+        cv[i] = 1.0 / Wq[i, i]
     for c in range(m):  # L⁻¹ column by column (forward substitution), lower triangle of Li
         for i in range(c, m):
             s = 1.0 if i == c else 0.0
             for k in range(c, i):
                 s -= Wq[i, k] * Li[k, c]
-            x = s / Wq[i, i]
+            x = s * cv[i]
             Li[i, c] = x
             fi += x * x
     margin = QR_MARGIN if rtol <= QR_MARGIN_RTOL else 1.0
