@@ -66,14 +66,59 @@ def scratch(n, m):
     """Scratch arrays of :func:`solve_range` for ``n`` coordinates and ``m`` rows.
 
     Everything a state needs is here, including the warm-start buffers and the status/μ slots of
-    :func:`solve_work`, so a loop that owns one set allocates nothing per call (two small
-    allocations per call cost the simulation loop ~1.5 µs per solve at n = 9, measured).
+    :func:`solve_work` and what :func:`solve_again` reuses, so a loop that owns one set
+    allocates nothing per call. The float arrays are views of one buffer (two allocations in
+    all: a single call that builds its scratch pays ~0.1 µs per allocation).
     """
-    return (np.empty((m, n + 1)), np.empty((m, n)), np.empty((m, n)), np.empty((m, n)),
-            np.empty((m, n)), np.empty((m, n)), np.empty((m, m)), np.empty((n, n)),
-            np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(m), np.empty(m),
-            np.empty(n), np.empty((m, n + 1)), np.empty((m, m)), np.empty(2, dtype=np.int64),
-            np.empty(1), np.empty((m, m)), np.empty(m), np.zeros(8))  # fmt: skip
+    n1 = n + 1
+    total = 2 * m * n1 + 5 * m * n + 3 * m * m + n * n + 5 * n + 3 * m + 9
+    buf = np.empty(total)
+    o = 0
+    B = buf[o : o + m * n1].reshape((m, n1))
+    o += m * n1
+    V = buf[o : o + m * n].reshape((m, n))
+    o += m * n
+    Kt = buf[o : o + m * n].reshape((m, n))
+    o += m * n
+    Tt = buf[o : o + m * n].reshape((m, n))
+    o += m * n
+    Et = buf[o : o + m * n].reshape((m, n))
+    o += m * n
+    Ft = buf[o : o + m * n].reshape((m, n))
+    o += m * n
+    G = buf[o : o + m * m].reshape((m, m))
+    o += m * m
+    W = buf[o : o + n * n].reshape((n, n))
+    o += n * n
+    cw = buf[o : o + n]
+    o += n
+    g = buf[o : o + n]
+    o += n
+    wv = buf[o : o + n]
+    o += n
+    u = buf[o : o + n]
+    o += n
+    sig = buf[o : o + m]
+    o += m
+    cv = buf[o : o + m]
+    o += m
+    dinv = buf[o : o + n]
+    o += n
+    Bw = buf[o : o + m * n1].reshape((m, n1))
+    o += m * n1
+    Tn = buf[o : o + m * m].reshape((m, m))
+    o += m * m
+    mu1 = buf[o : o + 1]
+    o += 1
+    Li = buf[o : o + m * m].reshape((m, m))
+    o += m * m
+    dsc = buf[o : o + m]
+    o += m
+    info = buf[o : o + 8]
+    for i in range(8):
+        info[i] = 0.0  # no factorization held yet
+    return (B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn,
+            np.empty(2, dtype=np.int64), mu1, Li, dsc, info)  # fmt: skip
 
 
 #: Safety factor of the certified-QR rank decision (see :func:`_lq_certified`) for small
@@ -271,7 +316,8 @@ def _finish(b, M, h, f, has_f, qdd, fc, P, L, want_pl, n, r, zmode, diag, mu, wv
     """Step 6 of :func:`solve_range` (right-hand side, the two triangular solves, ``f_c``,
     ``P`` and ``L``) from a factorization: ``w = −(DA)⁺ D γ`` in ``wv``, the kept rows ``V``
     (or the null-space rows ``Kt`` when ``zmode``), the Cholesky factor of ``M̄`` in ``W`` with
-    inverse pivots ``dinv``. Shared by :func:`solve_range` and :func:`solve_again`."""
+    inverse pivots ``dinv``. Used by :func:`solve_again`; :func:`solve_range` has the same
+    steps written out (tested equal: ``test_solve_again_reuses_the_factorization``)."""
     want_fc = fc.shape[0] > 0
     for i in range(n):
         gi = h[b, i]
@@ -690,8 +736,84 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
         if st != OK:
             continue
         # ---------------------------------------------------------------- 6. right-hand side, solve
-        _finish(b, M, h, f, has_f, qdd, fc, P, L, want_pl, n, r, zmode, diag, mu, wv, V, Kt, W,
-                dinv, g, u, cv, cw)  # fmt: skip
+        # (the same steps as _finish, which solve_again calls: written out here because numba's
+        # inline="always" of _finish cost single calls 0.2–0.4 µs, measured at n = 3 and 9)
+        want_fc = fc.shape[0] > 0
+        for i in range(n):
+            gi = h[b, i]
+            if has_f:
+                gi += f[b, i]
+            g[i] = gi
+            u[i] = gi
+        if diag:
+            for i in range(n):
+                u[i] -= M[b, i, i] * wv[i]
+        else:
+            for j in range(n):  # u = g − M w  (element-wise updates; M symmetric)
+                c = wv[j]
+                for i in range(n):
+                    u[i] -= M[b, j, i] * c
+        if zmode:  # rhs = Zᵀ(Z u) + μ w   (stored in u)
+            kz = n - r
+            for a in range(kz):
+                s = 0.0
+                for j in range(n):
+                    s += Kt[a, j] * u[j]
+                cv[a] = s
+            for i in range(n):
+                u[i] = mu * wv[i]
+            for a in range(kz):
+                c = cv[a]
+                for i in range(n):
+                    u[i] += Kt[a, i] * c
+        else:
+            for k in range(r):  # cv ← V u
+                s = 0.0
+                for j in range(n):
+                    s += V[k, j] * u[j]
+                cv[k] = s
+            for i in range(n):  # rhs = u − Vᵀ(V u) + μ w   (stored in u)
+                u[i] += mu * wv[i]
+            for k in range(r):
+                c = cv[k]
+                for i in range(n):
+                    u[i] -= V[k, i] * c
+        for k in range(n):  # L y = rhs, column-oriented (independent updates)
+            y = u[k] * dinv[k]
+            u[k] = y
+            for i in range(k + 1, n):
+                u[i] -= W[i, k] * y
+        for i in range(n - 1, -1, -1):  # Lᵀ x = y, column-oriented (contiguous rows of L)
+            xi = u[i] * dinv[i]
+            qdd[b, i] = xi
+            for k in range(i):
+                u[k] -= W[i, k] * xi
+        if want_fc:
+            for i in range(n):  # f_c = M qdd − g
+                cw[i] = 0.0
+            if diag:
+                for i in range(n):
+                    cw[i] += M[b, i, i] * qdd[b, i]
+            else:
+                for j in range(n):
+                    c = qdd[b, j]
+                    for i in range(n):
+                        cw[i] += M[b, j, i] * c
+            for i in range(n):
+                fc[b, i] = cw[i] - g[i]
+        if want_pl:
+            for i in range(n):
+                for j in range(n):
+                    s = 0.0
+                    if zmode:  # P = ZᵀZ
+                        for k in range(n - r):
+                            s += Kt[k, i] * Kt[k, j]
+                        P[b, i, j] = s
+                    else:  # P = I − VᵀV
+                        for k in range(r):
+                            s += V[k, i] * V[k, j]
+                        P[b, i, j] = (1.0 if i == j else 0.0) - s
+                    L[b, i, j] = W[i, j] if j <= i else 0.0
 
 
 @njit(cache=True)
@@ -707,7 +829,8 @@ def solve_one(M, h, f, A, gam, params, out, P, L):  # type: ignore[no-untyped-de
     n = M.shape[0]
     m = A.shape[0]
     res = out[: 2 * n].reshape((2, n))
-    ist = np.empty(2, dtype=np.int64)
+    work = scratch(n, m)
+    ist = work[17]
     mu_in = params[1:2]
     solve_range(
         0, 1, M.reshape((1, n, n)), h.reshape((1, n)), f.reshape((1, f.shape[0])),
@@ -715,7 +838,7 @@ def solve_one(M, h, f, A, gam, params, out, P, L):  # type: ignore[no-untyped-de
         params[2] != 0.0, params[3], params[4], params[5], res[0:1], res[1:2],
         P.reshape((1, P.shape[0], P.shape[1])), L.reshape((1, L.shape[0], L.shape[1])),
         params[6] != 0.0, ist[0:1], ist[1:2], out[2 * n + 1 : 2 * n + 2],
-        out[2 * n + 2 : 2 * n + 3], scratch(n, m), _NO_T, False,
+        out[2 * n + 2 : 2 * n + 3], work, _NO_T, False,
     )  # fmt: skip
     out[2 * n] = ist[1]
     return ist[0]
