@@ -159,7 +159,6 @@ def _resolve() -> Any:
 
 
 _NO_MU = np.ones(1)
-_NO_PL = np.empty((1, 1))
 _PARAMS: dict[tuple[bool, float, bool], FloatArray] = {}
 
 
@@ -241,15 +240,17 @@ def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | N
                                float(want_pl)])  # fmt: skip
         else:
             params = _params(has_f, resolve_rtol(rtol), want_pl)
-        out = np.empty(2 * n + 3)
         if not want_pl:
-            if kern.solve_one(Mm, hv, fv, Am, gv, params, out, _NO_PL, _NO_PL):
+            out = np.empty(2 * n + 3)
+            if kern.solve_one(Mm, hv, fv, Am, gv, params, out):
                 return None
             return out[:n] if what == QDD else out[n : 2 * n]
-        P = np.empty((n, n))
-        L = np.empty((n, n))
-        if kern.solve_one(Mm, hv, fv, Am, gv, params, out, P, L):
+        out = np.empty(2 * n + 3 + 2 * n * n)  # P and L follow the scalars
+        if kern.solve_one(Mm, hv, fv, Am, gv, params, out):
             return None
+        o = 2 * n + 3
+        P = out[o : o + n * n].reshape(n, n)
+        L = out[o + n * n :].reshape(n, n)
         rank = np.asarray(int(out[2 * n]), dtype=np.intp)
         mu_used = mu_v if has_mu else np.asarray(out[2 * n + 1])
         return out[:n], out[n : 2 * n], P, L, rank, mu_used

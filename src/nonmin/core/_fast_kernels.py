@@ -817,18 +817,24 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
 
 
 @njit(cache=True)
-def solve_one(M, h, f, A, gam, params, out, P, L):  # type: ignore[no-untyped-def]
+def solve_one(M, h, f, A, gam, params, out):  # type: ignore[no-untyped-def]
     """Single state (2-D ``M``, ``A``), with few arguments to keep the call overhead small.
 
     ``params = [has_f, mu, has_mu, rtol, spd_rtol, sym_rtol, want_pl]``; writes
-    ``out = [qdd (n), f_c (n), rank, mu, pivot_ratio]`` (and ``P``, ``L`` if ``want_pl``; pass
-    any 2-D arrays otherwise) and returns the status. It inlines :func:`solve_range` itself
-    (rather than calling :func:`solve_work`, which would pass the scratch tuple: ~0.5 µs per
-    call, measured at n = 3); the compiled simulation loop uses :func:`solve_work`.
+    ``out = [qdd (n), f_c (n), rank, mu, pivot_ratio]``, followed by ``P`` and ``L`` (n × n
+    each, row-major) if ``want_pl`` (then ``out`` has ``2n + 3 + 2n²`` entries), and returns the
+    status. It inlines :func:`solve_range` itself (rather than calling :func:`solve_work`, which
+    would pass the scratch tuple: ~0.5 µs per call, measured at n = 3); the compiled simulation
+    loop uses :func:`solve_work`. Every array argument costs the call ~0.1 µs of unboxing,
+    hence ``P`` and ``L`` inside ``out``.
     """
     n = M.shape[0]
     m = A.shape[0]
     res = out[: 2 * n].reshape((2, n))
+    k = n if params[6] != 0.0 else 0
+    o = 2 * n + 3
+    P = out[o : o + k * k].reshape((k, k))
+    L = out[o + k * k : o + 2 * k * k].reshape((k, k))
     work = scratch(n, m)
     ist = work[17]
     mu_in = params[1:2]
