@@ -310,96 +310,10 @@ def _mbar_null(M, b, Z, k, diag, has_mu, mu_in, nmu, ZM, S, Y, W):  # type: igno
 _FM: set[str] = set()
 
 
-@njit(cache=True, fastmath=_FM, inline="always")
-def _finish(b, M, h, f, has_f, qdd, fc, P, L, want_pl, n, r, zmode, diag, mu, wv, V, Kt, W, dinv,
-            g, u, cv, cw):  # type: ignore[no-untyped-def]  # fmt: skip
-    """Step 6 of :func:`solve_range` (right-hand side, the two triangular solves, ``f_c``,
-    ``P`` and ``L``) from a factorization: ``w = −(DA)⁺ D γ`` in ``wv``, the kept rows ``V``
-    (or the null-space rows ``Kt`` when ``zmode``), the Cholesky factor of ``M̄`` in ``W`` with
-    inverse pivots ``dinv``. Used by :func:`solve_again`; :func:`solve_range` has the same
-    steps written out (tested equal: ``test_solve_again_reuses_the_factorization``)."""
-    want_fc = fc.shape[0] > 0
-    for i in range(n):
-        gi = h[b, i]
-        if has_f:
-            gi += f[b, i]
-        g[i] = gi
-        u[i] = gi
-    if diag:
-        for i in range(n):
-            u[i] -= M[b, i, i] * wv[i]
-    else:
-        for j in range(n):  # u = g − M w  (element-wise updates; M symmetric)
-            c = wv[j]
-            for i in range(n):
-                u[i] -= M[b, j, i] * c
-    if zmode:  # rhs = Zᵀ(Z u) + μ w   (stored in u)
-        kz = n - r
-        for a in range(kz):
-            s = 0.0
-            for j in range(n):
-                s += Kt[a, j] * u[j]
-            cv[a] = s
-        for i in range(n):
-            u[i] = mu * wv[i]
-        for a in range(kz):
-            c = cv[a]
-            for i in range(n):
-                u[i] += Kt[a, i] * c
-    else:
-        for k in range(r):  # cv ← V u
-            s = 0.0
-            for j in range(n):
-                s += V[k, j] * u[j]
-            cv[k] = s
-        for i in range(n):  # rhs = u − Vᵀ(V u) + μ w   (stored in u)
-            u[i] += mu * wv[i]
-        for k in range(r):
-            c = cv[k]
-            for i in range(n):
-                u[i] -= V[k, i] * c
-    for k in range(n):  # L y = rhs, column-oriented (independent updates)
-        y = u[k] * dinv[k]
-        u[k] = y
-        for i in range(k + 1, n):
-            u[i] -= W[i, k] * y
-    for i in range(n - 1, -1, -1):  # Lᵀ x = y, column-oriented (contiguous rows of L)
-        xi = u[i] * dinv[i]
-        qdd[b, i] = xi
-        for k in range(i):
-            u[k] -= W[i, k] * xi
-    if want_fc:
-        for i in range(n):  # f_c = M qdd − g
-            cw[i] = 0.0
-        if diag:
-            for i in range(n):
-                cw[i] += M[b, i, i] * qdd[b, i]
-        else:
-            for j in range(n):
-                c = qdd[b, j]
-                for i in range(n):
-                    cw[i] += M[b, j, i] * c
-        for i in range(n):
-            fc[b, i] = cw[i] - g[i]
-    if want_pl:
-        for i in range(n):
-            for j in range(n):
-                s = 0.0
-                if zmode:  # P = ZᵀZ
-                    for k in range(n - r):
-                        s += Kt[k, i] * Kt[k, j]
-                    P[b, i, j] = s
-                else:  # P = I − VᵀV
-                    for k in range(r):
-                        s += V[k, i] * V[k, j]
-                    P[b, i, j] = (1.0 if i == j else 0.0) - s
-                L[b, i, j] = W[i, j] if j <= i else 0.0
-
-
-
 @njit(cache=True, fastmath=_FM, inline="always")  # numba-level inlining: no call, no refcounts
 def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
-                qdd, fc, P, L, want_pl, status, rank, mu_out, ratio, work, T, warm):  # fmt: skip
+                qdd, fc, P, L, want_pl, status, rank, mu_out, ratio, work, T, warm,
+                again):  # fmt: skip
     """Evaluate states ``lo … hi−1`` of the batch arrays, one after the other.
 
     Inputs ``M`` (N, n, n), ``h``, ``f`` (N, n) (``f`` read only if ``has_f``), ``A``
@@ -409,7 +323,8 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
     code), ``rank[b]``, ``mu_out[b]``, ``ratio[b]`` (smallest pivot ratio if
     :data:`SMALL_PIVOT`). The loop indexes the batch arrays directly (no per-state views, whose
     reference counting cost ~0.2 µs per state) and reuses one set of scratch arrays. See the
-    module docstring for the steps.
+    module docstring for the steps. With ``again`` (single state, see :func:`solve_again`) steps
+    1–5 are skipped: ``w`` comes from the factorization the last call left in ``work``.
     """
     n = M.shape[1]
     m = A.shape[1]
@@ -417,327 +332,364 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
     nmu = mu_in.shape[0]
     B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, _ist, _mu1, Li, dsc, info = work
     for b in range(lo, hi):
-        # ---------------------------------------------------------------- 1. input checks
-        # Finiteness: x·0 is 0 for finite x and NaN for ±inf/NaN; the per-column sums cw[j] (each
-        # sequential, element-wise across j) are 0 iff every entry is finite.
-        for j in range(n):
-            cw[j] = h[b, j] * 0.0
-        if has_f:
-            for j in range(n):
-                cw[j] += f[b, j] * 0.0
-        for i in range(n):
-            for j in range(n):
-                cw[j] += M[b, i, j] * 0.0
-        for i in range(m):
-            for j in range(n):
-                cw[j] += A[b, i, j] * 0.0
-        bad = False
-        for j in range(n):
-            bad |= cw[j] != 0.0
-        for i in range(m):
-            bad |= gam[b, i] - gam[b, i] != 0.0
-        code = NONFINITE if bad else OK
-        asym = 0.0
-        offd = 0.0  # largest off-diagonal |M_ij|: 0 for a diagonal M (planar bodies, point masses)
-        if code == OK:
-            for i in range(n):
-                for j in range(i):
-                    d = abs(M[b, i, j] - M[b, j, i])
-                    if d > asym:
-                        asym = d
-                    a = abs(M[b, i, j]) + abs(M[b, j, i])
-                    if a > offd:
-                        offd = a
-        diag = offd == 0.0
-        if asym > 0.0:  # same decision as _validation.symmetric (max|M| only needed now)
-            scale = 0.0
-            for i in range(n):
-                for j in range(n):
-                    a = abs(M[b, i, j])
-                    if a > scale:
-                        scale = a
-            if asym > sym_rtol * max(scale, _TINY):
-                code = ASYMMETRIC
-        if code != OK:  # invalid input: the caller re-runs the NumPy path, which raises
-            status[b] = code
-            rank[b] = 0
-            mu_out[b] = 0.0
-            ratio[b] = 0.0
-            continue
-        # ---------------------------------------------------------------- 2. equilibration
-        big = 0.0
-        for i in range(m):
-            s0 = 0.0
-            s1 = 0.0
-            s2 = 0.0
-            s3 = 0.0
-            for k in range(0, n4, 4):
-                s0 += A[b, i, k] * A[b, i, k]
-                s1 += A[b, i, k + 1] * A[b, i, k + 1]
-                s2 += A[b, i, k + 2] * A[b, i, k + 2]
-                s3 += A[b, i, k + 3] * A[b, i, k + 3]
-            for k in range(n4, n):
-                s0 += A[b, i, k] * A[b, i, k]
-            nrm = math.sqrt((s0 + s1) + (s2 + s3))
-            sig[i] = nrm
-            if nrm > big:
-                big = nrm
-        thr = rtol * big
-        for i in range(m):
-            nrm = sig[i]
-            if nrm > thr:
-                di = 1.0 / nrm
-                for j in range(n):
-                    B[i, j] = A[b, i, j] * di
-                B[i, n] = di * gam[b, i]
-                dsc[i] = di
+        if again:  # solve_again: the factorization left by the last call; new h, f, γ
+            if info[0] == 0.0:
+                status[b] = NO_FACTOR
+                rank[b] = 0
+                mu_out[b] = 0.0
+                ratio[b] = 0.0
+                continue
+            zmode = info[1] != 0.0
+            r = int(info[2])
+            diag = info[3] != 0.0
+            mu = info[4]
+            for i in range(m):
+                Bw[i, 0] = dsc[i] * gam[b, i]  # D γ
+            if info[5] != 0.0:  # certified LQ: cv = L⁻¹ D γ
+                for i in range(m):
+                    s = 0.0
+                    for k in range(i + 1):
+                        s += Li[i, k] * Bw[k, 0]
+                    cv[i] = s
+            else:  # Jacobi: cv = Σ⁻¹Uᵀ D γ (kept rows)
+                for k in range(r):
+                    s = 0.0
+                    for c in range(m):
+                        s += Li[k, c] * Bw[c, 0]
+                    cv[k] = s
+            if zmode:
+                _lq_min_norm(Ft, sig, m, n, cv, wv)
             else:
-                for j in range(n + 1):
-                    B[i, j] = 0.0
-                dsc[i] = 0.0
-        # ---------------------------------------------------------------- 2b. certified QR
-        # When every row is live (m ≤ n), an LQ factorization D A = L Q (Householder reflections
-        # from the right on the rows; Q has orthonormal rows) decides the rank without the SVD if
-        # it is certainly full: σ_min/σ_max ≥ 1/(‖L‖_F ‖L⁻¹‖_F) > QR_MARGIN · rtol means every
-        # σ_i is kept by the SVD's rule too. Then V = Q and (D A)⁺ D γ = Qᵀ L⁻¹ D γ. Otherwise
-        # (near a singular configuration, redundant rows) the Jacobi SVD below decides.
-        qr_ok = False
-        zmode = False
-        r = 0
-        if QR_MIN_ROWS <= m <= n:
-            live = 0
+                for j in range(n):
+                    wv[j] = 0.0
+                for k in range(r):
+                    c = cv[k]
+                    for j in range(n):
+                        wv[j] -= V[k, j] * c
+            status[b] = OK
+            rank[b] = r
+            mu_out[b] = mu
+            ratio[b] = 0.0
+        else:
+            # ---------------------------------------------------------------- 1. input checks
+            # Finiteness: x·0 is 0 for finite x and NaN for ±inf/NaN; the per-column sums cw[j] (each
+            # sequential, element-wise across j) are 0 iff every entry is finite.
+            for j in range(n):
+                cw[j] = h[b, j] * 0.0
+            if has_f:
+                for j in range(n):
+                    cw[j] += f[b, j] * 0.0
+            for i in range(n):
+                for j in range(n):
+                    cw[j] += M[b, i, j] * 0.0
             for i in range(m):
-                if sig[i] > thr:
-                    live += 1
-            if live == m:
-                qr_ok = _lq_certified(B, m, n, rtol, Et, Ft, Li, cv, sig)
-                if qr_ok:
-                    r = m
-                    # few degrees of freedom (n − m ≤ m): work with the null-space basis Z
-                    # (rows of Kt) — M̄ = μI + Zᵀ(S − μI)Z, S = Z M Zᵀ, P = ZᵀZ — instead of V
-                    zmode = n - m <= m
-                    if zmode:
-                        _lq_rows(Ft, sig, m, n, m, n - m, Kt)
-                        _lq_min_norm(Ft, sig, m, n, cv, wv)
-                    else:
-                        _lq_rows(Ft, sig, m, n, 0, m, V)
-        if not qr_ok:
-            if warm:  # start from the previous state's rotation: B ← T B (T orthogonal, m × m)
-                for i in range(m):
-                    for k in range(n + 1):
-                        Bw[i, k] = 0.0
-                    for j in range(m):
-                        c = T[i, j]
-                        if c != 0.0:
-                            for k in range(n + 1):
-                                Bw[i, k] += c * B[j, k]
-                for i in range(m):
-                    for k in range(n + 1):
-                        B[i, k] = Bw[i, k]
-                    for j in range(m):
-                        Tn[i, j] = T[i, j]
-            # ---------------------------------------------------------------- 3. Jacobi SVD
-            # Rows of norm ≤ eps·‖B‖_F are round-off (e.g. the difference of two duplicated rows): they
-            # are never rotated, else the sweeps would chase noise (their σ is far below any rtol).
-            frob2 = 0.0
+                for j in range(n):
+                    cw[j] += A[b, i, j] * 0.0
+            bad = False
+            for j in range(n):
+                bad |= cw[j] != 0.0
             for i in range(m):
-                for k in range(n):
-                    frob2 += B[i, k] * B[i, k]
-            noise2 = _EPS * _EPS * frob2
-            for _sweep in range(MAX_SWEEPS):
-                rotated = False
-                for i in range(m - 1):
-                    for j in range(i + 1, m):
-                        a0 = 0.0
-                        a1 = 0.0
-                        b0 = 0.0
-                        b1 = 0.0
-                        c0 = 0.0
-                        c1 = 0.0
-                        for k in range(0, n - n % 2, 2):
-                            x = B[i, k]
-                            y = B[j, k]
-                            x1 = B[i, k + 1]
-                            y1 = B[j, k + 1]
-                            a0 += x * x
-                            b0 += y * y
-                            c0 += x * y
-                            a1 += x1 * x1
-                            b1 += y1 * y1
-                            c1 += x1 * y1
-                        if n % 2:
-                            x = B[i, n - 1]
-                            y = B[j, n - 1]
-                            a0 += x * x
-                            b0 += y * y
-                            c0 += x * y
-                        aa = a0 + a1
-                        bb = b0 + b1
-                        cc = c0 + c1
-                        if aa <= noise2 or bb <= noise2 or abs(cc) <= _EPS * math.sqrt(aa * bb):
-                            continue
-                        rotated = True
-                        zeta = (bb - aa) / (2.0 * cc)
-                        if abs(zeta) > 1e150:
-                            t = 0.5 / zeta
-                        else:
-                            t = math.copysign(1.0, zeta) / (abs(zeta) + math.sqrt(1.0 + zeta * zeta))
-                        cs = 1.0 / math.sqrt(1.0 + t * t)
-                        sn = cs * t
-                        for k in range(n + 1):
-                            x = B[i, k]
-                            y = B[j, k]
-                            B[i, k] = cs * x - sn * y
-                            B[j, k] = sn * x + cs * y
-                        if warm:
-                            for k in range(m):
-                                x = Tn[i, k]
-                                y = Tn[j, k]
-                                Tn[i, k] = cs * x - sn * y
-                                Tn[j, k] = sn * x + cs * y
-                if not rotated:
-                    break
-            if warm:
-                for i in range(m):
-                    for j in range(m):
-                        T[i, j] = Tn[i, j]
-            smax = 0.0
+                bad |= gam[b, i] - gam[b, i] != 0.0
+            code = NONFINITE if bad else OK
+            asym = 0.0
+            offd = 0.0  # largest off-diagonal |M_ij|: 0 for a diagonal M (planar bodies, point masses)
+            if code == OK:
+                for i in range(n):
+                    for j in range(i):
+                        d = abs(M[b, i, j] - M[b, j, i])
+                        if d > asym:
+                            asym = d
+                        a = abs(M[b, i, j]) + abs(M[b, j, i])
+                        if a > offd:
+                            offd = a
+            diag = offd == 0.0
+            if asym > 0.0:  # same decision as _validation.symmetric (max|M| only needed now)
+                scale = 0.0
+                for i in range(n):
+                    for j in range(n):
+                        a = abs(M[b, i, j])
+                        if a > scale:
+                            scale = a
+                if asym > sym_rtol * max(scale, _TINY):
+                    code = ASYMMETRIC
+            if code != OK:  # invalid input: the caller re-runs the NumPy path, which raises
+                status[b] = code
+                rank[b] = 0
+                mu_out[b] = 0.0
+                ratio[b] = 0.0
+                continue
+            # ---------------------------------------------------------------- 2. equilibration
+            big = 0.0
             for i in range(m):
                 s0 = 0.0
                 s1 = 0.0
                 s2 = 0.0
                 s3 = 0.0
                 for k in range(0, n4, 4):
-                    s0 += B[i, k] * B[i, k]
-                    s1 += B[i, k + 1] * B[i, k + 1]
-                    s2 += B[i, k + 2] * B[i, k + 2]
-                    s3 += B[i, k + 3] * B[i, k + 3]
+                    s0 += A[b, i, k] * A[b, i, k]
+                    s1 += A[b, i, k + 1] * A[b, i, k + 1]
+                    s2 += A[b, i, k + 2] * A[b, i, k + 2]
+                    s3 += A[b, i, k + 3] * A[b, i, k + 3]
                 for k in range(n4, n):
-                    s0 += B[i, k] * B[i, k]
-                sig[i] = math.sqrt((s0 + s1) + (s2 + s3))
-                if sig[i] > smax:
-                    smax = sig[i]
-            r = 0
+                    s0 += A[b, i, k] * A[b, i, k]
+                nrm = math.sqrt((s0 + s1) + (s2 + s3))
+                sig[i] = nrm
+                if nrm > big:
+                    big = nrm
+            thr = rtol * big
             for i in range(m):
-                if sig[i] > rtol * smax:
-                    inv = 1.0 / sig[i]
-                    for k in range(n):
-                        V[r, k] = B[i, k] * inv
-                    cv[r] = B[i, n] * inv  # (Uᵀ D γ)_i / σ_i
-                    if warm:  # row r of (Σ⁻¹Uᵀ) for solve_again: B = Tn · (D A | D γ)
-                        for k in range(m):
-                            Li[r, k] = Tn[i, k] * inv
-                    r += 1
-        if not zmode:  # w = −(DA)⁺ D γ = −Σ_k v_k (u_kᵀ D γ)/σ_k
-            for j in range(n):
-                wv[j] = 0.0
-            for k in range(r):
-                c = cv[k]
-                for j in range(n):
-                    wv[j] -= V[k, j] * c
-        # ---------------------------------------------------------------- 4. PMP, μ, M̄
-        if zmode:
-            mu, dmax = _mbar_null(M, b, Kt, n - r, diag, has_mu, mu_in, nmu, Et, G, Tt, W)
-        for k in range(r if not zmode else 0):  # Kt = V M (M symmetric; element-wise updates)
-            if diag:  # the same sums without the zero terms
-                for i in range(n):
-                    Kt[k, i] = 0.0 + V[k, i] * M[b, i, i]
-                continue
-            for i in range(n):
-                Kt[k, i] = 0.0
-            for j in range(n):
-                c = V[k, j]
-                for i in range(n):
-                    Kt[k, i] += c * M[b, j, i]
-        if not zmode:
-            for k in range(r):  # G = V M Vᵀ (r × r), Tt = G V
-                for l in range(r):
-                    s = 0.0
+                nrm = sig[i]
+                if nrm > thr:
+                    di = 1.0 / nrm
                     for j in range(n):
-                        s += V[k, j] * Kt[l, j]
-                    G[k, l] = s
-            for l in range(r):
-                for j in range(n):
-                    Tt[l, j] = 0.0
-                for k in range(r):
-                    c = G[l, k]
-                    for j in range(n):
-                        Tt[l, j] += c * V[k, j]
-            tr_pmp = 0.0
-            tr_m = 0.0
-            for i in range(n):  # diag(PMP) = diag(M − QM − MQ + QMQ)
-                s = 0.0
-                for k in range(r):
-                    s += (2.0 * Kt[k, i] - Tt[k, i]) * V[k, i]
-                tr_pmp += M[b, i, i] - s
-                tr_m += M[b, i, i]
-            if has_mu:
-                mu = mu_in[b] if nmu > 1 else mu_in[0]
-            else:
-                if r < n:
-                    mu = tr_pmp / (n - r)
+                        B[i, j] = A[b, i, j] * di
+                    B[i, n] = di * gam[b, i]
+                    dsc[i] = di
                 else:
-                    mu = tr_m / n
-                if not mu > 0.0:
-                    mu = 1.0
-            for k in range(r):
+                    for j in range(n + 1):
+                        B[i, j] = 0.0
+                    dsc[i] = 0.0
+            # ---------------------------------------------------------------- 2b. certified QR
+            # When every row is live (m ≤ n), an LQ factorization D A = L Q (Householder reflections
+            # from the right on the rows; Q has orthonormal rows) decides the rank without the SVD if
+            # it is certainly full: σ_min/σ_max ≥ 1/(‖L‖_F ‖L⁻¹‖_F) > QR_MARGIN · rtol means every
+            # σ_i is kept by the SVD's rule too. Then V = Q and (D A)⁺ D γ = Qᵀ L⁻¹ D γ. Otherwise
+            # (near a singular configuration, redundant rows) the Jacobi SVD below decides.
+            qr_ok = False
+            zmode = False
+            r = 0
+            if QR_MIN_ROWS <= m <= n:
+                live = 0
+                for i in range(m):
+                    if sig[i] > thr:
+                        live += 1
+                if live == m:
+                    qr_ok = _lq_certified(B, m, n, rtol, Et, Ft, Li, cv, sig)
+                    if qr_ok:
+                        r = m
+                        # few degrees of freedom (n − m ≤ m): work with the null-space basis Z
+                        # (rows of Kt) — M̄ = μI + Zᵀ(S − μI)Z, S = Z M Zᵀ, P = ZᵀZ — instead of V
+                        zmode = n - m <= m
+                        if zmode:
+                            _lq_rows(Ft, sig, m, n, m, n - m, Kt)
+                            _lq_min_norm(Ft, sig, m, n, cv, wv)
+                        else:
+                            _lq_rows(Ft, sig, m, n, 0, m, V)
+            if not qr_ok:
+                if warm:  # start from the previous state's rotation: B ← T B (T orthogonal, m × m)
+                    for i in range(m):
+                        for k in range(n + 1):
+                            Bw[i, k] = 0.0
+                        for j in range(m):
+                            c = T[i, j]
+                            if c != 0.0:
+                                for k in range(n + 1):
+                                    Bw[i, k] += c * B[j, k]
+                    for i in range(m):
+                        for k in range(n + 1):
+                            B[i, k] = Bw[i, k]
+                        for j in range(m):
+                            Tn[i, j] = T[i, j]
+                # ---------------------------------------------------------------- 3. Jacobi SVD
+                # Rows of norm ≤ eps·‖B‖_F are round-off (e.g. the difference of two duplicated rows): they
+                # are never rotated, else the sweeps would chase noise (their σ is far below any rtol).
+                frob2 = 0.0
+                for i in range(m):
+                    for k in range(n):
+                        frob2 += B[i, k] * B[i, k]
+                noise2 = _EPS * _EPS * frob2
+                for _sweep in range(MAX_SWEEPS):
+                    rotated = False
+                    for i in range(m - 1):
+                        for j in range(i + 1, m):
+                            a0 = 0.0
+                            a1 = 0.0
+                            b0 = 0.0
+                            b1 = 0.0
+                            c0 = 0.0
+                            c1 = 0.0
+                            for k in range(0, n - n % 2, 2):
+                                x = B[i, k]
+                                y = B[j, k]
+                                x1 = B[i, k + 1]
+                                y1 = B[j, k + 1]
+                                a0 += x * x
+                                b0 += y * y
+                                c0 += x * y
+                                a1 += x1 * x1
+                                b1 += y1 * y1
+                                c1 += x1 * y1
+                            if n % 2:
+                                x = B[i, n - 1]
+                                y = B[j, n - 1]
+                                a0 += x * x
+                                b0 += y * y
+                                c0 += x * y
+                            aa = a0 + a1
+                            bb = b0 + b1
+                            cc = c0 + c1
+                            if aa <= noise2 or bb <= noise2 or abs(cc) <= _EPS * math.sqrt(aa * bb):
+                                continue
+                            rotated = True
+                            zeta = (bb - aa) / (2.0 * cc)
+                            if abs(zeta) > 1e150:
+                                t = 0.5 / zeta
+                            else:
+                                t = math.copysign(1.0, zeta) / (abs(zeta) + math.sqrt(1.0 + zeta * zeta))
+                            cs = 1.0 / math.sqrt(1.0 + t * t)
+                            sn = cs * t
+                            for k in range(n + 1):
+                                x = B[i, k]
+                                y = B[j, k]
+                                B[i, k] = cs * x - sn * y
+                                B[j, k] = sn * x + cs * y
+                            if warm:
+                                for k in range(m):
+                                    x = Tn[i, k]
+                                    y = Tn[j, k]
+                                    Tn[i, k] = cs * x - sn * y
+                                    Tn[j, k] = sn * x + cs * y
+                    if not rotated:
+                        break
+                if warm:
+                    for i in range(m):
+                        for j in range(m):
+                            T[i, j] = Tn[i, j]
+                smax = 0.0
+                for i in range(m):
+                    s0 = 0.0
+                    s1 = 0.0
+                    s2 = 0.0
+                    s3 = 0.0
+                    for k in range(0, n4, 4):
+                        s0 += B[i, k] * B[i, k]
+                        s1 += B[i, k + 1] * B[i, k + 1]
+                        s2 += B[i, k + 2] * B[i, k + 2]
+                        s3 += B[i, k + 3] * B[i, k + 3]
+                    for k in range(n4, n):
+                        s0 += B[i, k] * B[i, k]
+                    sig[i] = math.sqrt((s0 + s1) + (s2 + s3))
+                    if sig[i] > smax:
+                        smax = sig[i]
+                r = 0
+                for i in range(m):
+                    if sig[i] > rtol * smax:
+                        inv = 1.0 / sig[i]
+                        for k in range(n):
+                            V[r, k] = B[i, k] * inv
+                        cv[r] = B[i, n] * inv  # (Uᵀ D γ)_i / σ_i
+                        if warm:  # row r of (Σ⁻¹Uᵀ) for solve_again: B = Tn · (D A | D γ)
+                            for k in range(m):
+                                Li[r, k] = Tn[i, k] * inv
+                        r += 1
+            if not zmode:  # w = −(DA)⁺ D γ = −Σ_k v_k (u_kᵀ D γ)/σ_k
                 for j in range(n):
-                    Et[k, j] = Kt[k, j] - mu * V[k, j]
-                    Ft[k, j] = Kt[k, j] - Tt[k, j]
-            dmax = -np.inf
-            for i in range(n):  # M̄ = PMP + μQ = M − Vᵀ Et − Ftᵀ V (lower triangle, row by row)
-                for j in range(i + 1):
-                    W[i, j] = M[b, i, j]
+                    wv[j] = 0.0
                 for k in range(r):
-                    a = V[k, i]
-                    c = Ft[k, i]
+                    c = cv[k]
+                    for j in range(n):
+                        wv[j] -= V[k, j] * c
+            # ---------------------------------------------------------------- 4. PMP, μ, M̄
+            if zmode:
+                mu, dmax = _mbar_null(M, b, Kt, n - r, diag, has_mu, mu_in, nmu, Et, G, Tt, W)
+            for k in range(r if not zmode else 0):  # Kt = V M (M symmetric; element-wise updates)
+                if diag:  # the same sums without the zero terms
+                    for i in range(n):
+                        Kt[k, i] = 0.0 + V[k, i] * M[b, i, i]
+                    continue
+                for i in range(n):
+                    Kt[k, i] = 0.0
+                for j in range(n):
+                    c = V[k, j]
+                    for i in range(n):
+                        Kt[k, i] += c * M[b, j, i]
+            if not zmode:
+                for k in range(r):  # G = V M Vᵀ (r × r), Tt = G V
+                    for l in range(r):
+                        s = 0.0
+                        for j in range(n):
+                            s += V[k, j] * Kt[l, j]
+                        G[k, l] = s
+                for l in range(r):
+                    for j in range(n):
+                        Tt[l, j] = 0.0
+                    for k in range(r):
+                        c = G[l, k]
+                        for j in range(n):
+                            Tt[l, j] += c * V[k, j]
+                tr_pmp = 0.0
+                tr_m = 0.0
+                for i in range(n):  # diag(PMP) = diag(M − QM − MQ + QMQ)
+                    s = 0.0
+                    for k in range(r):
+                        s += (2.0 * Kt[k, i] - Tt[k, i]) * V[k, i]
+                    tr_pmp += M[b, i, i] - s
+                    tr_m += M[b, i, i]
+                if has_mu:
+                    mu = mu_in[b] if nmu > 1 else mu_in[0]
+                else:
+                    if r < n:
+                        mu = tr_pmp / (n - r)
+                    else:
+                        mu = tr_m / n
+                    if not mu > 0.0:
+                        mu = 1.0
+                for k in range(r):
+                    for j in range(n):
+                        Et[k, j] = Kt[k, j] - mu * V[k, j]
+                        Ft[k, j] = Kt[k, j] - Tt[k, j]
+                dmax = -np.inf
+                for i in range(n):  # M̄ = PMP + μQ = M − Vᵀ Et − Ftᵀ V (lower triangle, row by row)
                     for j in range(i + 1):
-                        W[i, j] -= a * Et[k, j] + c * V[k, j]
-                if W[i, i] > dmax:
-                    dmax = W[i, i]
-        # ---------------------------------------------------------------- 5. Cholesky
-        # Right-looking (outer-product) form on the lower triangle: after column j, the trailing
-        # rows are updated element-wise with a contiguous copy cw of the column.
-        st = OK
-        rt = np.inf
-        for j in range(n):
-            s = W[j, j]
-            if not s > 0.0:
-                st = CHOL_FAIL
-                break
-            ljj = math.sqrt(s)
-            piv = ljj * ljj
-            if piv <= spd_rtol * dmax:
-                st = SMALL_PIVOT
-                if piv / dmax < rt:
-                    rt = piv / dmax
-            W[j, j] = ljj
-            rj = 1.0 / ljj  # one division per column, as LAPACK's dpotf2
-            dinv[j] = rj
-            for i in range(j + 1, n):
-                x = W[i, j] * rj
-                W[i, j] = x
-                cw[i] = x
-            for i in range(j + 1, n):
-                a = cw[i]
-                for k in range(j + 1, i + 1):
-                    W[i, k] -= a * cw[k]
-        status[b] = st
-        rank[b] = r
-        mu_out[b] = mu
-        ratio[b] = rt if st == SMALL_PIVOT else 0.0
-        # what solve_again needs to reuse this factorization (the last state's)
-        info[0] = 1.0 if (st == OK and (qr_ok or warm)) else 0.0
-        info[1] = 1.0 if zmode else 0.0
-        info[2] = r
-        info[3] = 1.0 if diag else 0.0
-        info[4] = mu
-        info[5] = 1.0 if qr_ok else 0.0
-        if st != OK:
-            continue
+                        W[i, j] = M[b, i, j]
+                    for k in range(r):
+                        a = V[k, i]
+                        c = Ft[k, i]
+                        for j in range(i + 1):
+                            W[i, j] -= a * Et[k, j] + c * V[k, j]
+                    if W[i, i] > dmax:
+                        dmax = W[i, i]
+            # ---------------------------------------------------------------- 5. Cholesky
+            # Right-looking (outer-product) form on the lower triangle: after column j, the trailing
+            # rows are updated element-wise with a contiguous copy cw of the column.
+            st = OK
+            rt = np.inf
+            for j in range(n):
+                s = W[j, j]
+                if not s > 0.0:
+                    st = CHOL_FAIL
+                    break
+                ljj = math.sqrt(s)
+                piv = ljj * ljj
+                if piv <= spd_rtol * dmax:
+                    st = SMALL_PIVOT
+                    if piv / dmax < rt:
+                        rt = piv / dmax
+                W[j, j] = ljj
+                rj = 1.0 / ljj  # one division per column, as LAPACK's dpotf2
+                dinv[j] = rj
+                for i in range(j + 1, n):
+                    x = W[i, j] * rj
+                    W[i, j] = x
+                    cw[i] = x
+                for i in range(j + 1, n):
+                    a = cw[i]
+                    for k in range(j + 1, i + 1):
+                        W[i, k] -= a * cw[k]
+            status[b] = st
+            rank[b] = r
+            mu_out[b] = mu
+            ratio[b] = rt if st == SMALL_PIVOT else 0.0
+            # what solve_again needs to reuse this factorization (the last state's)
+            info[0] = 1.0 if (st == OK and (qr_ok or warm)) else 0.0
+            info[1] = 1.0 if zmode else 0.0
+            info[2] = r
+            info[3] = 1.0 if diag else 0.0
+            info[4] = mu
+            info[5] = 1.0 if qr_ok else 0.0
+            if st != OK:
+                continue
         # ---------------------------------------------------------------- 6. right-hand side, solve
-        # (the same steps as _finish, which solve_again calls: written out here because numba's
-        # inline="always" of _finish cost single calls 0.2–0.4 µs, measured at n = 3 and 9)
         want_fc = fc.shape[0] > 0
         for i in range(n):
             gi = h[b, i]
@@ -844,7 +796,7 @@ def solve_one(M, h, f, A, gam, params, out):  # type: ignore[no-untyped-def]
         params[2] != 0.0, params[3], params[4], params[5], res[0:1], res[1:2],
         P.reshape((1, P.shape[0], P.shape[1])), L.reshape((1, L.shape[0], L.shape[1])),
         params[6] != 0.0, ist[0:1], ist[1:2], out[2 * n + 1 : 2 * n + 2],
-        out[2 * n + 2 : 2 * n + 3], work, _NO_T, False,
+        out[2 * n + 2 : 2 * n + 3], work, _NO_T, False, False,
     )  # fmt: skip
     out[2 * n] = ist[1]
     return ist[0]
@@ -852,7 +804,7 @@ def solve_one(M, h, f, A, gam, params, out):  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def solve_work(M, h, f, has_f, A, gam, mu, has_mu, rtol, spd_rtol, sym_rtol, want_pl, out, P, L,
-               work, T, warm):  # type: ignore[no-untyped-def]  # fmt: skip
+               work, T, warm, again=False):  # type: ignore[no-untyped-def]  # fmt: skip
     """Single state with caller-owned scratch (``work = scratch(n, m)``) and a warm start.
 
     For integration loops: no allocation per call, and with ``warm`` true the Jacobi SVD
@@ -873,7 +825,7 @@ def solve_work(M, h, f, has_f, A, gam, mu, has_mu, rtol, spd_rtol, sym_rtol, wan
         A.reshape((1, m, n)), gam.reshape((1, m)), mu_in, has_mu, rtol, spd_rtol, sym_rtol,
         res[0:1], res[1:2], P.reshape((1, P.shape[0], P.shape[1])),
         L.reshape((1, L.shape[0], L.shape[1])), want_pl, ist[0:1], ist[1:2],
-        out[2 * n + 1 : 2 * n + 2], out[2 * n + 2 : 2 * n + 3], work, T, warm,
+        out[2 * n + 1 : 2 * n + 2], out[2 * n + 2 : 2 * n + 3], work, T, warm, again,
     )  # fmt: skip
     out[2 * n] = ist[1]
     return ist[0]
@@ -886,55 +838,16 @@ def solve_again(M, h, f, has_f, gam, want_pl, out, P, L, work):  # type: ignore[
     Same ``A``, ``M``, rank tolerance and μ as that call (the caller guarantees it); new
     ``h``, ``f`` and ``γ``. The result is linear in ``(h + f, γ)``: ``w = −(DA)⁺ D γ`` comes from
     the kept factors (certified LQ: ``L⁻¹`` and the reflectors or ``V``; Jacobi SVD:
-    ``Σ⁻¹Uᵀ`` of the kept rows, recorded when the call was warm-started), then step 6 as in
-    :func:`solve_range`. Costs O(m² + mn + n²) instead of a factorization; used by the
-    simulation loop for the velocity projection and ``F(t, y)`` at the same projected ``q``,
-    and for the simplified Gauss–Newton steps of the projection. Writes ``out`` as
-    :func:`solve_work`; returns :data:`OK`, or :data:`NO_FACTOR` when ``work`` holds no
-    reusable factorization (a failed or cold-started Jacobi call).
+    ``Σ⁻¹Uᵀ`` of the kept rows, recorded when the call was warm-started), then step 6 of
+    :func:`solve_range` (``solve_work`` with ``again``). Costs O(m² + mn + n²) instead of a
+    factorization; used by the simulation loop for the velocity projection and ``F(t, y)`` at
+    the same projected ``q``, and for the simplified Gauss–Newton steps of the projection.
+    Writes ``out`` as :func:`solve_work`; returns :data:`OK`, or :data:`NO_FACTOR` when
+    ``work`` holds no reusable factorization (a failed or cold-started Jacobi call).
     """
-    n = M.shape[0]
-    m = gam.shape[0]
-    V, Kt, Ft, W, cw, g, wv, u = work[1], work[2], work[5], work[7], work[8], work[9], work[10], work[11]
-    sig, cv, dinv, Bw, Li, dsc, info = work[12], work[13], work[14], work[15], work[19], work[20], work[21]
-    if info[0] == 0.0:
-        return NO_FACTOR
-    zmode = info[1] != 0.0
-    r = int(info[2])
-    diag = info[3] != 0.0
-    mu = info[4]
-    for i in range(m):
-        Bw[i, 0] = dsc[i] * gam[i]  # D γ
-    if info[5] != 0.0:  # certified LQ: cv = L⁻¹ D γ
-        for i in range(m):
-            s = 0.0
-            for k in range(i + 1):
-                s += Li[i, k] * Bw[k, 0]
-            cv[i] = s
-    else:  # Jacobi: cv = Σ⁻¹Uᵀ D γ (kept rows)
-        for k in range(r):
-            s = 0.0
-            for c in range(m):
-                s += Li[k, c] * Bw[c, 0]
-            cv[k] = s
-    if zmode:
-        _lq_min_norm(Ft, sig, m, n, cv, wv)
-    else:
-        for j in range(n):
-            wv[j] = 0.0
-        for k in range(r):
-            c = cv[k]
-            for j in range(n):
-                wv[j] -= V[k, j] * c
-    res = out[: 2 * n].reshape((2, n))
-    _finish(0, M.reshape((1, n, n)), h.reshape((1, n)), f.reshape((1, f.shape[0])), has_f,
-            res[0:1], res[1:2], P.reshape((1, P.shape[0], P.shape[1])),
-            L.reshape((1, L.shape[0], L.shape[1])), want_pl, n, r, zmode, diag, mu, wv, V, Kt, W,
-            dinv, g, u, cv, cw)  # fmt: skip
-    out[2 * n] = r
-    out[2 * n + 1] = mu
-    out[2 * n + 2] = 0.0
-    return OK
+    # A, T, μ and the tolerances are not read in this mode: any arrays of the right shape
+    return solve_work(M, h, f, has_f, work[1], gam, 1.0, False, 1.0, 1.0, 1.0, want_pl, out, P, L,
+                      work, work[16], False, True)  # fmt: skip
 
 
 @njit(cache=True)
@@ -943,7 +856,7 @@ def solve_batch_serial(M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sy
     """Batch of states (leading axis), one after the other."""
     solve_range(0, M.shape[0], M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
                 qdd, fc, P, L, want_pl, status, rank, mu_out, ratio,
-                scratch(M.shape[1], A.shape[1]), _NO_T, False)  # fmt: skip
+                scratch(M.shape[1], A.shape[1]), _NO_T, False, False)  # fmt: skip
 
 
 @njit(cache=True, parallel=True)
@@ -956,7 +869,7 @@ def solve_batch_parallel(M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, 
         hi = ((c + 1) * N) // nchunks
         solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
                     qdd, fc, P, L, want_pl, status, rank, mu_out, ratio,
-                    scratch(M.shape[1], A.shape[1]), _NO_T, False)  # fmt: skip
+                    scratch(M.shape[1], A.shape[1]), _NO_T, False, False)  # fmt: skip
 
 
 def num_threads() -> int:

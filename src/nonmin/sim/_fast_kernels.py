@@ -31,6 +31,7 @@ from numba import njit
 
 from ..core._fast_kernels import scratch, solve_again, solve_work
 from ..model.planar._fast_kernels import pin_line_rod_work
+from ._integrators import hermite_into
 
 #: Return codes of :func:`rk4_planar`.
 DONE = 0  # reached t1 or the step budget of the call
@@ -204,34 +205,9 @@ def _advance(prog, ws, cfg, t, yy, kk1, h, res, stages):  # type: ignore[no-unty
     return 0
 
 
-@njit(cache=True)
-def _hermite(y0, f0, y1, f1, h, s, out):  # type: ignore[no-untyped-def]
-    """:func:`nonmin.sim._integrators.hermite_quintic` into ``out`` (same expressions)."""
-    n = y0.shape[0] // 2
-    t = s / h
-    t2 = t * t
-    t3 = t2 * t
-    t4 = t3 * t
-    t5 = t4 * t
-    b1 = 10.0 * t3 - 15.0 * t4 + 6.0 * t5
-    b2 = t - 6.0 * t3 + 8.0 * t4 - 3.0 * t5
-    b3 = -4.0 * t3 + 7.0 * t4 - 3.0 * t5
-    b4 = 0.5 * (t2 - 3.0 * t3 + 3.0 * t4 - t5)
-    b5 = 0.5 * (t3 - 2.0 * t4 + t5)
-    d1 = 30.0 * t2 - 60.0 * t3 + 30.0 * t4
-    d2 = 1.0 - 18.0 * t2 + 32.0 * t3 - 15.0 * t4
-    d3 = -12.0 * t2 + 28.0 * t3 - 15.0 * t4
-    d4 = t - 4.5 * t2 + 6.0 * t3 - 2.5 * t4
-    d5 = 1.5 * t2 - 4.0 * t3 + 2.5 * t4
-    hh = h * h
-    for i in range(n):
-        dq = y1[i] - y0[i]
-        v0 = f0[i]
-        v1 = f1[i]
-        a0 = f0[n + i]
-        a1 = f1[n + i]
-        out[i] = y0[i] + dq * b1 + h * (v0 * b2 + v1 * b3) + hh * (a0 * b4 + a1 * b5)
-        out[n + i] = (dq / h) * d1 + (v0 * d2 + v1 * d3) + h * (a0 * d4 + a1 * d5)
+#: :func:`nonmin.sim._integrators.hermite_into` compiled: the general driver's continuous
+#: extension, the same function.
+_hermite = njit(cache=True)(hermite_into)
 
 
 @njit(cache=True)

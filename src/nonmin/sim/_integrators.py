@@ -96,9 +96,18 @@ def hermite_quintic(
     accurate as the O(h⁵) local error of a step of RK4. It replaces a partial step from the
     step start (three more right-hand sides) for the output samples of fixed-step methods;
     the stabilization then projects the sample onto the constraints as it does a step end.
-    The compiled engine evaluates the same expressions
-    (:func:`nonmin.sim._fast_kernels._hermite`).
     """
+    out = np.empty(y0.shape[0])
+    hermite_into(y0, f0, y1, f1, h, s, out)
+    return out
+
+
+def hermite_into(
+    y0: FloatArray, f0: FloatArray, y1: FloatArray, f1: FloatArray, h: float, s: float,
+    out: FloatArray,
+) -> None:  # fmt: skip
+    """:func:`hermite_quintic` into ``out``; plain loops, so the compiled engine compiles this
+    very function (``nonmin.sim._fast_kernels._hermite``)."""
     n = y0.shape[0] // 2
     t = s / h
     t2 = t * t
@@ -115,12 +124,15 @@ def hermite_quintic(
     d3 = -12.0 * t2 + 28.0 * t3 - 15.0 * t4
     d4 = t - 4.5 * t2 + 6.0 * t3 - 2.5 * t4
     d5 = 1.5 * t2 - 4.0 * t3 + 2.5 * t4
-    q0, v0, a0 = y0[:n], f0[:n], f0[n:]
-    q1, v1, a1 = y1[:n], f1[:n], f1[n:]
-    dq = q1 - q0
-    q = q0 + dq * b1 + h * (v0 * b2 + v1 * b3) + (h * h) * (a0 * b4 + a1 * b5)
-    qd = (dq / h) * d1 + (v0 * d2 + v1 * d3) + h * (a0 * d4 + a1 * d5)
-    return np.concatenate((q, qd))
+    hh = h * h
+    for i in range(n):
+        dq = y1[i] - y0[i]
+        v0 = f0[i]
+        v1 = f1[i]
+        a0 = f0[n + i]
+        a1 = f1[n + i]
+        out[i] = y0[i] + dq * b1 + h * (v0 * b2 + v1 * b3) + hh * (a0 * b4 + a1 * b5)
+        out[n + i] = (dq / h) * d1 + (v0 * d2 + v1 * d3) + h * (a0 * d4 + a1 * d5)
 
 
 def _clip(t: float, h: float, t_bound: float) -> float:
