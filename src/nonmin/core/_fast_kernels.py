@@ -61,6 +61,12 @@ _EPS = float(np.finfo(np.float64).eps)
 _TINY = float(np.finfo(np.float64).tiny)
 
 
+@njit(cache=True, inline="always")
+def _cut(buf, o, r, c):  # type: ignore[no-untyped-def]
+    """The r × c view of ``buf`` at offset ``o`` and the offset after it."""
+    return buf[o : o + r * c].reshape((r, c)), o + r * c
+
+
 @njit(cache=True)
 def scratch(n, m):
     """Scratch arrays of :func:`solve_range` for ``n`` coordinates and ``m`` rows.
@@ -71,50 +77,24 @@ def scratch(n, m):
     all: a single call that builds its scratch pays ~0.1 µs per allocation).
     """
     n1 = n + 1
-    total = 2 * m * n1 + 5 * m * n + 3 * m * m + n * n + 5 * n + 3 * m + 9
-    buf = np.empty(total)
-    o = 0
-    B = buf[o : o + m * n1].reshape((m, n1))
-    o += m * n1
-    V = buf[o : o + m * n].reshape((m, n))
-    o += m * n
-    Kt = buf[o : o + m * n].reshape((m, n))
-    o += m * n
-    Tt = buf[o : o + m * n].reshape((m, n))
-    o += m * n
-    Et = buf[o : o + m * n].reshape((m, n))
-    o += m * n
-    Ft = buf[o : o + m * n].reshape((m, n))
-    o += m * n
-    G = buf[o : o + m * m].reshape((m, m))
-    o += m * m
-    W = buf[o : o + n * n].reshape((n, n))
-    o += n * n
-    cw = buf[o : o + n]
-    o += n
-    g = buf[o : o + n]
-    o += n
-    wv = buf[o : o + n]
-    o += n
-    u = buf[o : o + n]
-    o += n
-    sig = buf[o : o + m]
-    o += m
-    cv = buf[o : o + m]
-    o += m
-    dinv = buf[o : o + n]
-    o += n
-    Bw = buf[o : o + m * n1].reshape((m, n1))
-    o += m * n1
-    Tn = buf[o : o + m * m].reshape((m, m))
-    o += m * m
-    mu1 = buf[o : o + 1]
-    o += 1
-    Li = buf[o : o + m * m].reshape((m, m))
-    o += m * m
-    dsc = buf[o : o + m]
-    o += m
-    info = buf[o : o + 8]
+    buf = np.empty(2 * m * n1 + 5 * m * n + 3 * m * m + n * n + 5 * n + 3 * m + 9)
+    B, o = _cut(buf, 0, m, n1)
+    V, o = _cut(buf, o, m, n)
+    Kt, o = _cut(buf, o, m, n)
+    Tt, o = _cut(buf, o, m, n)
+    Et, o = _cut(buf, o, m, n)
+    Ft, o = _cut(buf, o, m, n)
+    G, o = _cut(buf, o, m, m)
+    W, o = _cut(buf, o, n, n)
+    Bw, o = _cut(buf, o, m, n1)
+    Tn, o = _cut(buf, o, m, m)
+    Li, o = _cut(buf, o, m, m)
+    vn = buf[o : o + 5 * n].reshape((5, n))  # cw, g, wv, u, dinv
+    vm = buf[o + 5 * n : o + 5 * n + 3 * m].reshape((3, m))  # sig, cv, dsc
+    tail = buf[o + 5 * n + 3 * m :]  # μ, info (8)
+    cw, g, wv, u, dinv = vn[0], vn[1], vn[2], vn[3], vn[4]
+    sig, cv, dsc = vm[0], vm[1], vm[2]
+    mu1, info = tail[:1], tail[1:]
     for i in range(8):
         info[i] = 0.0  # no factorization held yet
     return (B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn,
