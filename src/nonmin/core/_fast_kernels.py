@@ -223,6 +223,24 @@ def _lq_min_norm(Hv, beta, m, n, cv, w):  # type: ignore[no-untyped-def]
         w[i] = -w[i]
 
 
+@njit(cache=True, inline="always")
+def _rows_times_m(X, k, M, b, diag, out):  # type: ignore[no-untyped-def]
+    """``out[:k] = X[:k] M[b]`` (M symmetric; element-wise updates, which LLVM vectorizes; for a
+    diagonal M the same sums without the zero terms)."""
+    n = M.shape[1]
+    for a in range(k):
+        if diag:
+            for j in range(n):
+                out[a, j] = 0.0 + X[a, j] * M[b, j, j]
+            continue
+        for j in range(n):
+            out[a, j] = 0.0
+        for i in range(n):
+            c = X[a, i]
+            for j in range(n):
+                out[a, j] += c * M[b, i, j]
+
+
 @njit(cache=True)
 def _mbar_null(M, b, Z, k, diag, has_mu, mu_in, nmu, ZM, S, Y, W):  # type: ignore[no-untyped-def]
     """μ and ``M̄ = μI + Zᵀ(S − μI)Z`` (lower triangle of ``W``) from the null-space basis.
@@ -232,17 +250,7 @@ def _mbar_null(M, b, Z, k, diag, has_mu, mu_in, nmu, ZM, S, Y, W):  # type: igno
     ``ZM`` (≥ k × n), ``S`` (≥ k × k), ``Y`` (≥ k × n). Returns ``(μ, max_i M̄_ii)``.
     """
     n = M.shape[1]
-    for a in range(k):  # ZM = Z M
-        if diag:
-            for j in range(n):
-                ZM[a, j] = Z[a, j] * M[b, j, j]
-        else:
-            for j in range(n):
-                ZM[a, j] = 0.0
-            for i in range(n):
-                c = Z[a, i]
-                for j in range(n):
-                    ZM[a, j] += c * M[b, i, j]
+    _rows_times_m(Z, k, M, b, diag, ZM)  # ZM = Z M
     trs = 0.0
     for a in range(k):
         for c in range(k):
@@ -337,15 +345,6 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                     for c in range(m):
                         s += Li[k, c] * Bw[c, 0]
                     cv[k] = s
-            if zmode:
-                _lq_min_norm(Ft, sig, m, n, cv, wv)
-            else:
-                for j in range(n):
-                    wv[j] = 0.0
-                for k in range(r):
-                    c = cv[k]
-                    for j in range(n):
-                        wv[j] -= V[k, j] * c
             status[b] = OK
             rank[b] = r
             mu_out[b] = mu
@@ -452,7 +451,6 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                         zmode = n - m <= m
                         if zmode:
                             _lq_rows(Ft, sig, m, n, m, n - m, Kt)
-                            _lq_min_norm(Ft, sig, m, n, cv, wv)
                         else:
                             _lq_rows(Ft, sig, m, n, 0, m, V)
             if not qr_ok:
@@ -562,27 +560,11 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                             for k in range(m):
                                 Li[r, k] = Tn[i, k] * inv
                         r += 1
-            if not zmode:  # w = −(DA)⁺ D γ = −Σ_k v_k (u_kᵀ D γ)/σ_k
-                for j in range(n):
-                    wv[j] = 0.0
-                for k in range(r):
-                    c = cv[k]
-                    for j in range(n):
-                        wv[j] -= V[k, j] * c
             # ---------------------------------------------------------------- 4. PMP, μ, M̄
             if zmode:
                 mu, dmax = _mbar_null(M, b, Kt, n - r, diag, has_mu, mu_in, nmu, Et, G, Tt, W)
-            for k in range(r if not zmode else 0):  # Kt = V M (M symmetric; element-wise updates)
-                if diag:  # the same sums without the zero terms
-                    for i in range(n):
-                        Kt[k, i] = 0.0 + V[k, i] * M[b, i, i]
-                    continue
-                for i in range(n):
-                    Kt[k, i] = 0.0
-                for j in range(n):
-                    c = V[k, j]
-                    for i in range(n):
-                        Kt[k, i] += c * M[b, j, i]
+            if not zmode:
+                _rows_times_m(V, r, M, b, diag, Kt)  # Kt = V M
             if not zmode:
                 for k in range(r):  # G = V M Vᵀ (r × r), Tt = G V
                     for l in range(r):
@@ -670,6 +652,17 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             if st != OK:
                 continue
         # ---------------------------------------------------------------- 6. right-hand side, solve
+        # w = −(DA)⁺ D γ from cv (both branches leave it: certified LQ cv = L⁻¹ D γ, Jacobi
+        # cv_k = (u_kᵀ D γ)/σ_k)
+        if zmode:  # −Qᵀ cv through the reflectors
+            _lq_min_norm(Ft, sig, m, n, cv, wv)
+        else:  # −Σ_k v_k cv_k
+            for j in range(n):
+                wv[j] = 0.0
+            for k in range(r):
+                c = cv[k]
+                for j in range(n):
+                    wv[j] -= V[k, j] * c
         want_fc = fc.shape[0] > 0
         for i in range(n):
             gi = h[b, i]
