@@ -29,6 +29,7 @@ import math
 import numpy as np
 from numba import njit
 
+from ..core._borrow import borrow
 from ..core._fast_kernels import scratch, solve_again, solve_work
 from ..model.planar._fast_kernels import pin_line_rod_work
 from ._integrators import hermite_into
@@ -55,6 +56,16 @@ def workspace(n, m, S, n_var, T):  # type: ignore[no-untyped-def]
             np.empty(m), np.zeros(n), np.empty(2 * n + 3), np.empty((n, n)), np.empty((n, n)),
             np.empty(n), np.empty(n), scratch(n, m), T, np.empty((9, S)), np.empty(n_var),
             np.empty(m), np.empty((n, n)), np.empty(n), np.zeros(2))  # fmt: skip
+
+
+@njit(cache=True)
+def carry(n, m, S, n_var):  # type: ignore[no-untyped-def]
+    """The state :func:`rk4_planar` carries from call to call: ``(ws, (k1, kp, y1, yp, (K, ys)),
+    flag)`` — the :func:`workspace` (warm-start rotation included), ``k1 = F(t, y)`` and the
+    loop's other buffers, and ``flag[0] = 1`` when ``k1`` is known."""
+    loop = (np.empty(2 * n), np.empty(2 * n), np.empty(2 * n), np.empty(2 * n),
+            (np.empty((3, 2 * n)), np.empty(2 * n)))  # fmt: skip
+    return workspace(n, m, S, n_var, np.eye(m)), loop, np.zeros(1, dtype=np.int64)
 
 
 @njit(cache=True)
@@ -411,7 +422,7 @@ def _point(prog, ws, cfg, tt, yy, recs, k, kk):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def rk4_planar(prog, t, t1, dt, y, t_out, out_i, every, max_steps, cfg, recs, carry):  # type: ignore[no-untyped-def]
+def rk4_planar(prog, t, t1, dt, y, t_out, out_i, every, max_steps, cfg, recs, state):  # type: ignore[no-untyped-def]
     """Advance ``y = (q, qd)`` (in place) from ``t`` by at most ``max_steps`` RK4 steps.
 
     ``prog = (M, f, A0, I6, SL, prm, rows, var_idx, counts, angle_rows, G, angle_const)`` (a
@@ -419,20 +430,23 @@ def rk4_planar(prog, t, t1, dt, y, t_out, out_i, every, max_steps, cfg, recs, ca
     output times (``every`` false; ``out_i`` is the next one) or is ignored (``every`` true:
     one sample per step end). ``cfg``: see :data:`BASE_RTOL` …; ``recs`` the 11 record arrays
     (``t, q, qd, qdd, f_c, rank, cond, mu, energy, ‖φ‖∞, ‖A qd‖∞``) whose length must cover the
-    samples of ``max_steps`` steps. ``carry = (T, k1, flag)`` is the state carried between calls
-    (warm-start rotation, ``F(t, y)`` and ``flag[0] = 1`` when it is known), so a run split into
-    calls gives bitwise the result of one call. Returns ``(code, t, steps, n_rhs, n_rec, out_i)``; on
-    :data:`FAILED` the values describe the last accepted step (samples of the failed step are
-    not counted) and ``y`` is that step's state.
+    samples of ``max_steps`` steps. ``state = carry(...)`` is the state carried between calls
+    (workspace with the warm-start rotation, ``F(t, y)`` and whether it is known), so a run
+    split into calls gives bitwise the result of one call. Returns ``(code, t, steps, n_rhs,
+    n_rec, out_i)``; on :data:`FAILED` the values describe the last accepted step (samples of
+    the failed step are not counted) and ``y`` is that step's state.
+
+    Every array is used through borrowed views (:func:`nonmin.core._borrow.borrow`): no
+    reference counting inside the loop. The caller owns all of them for the whole call.
     """
+    ws, loop, flag = borrow(state)
+    prog = borrow(prog)
+    recs = borrow(recs)
+    y = borrow(y)
+    t_out = borrow(t_out)
+    cfg = borrow(cfg)
+    k1, kp, y1, yp, stages = loop
     n = prog[0].shape[0]
-    m = (prog[2].shape[0] - 1) // n
-    T, k1, flag = carry
-    ws = workspace(n, m, prog[3].shape[1], prog[7].shape[0], T)
-    kp = np.empty(2 * n)
-    y1 = np.empty(2 * n)
-    yp = np.empty(2 * n)
-    stages = (np.empty((3, 2 * n)), np.empty(2 * n))
     n_rhs = 0
     n_rec = 0
     steps = 0

@@ -175,7 +175,8 @@ def run(
     rhs_total = 0
     blocks: list[dict[str, Any]] = []
     m = prog.m
-    carry = (np.eye(m), np.empty(2 * n), np.zeros(1, dtype=np.int64))
+    # owned here for the whole run: the loop works on borrowed views of them
+    state = kern.carry(n, m, prog.I6.shape[1], prog.var_idx.shape[0])
     chunk = 64
     failed = False
     while t < t1 and steps_total < max_steps:
@@ -187,7 +188,7 @@ def run(
             cap = max(hi - out_i, 0)
         rec = _alloc(cap, n)
         w0 = time.perf_counter()
-        code, t, st, nr, nrec, out_i = kern.rk4_planar(pr, t, t1, dt, y, tv, out_i, every, S, cfg, rec, carry)
+        code, t, st, nr, nrec, out_i = kern.rk4_planar(pr, t, t1, dt, y, tv, out_i, every, S, cfg, rec, state)
         elapsed = time.perf_counter() - w0
         steps_total += st
         rhs_total += nr
