@@ -34,6 +34,13 @@ Per state (``n`` coordinates, ``m`` constraint rows):
 6. ``w = −(DA)⁺ D γ``, ``rhs = P(g − Mw) + μw`` with ``g = h + f``, ``qdd = M̄⁻¹ rhs``,
    ``f_c = M qdd − g``.
 
+Null-space form (certified full rank with few degrees of freedom, ``k = n − r ≤ r``): the LQ
+factorization also gives an orthonormal basis ``Z`` (k × n) of N(A). In the basis ``[Q; Z]``,
+``M̄ = diag(μ I, S)`` with ``S = Z M Zᵀ`` (k × k), so steps 4–6 become: ``μ = tr S / k``, the
+Cholesky factor of ``S`` (same SPD test, pivots of ``S`` against ``max M̄_jj``) and
+``qdd = w + Zᵀ S⁻¹ Z (g − M w)`` — O(k n² + k³) instead of the n × n M̄ and its O(n³)
+factorization (formed only when ``P`` and ``L`` are asked for).
+
 Status codes: :data:`OK`, :data:`CHOL_FAIL`, :data:`SMALL_PIVOT`, :data:`NONFINITE`,
 :data:`ASYMMETRIC`.
 """
@@ -242,12 +249,39 @@ def _rows_times_m(X, k, M, b, diag, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _mbar_null(M, b, Z, k, diag, has_mu, mu_in, nmu, ZM, S, Y, W):  # type: ignore[no-untyped-def]
-    """μ and ``M̄ = μI + Zᵀ(S − μI)Z`` (lower triangle of ``W``) from the null-space basis.
+def _mbar_from_s(Z, k, S, mu, Y, W):  # type: ignore[no-untyped-def]
+    """``M̄ = μI + Zᵀ(S − μI)Z`` (lower triangle of ``W``) from the null-space basis ``Z``
+    (k × n, orthonormal rows spanning N(A)) and ``S = Z M Zᵀ`` (:func:`_null_factor`); only
+    for the ``L`` output of the null-space form. Scratch: ``Y`` (≥ k × n)."""
+    n = Z.shape[1]
+    for a in range(k):  # Y = (S − μI) Z
+        for j in range(n):
+            s = -mu * Z[a, j]
+            for c in range(k):
+                s += S[a, c] * Z[c, j]
+            Y[a, j] = s
+    dmax = -np.inf
+    for i in range(n):
+        for j in range(i + 1):
+            s = mu if i == j else 0.0
+            for a in range(k):
+                s += Z[a, i] * Y[a, j]
+            W[i, j] = s
+        if W[i, i] > dmax:
+            dmax = W[i, i]
+    return dmax
 
-    ``Z`` (k × n, orthonormal rows spanning N(A)); ``S = Z M Zᵀ``, so ``PMP = ZᵀSZ``,
-    ``tr(PMP) = tr S`` and ``μ = tr S / k`` (the paper's choice, as in the V form). Scratch:
-    ``ZM`` (≥ k × n), ``S`` (≥ k × k), ``Y`` (≥ k × n). Returns ``(μ, max_i M̄_ii)``.
+
+@njit(cache=True)
+def _null_factor(M, b, Z, k, diag, has_mu, mu_in, nmu, spd_rtol, ZM, S, Ls):  # type: ignore[no-untyped-def]
+    """The null-space form's factorization: ``S = Z M Zᵀ`` (k × k, into ``S``), μ, and the
+    Cholesky factor of ``S`` (lower triangle of ``Ls``).
+
+    ``M̄ = μQ + ZᵀSZ`` is ``diag(μ I, S)`` in the orthonormal basis ``[Q; Z]``, so it is SPD iff
+    ``S`` is, and ``M̄⁻¹ x = Q x / μ + Zᵀ S⁻¹ Z x``: the n × n M̄ is never needed (see
+    :func:`solve_range`, step 6). The SPD test is the one of the n × n factorization with the
+    pivots of ``S``: fail if a pivot is ``≤ 0`` or ``≤ spd_rtol · max_i M̄_ii``. Returns
+    ``(status, smallest pivot ratio, μ)``. Scratch: ``ZM`` (≥ k × n).
     """
     n = M.shape[1]
     _rows_times_m(Z, k, M, b, diag, ZM)  # ZM = Z M
@@ -264,29 +298,81 @@ def _mbar_null(M, b, Z, k, diag, has_mu, mu_in, nmu, ZM, S, Y, W):  # type: igno
     else:
         if k > 0:
             mu = trs / k
-        else:
+        else:  # r = n: μ = tr(M)/n, as the V form
             mu = 0.0
             for i in range(n):
                 mu += M[b, i, i]
             mu /= n
         if not mu > 0.0:
             mu = 1.0
-    for a in range(k):  # Y = (S − μI) Z
-        for j in range(n):
-            s = -mu * Z[a, j]
-            for c in range(k):
-                s += S[a, c] * Z[c, j]
-            Y[a, j] = s
-    dmax = -np.inf
+    dmax = -np.inf  # max_i M̄_ii = μ (1 − ‖Z e_i‖²) + (Zᵀ S Z)_ii
     for i in range(n):
-        for j in range(i + 1):
-            s = mu if i == j else 0.0
-            for a in range(k):
-                s += Z[a, i] * Y[a, j]
-            W[i, j] = s
-        if W[i, i] > dmax:
-            dmax = W[i, i]
-    return mu, dmax
+        p = 0.0
+        t = 0.0
+        for a in range(k):
+            za = Z[a, i]
+            p += za * za
+            s = 0.0
+            for c in range(k):
+                s += S[a, c] * Z[c, i]
+            t += za * s
+        d = mu * (1.0 - p) + t
+        if d > dmax:
+            dmax = d
+    st = OK
+    rt = np.inf
+    for j in range(k):  # Cholesky of S (lower triangle of Ls)
+        s = S[j, j]
+        for c in range(j):
+            s -= Ls[j, c] * Ls[j, c]
+        if not s > 0.0:
+            return CHOL_FAIL, rt, mu
+        piv = s
+        if piv <= spd_rtol * dmax:
+            st = SMALL_PIVOT
+            if piv / dmax < rt:
+                rt = piv / dmax
+        ljj = math.sqrt(s)
+        Ls[j, j] = ljj
+        for i in range(j + 1, k):
+            s = S[i, j]
+            for c in range(j):
+                s -= Ls[i, c] * Ls[j, c]
+            Ls[i, j] = s / ljj
+    return st, rt, mu
+
+
+@njit(cache=True, inline="always")
+def _cholesky_lower(W, n, spd_rtol, dmax, dinv, cw):  # type: ignore[no-untyped-def]
+    """In-place Cholesky factor of the lower triangle of ``W`` (n × n) with the SPD test of
+    :func:`nonmin.core.linalg.cholesky` (a pivot ``≤ 0``: CHOL_FAIL; ``L_jj² ≤ spd_rtol ·
+    dmax``: SMALL_PIVOT, factorization continued); reciprocal pivots into ``dinv``. Returns
+    ``(status, smallest pivot ratio)``. Right-looking (outer-product) form: after column j the
+    trailing rows are updated element-wise with a contiguous copy ``cw`` of the column."""
+    st = OK
+    rt = np.inf
+    for j in range(n):
+        s = W[j, j]
+        if not s > 0.0:
+            return CHOL_FAIL, rt
+        ljj = math.sqrt(s)
+        piv = ljj * ljj
+        if piv <= spd_rtol * dmax:
+            st = SMALL_PIVOT
+            if piv / dmax < rt:
+                rt = piv / dmax
+        W[j, j] = ljj
+        rj = 1.0 / ljj  # one division per column, as LAPACK's dpotf2
+        dinv[j] = rj
+        for i in range(j + 1, n):
+            x = W[i, j] * rj
+            W[i, j] = x
+            cw[i] = x
+        for i in range(j + 1, n):
+            a = cw[i]
+            for k in range(j + 1, i + 1):
+                W[i, k] -= a * cw[k]
+    return st, rt
 
 
 #: No fast-math flags: strict IEEE arithmetic, so the compiled per-state routine gives bitwise the
@@ -345,6 +431,9 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                     for c in range(m):
                         s += Li[k, c] * Bw[c, 0]
                     cv[k] = s
+            if zmode and want_pl:  # M̄ and its factor were not formed (null-space form)
+                dm = _mbar_from_s(Kt, n - r, G, mu, Tt, W)
+                _cholesky_lower(W, n, 0.0, dm, dinv, cw)
             status[b] = OK
             rank[b] = r
             mu_out[b] = mu
@@ -561,8 +650,14 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                                 Li[r, k] = Tn[i, k] * inv
                         r += 1
             # ---------------------------------------------------------------- 4. PMP, μ, M̄
-            if zmode:
-                mu, dmax = _mbar_null(M, b, Kt, n - r, diag, has_mu, mu_in, nmu, Et, G, Tt, W)
+            dmax = 1.0
+            stz = OK
+            rtz = np.inf
+            if zmode:  # S = Z M Zᵀ and its Cholesky factor (in Tn); M̄ itself only for want_pl
+                stz, rtz, mu = _null_factor(M, b, Kt, n - r, diag, has_mu, mu_in, nmu, spd_rtol,
+                                            Et, G, Tn)  # fmt: skip
+                if want_pl:
+                    dmax = _mbar_from_s(Kt, n - r, G, mu, Tt, W)
             if not zmode:
                 _rows_times_m(V, r, M, b, diag, Kt)  # Kt = V M
             if not zmode:
@@ -612,32 +707,14 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                     if W[i, i] > dmax:
                         dmax = W[i, i]
             # ---------------------------------------------------------------- 5. Cholesky
-            # Right-looking (outer-product) form on the lower triangle: after column j, the trailing
-            # rows are updated element-wise with a contiguous copy cw of the column.
+            # (null-space form: only for the L output; the status is that of S)
             st = OK
             rt = np.inf
-            for j in range(n):
-                s = W[j, j]
-                if not s > 0.0:
-                    st = CHOL_FAIL
-                    break
-                ljj = math.sqrt(s)
-                piv = ljj * ljj
-                if piv <= spd_rtol * dmax:
-                    st = SMALL_PIVOT
-                    if piv / dmax < rt:
-                        rt = piv / dmax
-                W[j, j] = ljj
-                rj = 1.0 / ljj  # one division per column, as LAPACK's dpotf2
-                dinv[j] = rj
-                for i in range(j + 1, n):
-                    x = W[i, j] * rj
-                    W[i, j] = x
-                    cw[i] = x
-                for i in range(j + 1, n):
-                    a = cw[i]
-                    for k in range(j + 1, i + 1):
-                        W[i, k] -= a * cw[k]
+            if not zmode or want_pl:
+                st, rt = _cholesky_lower(W, n, spd_rtol, dmax, dinv, cw)
+            if zmode:
+                st = stz
+                rt = rtz
             status[b] = st
             rank[b] = r
             mu_out[b] = mu
@@ -678,19 +755,26 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                 c = wv[j]
                 for i in range(n):
                     u[i] -= M[b, j, i] * c
-        if zmode:  # rhs = Zᵀ(Z u) + μ w   (stored in u)
+        if zmode:  # qdd = M̄⁻¹(Zᵀ Z u + μ w) = w + Zᵀ S⁻¹ Z u   (S = Ls Lsᵀ, Ls in Tn)
             kz = n - r
             for a in range(kz):
                 s = 0.0
                 for j in range(n):
                     s += Kt[a, j] * u[j]
-                cv[a] = s
+                for c in range(a):  # forward substitution with Ls
+                    s -= Tn[a, c] * cv[c]
+                cv[a] = s / Tn[a, a]
+            for a in range(kz - 1, -1, -1):  # back substitution with Lsᵀ
+                s = cv[a]
+                for c in range(a + 1, kz):
+                    s -= Tn[c, a] * cv[c]
+                cv[a] = s / Tn[a, a]
             for i in range(n):
-                u[i] = mu * wv[i]
+                qdd[b, i] = wv[i]
             for a in range(kz):
                 c = cv[a]
                 for i in range(n):
-                    u[i] += Kt[a, i] * c
+                    qdd[b, i] += Kt[a, i] * c
         else:
             for k in range(r):  # cv ← V u
                 s = 0.0
@@ -703,12 +787,12 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                 c = cv[k]
                 for i in range(n):
                     u[i] -= V[k, i] * c
-        for k in range(n):  # L y = rhs, column-oriented (independent updates)
+        for k in range(0 if zmode else n):  # L y = rhs, column-oriented (independent updates)
             y = u[k] * dinv[k]
             u[k] = y
             for i in range(k + 1, n):
                 u[i] -= W[i, k] * y
-        for i in range(n - 1, -1, -1):  # Lᵀ x = y, column-oriented (contiguous rows of L)
+        for i in range(-1 if zmode else n - 1, -1, -1):  # Lᵀ x = y (contiguous rows of L)
             xi = u[i] * dinv[i]
             qdd[b, i] = xi
             for k in range(i):
