@@ -261,6 +261,8 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
                 if cut == cfg[BASE_RTOL] and err >= prev:
                     break  # no progress at the full rank: round-off floor reached
                 cut = cfg[BASE_RTOL]
+            elif err > 0.5 * prev:  # a chord step without real progress: residual along the cut
+                cut = cfg[BASE_RTOL]
             relin = True
         if relin:
             if it >= cfg[MAX_ITER]:

@@ -219,6 +219,8 @@ class Projection(Stabilization):
                         # rank and still decreasing: far from φ = 0 near a singular
                         # configuration (a poor linearization) — Gauss–Newton again
                         cut = full
+                    elif err > 0.5 * prev:  # a chord step without real progress: the residual lies
+                        cut = full  # along the cut directions, which no step at the cut reaches
                     relin = True
                 if relin:
                     if lin_count >= self.max_iter:
