@@ -308,3 +308,43 @@ def test_solve_again_reuses_the_factorization(kind, shape, diag):
         assert np.max(np.abs(again[n : 2 * n] - ref[n : 2 * n])) <= 1e-11 * scale * np.max(np.abs(M))
         assert again[2 * n] == ref[2 * n] and again[2 * n + 1] == pytest.approx(ref[2 * n + 1])
         assert np.allclose(P2, P, atol=1e-12) and np.allclose(L2, L, atol=1e-12 * np.max(np.abs(L)))
+
+
+@pytest.mark.parametrize(("n", "m", "diag"), [(9, 8, True), (15, 14, True), (15, 14, False), (12, 7, False)])
+def test_solve_near_equals_a_fresh_factorization(n, m, diag):
+    """``solve_near`` (a nearby A on the held certified LQ, with the refined null-space basis)
+    gives the fresh factorization's q̈, f_c, rank and μ to round-off for a projection-sized
+    change of A, declines a far one, and declines when no null-space-form LQ is held."""
+    from nonmin.core._fast_kernels import NO_FACTOR, OK, scratch, solve_near, solve_work
+
+    rng = np.random.default_rng(100 * n + m + diag)
+    A = rng.standard_normal((m, n))
+    M = np.diag(rng.uniform(0.5, 3.0, n)) if diag else random_spd(rng, n)
+    args = (1.0, False, 1e-10, 1e-13, 1e-12, False)
+    none = np.empty((0, 0))
+    work = scratch(n, m)
+    h = rng.standard_normal(n)
+    assert solve_work(M, h, h, False, A, rng.standard_normal(m), *args, np.empty(2 * n + 3), none,
+                      none, work, np.eye(m), True) == OK  # fmt: skip
+    for eps, close in ((1e-9, True), (1e-6, True), (1e-2, False)):
+        A2 = A + eps * rng.standard_normal((m, n))
+        h2, g2 = rng.standard_normal(n), rng.standard_normal(m)
+        got = np.empty(2 * n + 3)
+        st = solve_near(M, h2, h2, False, A2, g2, 1e-13, got, work)
+        if not close:
+            assert st == NO_FACTOR
+            continue
+        assert st == OK
+        ref = np.empty(2 * n + 3)
+        assert solve_work(M, h2, h2, False, A2, g2, *args, ref, none, none, scratch(n, m),
+                          np.eye(m), False) == OK  # fmt: skip
+        assert np.max(np.abs(got[:n] - ref[:n])) <= 1e-13 * np.max(np.abs(ref[:n]))
+        assert np.max(np.abs(got[n : 2 * n] - ref[n : 2 * n])) <= 1e-13 * np.max(np.abs(ref[n : 2 * n]))
+        assert got[2 * n] == ref[2 * n] == m and got[2 * n + 1] == pytest.approx(ref[2 * n + 1], rel=1e-12)
+    # few constraints (V form, not the null-space form) and a redundant row (Jacobi): declined
+    for Ab in (rng.standard_normal((2, n)), np.vstack([A, A[:1]])):
+        w2 = scratch(n, Ab.shape[0])
+        solve_work(M, h, h, False, Ab, np.zeros(Ab.shape[0]), *args, np.empty(2 * n + 3), none, none,
+                   w2, np.eye(Ab.shape[0]), True)  # fmt: skip
+        assert solve_near(M, h, h, False, Ab, np.zeros(Ab.shape[0]), 1e-13, np.empty(2 * n + 3),
+                          w2) == NO_FACTOR  # fmt: skip

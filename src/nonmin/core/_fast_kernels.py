@@ -432,6 +432,8 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                         s += Li[k, c] * Bw[c, 0]
                     cv[k] = s
             if zmode and want_pl:  # M̄ and its factor were not formed (null-space form)
+                # S afresh: G may hold the S of a solve_near since (Tn: the same Ls again)
+                _null_factor(M, b, Kt, n - r, diag, True, info[4:5], 1, spd_rtol, Et, G, Tn)
                 dm = _mbar_from_s(Kt, n - r, G, mu, Tt, W)
                 _cholesky_lower(W, n, 0.0, dm, dinv, cw)
             status[b] = OK
@@ -905,6 +907,190 @@ def solve_again(M, h, f, has_f, gam, want_pl, out, P, L, work):  # type: ignore[
     # A, T, μ and the tolerances are not read in this mode: any arrays of the right shape
     return solve_work(M, h, f, has_f, work[1], gam, 1.0, False, 1.0, 1.0, 1.0, want_pl, out, P, L,
                       work, work[16], False, True)  # fmt: skip
+
+
+#: Largest number of refinement passes of :func:`solve_near` (each multiplies the residual by
+#: about ‖A − A_h‖ ‖A_h⁺‖; two suffice for the projection's corrections of ~1e-6).
+NEAR_PASSES = 3
+
+
+@njit(cache=True, inline="always")
+def _apply_pinv(Hv, beta, Li, dsc, m, n, t, cv, x):  # type: ignore[no-untyped-def]
+    """``x = A_h⁺ t = (D A_h)⁺ D t = Qᵀ L⁻¹ D t`` with the certified LQ held (``cv``: scratch)."""
+    for i in range(m):
+        s = 0.0
+        for k in range(i + 1):
+            s += Li[i, k] * (dsc[k] * t[k])
+        cv[i] = s
+    _lq_min_norm(Hv, beta, m, n, cv, x)  # −Qᵀ cv
+    for j in range(n):
+        x[j] = -x[j]
+
+
+@njit(cache=True, inline="always")
+def _scaled_residual(A, x, b, dsc, m, n, res):  # type: ignore[no-untyped-def]
+    """``res = A x + b`` and ``max_i |D (A x + b)|_i``."""
+    big = 0.0
+    for i in range(m):
+        s = b[i]
+        for j in range(n):
+            s += A[i, j] * x[j]
+        res[i] = s
+        a = abs(s) * dsc[i]
+        if a > big:
+            big = a
+    return big
+
+
+@njit(cache=True)
+def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work):  # type: ignore[no-untyped-def]
+    """Solve at a constraint matrix ``A`` close to the ``A_h`` of the factorization held in
+    ``work`` (a certified LQ in the null-space form), without factorizing ``A``.
+
+    The held factors give ``A_h⁺`` (:func:`_apply_pinv`) and an orthonormal basis ``Z_h`` of
+    N(A_h). With ``A = A_h + E``: ``z' = z − A_h⁺(A z)`` has ``A z' = −E A_h⁺ E z``, so each
+    pass turns the basis' residual from O(‖E‖) into O(‖E‖²) (then Gram–Schmidt); likewise the
+    minimum-norm solution ``w`` of ``A w = −γ`` by ``w ← w − A_h⁺(A w + γ)``, then ``w`` minus
+    its part in the refined span. With ``Z`` and ``w`` exact for ``A``, the null-space form
+    (:func:`solve_range`) gives ``qdd = w + Zᵀ S⁻¹ Z (g − M w)``, ``S = Z M Zᵀ`` and μ = tr S / k:
+    the same solution as a factorization of ``A`` (to round-off), at the cost of a few
+    products with A and the held factors. Passes continue (at most :data:`NEAR_PASSES`) until
+    the equilibrated residuals ``D A Z'ᵀ`` and ``D (A w + γ)`` are at round-off (64 eps). The
+    rank is the held one: ``A`` must be within the held factorization's certified margin (the
+    caller's concern: the same configuration up to a projection's correction).
+
+    Writes ``out`` as :func:`solve_work` (``S`` in the scratch, for cond(M̄)); returns
+    :data:`OK`, the SPD status of ``S``, or :data:`NO_FACTOR` when nothing suitable is held or
+    the passes do not reach round-off (then factorize ``A``).
+    """
+    n = M.shape[0]
+    m = A.shape[0]
+    Kt, Tt, Et, Ft, G = work[2], work[3], work[4], work[5], work[6]
+    g, wv, u, sig, cv, Bw, Li, dsc, info = (work[9], work[10], work[11], work[12], work[13],
+                                           work[15], work[19], work[20], work[21])  # fmt: skip
+    if info[0] == 0.0 or info[1] == 0.0 or info[5] == 0.0 or int(info[2]) != m:
+        return NO_FACTOR
+    k = n - m
+    tol = 64.0 * _EPS
+    res = Bw[0]  # scratch (n + 1 ≥ m entries)
+    # the refined basis Z' (rows of Tt), from Z_h (rows of Kt)
+    for a in range(k):
+        for j in range(n):
+            Tt[a, j] = Kt[a, j]
+    ok = False
+    for _ in range(NEAR_PASSES):
+        big = 0.0
+        for a in range(k):
+            zr = Tt[a]
+            for i in range(m):
+                s = 0.0
+                for j in range(n):
+                    s += A[i, j] * zr[j]
+                res[i] = s
+            _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, u)
+            for j in range(n):
+                zr[j] -= u[j]
+        for a in range(k):  # Gram–Schmidt
+            for c in range(a):
+                d = 0.0
+                for j in range(n):
+                    d += Tt[c, j] * Tt[a, j]
+                for j in range(n):
+                    Tt[a, j] -= d * Tt[c, j]
+            d = 0.0
+            for j in range(n):
+                d += Tt[a, j] * Tt[a, j]
+            d = 1.0 / math.sqrt(d)
+            for j in range(n):
+                Tt[a, j] *= d
+        for a in range(k):
+            for i in range(m):
+                cv[i] = 0.0
+            e = _scaled_residual(A, Tt[a], cv, dsc, m, n, res)
+            if e > big:
+                big = e
+        if big <= tol:
+            ok = True
+            break
+    if not ok:
+        return NO_FACTOR
+    # w: minimum-norm solution of A w = −γ
+    for i in range(m):
+        res[i] = gam[i]
+    _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, wv)
+    for j in range(n):
+        wv[j] = -wv[j]
+    gs = 0.0
+    for i in range(m):
+        gs = max(gs, abs(gam[i]) * dsc[i])
+    ok = False
+    for _ in range(NEAR_PASSES):
+        e = _scaled_residual(A, wv, gam, dsc, m, n, res)
+        wmax = 0.0
+        for j in range(n):
+            wmax = max(wmax, abs(wv[j]))
+        if e <= tol * (gs + wmax):
+            ok = True
+            break
+        _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, u)
+        for j in range(n):
+            wv[j] -= u[j]
+    if not ok:
+        return NO_FACTOR
+    for a in range(k):  # w ⟂ N(A)
+        d = 0.0
+        for j in range(n):
+            d += Tt[a, j] * wv[j]
+        for j in range(n):
+            wv[j] -= d * Tt[a, j]
+    # the null-space form with Z'
+    M3 = M.reshape((1, n, n))
+    diag = info[3] != 0.0
+    st, _rt, mu = _null_factor(M3, 0, Tt, k, diag, False, info[4:5], 1, spd_rtol, Et, G, Et)
+    for i in range(n):
+        gi = h[i]
+        if has_f:
+            gi += f[i]
+        g[i] = gi
+        if diag:
+            u[i] = gi - M[i, i] * wv[i]
+        else:
+            s = gi
+            for j in range(n):
+                s -= M[i, j] * wv[j]
+            u[i] = s
+    if st != OK:
+        return st
+    for a in range(k):  # S⁻¹ Z u (Ls in Et)
+        s = 0.0
+        for j in range(n):
+            s += Tt[a, j] * u[j]
+        for c in range(a):
+            s -= Et[a, c] * cv[c]
+        cv[a] = s / Et[a, a]
+    for a in range(k - 1, -1, -1):
+        s = cv[a]
+        for c in range(a + 1, k):
+            s -= Et[c, a] * cv[c]
+        cv[a] = s / Et[a, a]
+    for i in range(n):
+        out[i] = wv[i]
+    for a in range(k):
+        c = cv[a]
+        for i in range(n):
+            out[i] += Tt[a, i] * c
+    for i in range(n):  # f_c = M qdd − g
+        if diag:
+            out[n + i] = M[i, i] * out[i] - g[i]
+        else:
+            s = -g[i]
+            for j in range(n):
+                s += M[i, j] * out[j]
+            out[n + i] = s
+    out[2 * n] = m
+    out[2 * n + 1] = mu
+    out[2 * n + 2] = 0.0
+    return OK
 
 
 @njit(cache=True)

@@ -10,7 +10,10 @@ algorithm of the general driver (:func:`nonmin.sim.simulate` with ``method="rk4"
    (:func:`nonmin.core._fast_kernels.solve_one`), with the drift-aware rank tolerance of
    :func:`nonmin.sim._simulate.drift_rank_rtol`;
 2. the post-step projection of :class:`nonmin.sim.Projection` (Gauss–Newton in the mass metric
-   to the round-off floor, then the velocity correction = plastic impact map);
+   to the round-off floor, then the velocity correction = plastic impact map); the velocity
+   correction and ``F`` at the projected state reuse the last Gauss–Newton factorization through
+   :func:`nonmin.core._fast_kernels.solve_near` (exact to round-off: the held null-space basis
+   and minimum-norm solution refined to the new A) instead of factorizing again;
 3. samples at the requested times (the quintic Hermite interpolant of the projected step ends,
    :func:`_hermite`, then the projection) or at every step, with the diagnostics the
    :class:`~nonmin.sim.Trajectory` records.
@@ -30,7 +33,7 @@ import numpy as np
 from numba import njit
 
 from ..core._borrow import borrow
-from ..core._fast_kernels import scratch, solve_again, solve_work
+from ..core._fast_kernels import scratch, solve_again, solve_near, solve_work
 from ..model.planar._fast_kernels import pin_line_rod_work
 from ._integrators import hermite_into
 
@@ -158,10 +161,13 @@ def _again(prog, ws, h, gam, want_pl):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, inline="always")
-def _solve_at(prog, ws, cfg, h, gam, rtol, want_pl):  # type: ignore[no-untyped-def]
+def _solve_at(prog, ws, cfg, h, gam, rtol, want_pl, near):  # type: ignore[no-untyped-def]
     """:func:`_solve`, or :func:`_again` when the factorization held was taken at this very
     ``q`` with this ``rtol`` (M is constant: planar bodies): the velocity projection and the
-    evaluation of ``F`` at the projected state share one factorization."""
+    evaluation of ``F`` at the projected state share one factorization. With ``near`` (``q``
+    is the projection's result, within its correction of the ``q`` of the factorization held)
+    a certified LQ held at a cutoff ``≥ rtol`` is reused exactly by
+    :func:`nonmin.core._fast_kernels.solve_near` (fresh factorization if that declines)."""
     q, tag, fq = ws[9], ws[18], ws[17]
     same = tag[0] != 0.0 and tag[1] == rtol
     if same:
@@ -171,12 +177,17 @@ def _solve_at(prog, ws, cfg, h, gam, rtol, want_pl):  # type: ignore[no-untyped-
                 break
     if same:
         return _again(prog, ws, h, gam, want_pl)
+    if near != 0 and want_pl == 0 and tag[0] != 0.0 and tag[1] >= rtol:
+        st = solve_near(prog[0], h, h, False, ws[3], gam, cfg[SPD_RTOL], ws[6], ws[11])
+        if st == 0:
+            return st
     return _solve(prog, ws, cfg, h, gam, rtol, want_pl)
 
 
 @njit(cache=True, inline="always")
-def _rhs(prog, ws, cfg, t, yy, kk):  # type: ignore[no-untyped-def]
-    """``kk = F(t, yy) = (qd, qdd)``; returns a status (0 = OK)."""
+def _rhs(prog, ws, cfg, t, yy, kk, near):  # type: ignore[no-untyped-def]
+    """``kk = F(t, yy) = (qd, qdd)``; returns a status (0 = OK). ``near``: ``yy`` is a
+    projected state (see :func:`_solve_at`)."""
     q, qd, out = ws[9], ws[10], ws[6]
     n = q.shape[0]
     for i in range(n):
@@ -184,7 +195,7 @@ def _rhs(prog, ws, cfg, t, yy, kk):  # type: ignore[no-untyped-def]
         qd[i] = yy[n + i]
     _evaluate(prog, q, qd, ws)
     rtol = _drift_rtol(ws[3], ws[2][0], cfg[BASE_RTOL], cfg[DRIFT_FACTOR], ws[15])
-    st = _solve_at(prog, ws, cfg, prog[1], ws[2][1], rtol, 0)
+    st = _solve_at(prog, ws, cfg, prog[1], ws[2][1], rtol, 0, near)
     if st != 0:
         return st
     for i in range(n):
@@ -208,7 +219,7 @@ def _advance(prog, ws, cfg, t, yy, kk1, h, res, stages):  # type: ignore[no-unty
         c = h if s == 2 else 0.5 * h
         for i in range(n2):
             ys[i] = yy[i] + c * (kk1[i] if s == 0 else K[s - 1, i])
-        st = _rhs(prog, ws, cfg, t + c, ys, K[s])
+        st = _rhs(prog, ws, cfg, t + c, ys, K[s], 0)
         if st != 0:
             return st
     for i in range(n2):
@@ -279,7 +290,8 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
         for i in range(n):
             q[i] = q[i] + out[i]
     _matvec_rows(A, qd, vres)
-    st = _solve_at(prog, ws, cfg, zero, vres, cfg[VEL_RTOL], 0)
+    # near: the factorization held is this projection's last linearization, if it took one
+    st = _solve_at(prog, ws, cfg, zero, vres, cfg[VEL_RTOL], 0, 1 if lin else 0)
     if st != 0:
         return st
     for i in range(n):
@@ -382,7 +394,7 @@ def _point(prog, ws, cfg, tt, yy, recs, k, kk):  # type: ignore[no-untyped-def]
         qd[i] = yy[n + i]
     _evaluate(prog, q, qd, ws)
     rtol = _drift_rtol(A, PG[0], cfg[BASE_RTOL], cfg[DRIFT_FACTOR], ws[15])
-    st = _solve_at(prog, ws, cfg, f, PG[1], rtol, 0)
+    st = _solve_at(prog, ws, cfg, f, PG[1], rtol, 0, 1)
     if st != 0:
         return st
     for i in range(n):
@@ -461,7 +473,7 @@ def rk4_planar(prog, t, t1, dt, y, t_out, out_i, every, max_steps, cfg, recs, st
             h = rem
         st = 0
         if not have_k1:
-            st = _rhs(prog, ws, cfg, t, y, k1)
+            st = _rhs(prog, ws, cfg, t, y, k1, 0)
             n_rhs += 1
         if st == 0:
             st = _advance(prog, ws, cfg, t, y, k1, h, y1, stages)
@@ -488,7 +500,7 @@ def rk4_planar(prog, t, t1, dt, y, t_out, out_i, every, max_steps, cfg, recs, st
             if last_end:
                 st = _point(prog, ws, cfg, t_new, y1, recs, k + n_s - 1, kp)
             else:
-                st = _rhs(prog, ws, cfg, t_new, y1, kp)
+                st = _rhs(prog, ws, cfg, t_new, y1, kp, 1)
             n_rhs += 1
         for j in range(oi, oe):
             if st != 0:
