@@ -19,8 +19,9 @@ energy drift and the branch test are then computed by the same code for every en
 * branch: the largest distance (rad) of the sampled configuration from the intended assembly
   branch (anti-parallelogram / parallelogram mode); "stays on branch" means < ``BRANCH_TOL``
   at every sample and no non-finite value,
-* wall time per simulated second: median over ``--repeat`` timed runs after one warm-up run,
-  setup (model building, compilation) excluded.
+* wall time per simulated second: median over ``--repeat`` timed runs, setup (model building,
+  compilation) and one warm-up run excluded; the timed runs are interleaved (every setting
+  once, then every setting again, …), so a drifting machine load weighs on all engines alike.
 
 Peers and their settings:
 
@@ -430,7 +431,7 @@ def reduced_reference(mech: BarMechanism) -> Callable[[np.ndarray], np.ndarray]:
 # peers
 # ---------------------------------------------------------------------------------------------
 def run_exudyn(mech: BarMechanism, dt: float, *, spectral_radius: float = 0.9,
-               sparse: bool | None = None, repeat: int = 3) -> RunResult:
+               sparse: bool | None = None, repeat: int = 3, warmup: bool = True) -> RunResult:
     import exudyn as exu
     from exudyn.itemInterface import (
         LoadMassProportional,
@@ -502,7 +503,8 @@ def run_exudyn(mech: BarMechanism, dt: float, *, spectral_radius: float = 0.9,
     walls = []
     status = "ok"
     mbs = sens_q = sens_v = None
-    for rep in range(repeat + 1):
+    w0 = 1 if warmup else 0  # untimed warm-up runs
+    for rep in range(repeat + w0):
         _sc, mbs, sens_q, sens_v, s = build()
         t0 = time.perf_counter()
         try:
@@ -513,7 +515,7 @@ def run_exudyn(mech: BarMechanism, dt: float, *, spectral_radius: float = 0.9,
         t1 = time.perf_counter()
         if ok is False and status == "ok":
             status = "failed: SolveDynamic returned False"
-        if rep > 0:
+        if rep >= w0:
             walls.append(t1 - t0)
         if status != "ok":
             break
@@ -589,7 +591,8 @@ def mjcf(mech: BarMechanism, dt: float, setting: str) -> str:
     )
 
 
-def run_mujoco(mech: BarMechanism, dt: float, setting: str, *, repeat: int = 3) -> RunResult:
+def run_mujoco(mech: BarMechanism, dt: float, setting: str, *, repeat: int = 3,
+               warmup: bool = True) -> RunResult:
     import mujoco
 
     model = mujoco.MjModel.from_xml_string(mjcf(mech, dt, setting))
@@ -612,7 +615,8 @@ def run_mujoco(mech: BarMechanism, dt: float, setting: str, *, repeat: int = 3) 
     qvel_hist = np.zeros((nsamp, model.nv))
     walls = []
     status = "ok"
-    for rep in range(repeat + 1):
+    w0 = 1 if warmup else 0  # untimed warm-up runs
+    for rep in range(repeat + w0):
         mujoco.mj_resetData(model, data)
         data.qvel[:] = qvel_init
         mujoco.mj_forward(model, data)
@@ -628,7 +632,7 @@ def run_mujoco(mech: BarMechanism, dt: float, setting: str, *, repeat: int = 3) 
                 qpos_hist[k] = data.qpos
                 qvel_hist[k] = data.qvel
         t1 = time.perf_counter()
-        if rep > 0:
+        if rep >= w0:
             walls.append(t1 - t0)
         if not np.all(np.isfinite(data.qpos)):
             status = "diverged"
@@ -645,7 +649,7 @@ def run_mujoco(mech: BarMechanism, dt: float, setting: str, *, repeat: int = 3) 
 
 
 def run_pinocchio(mech: BarMechanism, dt: float, *, kp: float = 100.0, mu: float = 1e-8,
-                  repeat: int = 3) -> RunResult:
+                  repeat: int = 3, warmup: bool = True) -> RunResult:
     import pinocchio as pin
 
     model = pin.Model()
@@ -711,7 +715,8 @@ def run_pinocchio(mech: BarMechanism, dt: float, *, kp: float = 100.0, mu: float
     vh = np.zeros((nsamp, model.nv))
     walls = []
     status = "ok"
-    for rep in range(repeat + 1):
+    w0 = 1 if warmup else 0  # untimed warm-up runs
+    for rep in range(repeat + w0):
         q = q0.copy()
         v = v0.copy()
         qh[0] = q
@@ -727,7 +732,7 @@ def run_pinocchio(mech: BarMechanism, dt: float, *, kp: float = 100.0, mu: float
                 qh[k] = q
                 vh[k] = v
         t1 = time.perf_counter()
-        if rep > 0:
+        if rep >= w0:
             walls.append(t1 - t0)
         if not np.all(np.isfinite(q)):
             status = "diverged"
@@ -803,7 +808,7 @@ def _nonmin_body_names(bar: BarMechanism) -> list[str]:
 
 def run_nonmin(bar: BarMechanism, method: str, *, dt: float | None = None,
                rtol: float = 1e-8, atol: float = 1e-10, stabilization: str = "projection",
-               engine: str = "auto", repeat: int = 3) -> RunResult:
+               engine: str = "auto", repeat: int = 3, warmup: bool = True) -> RunResult:
     from nonmin.sim import simulate
 
     mech = nonmin_mechanism(bar)
@@ -824,16 +829,17 @@ def run_nonmin(bar: BarMechanism, method: str, *, dt: float | None = None,
     status = "ok"
     traj = None
     note = ""
-    for rep in range(repeat + 1):
+    w0 = 1 if warmup else 0  # untimed warm-up runs
+    for rep in range(repeat + w0):
         t0 = time.perf_counter()
         traj = simulate(mech, (0.0, bar.t_final), throw=False, progress=False, **kw)
         t1 = time.perf_counter()
-        if rep > 0:
+        if rep >= w0:
             walls.append(t1 - t0)
         if not traj.success:
             status = f"failed: {traj.message[:80]}"
             break
-        if rep == 0 and t1 - t0 > LONG_RUN_S:
+        if rep == 0 and warmup and t1 - t0 > LONG_RUN_S:
             # a long run: warm-up effects are negligible, time the first run only
             walls.append(t1 - t0)
             note = f"single timed run (> {LONG_RUN_S:g} s)"
@@ -913,15 +919,32 @@ def run_mechanism(mech: BarMechanism, configs: Sequence[PeerSpec], repeat: int,
             return ref_vals
         return ref_fn(t)
 
-    rows = []
+    # Pass 1: every setting once (warm-up + one timed run; its result is the row's). Passes
+    # 2 … repeat: one more timed run of every setting in turn, so that the load of the shared
+    # machine, which drifts over minutes, weighs on every engine alike.
+    results: list[Any] = []
     for engine, kw in configs:
         try:
-            res = RUNNERS[engine](mech, repeat=repeat, **kw)
-            row = summarize(mech, res, cached_ref)
+            results.append(RUNNERS[engine](mech, repeat=1, **kw))
         except Exception as exc:  # an engine that cannot run is a result, not a crash
+            results.append(exc)
+    for _ in range(repeat - 1):
+        for (engine, kw), res in zip(configs, results, strict=True):
+            if isinstance(res, Exception) or not res.wall or res.extra.get("timing_note"):
+                continue
+            try:
+                more = RUNNERS[engine](mech, repeat=1, warmup=False, **kw)
+            except Exception:  # the first pass decides the row's status
+                continue
+            res.wall.extend(more.wall)
+    rows = []
+    for (engine, kw), res in zip(configs, results, strict=True):
+        if isinstance(res, Exception):
             row = {"engine": engine, "setting": str(kw), "mechanism": mech.name,
-                   "dt": kw.get("dt"), "status": f"error: {type(exc).__name__}: {exc}"[:200],
+                   "dt": kw.get("dt"), "status": f"error: {type(res).__name__}: {res}"[:200],
                    "on_branch": False}
+        else:
+            row = summarize(mech, res, cached_ref)
         rows.append(row)
         log(_row_line(row))
     return rows
@@ -999,7 +1022,7 @@ def write_markdown(path: Path, results: dict[str, Any]) -> None:
              "", "Versions: " + ", ".join(f"{k} {v}" for k, v in info["versions"].items()), "",
              f"Load average (1, 5, 15 min) before: {results['load_before']}, after: "
              f"{results['load_after']}. Wall times: median of the timed runs after one warm-up "
-             "run (`wall_runs_s` in the JSON: "
+             "run, interleaved across the settings of a mechanism (`wall_runs_s` in the JSON: "
              + ("2–3 per row, merged from the separate runs listed above"
                 if results.get("combined") else f"{results['repeat']} per row")
              + f"; nonmin runs longer than {LONG_RUN_S:g} s are timed once, without warm-up); "
