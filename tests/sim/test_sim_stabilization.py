@@ -236,3 +236,33 @@ def test_simplified_steps_land_where_gauss_newton_does(size: float) -> None:
             ref = ref + position_correction(M, ct.A, ct.phi)
         assert np.max(np.abs(model.constraint_terms(0.0, q, qd0, act).phi)) < 1e-14
         assert np.max(np.abs(q - ref)) < 1e-12 + 1e-3 * size**2, (size, np.max(np.abs(q - ref)))
+
+
+def test_a_stalled_chord_step_at_the_cut_goes_to_the_full_rank(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A02 (N = 2) at t = 0.71 s: σ_min/σ_max of the equilibrated A ~ 4e-3, below the cutoff
+    # POSITION_CUT_RTOL. An error of 1e-8 has a part along the cut direction that no step at
+    # the cut reduces: after the first Gauss–Newton step the chord step stalls, and the next
+    # linearization is at the full rank (it used to be a second one at the cut, a Jacobi SVD).
+    from nonmin.library import get
+    from nonmin.sim import _stabilization as stab_mod
+
+    n = 2
+    mech = get("A02_n_four_bar", N=n)
+    q, qd = _a02_state_on_the_mode(n, 0.71)
+    rng = np.random.default_rng(3)
+    q = q + 1e-8 * rng.standard_normal(q.shape[0])
+    calls: list[float | None] = []
+    orig = stab_mod._correction
+
+    def spy(M: np.ndarray, A: np.ndarray, r: np.ndarray, rtol: float | None) -> np.ndarray:
+        calls.append(rtol)
+        return orig(M, A, r, rtol)
+
+    monkeypatch.setattr(stab_mod, "_correction", spy)
+    active = frozenset(mech.state.active)
+    q1, qd1 = stab_mod.Projection().project(mech.model, 0.71, q, qd, active, None)
+    pos = calls[:-1]  # the last call is the velocity correction
+    assert pos[0] == stab_mod.POSITION_CUT_RTOL and pos[-1] == pytest.approx(1e-10)
+    assert pos.count(stab_mod.POSITION_CUT_RTOL) <= 2  # the Gauss–Newton step and one chord step
+    ct = mech.model.constraint_terms(0.71, q1, qd1, active)
+    assert np.max(np.abs(ct.phi)) < 1e-14 and np.max(np.abs(ct.A @ qd1)) < 1e-12
