@@ -54,21 +54,27 @@ def workspace(n, m, S, n_var, T):  # type: ignore[no-untyped-def]
     """Scratch arrays of the loop (``S`` kernel sides, ``n_var`` variable entries of A) and the
     warm-start rotation ``T`` (m × m) of the Jacobi SVD, carried from call to call. ``ws[17]``
     and ``ws[18] = [valid, rtol]`` tag the factorization held in the core scratch ``ws[11]``
-    with the ``q`` and rank tolerance it was taken at (see :func:`_solve_at`)."""
-    return (np.empty(2 * n + 2), np.empty(m * n + 1), np.empty((2, m)), np.empty((m, n)),
+    with the ``q`` and rank tolerance it was taken at (see :func:`_solve_at`). ``A = ws[3]`` is a
+    view of the flat buffer ``ws[1]`` the model kernel writes (row-major, one spare entry)."""
+    buf = np.empty(m * n + 1)
+    return (np.empty(2 * n + 2), buf, np.empty((2, m)), buf[: m * n].reshape((m, n)),
             np.empty(m), np.zeros(n), np.empty(2 * n + 3), np.empty((n, n)), np.empty((n, n)),
             np.empty(n), np.empty(n), scratch(n, m), T, np.empty((9, S)), np.empty(n_var),
             np.empty(m), np.empty((n, n)), np.empty(n), np.zeros(2))  # fmt: skip
 
 
 @njit(cache=True)
-def carry(n, m, S, n_var):  # type: ignore[no-untyped-def]
+def carry(n, m, S, n_var, A0):  # type: ignore[no-untyped-def]
     """The state :func:`rk4_planar` carries from call to call: ``(ws, (k1, kp, y1, yp, (K, ys)),
-    flag)`` — the :func:`workspace` (warm-start rotation included), ``k1 = F(t, y)`` and the
-    loop's other buffers, and ``flag[0] = 1`` when ``k1`` is known."""
+    flag)`` — the :func:`workspace` (warm-start rotation included; A's buffer holds the
+    program's constant entries ``A0``), ``k1 = F(t, y)`` and the loop's other buffers, and
+    ``flag[0] = 1`` when ``k1`` is known."""
     loop = (np.empty(2 * n), np.empty(2 * n), np.empty(2 * n), np.empty(2 * n),
             (np.empty((3, 2 * n)), np.empty(2 * n)))  # fmt: skip
-    return workspace(n, m, S, n_var, np.eye(m)), loop, np.zeros(1, dtype=np.int64)
+    ws = workspace(n, m, S, n_var, np.eye(m))
+    for i in range(A0.shape[0]):
+        ws[1][i] = A0[i]
+    return ws, loop, np.zeros(1, dtype=np.int64)
 
 
 @njit(cache=True)
@@ -83,8 +89,8 @@ def _evaluate(prog, q, qd, ws):  # type: ignore[no-untyped-def]
         x[n + 1 + i] = qd[i]
     x[n] = 0.0
     x[2 * n + 1] = 0.0
-    for i in range(buf.shape[0]):
-        buf[i] = A0[i]
+    for k in range(var_idx.shape[0]):  # the variable entries back to their constant part
+        buf[var_idx[k]] = A0[var_idx[k]]
     for i in range(m):
         PG[0, i] = 0.0
         PG[1, i] = 0.0
@@ -96,9 +102,6 @@ def _evaluate(prog, q, qd, ws):  # type: ignore[no-untyped-def]
         for j in range(n):
             s += G[k, j] * q[j]
         PG[0, arows[k]] = s - ac[k]
-    for i in range(m):
-        for j in range(n):
-            A[i, j] = buf[i * n + j]
 
 
 @njit(cache=True, inline="always")
