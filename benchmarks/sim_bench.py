@@ -829,6 +829,10 @@ def run_nonmin(bar: BarMechanism, method: str, *, dt: float | None = None,
     status = "ok"
     traj = None
     note = ""
+    if warmup:  # setup: compile (or load from numba's cache) before the runs, so that a long
+        # run timed once (below) is not timed with the compilation
+        simulate(mech, (0.0, min(bar.t_final, 20.0 * (dt or 1e-3))), throw=False, progress=False,
+                 **{**kw, "t_eval": None})  # fmt: skip
     w0 = 1 if warmup else 0  # untimed warm-up runs
     for rep in range(repeat + w0):
         t0 = time.perf_counter()

@@ -909,6 +909,26 @@ def solve_again(M, h, f, has_f, gam, want_pl, out, P, L, work):  # type: ignore[
                       work, work[16], False, True)  # fmt: skip
 
 
+@njit(cache=True, inline="always")
+def orthonormalize_row(X, i, passes):  # type: ignore[no-untyped-def]
+    """Row ``i`` of ``X`` made orthogonal to rows ``0 … i−1`` (orthonormal already; Gram–Schmidt,
+    ``passes`` times: 2 reorthogonalizes) and of unit length."""
+    n = X.shape[1]
+    for _ in range(passes):
+        for c in range(i):
+            d = 0.0
+            for j in range(n):
+                d += X[c, j] * X[i, j]
+            for j in range(n):
+                X[i, j] -= d * X[c, j]
+    d = 0.0
+    for j in range(n):
+        d += X[i, j] * X[i, j]
+    d = 1.0 / math.sqrt(d)
+    for j in range(n):
+        X[i, j] *= d
+
+
 #: Largest number of refinement passes of :func:`solve_near` (each multiplies the residual by
 #: about ‖A − A_h‖ ‖A_h⁺‖; two suffice for the projection's corrections of ~1e-6).
 NEAR_PASSES = 3
@@ -990,19 +1010,8 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work):  # type: ignore[no-
             _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, u)
             for j in range(n):
                 zr[j] -= u[j]
-        for a in range(k):  # Gram–Schmidt
-            for c in range(a):
-                d = 0.0
-                for j in range(n):
-                    d += Tt[c, j] * Tt[a, j]
-                for j in range(n):
-                    Tt[a, j] -= d * Tt[c, j]
-            d = 0.0
-            for j in range(n):
-                d += Tt[a, j] * Tt[a, j]
-            d = 1.0 / math.sqrt(d)
-            for j in range(n):
-                Tt[a, j] *= d
+        for a in range(k):
+            orthonormalize_row(Tt, a, 1)
         for a in range(k):
             for i in range(m):
                 cv[i] = 0.0

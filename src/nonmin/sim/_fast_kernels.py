@@ -33,7 +33,13 @@ import numpy as np
 from numba import njit
 
 from ..core._borrow import borrow
-from ..core._fast_kernels import scratch, solve_again, solve_near, solve_work
+from ..core._fast_kernels import (
+    orthonormalize_row,
+    scratch,
+    solve_again,
+    solve_near,
+    solve_work,
+)
 from ..model.planar._fast_kernels import pin_line_rod_work
 from ._integrators import hermite_into
 
@@ -345,19 +351,7 @@ def _cond_mbar(M, work, k, mu, P, Z):  # type: ignore[no-untyped-def]
                 jb = j
         for a in range(n):
             Z[i, a] = P[a, jb]
-        for l in range(i):  # orthogonalize against the previous rows (twice: reorthogonalization)
-            for _ in range(2):
-                d = 0.0
-                for a in range(n):
-                    d += Z[l, a] * Z[i, a]
-                for a in range(n):
-                    Z[i, a] -= d * Z[l, a]
-        nz = 0.0
-        for a in range(n):
-            nz += Z[i, a] * Z[i, a]
-        nz = math.sqrt(nz)
-        for a in range(n):
-            Z[i, a] /= nz
+        orthonormalize_row(Z, i, 2)  # twice: reorthogonalization
     S = np.empty((k, k))
     for i in range(k):
         for j in range(k):
