@@ -231,6 +231,64 @@ def _lq_min_norm(Hv, beta, m, n, cv, w):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, inline="always")
+def _row_norm(X, i, n):  # type: ignore[no-untyped-def]
+    """‖X[i, :n]‖₂ with four interleaved partial sums in a fixed order."""
+    n4 = n - n % 4
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    for k in range(0, n4, 4):
+        s0 += X[i, k] * X[i, k]
+        s1 += X[i, k + 1] * X[i, k + 1]
+        s2 += X[i, k + 2] * X[i, k + 2]
+        s3 += X[i, k + 3] * X[i, k + 3]
+    for k in range(n4, n):
+        s0 += X[i, k] * X[i, k]
+    return math.sqrt((s0 + s1) + (s2 + s3))
+
+
+@njit(cache=True, inline="always")
+def _add_m_times(M, b, diag, x, sign, out):  # type: ignore[no-untyped-def]
+    """``out += sign · M[b] x`` (M symmetric: element-wise column updates; diagonal M without
+    the zero terms)."""
+    n = x.shape[0]
+    if diag:
+        for i in range(n):
+            out[i] += sign * (M[b, i, i] * x[i])
+        return
+    for j in range(n):
+        c = sign * x[j]
+        for i in range(n):
+            out[i] += M[b, j, i] * c
+
+
+@njit(cache=True, inline="always")
+def _null_space_qdd(Z, Ls, k, u, w, cv, out):  # type: ignore[no-untyped-def]
+    """``out = w + Zᵀ S⁻¹ Z u`` with ``S = Ls Lsᵀ`` (k × k, lower ``Ls``): the null-space form's
+    solve (:func:`solve_range` step 6, :func:`solve_near`); ``cv`` (≥ k) is scratch."""
+    n = u.shape[0]
+    for a in range(k):
+        s = 0.0
+        for j in range(n):
+            s += Z[a, j] * u[j]
+        for c in range(a):  # forward substitution with Ls
+            s -= Ls[a, c] * cv[c]
+        cv[a] = s / Ls[a, a]
+    for a in range(k - 1, -1, -1):  # back substitution with Lsᵀ
+        s = cv[a]
+        for c in range(a + 1, k):
+            s -= Ls[c, a] * cv[c]
+        cv[a] = s / Ls[a, a]
+    for i in range(n):
+        out[i] = w[i]
+    for a in range(k):
+        c = cv[a]
+        for i in range(n):
+            out[i] += Z[a, i] * c
+
+
+@njit(cache=True, inline="always")
 def _rows_times_m(X, k, M, b, diag, out):  # type: ignore[no-untyped-def]
     """``out[:k] = X[:k] M[b]`` (M symmetric; element-wise updates, which LLVM vectorizes; for a
     diagonal M the same sums without the zero terms)."""
@@ -402,7 +460,6 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
     """
     n = M.shape[1]
     m = A.shape[1]
-    n4 = n - n % 4
     nmu = mu_in.shape[0]
     B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, _ist, _mu1, Li, dsc, info = work
     for b in range(lo, hi):
@@ -490,19 +547,9 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                 continue
             # ---------------------------------------------------------------- 2. equilibration
             big = 0.0
+            Ab = A[b]
             for i in range(m):
-                s0 = 0.0
-                s1 = 0.0
-                s2 = 0.0
-                s3 = 0.0
-                for k in range(0, n4, 4):
-                    s0 += A[b, i, k] * A[b, i, k]
-                    s1 += A[b, i, k + 1] * A[b, i, k + 1]
-                    s2 += A[b, i, k + 2] * A[b, i, k + 2]
-                    s3 += A[b, i, k + 3] * A[b, i, k + 3]
-                for k in range(n4, n):
-                    s0 += A[b, i, k] * A[b, i, k]
-                nrm = math.sqrt((s0 + s1) + (s2 + s3))
+                nrm = _row_norm(Ab, i, n)
                 sig[i] = nrm
                 if nrm > big:
                     big = nrm
@@ -626,18 +673,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                             T[i, j] = Tn[i, j]
                 smax = 0.0
                 for i in range(m):
-                    s0 = 0.0
-                    s1 = 0.0
-                    s2 = 0.0
-                    s3 = 0.0
-                    for k in range(0, n4, 4):
-                        s0 += B[i, k] * B[i, k]
-                        s1 += B[i, k + 1] * B[i, k + 1]
-                        s2 += B[i, k + 2] * B[i, k + 2]
-                        s3 += B[i, k + 3] * B[i, k + 3]
-                    for k in range(n4, n):
-                        s0 += B[i, k] * B[i, k]
-                    sig[i] = math.sqrt((s0 + s1) + (s2 + s3))
+                    sig[i] = _row_norm(B, i, n)
                     if sig[i] > smax:
                         smax = sig[i]
                 r = 0
@@ -749,34 +785,9 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                 gi += f[b, i]
             g[i] = gi
             u[i] = gi
-        if diag:
-            for i in range(n):
-                u[i] -= M[b, i, i] * wv[i]
-        else:
-            for j in range(n):  # u = g − M w  (element-wise updates; M symmetric)
-                c = wv[j]
-                for i in range(n):
-                    u[i] -= M[b, j, i] * c
+        _add_m_times(M, b, diag, wv, -1.0, u)  # u = g − M w
         if zmode:  # qdd = M̄⁻¹(Zᵀ Z u + μ w) = w + Zᵀ S⁻¹ Z u   (S = Ls Lsᵀ, Ls in Tn)
-            kz = n - r
-            for a in range(kz):
-                s = 0.0
-                for j in range(n):
-                    s += Kt[a, j] * u[j]
-                for c in range(a):  # forward substitution with Ls
-                    s -= Tn[a, c] * cv[c]
-                cv[a] = s / Tn[a, a]
-            for a in range(kz - 1, -1, -1):  # back substitution with Lsᵀ
-                s = cv[a]
-                for c in range(a + 1, kz):
-                    s -= Tn[c, a] * cv[c]
-                cv[a] = s / Tn[a, a]
-            for i in range(n):
-                qdd[b, i] = wv[i]
-            for a in range(kz):
-                c = cv[a]
-                for i in range(n):
-                    qdd[b, i] += Kt[a, i] * c
+            _null_space_qdd(Kt, Tn, n - r, u, wv, cv, qdd[b])
         else:
             for k in range(r):  # cv ← V u
                 s = 0.0
@@ -802,14 +813,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
         if want_fc:
             for i in range(n):  # f_c = M qdd − g
                 cw[i] = 0.0
-            if diag:
-                for i in range(n):
-                    cw[i] += M[b, i, i] * qdd[b, i]
-            else:
-                for j in range(n):
-                    c = qdd[b, j]
-                    for i in range(n):
-                        cw[i] += M[b, j, i] * c
+            _add_m_times(M, b, diag, qdd[b], 1.0, cw)
             for i in range(n):
                 fc[b, i] = cw[i] - g[i]
         if want_pl:
@@ -1056,46 +1060,21 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work):  # type: ignore[no-
     M3 = M.reshape((1, n, n))
     diag = info[3] != 0.0
     st, _rt, mu = _null_factor(M3, 0, Tt, k, diag, False, info[4:5], 1, spd_rtol, Et, G, Et)
+    if st != OK:
+        return st
     for i in range(n):
         gi = h[i]
         if has_f:
             gi += f[i]
         g[i] = gi
-        if diag:
-            u[i] = gi - M[i, i] * wv[i]
-        else:
-            s = gi
-            for j in range(n):
-                s -= M[i, j] * wv[j]
-            u[i] = s
-    if st != OK:
-        return st
-    for a in range(k):  # S⁻¹ Z u (Ls in Et)
-        s = 0.0
-        for j in range(n):
-            s += Tt[a, j] * u[j]
-        for c in range(a):
-            s -= Et[a, c] * cv[c]
-        cv[a] = s / Et[a, a]
-    for a in range(k - 1, -1, -1):
-        s = cv[a]
-        for c in range(a + 1, k):
-            s -= Et[c, a] * cv[c]
-        cv[a] = s / Et[a, a]
+        u[i] = gi
+    _add_m_times(M3, 0, diag, wv, -1.0, u)  # u = g − M w
+    res2 = out[: 2 * n].reshape((2, n))
+    _null_space_qdd(Tt, Et, k, u, wv, cv, res2[0])  # Ls in Et
+    fcv = res2[1]  # f_c = M qdd − g
     for i in range(n):
-        out[i] = wv[i]
-    for a in range(k):
-        c = cv[a]
-        for i in range(n):
-            out[i] += Tt[a, i] * c
-    for i in range(n):  # f_c = M qdd − g
-        if diag:
-            out[n + i] = M[i, i] * out[i] - g[i]
-        else:
-            s = -g[i]
-            for j in range(n):
-                s += M[i, j] * out[j]
-            out[n + i] = s
+        fcv[i] = -g[i]
+    _add_m_times(M3, 0, diag, res2[0], 1.0, fcv)
     out[2 * n] = m
     out[2 * n + 1] = mu
     out[2 * n + 2] = 0.0
