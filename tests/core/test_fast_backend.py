@@ -330,11 +330,22 @@ def test_solve_near_equals_a_fresh_factorization(n, m, diag):
         A2 = A + eps * rng.standard_normal((m, n))
         h2, g2 = rng.standard_normal(n), rng.standard_normal(m)
         got = np.empty(2 * n + 3)
-        st = solve_near(M, h2, h2, False, A2, g2, 1e-13, got, work)
+        st = solve_near(M, h2, h2, False, A2, g2, 1e-13, got, work, False)  # a new A
         if not close:
             assert st == NO_FACTOR
             continue
         assert st == OK
+        # a second call at the same A reuses the refined basis, S and μ: bitwise what a full
+        # call gives (the refinement is deterministic)
+        h3, g3 = rng.standard_normal(n), rng.standard_normal(m)
+        reused, full = np.empty(2 * n + 3), np.empty(2 * n + 3)
+        assert solve_near(M, h3, h3, False, A2, g3, 1e-13, reused, work, True) == OK
+        assert solve_near(M, h3, h3, False, A2, g3, 1e-13, full, work, False) == OK
+        assert np.array_equal(reused, full)
+        # a new factorization in between (its S replaces the near one's): nothing is reused
+        assert solve_work(M, h, h, False, A, rng.standard_normal(m), *args, np.empty(2 * n + 3),
+                          none, none, work, np.eye(m), True) == OK  # fmt: skip
+        assert solve_near(M, h2, h2, False, A2, g2, 1e-13, got, work, True) == OK
         ref = np.empty(2 * n + 3)
         assert solve_work(M, h2, h2, False, A2, g2, *args, ref, none, none, scratch(n, m),
                           np.eye(m), False) == OK  # fmt: skip
@@ -347,4 +358,4 @@ def test_solve_near_equals_a_fresh_factorization(n, m, diag):
         solve_work(M, h, h, False, Ab, np.zeros(Ab.shape[0]), *args, np.empty(2 * n + 3), none, none,
                    w2, np.eye(Ab.shape[0]), True)  # fmt: skip
         assert solve_near(M, h, h, False, Ab, np.zeros(Ab.shape[0]), 1e-13, np.empty(2 * n + 3),
-                          w2) == NO_FACTOR  # fmt: skip
+                          w2, False) == NO_FACTOR  # fmt: skip

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -159,8 +161,8 @@ def test_kernel_failure_hands_over_and_raises_the_same_error() -> None:
     assert not part.success and "compiled, then python" in part.metadata["engine"]
 
 
-def test_compiled_covers_every_primitive_kind() -> None:
-    """Point mass, gear and prismatic (angle rows), point-on-line, rods: both engines agree."""
+def _mix_model() -> tuple[Any, Any]:
+    """A planar model with every primitive kind, and an assembled state."""
     from nonmin.model import assemble
 
     b = PlanarBuilder("mix")
@@ -180,7 +182,12 @@ def test_compiled_covers_every_primitive_kind() -> None:
     for key, val in {"bar.x": 0.5, "wheel.x": 1.0, "slider.x": 1.0, "slider.y": -1.0,
                      "ball.x": 1.2, "ball.y": -0.3}.items():  # fmt: skip
         q0[names.index(key)] = val
-    st = assemble(model, q0)
+    return model, assemble(model, q0)
+
+
+def test_compiled_covers_every_primitive_kind() -> None:
+    """Point mass, gear and prismatic (angle rows), point-on-line, rods: both engines agree."""
+    model, st = _mix_model()
     assert isinstance(model.fast_program(st.active), PlanarProgram)
     a = simulate(model, (0.0, 0.5), st, dt=1e-3, engine="compiled", progress=False)
     c = simulate(model, (0.0, 0.5), st, dt=1e-3, engine="python", progress=False)
@@ -189,3 +196,34 @@ def test_compiled_covers_every_primitive_kind() -> None:
     assert float(np.max(np.abs(a.q - c.q))) < 1e-12
     assert float(np.max(np.abs(a.energy - c.energy))) < 1e-10
     assert float(np.max(a.phi_norm)) < 1e-13
+
+
+def test_evaluation_at_the_same_q_recomputes_only_gamma() -> None:
+    """The compiled loop's evaluation at the ``q`` of its previous one (after a velocity
+    correction) computes only γ: A, φ and γ are bitwise those of a fresh evaluation."""
+    from nonmin.sim import _fast_kernels as kern
+
+    model, st = _mix_model()
+    prog = model.fast_program(st.active)
+    pr = (prog.M, prog.f, prog.A0, prog.I6, prog.SL, prog.prm, prog.rows, prog.var_idx,
+          prog.counts, prog.angle_rows, prog.G, prog.angle_const)  # fmt: skip
+    rng = np.random.default_rng(7)
+    q = st.q + 0.05 * rng.standard_normal(prog.n)  # off the constraints: φ ≠ 0
+    qd1, qd2 = rng.standard_normal(prog.n), rng.standard_normal(prog.n)
+
+    def fresh(qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ws = kern.carry(prog.n, prog.m, prog.I6.shape[1], prog.var_idx.shape[0], prog.A0)[0]
+        kern._evaluate(pr, q, qd, ws)
+        return ws[3].copy(), ws[2].copy()
+
+    ws = kern.carry(prog.n, prog.m, prog.I6.shape[1], prog.var_idx.shape[0], prog.A0)[0]
+    kern._evaluate(pr, q, qd1, ws)
+    kern._evaluate(pr, q.copy(), qd2, ws)  # same q: γ only
+    A_ref, PG_ref = fresh(qd2)
+    assert np.array_equal(ws[3], A_ref) and np.array_equal(ws[2], PG_ref)
+    assert np.any(PG_ref[0] != 0.0) and not np.array_equal(PG_ref[1], fresh(qd1)[1])
+    q2 = q + 1e-3
+    kern._evaluate(pr, q2, qd2, ws)  # a new q: everything again
+    ws2 = kern.carry(prog.n, prog.m, prog.I6.shape[1], prog.var_idx.shape[0], prog.A0)[0]
+    kern._evaluate(pr, q2, qd2, ws2)
+    assert np.array_equal(ws[3], ws2[3]) and np.array_equal(ws[2], ws2[2])

@@ -41,6 +41,11 @@ Cholesky factor of ``S`` (same SPD test, pivots of ``S`` against ``max M̄_jj``)
 ``qdd = w + Zᵀ S⁻¹ Z (g − M w)`` — O(k n² + k³) instead of the n × n M̄ and its O(n³)
 factorization (formed only when ``P`` and ``L`` are asked for).
 
+The certified LQ exploits the sparsity of A (constraint Jacobians in absolute coordinates: a
+planar pin row has 3 nonzeros): every product with a Householder reflector runs over the
+reflector's nonzero columns only, and zero entries of L are skipped in L⁻¹. Only exact zero
+terms are skipped, so the results are those of the dense loops.
+
 Status codes: :data:`OK`, :data:`CHOL_FAIL`, :data:`SMALL_PIVOT`, :data:`NONFINITE`,
 :data:`ASYMMETRIC`.
 """
@@ -98,14 +103,18 @@ def scratch(n, m):
     Li, o = _cut(buf, o, m, m)
     vn = buf[o : o + 5 * n].reshape((5, n))  # cw, g, wv, u, dinv
     vm = buf[o + 5 * n : o + 5 * n + 3 * m].reshape((3, m))  # sig, cv, dsc
-    tail = buf[o + 5 * n + 3 * m :]  # μ, info (8)
+    # μ, info (8): the factorization held — [0] valid, [1] null-space form, [2] rank,
+    # [3] diagonal M, [4] μ, [5] certified LQ, [6] μ and [7] validity of solve_near's last result
+    tail = buf[o + 5 * n + 3 * m :]
     cw, g, wv, u, dinv = vn[0], vn[1], vn[2], vn[3], vn[4]
     sig, cv, dsc = vm[0], vm[1], vm[2]
     mu1, info = tail[:1], tail[1:]
     for i in range(8):
         info[i] = 0.0  # no factorization held yet
-    return (B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn,
-            np.empty(2, dtype=np.int64), mu1, Li, dsc, info)  # fmt: skip
+    ints = np.empty(2 + m * (n + 1), dtype=np.int64)  # status/rank slots, Hx (_lq_certified)
+    Hx = ints[2:].reshape((m, n + 1))
+    return (B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, ints[:2], mu1, Li,
+            dsc, info, Hx)  # fmt: skip
 
 
 #: Safety factor of the certified-QR rank decision (see :func:`_lq_certified`) for small
@@ -125,7 +134,7 @@ QR_MIN_ROWS = 4
 
 
 @njit(cache=True)
-def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta):  # type: ignore[no-untyped-def]
+def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx):  # type: ignore[no-untyped-def]
     """LQ factorization ``D A = L Q`` of ``B[:, :n]`` (m ≤ n, every row nonzero), if full rank
     is certain.
 
@@ -137,21 +146,34 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta):  # type: ignore[no-untyp
     the SVD's rule would keep all m rows. Then writes ``cv = L⁻¹ D γ`` (``D γ = B[:, n]``), so
     ``(D A)⁺ D γ = Qᵀ cv``, keeps the reflectors in ``Hv``/``beta`` (:func:`_lq_rows`,
     :func:`_lq_min_norm`) and returns True. Returns False when the bound fails.
+
+    Sparsity: constraint Jacobians in absolute coordinates are sparse (a planar pin row has
+    3 nonzeros of ``n``), and so are the first reflectors. ``Hx[j] = [c, k_1 … k_c]`` lists
+    the columns where reflector ``j`` is nonzero (``k_1 = j``); every product with it runs over
+    those only. The sums skip exact zero terms only, so the results are those of the dense
+    loops (up to the sign of a zero).
     """
     for i in range(m):
         for k in range(n):
             Wq[i, k] = B[i, k]
     for j in range(m):
-        s = 0.0
-        for k in range(j, n):
-            s += Wq[j, k] * Wq[j, k]
+        x0 = Wq[j, j]
+        s = x0 * x0
+        Hv[j, j] = x0
+        Hx[j, 1] = j
+        cnt = 1
+        for k in range(j + 1, n):
+            x = Wq[j, k]
+            Hv[j, k] = x
+            if x != 0.0:
+                s += x * x
+                Hx[j, 1 + cnt] = k
+                cnt += 1
+        Hx[j, 0] = cnt
         if s == 0.0:
             return False
         nrm = math.sqrt(s)
-        x0 = Wq[j, j]
         alpha = -nrm if x0 >= 0.0 else nrm
-        for k in range(j, n):
-            Hv[j, k] = Wq[j, k]
         v0 = x0 - alpha
         Hv[j, j] = v0
         bj = 2.0 / (s - x0 * x0 + v0 * v0)
@@ -159,28 +181,75 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta):  # type: ignore[no-untyp
         Wq[j, j] = alpha
         for k in range(j + 1, n):
             Wq[j, k] = 0.0
-        for i in range(j + 1, m):
+        # rows below: four at a time, so four independent dot products are in flight (each
+        # still one sequential sum over k, so the result is that of a row-by-row loop)
+        i = j + 1
+        while i + 3 < m:
+            d0 = 0.0
+            d1 = 0.0
+            d2 = 0.0
+            d3 = 0.0
+            for t in range(1, cnt + 1):
+                k = Hx[j, t]
+                hk = Hv[j, k]
+                d0 += Wq[i, k] * hk
+                d1 += Wq[i + 1, k] * hk
+                d2 += Wq[i + 2, k] * hk
+                d3 += Wq[i + 3, k] * hk
+            if d0 != 0.0 or d1 != 0.0 or d2 != 0.0 or d3 != 0.0:
+                d0 *= bj
+                d1 *= bj
+                d2 *= bj
+                d3 *= bj
+                for t in range(1, cnt + 1):
+                    k = Hx[j, t]
+                    hk = Hv[j, k]
+                    Wq[i, k] -= d0 * hk
+                    Wq[i + 1, k] -= d1 * hk
+                    Wq[i + 2, k] -= d2 * hk
+                    Wq[i + 3, k] -= d3 * hk
+            i += 4
+        while i < m:
             d = 0.0
-            for k in range(j, n):
+            for t in range(1, cnt + 1):
+                k = Hx[j, t]
                 d += Wq[i, k] * Hv[j, k]
-            d *= bj
-            for k in range(j, n):
-                Wq[i, k] -= d * Hv[j, k]
+            if d != 0.0:
+                d *= bj
+                for t in range(1, cnt + 1):
+                    k = Hx[j, t]
+                    Wq[i, k] -= d * Hv[j, k]
+            i += 1
     fl = 0.0
     for i in range(m):
         for k in range(i + 1):
             fl += Wq[i, k] * Wq[i, k]
-    fi = 0.0
     for i in range(m):  # reciprocal pivots (cv is scratch until the end)
         cv[i] = 1.0 / Wq[i, i]
-    for c in range(m):  # L⁻¹ column by column (forward substitution), lower triangle of Li
-        for i in range(c, m):
-            s = 1.0 if i == c else 0.0
-            for k in range(c, i):
-                s -= Wq[i, k] * Li[k, c]
-            x = s * cv[i]
-            Li[i, c] = x
-            fi += x * x
+    # L⁻¹ (lower triangle of Li) row by row: row i = (e_i − Σ_{k<i} L_ik · row k) / L_ii, the
+    # updates element-wise along the row (independent: no chain of dependent operations). Each
+    # entry's sum runs over k in increasing order, as in a column-by-column forward substitution.
+    f0 = 0.0
+    f1 = 0.0
+    for i in range(m):
+        for c in range(i):
+            Li[i, c] = 0.0
+        Li[i, i] = 1.0
+        for k in range(i):
+            a = Wq[i, k]
+            if a != 0.0:  # (L is sparse too)
+                for c in range(k + 1):
+                    Li[i, c] -= a * Li[k, c]
+        r = cv[i]
+        for c in range(i + 1):
+            Li[i, c] *= r
+        i2 = (i + 1) - (i + 1) % 2  # ‖L⁻¹‖_F²: two interleaved partial sums
+        for c in range(0, i2, 2):
+            f0 += Li[i, c] * Li[i, c]
+            f1 += Li[i, c + 1] * Li[i, c + 1]
+        if i2 <= i:
+            f0 += Li[i, i] * Li[i, i]
+    fi = f0 + f1
     margin = QR_MARGIN if rtol <= QR_MARGIN_RTOL else 1.0
     if not (math.sqrt(fl) * math.sqrt(fi) * margin * rtol < 1.0):
         return False
@@ -193,38 +262,64 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta):  # type: ignore[no-untyp
 
 
 @njit(cache=True)
-def _lq_rows(Hv, beta, m, n, first, count, E):  # type: ignore[no-untyped-def]
+def _lq_rows(Hv, beta, m, n, first, count, E, cv, w, with_w, Hx):  # type: ignore[no-untyped-def]
     """Rows ``first … first+count−1`` of the orthogonal ``H_{m−1} ⋯ H_0`` into ``E[:count]``.
 
     Rows ``0 … m−1`` are ``Q`` (an orthonormal basis of R(Aᵀ)), rows ``m … n−1`` an orthonormal
-    basis ``Z`` of N(A) (the reflectors are symmetric: ``E ← E H_j`` for j = m−1 … 0).
+    basis ``Z`` of N(A) (the reflectors are symmetric: ``E ← E H_j`` for j = m−1 … 0). With
+    ``with_w`` also :func:`_lq_min_norm`'s ``w`` from ``cv`` (bitwise the same), in the same pass
+    over the reflectors: its chain of dependent dot products then overlaps the rows' chains.
+    Products with reflector ``j`` run over its nonzero columns ``Hx[j]`` (see
+    :func:`_lq_certified`).
     """
     for i in range(count):
         for k in range(n):
             E[i, k] = 1.0 if k == first + i else 0.0
+    if with_w:
+        for i in range(n):
+            w[i] = cv[i] if i < m else 0.0
     for j in range(m - 1, -1, -1):
         bj = beta[j]
+        cnt = Hx[j, 0]
+        if with_w:
+            d = 0.0
+            for t in range(1, cnt + 1):
+                k = Hx[j, t]
+                d += Hv[j, k] * w[k]
+            d *= bj
+            for t in range(1, cnt + 1):
+                k = Hx[j, t]
+                w[k] -= d * Hv[j, k]
         for i in range(count):
             d = 0.0
-            for k in range(j, n):
+            for t in range(1, cnt + 1):
+                k = Hx[j, t]
                 d += E[i, k] * Hv[j, k]
             if d != 0.0:
                 d *= bj
-                for k in range(j, n):
+                for t in range(1, cnt + 1):
+                    k = Hx[j, t]
                     E[i, k] -= d * Hv[j, k]
+    if with_w:
+        for i in range(n):
+            w[i] = -w[i]
 
 
 @njit(cache=True)
-def _lq_min_norm(Hv, beta, m, n, cv, w):  # type: ignore[no-untyped-def]
-    """``w = −Qᵀ cv = −H_0 ⋯ H_{m−1} [cv; 0]`` (= ``−(DA)⁺ D γ`` with ``cv = L⁻¹ D γ``)."""
+def _lq_min_norm(Hv, beta, m, n, cv, w, Hx):  # type: ignore[no-untyped-def]
+    """``w = −Qᵀ cv = −H_0 ⋯ H_{m−1} [cv; 0]`` (= ``−(DA)⁺ D γ`` with ``cv = L⁻¹ D γ``);
+    reflector ``j`` over its nonzero columns ``Hx[j]``."""
     for i in range(n):
         w[i] = cv[i] if i < m else 0.0
     for j in range(m - 1, -1, -1):
+        cnt = Hx[j, 0]
         d = 0.0
-        for k in range(j, n):
+        for t in range(1, cnt + 1):
+            k = Hx[j, t]
             d += Hv[j, k] * w[k]
         d *= beta[j]
-        for k in range(j, n):
+        for t in range(1, cnt + 1):
+            k = Hx[j, t]
             w[k] -= d * Hv[j, k]
     for i in range(n):
         w[i] = -w[i]
@@ -461,7 +556,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
     n = M.shape[1]
     m = A.shape[1]
     nmu = mu_in.shape[0]
-    B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, _ist, _mu1, Li, dsc, info = work
+    B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, _ist, _mu1, Li, dsc, info, Hx = work
     for b in range(lo, hi):
         if again:  # solve_again: the factorization left by the last call; new h, f, γ
             if info[0] == 0.0:
@@ -491,6 +586,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             if zmode and want_pl:  # M̄ and its factor were not formed (null-space form)
                 # S afresh: G may hold the S of a solve_near since (Tn: the same Ls again)
                 _null_factor(M, b, Kt, n - r, diag, True, info[4:5], 1, spd_rtol, Et, G, Tn)
+                info[7] = 0.0  # solve_near's S and Ls are gone
                 dm = _mbar_from_s(Kt, n - r, G, mu, Tt, W)
                 _cholesky_lower(W, n, 0.0, dm, dinv, cw)
             status[b] = OK
@@ -581,16 +677,16 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                     if sig[i] > thr:
                         live += 1
                 if live == m:
-                    qr_ok = _lq_certified(B, m, n, rtol, Et, Ft, Li, cv, sig)
+                    qr_ok = _lq_certified(B, m, n, rtol, Et, Ft, Li, cv, sig, Hx)
                     if qr_ok:
                         r = m
                         # few degrees of freedom (n − m ≤ m): work with the null-space basis Z
                         # (rows of Kt) — M̄ = μI + Zᵀ(S − μI)Z, S = Z M Zᵀ, P = ZᵀZ — instead of V
                         zmode = n - m <= m
                         if zmode:
-                            _lq_rows(Ft, sig, m, n, m, n - m, Kt)
+                            _lq_rows(Ft, sig, m, n, m, n - m, Kt, cv, wv, True, Hx)  # and w
                         else:
-                            _lq_rows(Ft, sig, m, n, 0, m, V)
+                            _lq_rows(Ft, sig, m, n, 0, m, V, cv, wv, False, Hx)
             if not qr_ok:
                 if warm:  # start from the previous state's rotation: B ← T B (T orthogonal, m × m)
                     for i in range(m):
@@ -764,13 +860,15 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             info[3] = 1.0 if diag else 0.0
             info[4] = mu
             info[5] = 1.0 if qr_ok else 0.0
+            info[7] = 0.0  # no solve_near result on this factorization yet
             if st != OK:
                 continue
         # ---------------------------------------------------------------- 6. right-hand side, solve
         # w = −(DA)⁺ D γ from cv (both branches leave it: certified LQ cv = L⁻¹ D γ, Jacobi
         # cv_k = (u_kᵀ D γ)/σ_k)
-        if zmode:  # −Qᵀ cv through the reflectors
-            _lq_min_norm(Ft, sig, m, n, cv, wv)
+        if zmode:  # −Qᵀ cv through the reflectors (computed with Z unless again)
+            if again:
+                _lq_min_norm(Ft, sig, m, n, cv, wv, Hx)
         else:  # −Σ_k v_k cv_k
             for j in range(n):
                 wv[j] = 0.0
@@ -939,14 +1037,14 @@ NEAR_PASSES = 3
 
 
 @njit(cache=True, inline="always")
-def _apply_pinv(Hv, beta, Li, dsc, m, n, t, cv, x):  # type: ignore[no-untyped-def]
+def _apply_pinv(Hv, beta, Li, dsc, m, n, t, cv, x, Hx):  # type: ignore[no-untyped-def]
     """``x = A_h⁺ t = (D A_h)⁺ D t = Qᵀ L⁻¹ D t`` with the certified LQ held (``cv``: scratch)."""
     for i in range(m):
         s = 0.0
         for k in range(i + 1):
             s += Li[i, k] * (dsc[k] * t[k])
         cv[i] = s
-    _lq_min_norm(Hv, beta, m, n, cv, x)  # −Qᵀ cv
+    _lq_min_norm(Hv, beta, m, n, cv, x, Hx)  # −Qᵀ cv
     for j in range(n):
         x[j] = -x[j]
 
@@ -967,7 +1065,7 @@ def _scaled_residual(A, x, b, dsc, m, n, res):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work):  # type: ignore[no-untyped-def]
+def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: ignore[no-untyped-def]
     """Solve at a constraint matrix ``A`` close to the ``A_h`` of the factorization held in
     ``work`` (a certified LQ in the null-space form), without factorizing ``A``.
 
@@ -983,6 +1081,11 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work):  # type: ignore[no-
     rank is the held one: ``A`` must be within the held factorization's certified margin (the
     caller's concern: the same configuration up to a projection's correction).
 
+    With ``same`` the caller states that ``A`` is (bitwise) the ``A`` of the last call: if that
+    call succeeded on the factorization still held, its refined basis ``Z'``, ``S``, the
+    Cholesky factor of ``S`` and μ are reused and only ``w`` is computed for the new ``γ``
+    (the velocity projection and the evaluation at the projected state share one ``A``).
+
     Writes ``out`` as :func:`solve_work` (``S`` in the scratch, for cond(M̄)); returns
     :data:`OK`, the SPD status of ``S``, or :data:`NO_FACTOR` when nothing suitable is held or
     the passes do not reach round-off (then factorize ``A``).
@@ -990,19 +1093,22 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work):  # type: ignore[no-
     n = M.shape[0]
     m = A.shape[0]
     Kt, Tt, Et, Ft, G = work[2], work[3], work[4], work[5], work[6]
-    g, wv, u, sig, cv, Bw, Li, dsc, info = (work[9], work[10], work[11], work[12], work[13],
-                                           work[15], work[19], work[20], work[21])  # fmt: skip
+    g, wv, u, sig, cv, Bw, Li, dsc, info, Hx = (work[9], work[10], work[11], work[12], work[13],
+                                               work[15], work[19], work[20], work[21], work[22])  # fmt: skip
     if info[0] == 0.0 or info[1] == 0.0 or info[5] == 0.0 or int(info[2]) != m:
         return NO_FACTOR
     k = n - m
     tol = 64.0 * _EPS
     res = Bw[0]  # scratch (n + 1 ≥ m entries)
+    reuse = same and info[7] != 0.0  # Z', S, Ls and μ of the last call are this A's
+    info[7] = 0.0
     # the refined basis Z' (rows of Tt), from Z_h (rows of Kt)
-    for a in range(k):
-        for j in range(n):
-            Tt[a, j] = Kt[a, j]
-    ok = False
-    for _ in range(NEAR_PASSES):
+    if not reuse:
+        for a in range(k):
+            for j in range(n):
+                Tt[a, j] = Kt[a, j]
+    ok = reuse
+    for _ in range(0 if reuse else NEAR_PASSES):
         big = 0.0
         for a in range(k):
             zr = Tt[a]
@@ -1011,7 +1117,7 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work):  # type: ignore[no-
                 for j in range(n):
                     s += A[i, j] * zr[j]
                 res[i] = s
-            _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, u)
+            _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, u, Hx)
             for j in range(n):
                 zr[j] -= u[j]
         for a in range(k):
@@ -1030,7 +1136,7 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work):  # type: ignore[no-
     # w: minimum-norm solution of A w = −γ
     for i in range(m):
         res[i] = gam[i]
-    _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, wv)
+    _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, wv, Hx)
     for j in range(n):
         wv[j] = -wv[j]
     gs = 0.0
@@ -1045,7 +1151,7 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work):  # type: ignore[no-
         if e <= tol * (gs + wmax):
             ok = True
             break
-        _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, u)
+        _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, u, Hx)
         for j in range(n):
             wv[j] -= u[j]
     if not ok:
@@ -1059,9 +1165,12 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work):  # type: ignore[no-
     # the null-space form with Z'
     M3 = M.reshape((1, n, n))
     diag = info[3] != 0.0
-    st, _rt, mu = _null_factor(M3, 0, Tt, k, diag, False, info[4:5], 1, spd_rtol, Et, G, Et)
-    if st != OK:
-        return st
+    if reuse:
+        mu = info[6]
+    else:
+        st, _rt, mu = _null_factor(M3, 0, Tt, k, diag, False, info[4:5], 1, spd_rtol, Et, G, Et)
+        if st != OK:
+            return st
     for i in range(n):
         gi = h[i]
         if has_f:
@@ -1078,6 +1187,8 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work):  # type: ignore[no-
     out[2 * n] = m
     out[2 * n + 1] = mu
     out[2 * n + 2] = 0.0
+    info[6] = mu
+    info[7] = 1.0
     return OK
 
 

@@ -59,14 +59,16 @@ NONFINITE_QDD = 5
 def workspace(n, m, S, n_var, T):  # type: ignore[no-untyped-def]
     """Scratch arrays of the loop (``S`` kernel sides, ``n_var`` variable entries of A) and the
     warm-start rotation ``T`` (m × m) of the Jacobi SVD, carried from call to call. ``ws[17]``
-    and ``ws[18] = [valid, rtol]`` tag the factorization held in the core scratch ``ws[11]``
-    with the ``q`` and rank tolerance it was taken at (see :func:`_solve_at`). ``A = ws[3]`` is a
-    view of the flat buffer ``ws[1]`` the model kernel writes (row-major, one spare entry)."""
+    and ``ws[18] = [valid, rtol, near]`` tag the factorization held in the core scratch ``ws[11]``
+    with the ``q`` and rank tolerance it was taken at, and ``near`` (≠ 0) says that the last
+    :func:`~nonmin.core._fast_kernels.solve_near` on it succeeded at ``q = ws[19]`` (see
+    :func:`_solve_at`). ``A = ws[3]`` is a view of the flat buffer ``ws[1]`` the model kernel
+    writes (row-major, one spare entry)."""
     buf = np.empty(m * n + 1)
-    return (np.empty(2 * n + 2), buf, np.empty((2, m)), buf[: m * n].reshape((m, n)),
+    return (np.full(2 * n + 2, np.nan), buf, np.empty((2, m)), buf[: m * n].reshape((m, n)),
             np.empty(m), np.zeros(n), np.empty(2 * n + 3), np.empty((n, n)), np.empty((n, n)),
             np.empty(n), np.empty(n), scratch(n, m), T, np.empty((9, S)), np.empty(n_var),
-            np.empty(m), np.empty((n, n)), np.empty(n), np.zeros(2))  # fmt: skip
+            np.empty(m), np.empty((n, n)), np.empty(n), np.zeros(3), np.empty(n))  # fmt: skip
 
 
 @njit(cache=True)
@@ -85,24 +87,38 @@ def carry(n, m, S, n_var, A0):  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def _evaluate(prog, q, qd, ws):  # type: ignore[no-untyped-def]
-    """``A = ws[3]``, ``φ = ws[2][0]``, ``γ = ws[2][1]`` of the program at ``(q, qd)``."""
+    """``A = ws[3]``, ``φ = ws[2][0]``, ``γ = ws[2][1]`` of the program at ``(q, qd)``.
+
+    ``x = ws[0]`` keeps the ``(q, qd)`` of the last evaluation: at the same ``q`` (bitwise) only γ
+    is computed again (A and φ depend on ``q`` alone); e.g. the evaluation of ``F`` right after
+    a projection, whose velocity correction left ``q`` as it was.
+    """
     _M, _f, A0, I6, SL, prm, rows, var_idx, counts, arows, G, ac = prog
     x, buf, PG, A = ws[0], ws[1], ws[2], ws[3]
     n = q.shape[0]
     m = A.shape[0]
+    same = True
+    for i in range(n):
+        if x[i] != q[i]:  # (x starts as NaN: never equal)
+            same = False
+            break
     for i in range(n):
         x[i] = q[i]
         x[n + 1 + i] = qd[i]
     x[n] = 0.0
     x[2 * n + 1] = 0.0
-    for k in range(var_idx.shape[0]):  # the variable entries back to their constant part
-        buf[var_idx[k]] = A0[var_idx[k]]
     for i in range(m):
-        PG[0, i] = 0.0
         PG[1, i] = 0.0
+    if not same:
+        for k in range(var_idx.shape[0]):  # the variable entries back to their constant part
+            buf[var_idx[k]] = A0[var_idx[k]]
+        for i in range(m):
+            PG[0, i] = 0.0
     if I6.shape[1] > 0:
         pin_line_rod_work(x, I6, SL, prm, rows, var_idx, counts[0], counts[1], counts[2], buf, PG,
-                          ws[13], ws[14])  # fmt: skip
+                          ws[13], ws[14], same)  # fmt: skip
+    if same:
+        return
     for k in range(arows.shape[0]):
         s = 0.0
         for j in range(n):
@@ -159,6 +175,7 @@ def _solve(prog, ws, cfg, h, gam, rtol, want_pl):  # type: ignore[no-untyped-def
         ws[17][i] = q[i]
     tag[0] = 1.0 if st == 0 else 0.0
     tag[1] = rtol
+    tag[2] = 0.0
     return st
 
 
@@ -176,8 +193,10 @@ def _solve_at(prog, ws, cfg, h, gam, rtol, want_pl, near):  # type: ignore[no-un
     evaluation of ``F`` at the projected state share one factorization. With ``near`` (``q``
     is the projection's result, within its correction of the ``q`` of the factorization held)
     a certified LQ held at a cutoff ``≥ rtol`` is reused exactly by
-    :func:`nonmin.core._fast_kernels.solve_near` (fresh factorization if that declines)."""
-    q, tag, fq = ws[9], ws[18], ws[17]
+    :func:`nonmin.core._fast_kernels.solve_near` (fresh factorization if that declines); a
+    second ``solve_near`` at the same ``q`` (velocity projection, then ``F``) reuses the first
+    one's refined null-space basis."""
+    q, tag, fq, nq = ws[9], ws[18], ws[17], ws[19]
     same = tag[0] != 0.0 and tag[1] == rtol
     if same:
         for i in range(q.shape[0]):
@@ -187,9 +206,19 @@ def _solve_at(prog, ws, cfg, h, gam, rtol, want_pl, near):  # type: ignore[no-un
     if same:
         return _again(prog, ws, h, gam, want_pl)
     if near != 0 and want_pl == 0 and tag[0] != 0.0 and tag[1] >= rtol:
-        st = solve_near(prog[0], h, h, False, ws[3], gam, cfg[SPD_RTOL], ws[6], ws[11])
+        again = tag[2] != 0.0
+        if again:
+            for i in range(q.shape[0]):
+                if nq[i] != q[i]:
+                    again = False
+                    break
+        st = solve_near(prog[0], h, h, False, ws[3], gam, cfg[SPD_RTOL], ws[6], ws[11], again)
         if st == 0:
+            for i in range(q.shape[0]):
+                nq[i] = q[i]
+            tag[2] = 1.0
             return st
+        tag[2] = 0.0
     return _solve(prog, ws, cfg, h, gam, rtol, want_pl)
 
 
@@ -325,7 +354,7 @@ def _cond_mbar(M, work, k, mu, P, Z):  # type: ignore[no-untyped-def]
     if k <= 0:
         return 1.0
     if work[21][1] != 0.0:  # null-space form: S = Z M Zᵀ left in G by the kernel
-        return _cond_from_s(work[6][:k, :k].copy(), k, mu)
+        return _cond_from_s(work[6][:k, :k], k, mu)  # (k > 1 symmetrizes into a copy)
     V = work[1]
     r = n - k
     for i in range(n):

@@ -22,12 +22,16 @@ def pin_line_rod(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG):  # type: ig
     Allocates its scratch; loops call :func:`pin_line_rod_work` with their own.
     """
     pin_line_rod_work(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG,
-                      np.empty((9, I6.shape[1])), np.empty(var_idx.shape[0]))  # fmt: skip
+                      np.empty((9, I6.shape[1])), np.empty(var_idx.shape[0]), False)  # fmt: skip
 
 
 @njit(cache=True)
-def pin_line_rod_work(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG, wk, vals):  # type: ignore[no-untyped-def]
+def pin_line_rod_work(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG, wk, vals, vel_only):  # type: ignore[no-untyped-def]
     """:func:`pin_line_rod` with caller-owned scratch ``wk`` (9, S) and ``vals`` (len(var_idx),).
+
+    With ``vel_only`` only γ (``PG[1]``) is computed, for new velocities at the ``q`` of the
+    previous call with this ``wk`` (whose rotated vectors, points and angles it reuses); φ and
+    A are left as they are.
 
     Parameters
     ----------
@@ -49,24 +53,28 @@ def pin_line_rod_work(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG, wk, val
     cs = wk[7]
     sn = wk[8]
     for k in range(S):
-        th = x[I6[2, k]]
-        c = math.cos(th)
-        s = math.sin(th)
-        sx = SL[0, k]
-        sy = SL[1, k]
-        rx = c * sx + s * (-sy)
-        ry = c * sy + s * sx
-        rsx[k] = rx
-        rsy[k] = ry
-        px[k] = x[I6[0, k]] + rx
-        py[k] = x[I6[1, k]] + ry
+        if vel_only:
+            rx = rsx[k]
+            ry = rsy[k]
+        else:
+            th = x[I6[2, k]]
+            c = math.cos(th)
+            s = math.sin(th)
+            sx = SL[0, k]
+            sy = SL[1, k]
+            rx = c * sx + s * (-sy)
+            ry = c * sy + s * sx
+            rsx[k] = rx
+            rsy[k] = ry
+            px[k] = x[I6[0, k]] + rx
+            py[k] = x[I6[1, k]] + ry
+            cs[k] = c
+            sn[k] = s
         w = x[I6[5, k]]
         om[k] = w
         # ṗ = ṙ + θ̇ (R s)^⊥ with (R s)^⊥ = (−r_y, r_x)
         vx[k] = x[I6[3, k]] + w * -ry
         vy[k] = x[I6[4, k]] + w * rx
-        cs[k] = c
-        sn[k] = s
     phi = PG[0]
     gamma = PG[1]
     m = phi.shape[0]
@@ -78,8 +86,9 @@ def pin_line_rod_work(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG, wk, val
         a = i
         b = P + i
         r = rows[i]
-        phi[r] = px[a] - px[b]
-        phi[r + 1] = py[a] - py[b]
+        if not vel_only:
+            phi[r] = px[a] - px[b]
+            phi[r + 1] = py[a] - py[b]
         wa = om[a] * om[a]
         wb = om[b] * om[b]
         gamma[r] = wa * -rsx[a] - wb * -rsx[b]
@@ -111,7 +120,8 @@ def pin_line_rod_work(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG, wk, val
         ddx = vx[b] - vx[a]
         ddy = vy[b] - vy[a]
         dn = nx * dx + ny * dy
-        phi[r] = dn
+        if not vel_only:
+            phi[r] = dn
         wa = oma * oma
         wb = om[b] * om[b]
         gx = wb * -rsx[b] - wa * -rsx[a]
@@ -141,7 +151,8 @@ def pin_line_rod_work(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG, wk, val
         dy = py[b] - py[a]
         ddx = vx[b] - vx[a]
         ddy = vy[b] - vy[a]
-        phi[r] = sg * ((dx * dx + dy * dy) - L * L) / (2.0 * L)
+        if not vel_only:
+            phi[r] = sg * ((dx * dx + dy * dy) - L * L) / (2.0 * L)
         wa = om[a] * om[a]
         wb = om[b] * om[b]
         gx = wb * -rsx[b] - wa * -rsx[a]
@@ -156,8 +167,9 @@ def pin_line_rod_work(x, I6, SL, prm, rows, var_idx, P, NL, NR, buf, PG, wk, val
         vals[j + 4 * NR + i] = -kdy
         vals[j + 5 * NR + i] = -(kdx * -rsy[a] + kdy * rsx[a])
     j += 6 * NR
-    for k in range(n_var):
-        buf[var_idx[k]] += vals[k]
+    if not vel_only:  # (vals is scratch: computed either way)
+        for k in range(n_var):
+            buf[var_idx[k]] += vals[k]
     return m
 
 
