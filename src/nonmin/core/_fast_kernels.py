@@ -976,17 +976,15 @@ def solve_work(M, h, f, has_f, A, gam, mu, has_mu, rtol, spd_rtol, sym_rtol, wan
     pivot_ratio]`` (``P`` and ``L`` if ``want_pl``); returns the status.
     """
     n = M.shape[0]
-    m = A.shape[0]
-    res = out[: 2 * n].reshape((2, n))
     ist = work[17]
     mu_in = work[18]
     mu_in[0] = mu
+    # batches of one as x[None] views (a reshape calls a C helper: ~0.02 µs each)
     solve_range(
-        0, 1, M.reshape((1, n, n)), h.reshape((1, n)), f.reshape((1, f.shape[0])), has_f,
-        A.reshape((1, m, n)), gam.reshape((1, m)), mu_in, has_mu, rtol, spd_rtol, sym_rtol,
-        res[0:1], res[1:2], P.reshape((1, P.shape[0], P.shape[1])),
-        L.reshape((1, L.shape[0], L.shape[1])), want_pl, ist[0:1], ist[1:2],
-        out[2 * n + 1 : 2 * n + 2], out[2 * n + 2 : 2 * n + 3], work, T, warm, again,
+        0, 1, M[None], h[None], f[None], has_f, A[None], gam[None], mu_in, has_mu, rtol,
+        spd_rtol, sym_rtol, out[:n][None], out[n : 2 * n][None], P[None], L[None], want_pl,
+        ist[0:1], ist[1:2], out[2 * n + 1 : 2 * n + 2], out[2 * n + 2 : 2 * n + 3], work, T,
+        warm, again,
     )  # fmt: skip
     out[2 * n] = ist[1]
     return ist[0]
@@ -1163,7 +1161,7 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: igno
         for j in range(n):
             wv[j] -= d * Tt[a, j]
     # the null-space form with Z'
-    M3 = M.reshape((1, n, n))
+    M3 = M[None]
     diag = info[3] != 0.0
     if reuse:
         mu = info[6]
@@ -1178,12 +1176,12 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: igno
         g[i] = gi
         u[i] = gi
     _add_m_times(M3, 0, diag, wv, -1.0, u)  # u = g − M w
-    res2 = out[: 2 * n].reshape((2, n))
-    _null_space_qdd(Tt, Et, k, u, wv, cv, res2[0])  # Ls in Et
-    fcv = res2[1]  # f_c = M qdd − g
+    qv = out[:n]
+    _null_space_qdd(Tt, Et, k, u, wv, cv, qv)  # Ls in Et
+    fcv = out[n : 2 * n]  # f_c = M qdd − g
     for i in range(n):
         fcv[i] = -g[i]
-    _add_m_times(M3, 0, diag, res2[0], 1.0, fcv)
+    _add_m_times(M3, 0, diag, qv, 1.0, fcv)
     out[2 * n] = m
     out[2 * n + 1] = mu
     out[2 * n + 2] = 0.0
