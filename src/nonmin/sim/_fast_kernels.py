@@ -85,7 +85,7 @@ def carry(n, m, S, n_var, A0):  # type: ignore[no-untyped-def]
     return ws, loop, np.zeros(1, dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _evaluate(prog, q, qd, ws):  # type: ignore[no-untyped-def]
     """``A = ws[3]``, ``φ = ws[2][0]``, ``γ = ws[2][1]`` of the program at ``(q, qd)``.
 
