@@ -92,6 +92,29 @@ def test_backends_agree_single(kind, seed):
     assert _close(c1, c0, floor=_fc_scale(M, ref.qdd, h, f))
 
 
+@pytest.mark.parametrize(("n", "m", "density"), [(15, 14, 0.2), (9, 8, 0.35), (12, 5, 0.3),
+                                                (12, 6, 0.5)])
+@pytest.mark.parametrize("seed", range(4))
+def test_backends_agree_on_sparse_constraint_jacobians(n, m, density, seed):
+    """Sparse A (absolute coordinates: few nonzeros per row), where the certified LQ skips the
+    exact zeros of its reflectors and of L: the NumPy path's solution, in the null-space form
+    (n − m ≤ m) and the range form alike; zero diagonal entries included."""
+    rng = np.random.default_rng(1000 * n + 10 * m + seed)
+    A = np.zeros((m, n))
+    while np.linalg.cond(A) > 1e3:  # full rank and well conditioned (the tolerance below is
+        # round-off times cond; a random sparse A is often nearly rank deficient)
+        A = rng.standard_normal((m, n)) * (rng.uniform(size=(m, n)) < density)
+        A[:, 0] = 0.0  # an empty column: the first pivot comes from elsewhere
+    M = np.diag(rng.uniform(0.5, 3.0, n)) if seed % 2 else random_spd(rng, n)
+    h, f, gam = rng.standard_normal(n), rng.standard_normal(n), rng.standard_normal(m)
+    got, ref = _both(solve_dynamics, M, h, A, gam, f)
+    ascale = float(np.max(np.abs(h)) + np.max(np.abs(f))) / float(np.linalg.eigvalsh(M)[0])
+    assert int(got.rank) == int(ref.rank) == m
+    assert _close(got.qdd, ref.qdd, floor=ascale)
+    assert _close(got.f_c, ref.f_c, floor=_fc_scale(M, ref.qdd, h, f))
+    assert np.max(np.abs(got.P - ref.P)) <= 1e-12
+
+
 @pytest.mark.parametrize("kind", ["full", "duplicated", "deficient", "empty"])
 def test_backends_agree_options(kind):
     M, h, A, gam, f, _ = _case(11, kind, 5, 4)
