@@ -262,34 +262,20 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx):  # type: ignore[no-u
 
 
 @njit(cache=True)
-def _lq_rows(Hv, beta, m, n, first, count, E, cv, w, with_w, Hx):  # type: ignore[no-untyped-def]
+def _lq_rows(Hv, beta, m, n, first, count, E, Hx):  # type: ignore[no-untyped-def]
     """Rows ``first … first+count−1`` of the orthogonal ``H_{m−1} ⋯ H_0`` into ``E[:count]``.
 
     Rows ``0 … m−1`` are ``Q`` (an orthonormal basis of R(Aᵀ)), rows ``m … n−1`` an orthonormal
-    basis ``Z`` of N(A) (the reflectors are symmetric: ``E ← E H_j`` for j = m−1 … 0). With
-    ``with_w`` also :func:`_lq_min_norm`'s ``w`` from ``cv`` (bitwise the same), in the same pass
-    over the reflectors: its chain of dependent dot products then overlaps the rows' chains.
+    basis ``Z`` of N(A) (the reflectors are symmetric: ``E ← E H_j`` for j = m−1 … 0).
     Products with reflector ``j`` run over its nonzero columns ``Hx[j]`` (see
     :func:`_lq_certified`).
     """
     for i in range(count):
         for k in range(n):
             E[i, k] = 1.0 if k == first + i else 0.0
-    if with_w:
-        for i in range(n):
-            w[i] = cv[i] if i < m else 0.0
     for j in range(m - 1, -1, -1):
         bj = beta[j]
         cnt = Hx[j, 0]
-        if with_w:
-            d = 0.0
-            for t in range(1, cnt + 1):
-                k = Hx[j, t]
-                d += Hv[j, k] * w[k]
-            d *= bj
-            for t in range(1, cnt + 1):
-                k = Hx[j, t]
-                w[k] -= d * Hv[j, k]
         for i in range(count):
             d = 0.0
             for t in range(1, cnt + 1):
@@ -300,9 +286,6 @@ def _lq_rows(Hv, beta, m, n, first, count, E, cv, w, with_w, Hx):  # type: ignor
                 for t in range(1, cnt + 1):
                     k = Hx[j, t]
                     E[i, k] -= d * Hv[j, k]
-    if with_w:
-        for i in range(n):
-            w[i] = -w[i]
 
 
 @njit(cache=True)
@@ -684,9 +667,9 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                         # (rows of Kt) — M̄ = μI + Zᵀ(S − μI)Z, S = Z M Zᵀ, P = ZᵀZ — instead of V
                         zmode = n - m <= m
                         if zmode:
-                            _lq_rows(Ft, sig, m, n, m, n - m, Kt, cv, wv, True, Hx)  # and w
+                            _lq_rows(Ft, sig, m, n, m, n - m, Kt, Hx)
                         else:
-                            _lq_rows(Ft, sig, m, n, 0, m, V, cv, wv, False, Hx)
+                            _lq_rows(Ft, sig, m, n, 0, m, V, Hx)
             if not qr_ok:
                 if warm:  # start from the previous state's rotation: B ← T B (T orthogonal, m × m)
                     for i in range(m):
@@ -866,9 +849,8 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
         # ---------------------------------------------------------------- 6. right-hand side, solve
         # w = −(DA)⁺ D γ from cv (both branches leave it: certified LQ cv = L⁻¹ D γ, Jacobi
         # cv_k = (u_kᵀ D γ)/σ_k)
-        if zmode:  # −Qᵀ cv through the reflectors (computed with Z unless again)
-            if again:
-                _lq_min_norm(Ft, sig, m, n, cv, wv, Hx)
+        if zmode:  # −Qᵀ cv through the reflectors
+            _lq_min_norm(Ft, sig, m, n, cv, wv, Hx)
         else:  # −Σ_k v_k cv_k
             for j in range(n):
                 wv[j] = 0.0

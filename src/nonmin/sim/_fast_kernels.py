@@ -59,16 +59,16 @@ NONFINITE_QDD = 5
 def workspace(n, m, S, n_var, T):  # type: ignore[no-untyped-def]
     """Scratch arrays of the loop (``S`` kernel sides, ``n_var`` variable entries of A) and the
     warm-start rotation ``T`` (m × m) of the Jacobi SVD, carried from call to call. ``ws[17]``
-    and ``ws[18] = [valid, rtol, near]`` tag the factorization held in the core scratch ``ws[11]``
-    with the ``q`` and rank tolerance it was taken at, and ``near`` (≠ 0) says that the last
-    :func:`~nonmin.core._fast_kernels.solve_near` on it succeeded at ``q = ws[19]`` (see
-    :func:`_solve_at`). ``A = ws[3]`` is a view of the flat buffer ``ws[1]`` the model kernel
+    and ``ws[18] = [valid, rtol]`` tag the factorization held in the core scratch ``ws[11]``
+    with the ``q`` and rank tolerance it was taken at; ``ws[19]`` is the ``q`` of the last
+    :func:`~nonmin.core._fast_kernels.solve_near` (whether its result is still held, the core
+    knows: see :func:`_solve_at`). ``A = ws[3]`` is a view of the flat buffer ``ws[1]`` the model kernel
     writes (row-major, one spare entry)."""
     buf = np.empty(m * n + 1)
     return (np.full(2 * n + 2, np.nan), buf, np.empty((2, m)), buf[: m * n].reshape((m, n)),
             np.empty(m), np.zeros(n), np.empty(2 * n + 3), np.empty((n, n)), np.empty((n, n)),
             np.empty(n), np.empty(n), scratch(n, m), T, np.empty((9, S)), np.empty(n_var),
-            np.empty(m), np.empty((n, n)), np.empty(n), np.zeros(3), np.empty(n))  # fmt: skip
+            np.empty(m), np.empty((n, n)), np.empty(n), np.zeros(2), np.full(n, np.nan))  # fmt: skip
 
 
 @njit(cache=True)
@@ -86,6 +86,15 @@ def carry(n, m, S, n_var, A0):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, inline="always")
+def _equal(a, b, n):  # type: ignore[no-untyped-def]
+    """``a[:n] == b[:n]`` entry by entry (a NaN entry never equal)."""
+    for i in range(n):
+        if a[i] != b[i]:
+            return False
+    return True
+
+
+@njit(cache=True, inline="always")
 def _evaluate(prog, q, qd, ws):  # type: ignore[no-untyped-def]
     """``A = ws[3]``, ``φ = ws[2][0]``, ``γ = ws[2][1]`` of the program at ``(q, qd)``.
 
@@ -97,11 +106,7 @@ def _evaluate(prog, q, qd, ws):  # type: ignore[no-untyped-def]
     x, buf, PG, A = ws[0], ws[1], ws[2], ws[3]
     n = q.shape[0]
     m = A.shape[0]
-    same = True
-    for i in range(n):
-        if x[i] != q[i]:  # (x starts as NaN: never equal)
-            same = False
-            break
+    same = _equal(x, q, n)  # (x starts as NaN: never equal)
     for i in range(n):
         x[i] = q[i]
         x[n + 1 + i] = qd[i]
@@ -175,7 +180,6 @@ def _solve(prog, ws, cfg, h, gam, rtol, want_pl):  # type: ignore[no-untyped-def
         ws[17][i] = q[i]
     tag[0] = 1.0 if st == 0 else 0.0
     tag[1] = rtol
-    tag[2] = 0.0
     return st
 
 
@@ -195,30 +199,19 @@ def _solve_at(prog, ws, cfg, h, gam, rtol, want_pl, near):  # type: ignore[no-un
     a certified LQ held at a cutoff ``≥ rtol`` is reused exactly by
     :func:`nonmin.core._fast_kernels.solve_near` (fresh factorization if that declines); a
     second ``solve_near`` at the same ``q`` (velocity projection, then ``F``) reuses the first
-    one's refined null-space basis."""
+    one's refined null-space basis (the core drops it when a new factorization replaces the
+    one held)."""
     q, tag, fq, nq = ws[9], ws[18], ws[17], ws[19]
-    same = tag[0] != 0.0 and tag[1] == rtol
-    if same:
-        for i in range(q.shape[0]):
-            if fq[i] != q[i]:
-                same = False
-                break
-    if same:
+    n = q.shape[0]
+    if tag[0] != 0.0 and tag[1] == rtol and _equal(fq, q, n):
         return _again(prog, ws, h, gam, want_pl)
     if near != 0 and want_pl == 0 and tag[0] != 0.0 and tag[1] >= rtol:
-        again = tag[2] != 0.0
-        if again:
-            for i in range(q.shape[0]):
-                if nq[i] != q[i]:
-                    again = False
-                    break
-        st = solve_near(prog[0], h, h, False, ws[3], gam, cfg[SPD_RTOL], ws[6], ws[11], again)
+        st = solve_near(prog[0], h, h, False, ws[3], gam, cfg[SPD_RTOL], ws[6], ws[11],
+                        _equal(nq, q, n))  # fmt: skip
         if st == 0:
-            for i in range(q.shape[0]):
+            for i in range(n):
                 nq[i] = q[i]
-            tag[2] = 1.0
             return st
-        tag[2] = 0.0
     return _solve(prog, ws, cfg, h, gam, rtol, want_pl)
 
 

@@ -102,7 +102,7 @@ FULL_T = {"A02_N40": 20.0, "A04": 10.0}
 FULL_T_NOTE = {
     "A02_N40": "The specified 20 s at RK4 dt = 2e-3 s (general driver: 243 coordinates; 10000 "
     "steps, ~0.14 s per step with one BLAS thread: 1367 s wall on 2026-11-21 at 15 UTC, 1212 s "
-    "at 20 UTC with the machine's other core busy). Step choice over 1.5 s "
+    "at 20 UTC and 1180 s at 23 UTC with the machine's other core busy). Step choice over 1.5 s "
     "(horizontal configurations at 0.7216 s and 1.2440 s), dt = 1e-3 / 2e-3 s: both stay in the "
     "mode, closure 7.1e-15 m, B0(1.5 s) within 2.3e-9 / 1.5e-8 m of the exact reduction and "
     "1.2e-8 m of each other. Energy: an earlier build gained 2.19 J over the 20 s, from a step "
@@ -115,7 +115,7 @@ FULL_T_NOTE = {
     "620.34 J): 2.8e-3 J with a fresh Gauss-Newton linearization at every correction (15 UTC "
     "run), 4.0e-3 J with the simplified (chord) steps between linearizations (18 UTC run), "
     "3.6e-3 J when a stalled chord step after a step at the cutoff goes to the full rank at "
-    "once (20 UTC run, the table above). Steps ending within ~1e-7 s of a configuration can still gain energy (RK4 "
+    "once (20 and 23 UTC runs, the table above). Steps ending within ~1e-7 s of a configuration can still gain energy (RK4 "
     "error of the right-hand side there; measured on N = 2).",
     "A04": "The specified 10 s. Earlier engine builds needed steps of ~2e-4 s here (stage "
     "points off the manifold made the redundant row's vanishing singular value look like a "
