@@ -896,9 +896,10 @@ NONMIN_CONFIGS: dict[str, list[PeerSpec]] = {
     "A02_N2": [
         *(("nonmin", {"method": "rk4", "dt": dt}) for dt in (1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 4e-2, 5e-2)),
     ],
-    # N = 40 (243 coordinates): the general driver (LAPACK SVD per right-hand side, ~0.16 s
-    # per RK4 step) would need ~27 min for the 20 s; its full run is in docs/validation.md.
-    "A02_N40": [],
+    # N = 40 (243 coordinates, 242 rows): the compiled engine with the sparse certified LQ
+    "A02_N40": [
+        *(("nonmin", {"method": "rk4", "dt": dt}) for dt in (1e-2, 2e-2, 5e-2, 1e-1)),
+    ],
 }
 
 RUNNERS: dict[str, Callable[..., RunResult]] = {

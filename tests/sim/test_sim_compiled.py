@@ -80,10 +80,20 @@ def test_auto_engine_choice() -> None:
     assert simulate(mech, 0.01, stabilization="baumgarte", progress=False).metadata["engine"] == "python"
     with use_backend("numpy"):
         assert simulate(mech, 0.01, progress=False).metadata["engine"] == "python"
-    big = library.get("A02_n_four_bar", N=12)  # n = 75 > AUTO_NUMBA_MAX_N: LAPACK is faster
-    assert simulate(big, 0.002, progress=False).metadata["engine"] == "python"
+    # n = 243 coordinates, one degree of freedom: the compiled null-space form (sparse LQ)
+    big = library.get("A02_n_four_bar", N=40)
+    assert simulate(big, 0.002, progress=False).metadata["engine"] == "compiled"
+    # n = 75 and 73 degrees of freedom (> AUTO_NUMBA_MAX_N): LAPACK is faster
+    b = PlanarBuilder("loose")
+    for i in range(25):
+        b.body(f"bar{i}", mass=1.0, inertia=0.1)
+    b.revolute("pin", ("ground", (0.0, 0.0)), ("bar0", (-0.5, 0.0)))
+    loose = b.build()
+    q0 = np.zeros(loose.n)
+    q0[0] = 0.5
+    assert simulate(loose, 0.002, q0, progress=False).metadata["engine"] == "python"
     with use_backend("numba"):  # forced
-        assert simulate(big, 0.002, progress=False).metadata["engine"] == "compiled"
+        assert simulate(loose, 0.002, q0, progress=False).metadata["engine"] == "compiled"
     wall = library.get("arm2r_wall")  # unilateral contact: events need the general driver
     assert simulate(wall, 0.01, progress=False).metadata["engine"] == "python"
     assert simulate(wall, 0.01, contact=False, progress=False).metadata["engine"] == "compiled"

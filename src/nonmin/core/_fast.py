@@ -178,11 +178,20 @@ _DEFAULT_PARAMS = tuple(
     tuple(_params(bool(hf), DEFAULT_RTOL, bool(pl)) for pl in (0, 1)) for hf in (0, 1)
 )
 
-#: In ``"auto"`` mode the compiled path is used up to this n; above it the NumPy path (LAPACK
-#: SVD) is faster: one A02 N = 40 evaluation (n = 243, A 242 × 243) took 267 ms compiled
-#: (Jacobi SVD) against 42 ms with NumPy (one BLAS thread). ``set_backend("numba")`` forces
-#: the compiled path at any n.
+#: In ``"auto"`` mode the compiled path is used up to this n, and above it when the constraints
+#: leave at most this many degrees of freedom (``n − m``, see :func:`auto_compiled`); otherwise
+#: the NumPy path (LAPACK) is used. Measured (one BLAS thread, ``benchmarks/core_bench.py
+#: --large``): an A02 N = 40 evaluation (n = 243, A 242 × 243, one degree of freedom) takes
+#: ~0.5 ms compiled (certified sparse LQ, null-space form) against ~20 ms with NumPy's SVD; with
+#: many degrees of freedom the compiled path forms and factorizes the n × n M̄ in scalar loops
+#: (n = 243, m = 121: 8.9 ms against 7.6 ms). ``set_backend("numba")`` forces the compiled
+#: path at any size.
 AUTO_NUMBA_MAX_N = 64
+
+
+def auto_compiled(n: int, m: int) -> bool:
+    """Whether ``"auto"`` takes the compiled path for n coordinates and m constraint rows."""
+    return n <= AUTO_NUMBA_MAX_N or n - m <= AUTO_NUMBA_MAX_N
 
 #: ``what`` codes of :func:`solve`.
 QDD, FC, ALL = 0, 1, 2
@@ -205,10 +214,11 @@ def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | N
     # Coerce once (no copy for float64 C-contiguous arrays); finiteness and symmetry are checked
     # inside the kernel.
     Mm = M if type(M) is _ND and M.dtype is _F64 and M.flags.c_contiguous else _prep(M, "M")
-    if Mm.ndim and Mm.shape[-1] > AUTO_NUMBA_MAX_N and _state["name"] == "auto":
-        return None  # large n: LAPACK's SVD beats the compiled Jacobi SVD (measured)
     hv = h if type(h) is _ND and h.dtype is _F64 and h.flags.c_contiguous else _prep(h, "h")
     Am = A if type(A) is _ND and A.dtype is _F64 and A.flags.c_contiguous else _prep(A, "A")
+    if (Mm.ndim and Am.ndim >= 2 and _state["name"] == "auto"
+            and not auto_compiled(Mm.shape[-1], Am.shape[-2])):
+        return None  # many coordinates and degrees of freedom: LAPACK is faster (measured)
     gv = (
         adot_qd
         if type(adot_qd) is _ND and adot_qd.dtype is _F64 and adot_qd.flags.c_contiguous

@@ -111,10 +111,16 @@ def scratch(n, m):
     mu1, info = tail[:1], tail[1:]
     for i in range(8):
         info[i] = 0.0  # no factorization held yet
-    ints = np.empty(2 + m * (n + 1), dtype=np.int64)  # status/rank slots, Hx (_lq_certified)
-    Hx = ints[2:].reshape((m, n + 1))
+    # status/rank slots; Hx, Lf, Ro, Pc and Lr of _lq_certified
+    o = 2 + m * (n + 1)
+    ints = np.empty(o + 2 * m + 2 * n, dtype=np.int64)
+    Hx = ints[2:o].reshape((m, n + 1))
+    Lf = ints[o : o + m]
+    Ro = ints[o + m : o + 2 * m]
+    Pc = ints[o + 2 * m : o + 2 * m + n]
+    Lr = ints[o + 2 * m + n :]
     return (B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, ints[:2], mu1, Li,
-            dsc, info, Hx)  # fmt: skip
+            dsc, info, Hx, Lf, Ro, Pc, Lr)  # fmt: skip
 
 
 #: Safety factor of the certified-QR rank decision (see :func:`_lq_certified`) for small
@@ -128,13 +134,35 @@ QR_MARGIN = 10.0
 #: (‖L‖_F ‖L⁻¹‖_F ≥ m) and always took the Jacobi SVD.
 QR_MARGIN_RTOL = 1e-6
 
+#: Results of :func:`_lq_certified`: not certified; certified with the dense ``L⁻¹`` in the
+#: scratch; certified with ``L`` and its row profile (:func:`_certify_profile`).
+LQ_NONE = 0
+LQ_INVERSE = 1
+LQ_PROFILE = 2
+
+#: Up to this many rows the certificate is ``‖L‖_F ‖L⁻¹‖_F`` with the dense ``L⁻¹`` (cheap and
+#: sharp enough there); above, :func:`_certify_profile`.
+DENSE_INVERSE_MAX_ROWS = 32
+
+#: :func:`_certify_profile` certifies ``σ_min > CERT_SLACK · max(rtol, CERT_FLOOR) · ‖T‖∞^½``:
+#: the floor keeps the shift τ ≥ 1e-10 ‖T‖∞, far above the round-off of T and its Cholesky
+#: factorization (~m eps ‖T‖), and the slack absorbs what is left of it. Below the floor
+#: (σ_min/σ_max < 1e-5, within ~1e-5 of a singular configuration) the SVD decides.
+CERT_FLOOR = 1e-5
+CERT_SLACK = 1.01
+
+#: Above this many rows a state the certified LQ does not settle takes LAPACK's SVD
+#: (:func:`_svd_lapack`) instead of the Jacobi sweeps (measured at m = 242: 12 ms against
+#: 460 ms).
+JACOBI_MAX_ROWS = 32
+
 #: The certified LQ is tried from this many rows on; with fewer, the Jacobi SVD is as cheap
 #: (a pair or three of rows converge in 2–3 sweeps) and a failed certification is pure cost.
 QR_MIN_ROWS = 4
 
 
 @njit(cache=True)
-def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx):  # type: ignore[no-untyped-def]
+def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx, G, Lf, Ro, Pc, Lr):  # type: ignore[no-untyped-def]
     """LQ factorization ``D A = L Q`` of ``B[:, :n]`` (m ≤ n, every row nonzero), if full rank
     is certain.
 
@@ -145,46 +173,93 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx):  # type: ignore[no-u
     singular value is above ``rtol · σ_max`` and
     the SVD's rule would keep all m rows. Then writes ``cv = L⁻¹ D γ`` (``D γ = B[:, n]``), so
     ``(D A)⁺ D γ = Qᵀ cv``, keeps the reflectors in ``Hv``/``beta`` (:func:`_lq_rows`,
-    :func:`_lq_min_norm`) and returns True. Returns False when the bound fails.
+    :func:`_lq_min_norm`) and returns :data:`LQ_INVERSE`. Returns :data:`LQ_NONE` when the
+    bound fails. With more than :data:`DENSE_INVERSE_MAX_ROWS` rows the certificate is
+    :func:`_certify_profile` (:data:`LQ_PROFILE`).
 
     Sparsity: constraint Jacobians in absolute coordinates are sparse (a planar pin row has
     3 nonzeros of ``n``), and so are the first reflectors. ``Hx[j] = [c, k_1 … k_c]`` lists
-    the columns where reflector ``j`` is nonzero (``k_1 = j``); every product with it runs over
-    those only. The sums skip exact zero terms only, so the results are those of the dense
-    loops (up to the sign of a zero).
+    the columns where reflector ``j`` is nonzero (``k_1`` is its pivot column, onto which it
+    maps row j); every product with it runs over those only, and only over the rows that can
+    be nonzero there (``Lr[k]``: the last row that may have a nonzero in column k). The sums
+    skip exact zero terms only, so the results are those of the dense loops (up to the sign
+    of a zero). With few rows the pivot of reflector j is column j and the rows are taken in
+    their order. With many rows (a large mechanism, where the dense order would fill L and
+    the reflectors: A02 N = 40 has a profile of 121 columns in the builder's order) the rows
+    are taken in the order of their first nonzero column (``Ro``) and the pivot is the first
+    column of the row not pivoted yet with a nonzero entry: the reflectors then stay within
+    the bodies a constraint couples. ``Pc`` lists the pivot columns, then the others, so that
+    row ``i`` of ``H_{m−1} ⋯ H_0`` is ``e_{Pc[i]}ᵀ H_{m−1} ⋯ H_0``; L is in that order.
     """
+    sparse = m > DENSE_INVERSE_MAX_ROWS
+    if sparse:  # rows by their first nonzero column (a stable sort)
+        for i in range(m):
+            f = 0
+            while f < n - 1 and B[i, f] == 0.0:
+                f += 1
+            cv[i] = f * float(m) + i
+        order = np.argsort(cv[:m])
+        for i in range(m):
+            Ro[i] = order[i]
+    else:
+        for i in range(m):
+            Ro[i] = i
+    for k in range(n):
+        Pc[k] = 0  # 1 once pivoted
+        Lr[k] = -1
     for i in range(m):
+        src = Ro[i]
         for k in range(n):
-            Wq[i, k] = B[i, k]
+            x = B[src, k]
+            Wq[i, k] = x
+            if x != 0.0:
+                Lr[k] = i
     for j in range(m):
-        x0 = Wq[j, j]
+        if sparse:
+            p = -1
+            for k in range(n):
+                if Pc[k] == 0 and Wq[j, k] != 0.0:
+                    p = k
+                    break
+            if p < 0:
+                return LQ_NONE
+        else:
+            p = j
+        x0 = Wq[j, p]
         s = x0 * x0
-        Hv[j, j] = x0
-        Hx[j, 1] = j
+        Hv[j, p] = x0
+        Hx[j, 1] = p
+        Pc[p] = 1
         cnt = 1
-        for k in range(j + 1, n):
+        imax = Lr[p]
+        for k in range(p + 1, n):
+            if Pc[k] != 0:
+                continue
             x = Wq[j, k]
             Hv[j, k] = x
             if x != 0.0:
                 s += x * x
                 Hx[j, 1 + cnt] = k
                 cnt += 1
+                if Lr[k] > imax:
+                    imax = Lr[k]
         Hx[j, 0] = cnt
         if s == 0.0:
-            return False
+            return LQ_NONE
         nrm = math.sqrt(s)
         alpha = -nrm if x0 >= 0.0 else nrm
         v0 = x0 - alpha
-        Hv[j, j] = v0
+        Hv[j, p] = v0
         bj = 2.0 / (s - x0 * x0 + v0 * v0)
         beta[j] = bj
-        Wq[j, j] = alpha
-        for k in range(j + 1, n):
-            Wq[j, k] = 0.0
-        # rows below: four at a time, so four independent dot products are in flight (each
-        # still one sequential sum over k, so the result is that of a row-by-row loop)
+        Wq[j, p] = alpha
+        for t in range(2, cnt + 1):
+            Wq[j, Hx[j, t]] = 0.0
+        # rows below that can be nonzero in the reflector's columns: four at a time, so four
+        # independent dot products are in flight (each still one sequential sum over k, so the
+        # result is that of a row-by-row loop)
         i = j + 1
-        while i + 3 < m:
+        while i + 3 <= imax:
             d0 = 0.0
             d1 = 0.0
             d2 = 0.0
@@ -209,7 +284,7 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx):  # type: ignore[no-u
                     Wq[i + 2, k] -= d2 * hk
                     Wq[i + 3, k] -= d3 * hk
             i += 4
-        while i < m:
+        while i <= imax:
             d = 0.0
             for t in range(1, cnt + 1):
                 k = Hx[j, t]
@@ -220,6 +295,20 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx):  # type: ignore[no-u
                     k = Hx[j, t]
                     Wq[i, k] -= d * Hv[j, k]
             i += 1
+        for t in range(1, cnt + 1):  # those rows may now be nonzero in all its columns
+            k = Hx[j, t]
+            if imax > Lr[k]:
+                Lr[k] = imax
+    for i in range(m):  # Pc: the pivot columns in order, then the others
+        Pc[i] = Hx[i, 1]
+        Lr[Hx[i, 1]] = -2
+    c = m
+    for k in range(n):
+        if Lr[k] != -2:
+            Pc[c] = k
+            c += 1
+    if m > DENSE_INVERSE_MAX_ROWS:
+        return _certify_profile(B, m, n, rtol, Wq, Li, cv, G, Lf, Ro, Pc)
     fl = 0.0
     for i in range(m):
         for k in range(i + 1):
@@ -252,17 +341,129 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx):  # type: ignore[no-u
     fi = f0 + f1
     margin = QR_MARGIN if rtol <= QR_MARGIN_RTOL else 1.0
     if not (math.sqrt(fl) * math.sqrt(fi) * margin * rtol < 1.0):
-        return False
+        return LQ_NONE
     for i in range(m):
         s = 0.0
         for k in range(i + 1):
             s += Li[i, k] * B[k, n]
         cv[i] = s
-    return True
+    return LQ_INVERSE
 
 
 @njit(cache=True)
-def _lq_rows(Hv, beta, m, n, first, count, E, Hx):  # type: ignore[no-untyped-def]
+def _certify_profile(B, m, n, rtol, Wq, Li, cv, G, Lf, Ro, Pc):  # type: ignore[no-untyped-def]
+    """The certification of :func:`_lq_certified` for many rows, in O(m b²) (b: L's bandwidth).
+
+    ``‖L‖_F ‖L⁻¹‖_F ≥ m`` cannot certify a cutoff ``rtol ≥ 1/m`` (the projection's 1e-2 with
+    over 100 rows), and the dense ``L⁻¹`` costs O(m³). Instead: ``T = L Lᵀ = (D A)(D A)ᵀ`` has
+    the eigenvalues ``σ_i²`` and at most ``‖T‖∞ ≥ σ_max²``; a Cholesky factorization of
+    ``T − τ I`` with ``τ = (CERT_SLACK · max(rtol, CERT_FLOOR))² ‖T‖∞`` succeeds iff every
+    ``σ_i² > τ`` (to round-off ~m·eps·‖T‖, which the floor keeps ≥ 1e3 times below τ), so every
+    σ_i is above ``rtol · σ_max`` and the SVD's rule would keep all m rows. L keeps the row
+    profile of ``D A`` (a constraint row touches a few bodies), and ``T`` and its factor keep
+    L's, so both are formed over the profile only: row i of L starts at column ``Lf[i]``.
+
+    On success ``Li`` holds ``L`` itself (rows in the order ``Ro``, columns in the pivot order
+    ``Pc``; lower triangle over the profile, the rest is not read), ``cv = L⁻¹ (D γ)[Ro]`` by
+    forward substitution, and it returns :data:`LQ_PROFILE`; else
+    :data:`LQ_NONE`. Scratch: ``G`` (m × m, the factor of ``T − τI``), ``cv``.
+    """
+    for i in range(m):  # L (in the pivot order Pc) and its row profile
+        f = 0
+        while f < i and Wq[i, Pc[f]] == 0.0:
+            f += 1
+        Lf[i] = f
+        for c in range(f, i + 1):
+            Li[i, c] = Wq[i, Pc[c]]
+    for i in range(m):  # T = L Lᵀ over the profile: T_ij = 0 for j < Lf[i]
+        cv[i] = 0.0
+    for i in range(m):
+        fi = Lf[i]
+        for j in range(fi, i + 1):
+            s = 0.0
+            for k in range(max(fi, Lf[j]), j + 1):
+                s += Li[i, k] * Li[j, k]
+            G[i, j] = s
+            a = abs(s)
+            cv[i] += a  # |T| row sums (T symmetric: row i's entries left and below the diagonal)
+            if j < i:
+                cv[j] += a
+    tnorm = 0.0
+    for i in range(m):
+        tnorm = max(tnorm, cv[i])
+    rt = CERT_SLACK * max(rtol, CERT_FLOOR)
+    tau = rt * rt * tnorm
+    for i in range(m):  # Cholesky of T − τI, row by row over the profile
+        fi = Lf[i]
+        for j in range(fi, i):
+            s = G[i, j]
+            for k in range(max(fi, Lf[j]), j):
+                s -= G[i, k] * G[j, k]
+            G[i, j] = s / G[j, j]
+        s = G[i, i] - tau
+        for k in range(fi, i):
+            s -= G[i, k] * G[i, k]
+        if not s > 0.0:
+            return LQ_NONE
+        G[i, i] = math.sqrt(s)
+    for i in range(m):
+        cv[i] = B[Ro[i], n]
+    _profile_solve(Li, Lf, m, cv)
+    return LQ_PROFILE
+
+
+@njit(cache=True)
+def _svd_lapack(B, m, n, rtol, V, Kt, Li, cv):  # type: ignore[no-untyped-def]
+    """Step 3 for many rows: LAPACK's SVD of ``D A = U Σ Vᵀ`` (``B[:, :n]``) instead of the
+    Jacobi sweeps, with the same rank rule (keep ``σ_i > rtol · σ_max``).
+
+    Writes the kept right singular vectors into the rows of ``V``, ``cv_k = (u_kᵀ D γ)/σ_k``,
+    the rows ``u_kᵀ/σ_k`` of ``Σ⁻¹Uᵀ`` into ``Li`` (for :func:`solve_again`) and, when the
+    null-space form applies (``n − r ≤ r``), the other right singular vectors (an orthonormal
+    basis of N(D A) at that rank) into the rows of ``Kt``. Returns ``(r, null-space form)``.
+    """
+    X = np.empty((m, n))
+    for i in range(m):
+        for k in range(n):
+            X[i, k] = B[i, k]
+    U, s, Vt = np.linalg.svd(X)  # full: Vt is n × n
+    p = s.shape[0]
+    smax = s[0] if p > 0 else 0.0
+    r = 0
+    for a in range(p):
+        if s[a] > rtol * smax:
+            r += 1
+    for a in range(r):
+        inv = 1.0 / s[a]
+        for k in range(n):
+            V[a, k] = Vt[a, k]
+        t = 0.0
+        for c in range(m):
+            t += U[c, a] * B[c, n]
+        cv[a] = t * inv
+        for c in range(m):
+            Li[a, c] = U[c, a] * inv
+    zmode = n - r <= r
+    if zmode:
+        for a in range(n - r):
+            for k in range(n):
+                Kt[a, k] = Vt[r + a, k]
+    return r, zmode
+
+
+@njit(cache=True, inline="always")
+def _profile_solve(Lp, Lf, m, cv):  # type: ignore[no-untyped-def]
+    """``cv ← L⁻¹ cv`` by forward substitution over L's row profile (``Lp`` holds L, row i from
+    column ``Lf[i]``)."""
+    for i in range(m):
+        s = cv[i]
+        for k in range(Lf[i], i):
+            s -= Lp[i, k] * cv[k]
+        cv[i] = s / Lp[i, i]
+
+
+@njit(cache=True)
+def _lq_rows(Hv, beta, m, n, first, count, E, Hx, Pc):  # type: ignore[no-untyped-def]
     """Rows ``first … first+count−1`` of the orthogonal ``H_{m−1} ⋯ H_0`` into ``E[:count]``.
 
     Rows ``0 … m−1`` are ``Q`` (an orthonormal basis of R(Aᵀ)), rows ``m … n−1`` an orthonormal
@@ -272,7 +473,8 @@ def _lq_rows(Hv, beta, m, n, first, count, E, Hx):  # type: ignore[no-untyped-de
     """
     for i in range(count):
         for k in range(n):
-            E[i, k] = 1.0 if k == first + i else 0.0
+            E[i, k] = 0.0
+        E[i, Pc[first + i]] = 1.0
     for j in range(m - 1, -1, -1):
         bj = beta[j]
         cnt = Hx[j, 0]
@@ -289,11 +491,13 @@ def _lq_rows(Hv, beta, m, n, first, count, E, Hx):  # type: ignore[no-untyped-de
 
 
 @njit(cache=True)
-def _lq_min_norm(Hv, beta, m, n, cv, w, Hx):  # type: ignore[no-untyped-def]
+def _lq_min_norm(Hv, beta, m, n, cv, w, Hx, Pc):  # type: ignore[no-untyped-def]
     """``w = −Qᵀ cv = −H_0 ⋯ H_{m−1} [cv; 0]`` (= ``−(DA)⁺ D γ`` with ``cv = L⁻¹ D γ``);
     reflector ``j`` over its nonzero columns ``Hx[j]``."""
     for i in range(n):
-        w[i] = cv[i] if i < m else 0.0
+        w[i] = 0.0
+    for i in range(m):
+        w[Pc[i]] = cv[i]
     for j in range(m - 1, -1, -1):
         cnt = Hx[j, 0]
         d = 0.0
@@ -539,7 +743,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
     n = M.shape[1]
     m = A.shape[1]
     nmu = mu_in.shape[0]
-    B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, _ist, _mu1, Li, dsc, info, Hx = work
+    B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, _ist, _mu1, Li, dsc, info, Hx, Lf, Ro, Pc, Lr = work
     for b in range(lo, hi):
         if again:  # solve_again: the factorization left by the last call; new h, f, γ
             if info[0] == 0.0:
@@ -554,12 +758,16 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             mu = info[4]
             for i in range(m):
                 Bw[i, 0] = dsc[i] * gam[b, i]  # D γ
-            if info[5] != 0.0:  # certified LQ: cv = L⁻¹ D γ
+            if info[5] == LQ_INVERSE:  # certified LQ: cv = L⁻¹ D γ
                 for i in range(m):
                     s = 0.0
                     for k in range(i + 1):
                         s += Li[i, k] * Bw[k, 0]
                     cv[i] = s
+            elif info[5] == LQ_PROFILE:
+                for i in range(m):
+                    cv[i] = Bw[Ro[i], 0]
+                _profile_solve(Li, Lf, m, cv)
             else:  # Jacobi: cv = Σ⁻¹Uᵀ D γ (kept rows)
                 for k in range(r):
                     s = 0.0
@@ -651,7 +859,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             # it is certainly full: σ_min/σ_max ≥ 1/(‖L‖_F ‖L⁻¹‖_F) > QR_MARGIN · rtol means every
             # σ_i is kept by the SVD's rule too. Then V = Q and (D A)⁺ D γ = Qᵀ L⁻¹ D γ. Otherwise
             # (near a singular configuration, redundant rows) the Jacobi SVD below decides.
-            qr_ok = False
+            lq = LQ_NONE
             zmode = False
             r = 0
             if QR_MIN_ROWS <= m <= n:
@@ -660,17 +868,21 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                     if sig[i] > thr:
                         live += 1
                 if live == m:
-                    qr_ok = _lq_certified(B, m, n, rtol, Et, Ft, Li, cv, sig, Hx)
-                    if qr_ok:
+                    lq = _lq_certified(B, m, n, rtol, Et, Ft, Li, cv, sig, Hx, G, Lf, Ro, Pc, Lr)
+                    if lq != LQ_NONE:
                         r = m
                         # few degrees of freedom (n − m ≤ m): work with the null-space basis Z
                         # (rows of Kt) — M̄ = μI + Zᵀ(S − μI)Z, S = Z M Zᵀ, P = ZᵀZ — instead of V
                         zmode = n - m <= m
                         if zmode:
-                            _lq_rows(Ft, sig, m, n, m, n - m, Kt, Hx)
+                            _lq_rows(Ft, sig, m, n, m, n - m, Kt, Hx, Pc)
                         else:
-                            _lq_rows(Ft, sig, m, n, 0, m, V, Hx)
-            if not qr_ok:
+                            _lq_rows(Ft, sig, m, n, 0, m, V, Hx, Pc)
+            qr_ok = lq != LQ_NONE
+            lapack = not qr_ok and m > JACOBI_MAX_ROWS
+            if lapack:  # many rows: LAPACK's SVD (the Jacobi sweeps cost O(m² n) each)
+                r, zmode = _svd_lapack(B, m, n, rtol, V, Kt, Li, cv)
+            elif not qr_ok:
                 if warm:  # start from the previous state's rotation: B ← T B (T orthogonal, m × m)
                     for i in range(m):
                         for k in range(n + 1):
@@ -837,20 +1049,20 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             mu_out[b] = mu
             ratio[b] = rt if st == SMALL_PIVOT else 0.0
             # what solve_again needs to reuse this factorization (the last state's)
-            info[0] = 1.0 if (st == OK and (qr_ok or warm)) else 0.0
+            info[0] = 1.0 if (st == OK and (qr_ok or warm or lapack)) else 0.0
             info[1] = 1.0 if zmode else 0.0
             info[2] = r
             info[3] = 1.0 if diag else 0.0
             info[4] = mu
-            info[5] = 1.0 if qr_ok else 0.0
+            info[5] = lq
             info[7] = 0.0  # no solve_near result on this factorization yet
             if st != OK:
                 continue
         # ---------------------------------------------------------------- 6. right-hand side, solve
         # w = −(DA)⁺ D γ from cv (both branches leave it: certified LQ cv = L⁻¹ D γ, Jacobi
         # cv_k = (u_kᵀ D γ)/σ_k)
-        if zmode:  # −Qᵀ cv through the reflectors
-            _lq_min_norm(Ft, sig, m, n, cv, wv, Hx)
+        if zmode and info[5] != LQ_NONE:  # −Qᵀ cv through the reflectors
+            _lq_min_norm(Ft, sig, m, n, cv, wv, Hx, Pc)
         else:  # −Σ_k v_k cv_k
             for j in range(n):
                 wv[j] = 0.0
@@ -1017,14 +1229,20 @@ NEAR_PASSES = 3
 
 
 @njit(cache=True, inline="always")
-def _apply_pinv(Hv, beta, Li, dsc, m, n, t, cv, x, Hx):  # type: ignore[no-untyped-def]
-    """``x = A_h⁺ t = (D A_h)⁺ D t = Qᵀ L⁻¹ D t`` with the certified LQ held (``cv``: scratch)."""
-    for i in range(m):
-        s = 0.0
-        for k in range(i + 1):
-            s += Li[i, k] * (dsc[k] * t[k])
-        cv[i] = s
-    _lq_min_norm(Hv, beta, m, n, cv, x, Hx)  # −Qᵀ cv
+def _apply_pinv(Hv, beta, Li, dsc, m, n, t, cv, x, Hx, mode, Lf, Ro, Pc):  # type: ignore[no-untyped-def]
+    """``x = A_h⁺ t = (D A_h)⁺ D t = Qᵀ L⁻¹ D t`` with the certified LQ held (``cv``: scratch;
+    ``mode``: :data:`LQ_INVERSE` or :data:`LQ_PROFILE`, what ``Li`` holds)."""
+    if mode == LQ_PROFILE:
+        for i in range(m):
+            cv[i] = dsc[Ro[i]] * t[Ro[i]]
+        _profile_solve(Li, Lf, m, cv)
+    else:
+        for i in range(m):
+            s = 0.0
+            for k in range(i + 1):
+                s += Li[i, k] * (dsc[k] * t[k])
+            cv[i] = s
+    _lq_min_norm(Hv, beta, m, n, cv, x, Hx, Pc)  # −Qᵀ cv
     for j in range(n):
         x[j] = -x[j]
 
@@ -1075,8 +1293,10 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: igno
     Kt, Tt, Et, Ft, G = work[2], work[3], work[4], work[5], work[6]
     g, wv, u, sig, cv, Bw, Li, dsc, info, Hx = (work[9], work[10], work[11], work[12], work[13],
                                                work[15], work[19], work[20], work[21], work[22])  # fmt: skip
-    if info[0] == 0.0 or info[1] == 0.0 or info[5] == 0.0 or int(info[2]) != m:
+    Lf, Ro, Pc = work[23], work[24], work[25]
+    if info[0] == 0.0 or info[1] == 0.0 or info[5] == LQ_NONE or int(info[2]) != m:
         return NO_FACTOR
+    mode = int(info[5])
     k = n - m
     tol = 64.0 * _EPS
     res = Bw[0]  # scratch (n + 1 ≥ m entries)
@@ -1097,7 +1317,7 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: igno
                 for j in range(n):
                     s += A[i, j] * zr[j]
                 res[i] = s
-            _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, u, Hx)
+            _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, u, Hx, mode, Lf, Ro, Pc)
             for j in range(n):
                 zr[j] -= u[j]
         for a in range(k):
@@ -1116,7 +1336,7 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: igno
     # w: minimum-norm solution of A w = −γ
     for i in range(m):
         res[i] = gam[i]
-    _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, wv, Hx)
+    _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, wv, Hx, mode, Lf, Ro, Pc)
     for j in range(n):
         wv[j] = -wv[j]
     gs = 0.0
@@ -1131,7 +1351,7 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: igno
         if e <= tol * (gs + wmax):
             ok = True
             break
-        _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, u, Hx)
+        _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, u, Hx, mode, Lf, Ro, Pc)
         for j in range(n):
             wv[j] -= u[j]
     if not ok:

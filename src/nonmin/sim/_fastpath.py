@@ -10,8 +10,9 @@ projection in one compiled loop (:mod:`._fast_kernels`) when nothing in it needs
 * the model returns a program from :meth:`nonmin.model.Model.fast_program` for the active set
   (planar models without springs, dampers, drivers or user-defined joints);
 * the compiled backend of :mod:`nonmin.core` is in use (numba installed, backend not
-  ``"numpy"``; with ``"auto"`` up to :data:`nonmin.core._fast.AUTO_NUMBA_MAX_N` coordinates,
-  above which LAPACK's SVD is faster).
+  ``"numpy"``; with ``"auto"`` up to :data:`nonmin.core._fast.AUTO_NUMBA_MAX_N` coordinates or
+  degrees of freedom ``n − m``, :func:`nonmin.core._fast.auto_compiled`; with more of both,
+  LAPACK is faster).
 
 The loop runs in chunks of steps (about :data:`CHUNK_SECONDS` of wall time each) so the progress
 bar moves, ``KeyboardInterrupt`` is honoured between chunks and ``max_steps`` is checked. When a
@@ -29,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._validation import SYMMETRY_RTOL
-from ..core._fast import AUTO_NUMBA_MAX_N, backend_setting, get_backend
+from ..core._fast import AUTO_NUMBA_MAX_N, auto_compiled, backend_setting, get_backend
 from ..core.linalg import DEFAULT_RTOL, SPD_RTOL
 from ..errors import InputError, MissingDependencyError
 from ._integrators import RK4
@@ -120,9 +121,11 @@ def _ineligible(
         return "no constraint is active"
     if get_backend() == "numpy":
         return "the nonmin.core backend is 'numpy' (set_backend('auto') or 'numba')"
-    if backend_setting() == "auto" and model.n > AUTO_NUMBA_MAX_N:
-        return (f"n = {model.n} > {AUTO_NUMBA_MAX_N} with backend 'auto' (LAPACK is faster there; "
-                "set_backend('numba') forces it)")
+    m = int(model.num_rows(active))
+    if backend_setting() == "auto" and not auto_compiled(model.n, m):
+        return (f"n = {model.n} coordinates and n − m = {model.n - m} > {AUTO_NUMBA_MAX_N} degrees "
+                "of freedom with backend 'auto' (LAPACK is faster there; set_backend('numba') "
+                "forces it)")
     if _kernels() is None:
         return "numba"
     return None
