@@ -569,6 +569,63 @@ def batch_n12(n_states: int = 10_000, repeats: int = 15) -> dict[str, Any]:
     return out
 
 
+def large() -> None:
+    """Single calls of ``forward_dynamics`` at n = 243 (and two random sparse cases), compiled
+    against the NumPy backend (LAPACK SVD), interleaved; prints medians and minima."""
+    import math
+
+    from nonmin.core import forward_dynamics, use_backend
+    from nonmin.library import a02_n_four_bar
+
+    mech = a02_n_four_bar(N=40)
+    model = mech.model
+
+    def chain(theta: float) -> tuple[np.ndarray, ...]:
+        c, s = math.cos(theta), math.sin(theta)
+        q, qd = [], []
+        for i in range(41):
+            q += [i + 0.5 * c, 0.5 * s, theta]
+            qd += [0.5 * s, -0.5 * c, -1.0]
+        for i in range(1, 41):
+            q += [i - 0.5 + c, s, 0.0]
+            qd += [s, -c, 0.0]
+        qa, qda = np.array(q), np.array(qd)
+        ct = model.constraint_terms(0.0, qa, qda, mech.state.active)
+        h = model.conservative_force(qa) - model.coriolis_force(qa, qda)
+        return model.mass_matrix(qa), h, np.ascontiguousarray(ct.A), ct.gamma
+
+    rng = np.random.default_rng(0)
+    cases: list[tuple[str, tuple[np.ndarray, ...], float]] = [
+        ("A02 N=40, crank 1.3 rad, rtol 1e-10", chain(1.3), 1e-10),
+        ("A02 N=40, crank 1.3 rad, rtol 1e-2", chain(1.3), 1e-2),
+        ("A02 N=40, crank 0.1 rad, rtol 1e-2 (SVD)", chain(0.1), 1e-2),
+        ("A02 N=40, horizontal, rtol 1e-10 (SVD)", chain(0.0), 1e-10),
+    ]
+    for n, m in ((243, 60), (243, 121)):
+        A = rng.standard_normal((m, n)) * (rng.uniform(size=(m, n)) < 0.03)
+        A[np.arange(m), np.arange(m)] += 1.0
+        cases.append((f"random sparse n={n}, m={m}", (np.diag(rng.uniform(1, 2, n)),
+                      rng.standard_normal(n), A, rng.standard_normal(m)), 1e-10))  # fmt: skip
+    print("| case | compiled median (min) [ms] | NumPy median (min) [ms] | NumPy / compiled |")
+    print("|---|---|---|---|")
+    for name, (M, h, A, g), rtol in cases:
+        times: dict[str, list[float]] = {"numba": [], "numpy": []}
+        for b in times:
+            with use_backend(b):
+                forward_dynamics(M, h, A, g, rtol=rtol)  # compile / warm up
+        for _ in range(15):
+            for b in times:
+                with use_backend(b):
+                    t0 = time.perf_counter()
+                    forward_dynamics(M, h, A, g, rtol=rtol)
+                    times[b].append((time.perf_counter() - t0) * 1e3)
+        med = {b: float(np.median(v)) for b, v in times.items()}
+        print(f"| {name} | {med['numba']:.2f} ({min(times['numba']):.2f}) | "
+              f"{med['numpy']:.2f} ({min(times['numpy']):.2f}) | {med['numpy'] / med['numba']:.1f} |",
+              flush=True)  # fmt: skip
+    print("load average", os.getloadavg())
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="small sizes, few repeats")
@@ -577,7 +634,14 @@ def main(argv: list[str] | None = None) -> int:
         "--batch-n12", action="store_true",
         help="only nonmin's batched path at n = 12 over 10^4 states (no files written)",
     )  # fmt: skip
+    parser.add_argument(
+        "--large", action="store_true",
+        help="only single calls at n = 243 (A02 N = 40 and random sparse), compiled vs NumPy",
+    )  # fmt: skip
     args = parser.parse_args(argv)
+    if args.large:
+        large()
+        return 0
     if args.batch_n12:
         batch_n12()
         return 0

@@ -181,11 +181,12 @@ _DEFAULT_PARAMS = tuple(
 #: In ``"auto"`` mode the compiled path is used up to this n, and above it when the constraints
 #: leave at most this many degrees of freedom (``n − m``, see :func:`auto_compiled`); otherwise
 #: the NumPy path (LAPACK) is used. Measured (one BLAS thread, ``benchmarks/core_bench.py
-#: --large``): an A02 N = 40 evaluation (n = 243, A 242 × 243, one degree of freedom) takes
-#: ~0.5 ms compiled (certified sparse LQ, null-space form) against ~20 ms with NumPy's SVD; with
-#: many degrees of freedom the compiled path forms and factorizes the n × n M̄ in scalar loops
-#: (n = 243, m = 121: 8.9 ms against 7.6 ms). ``set_backend("numba")`` forces the compiled
-#: path at any size.
+#: --large``, medians, 00:11 UTC): an A02 N = 40 evaluation (n = 243, A 242 × 243, one degree of
+#: freedom) takes 0.52 ms compiled (certified sparse LQ, null-space form) against 15.3 ms with
+#: NumPy's SVD, and 11–12.5 ms against 17–19 ms where the compiled path also needs LAPACK's SVD
+#: (near a singular configuration); with many degrees of freedom the compiled path forms and
+#: factorizes the n × n M̄ in scalar loops (random sparse n = 243, m = 121: 11.3 against
+#: 10.9 ms). ``set_backend("numba")`` forces the compiled path at any size.
 AUTO_NUMBA_MAX_N = 64
 
 
