@@ -307,7 +307,7 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx, G, Lf, Ro, Pc, Lr):  
         if Lr[k] != -2:
             Pc[c] = k
             c += 1
-    if m > DENSE_INVERSE_MAX_ROWS:
+    if sparse:
         return _certify_profile(B, m, n, rtol, Wq, Li, cv, G, Lf, Ro, Pc)
     fl = 0.0
     for i in range(m):
@@ -342,11 +342,7 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx, G, Lf, Ro, Pc, Lr):  
     margin = QR_MARGIN if rtol <= QR_MARGIN_RTOL else 1.0
     if not (math.sqrt(fl) * math.sqrt(fi) * margin * rtol < 1.0):
         return LQ_NONE
-    for i in range(m):
-        s = 0.0
-        for k in range(i + 1):
-            s += Li[i, k] * B[k, n]
-        cv[i] = s
+    _apply_linv(LQ_INVERSE, Li, Lf, Ro, m, B[:, n], cv)
     return LQ_INVERSE
 
 
@@ -406,9 +402,7 @@ def _certify_profile(B, m, n, rtol, Wq, Li, cv, G, Lf, Ro, Pc):  # type: ignore[
         if not s > 0.0:
             return LQ_NONE
         G[i, i] = math.sqrt(s)
-    for i in range(m):
-        cv[i] = B[Ro[i], n]
-    _profile_solve(Li, Lf, m, cv)
+    _apply_linv(LQ_PROFILE, Li, Lf, Ro, m, B[:, n], cv)
     return LQ_PROFILE
 
 
@@ -422,11 +416,7 @@ def _svd_lapack(B, m, n, rtol, V, Kt, Li, cv):  # type: ignore[no-untyped-def]
     null-space form applies (``n − r ≤ r``), the other right singular vectors (an orthonormal
     basis of N(D A) at that rank) into the rows of ``Kt``. Returns ``(r, null-space form)``.
     """
-    X = np.empty((m, n))
-    for i in range(m):
-        for k in range(n):
-            X[i, k] = B[i, k]
-    U, s, Vt = np.linalg.svd(X)  # full: Vt is n × n
+    U, s, Vt = np.linalg.svd(B[:, :n])  # (numba copies it for LAPACK); full: Vt is n × n
     p = s.shape[0]
     smax = s[0] if p > 0 else 0.0
     r = 0
@@ -460,6 +450,23 @@ def _profile_solve(Lp, Lf, m, cv):  # type: ignore[no-untyped-def]
         for k in range(Lf[i], i):
             s -= Lp[i, k] * cv[k]
         cv[i] = s / Lp[i, i]
+
+
+@njit(cache=True, inline="always")
+def _apply_linv(mode, Li, Lf, Ro, m, y, cv):  # type: ignore[no-untyped-def]
+    """``cv = L⁻¹ y`` with the certified LQ's factor (``y`` of length m in A's row order):
+    :data:`LQ_INVERSE` — ``Li`` holds ``L⁻¹`` (rows in their order); :data:`LQ_PROFILE` —
+    ``Li`` holds ``L`` over its row profile (rows in the order ``Ro``, :func:`_profile_solve`)."""
+    if mode == LQ_PROFILE:
+        for i in range(m):
+            cv[i] = y[Ro[i]]
+        _profile_solve(Li, Lf, m, cv)
+    else:
+        for i in range(m):
+            s = 0.0
+            for k in range(i + 1):
+                s += Li[i, k] * y[k]
+            cv[i] = s
 
 
 @njit(cache=True)
@@ -758,17 +765,9 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             mu = info[4]
             for i in range(m):
                 Bw[i, 0] = dsc[i] * gam[b, i]  # D γ
-            if info[5] == LQ_INVERSE:  # certified LQ: cv = L⁻¹ D γ
-                for i in range(m):
-                    s = 0.0
-                    for k in range(i + 1):
-                        s += Li[i, k] * Bw[k, 0]
-                    cv[i] = s
-            elif info[5] == LQ_PROFILE:
-                for i in range(m):
-                    cv[i] = Bw[Ro[i], 0]
-                _profile_solve(Li, Lf, m, cv)
-            else:  # Jacobi: cv = Σ⁻¹Uᵀ D γ (kept rows)
+            if info[5] != LQ_NONE:  # certified LQ: cv = L⁻¹ D γ
+                _apply_linv(int(info[5]), Li, Lf, Ro, m, Bw[:, 0], cv)
+            else:  # Jacobi or LAPACK SVD: cv = Σ⁻¹Uᵀ D γ (kept rows)
                 for k in range(r):
                     s = 0.0
                     for c in range(m):
@@ -1231,17 +1230,11 @@ NEAR_PASSES = 3
 @njit(cache=True, inline="always")
 def _apply_pinv(Hv, beta, Li, dsc, m, n, t, cv, x, Hx, mode, Lf, Ro, Pc):  # type: ignore[no-untyped-def]
     """``x = A_h⁺ t = (D A_h)⁺ D t = Qᵀ L⁻¹ D t`` with the certified LQ held (``cv``: scratch;
-    ``mode``: :data:`LQ_INVERSE` or :data:`LQ_PROFILE`, what ``Li`` holds)."""
-    if mode == LQ_PROFILE:
-        for i in range(m):
-            cv[i] = dsc[Ro[i]] * t[Ro[i]]
-        _profile_solve(Li, Lf, m, cv)
-    else:
-        for i in range(m):
-            s = 0.0
-            for k in range(i + 1):
-                s += Li[i, k] * (dsc[k] * t[k])
-            cv[i] = s
+    ``mode``: :data:`LQ_INVERSE` or :data:`LQ_PROFILE`, what ``Li`` holds). ``t`` is scratch:
+    it is scaled to ``D t`` in place."""
+    for i in range(m):
+        t[i] *= dsc[i]
+    _apply_linv(mode, Li, Lf, Ro, m, t, cv)
     _lq_min_norm(Hv, beta, m, n, cv, x, Hx, Pc)  # −Qᵀ cv
     for j in range(n):
         x[j] = -x[j]
