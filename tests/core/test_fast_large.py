@@ -174,3 +174,61 @@ def test_large_solve_again_and_near(theta, rtol):
     assert solve_work(M, h1, h1, False, A2, g1, *args, fresh, none, none, scratch(n, m), np.eye(m),
                       False) == OK  # fmt: skip
     assert np.max(np.abs(near[:n] - fresh[:n])) <= 1e-11 * float(np.max(np.abs(fresh[:n])))
+
+
+def test_large_scratch_reused_across_changing_patterns():
+    """One scratch, states whose A has different sparsity patterns (B = D A is written on A's
+    pattern only and cleared on the last one): every call agrees with a fresh scratch and with
+    NumPy, including after an uncertified (SVD) state and a state with an exact zero that
+    another state's pattern has (sin 0 at the horizontal)."""
+    from nonmin.core._fast_kernels import OK, scratch, solve_work
+
+    N = 12
+    states = [_terms(N, th) for th in (1.3, 0.0, 0.7, 0.1, 1.3)]
+    rng = np.random.default_rng(5)
+    M0, h0, A0, g0 = states[0]
+    dense = A0.copy()  # a different pattern: extra nonzeros in every row
+    dense[A0 == 0.0] = 1e-3 * rng.standard_normal(int(np.sum(A0 == 0.0))) * (
+        rng.uniform(size=int(np.sum(A0 == 0.0))) < 0.05)  # fmt: skip
+    states.insert(2, (M0, h0, dense, g0))
+    n, m = M0.shape[0], A0.shape[0]
+    assert m > 32  # the sparse path
+    work = scratch(n, m)
+    none = np.empty((0, 0))
+    for M, h, A, g in states:
+        got = np.empty(2 * n + 3)
+        fresh = np.empty(2 * n + 3)
+        for wk, out in ((work, got), (scratch(n, m), fresh)):
+            st = solve_work(M, h, h, False, A, g, 1.0, False, 1e-10, 1e-13, 1e-12, False, out,
+                            none, none, wk, np.eye(m), False)  # fmt: skip
+            assert st == OK
+        assert np.array_equal(got, fresh)
+        _agree(M, h, A, g, 1e-10)
+
+
+def test_large_nonfinite_and_huge_entries():
+    """The sparse path learns A's finiteness from its row norms: a NaN or an infinity is
+    reported (NumPy path: a typed error), a finite entry whose square overflows is not (the
+    dense check decides; both backends then agree)."""
+    from nonmin.core._fast_kernels import NONFINITE, OK, scratch, solve_work
+    from nonmin.errors import InputError
+
+    M, h, A, g = _terms(12, 1.3)
+    n, m = M.shape[0], A.shape[0]
+    none = np.empty((0, 0))
+    for bad in (np.nan, np.inf):
+        Ab = A.copy()
+        Ab[m // 2, np.flatnonzero(Ab[m // 2])[0]] = bad
+        out = np.empty(2 * n + 3)
+        st = solve_work(M, h, h, False, Ab, g, 1.0, False, 1e-10, 1e-13, 1e-12, False, out,
+                        none, none, scratch(n, m), np.eye(m), False)  # fmt: skip
+        assert st == NONFINITE
+        with use_backend("numba"), pytest.raises(InputError, match="A"):
+            solve_dynamics(M, h, Ab, g)
+    Ah = A.copy()
+    Ah[3] *= 1e160  # its squares overflow; the row is still finite (and equilibrated away)
+    out = np.empty(2 * n + 3)
+    st = solve_work(M, h, h, False, Ah, g, 1.0, False, 1e-10, 1e-13, 1e-12, False, out,
+                    none, none, scratch(n, m), np.eye(m), False)  # fmt: skip
+    assert st == OK  # not NONFINITE; the NumPy path decides the same (rank 0: that row's
+    _agree(M, h, Ah, g, 1e-10)  # infinite norm makes every other row negligible)

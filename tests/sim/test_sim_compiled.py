@@ -222,11 +222,13 @@ def test_evaluation_at_the_same_q_recomputes_only_gamma() -> None:
     qd1, qd2 = rng.standard_normal(prog.n), rng.standard_normal(prog.n)
 
     def fresh(qd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        ws = kern.carry(prog.n, prog.m, prog.I6.shape[1], prog.var_idx.shape[0], prog.A0)[0]
+        ws = kern.carry(prog.n, prog.m, prog.I6.shape[1], prog.var_idx.shape[0], prog.A0, prog.var_idx,
+                          prog.M)[0]
         kern._evaluate(pr, q, qd, ws)
         return ws[3].copy(), ws[2].copy()
 
-    ws = kern.carry(prog.n, prog.m, prog.I6.shape[1], prog.var_idx.shape[0], prog.A0)[0]
+    ws = kern.carry(prog.n, prog.m, prog.I6.shape[1], prog.var_idx.shape[0], prog.A0, prog.var_idx,
+                          prog.M)[0]
     kern._evaluate(pr, q, qd1, ws)
     kern._evaluate(pr, q.copy(), qd2, ws)  # same q: γ only
     A_ref, PG_ref = fresh(qd2)
@@ -234,6 +236,7 @@ def test_evaluation_at_the_same_q_recomputes_only_gamma() -> None:
     assert np.any(PG_ref[0] != 0.0) and not np.array_equal(PG_ref[1], fresh(qd1)[1])
     q2 = q + 1e-3
     kern._evaluate(pr, q2, qd2, ws)  # a new q: everything again
-    ws2 = kern.carry(prog.n, prog.m, prog.I6.shape[1], prog.var_idx.shape[0], prog.A0)[0]
+    ws2 = kern.carry(prog.n, prog.m, prog.I6.shape[1], prog.var_idx.shape[0], prog.A0, prog.var_idx,
+                          prog.M)[0]
     kern._evaluate(pr, q2, qd2, ws2)
     assert np.array_equal(ws[3], ws2[3]) and np.array_equal(ws[2], ws2[2])

@@ -119,8 +119,21 @@ def scratch(n, m):
     Ro = ints[o + m : o + 2 * m]
     Pc = ints[o + 2 * m : o + 2 * m + n]
     Lr = ints[o + 2 * m + n :]
+    # _lq_sparse's zero-initialized work matrix, row column lists and marks (many rows only)
+    # and the row patterns of A (Ap: of the last factorization, whose B is zero elsewhere;
+    # An: solve_near's), all for many rows only (see _sparse_rows)
+    ms = m if _sparse_rows(m) else 0
+    Wz = np.zeros((ms, n))
+    Rl = np.empty((ms, n + 1), dtype=np.int64)
+    In = np.zeros((ms, n), dtype=np.uint8)
+    Ap = np.zeros((ms, n + 1), dtype=np.int64)
+    An = np.zeros((ms, n + 1), dtype=np.int64)
+    if ms > 0:
+        for i in range(m):
+            for j in range(n1):
+                B[i, j] = 0.0
     return (B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, ints[:2], mu1, Li,
-            dsc, info, Hx, Lf, Ro, Pc, Lr)  # fmt: skip
+            dsc, info, Hx, Lf, Ro, Pc, Lr, Wz, Rl, In, Ap, An)  # fmt: skip
 
 
 #: Safety factor of the certified-QR rank decision (see :func:`_lq_certified`) for small
@@ -161,8 +174,64 @@ JACOBI_MAX_ROWS = 32
 QR_MIN_ROWS = 4
 
 
+@njit(cache=True, inline="always")
+def _sparse_rows(m):  # type: ignore[no-untyped-def]
+    """Many rows (a large mechanism): A is handled through its row patterns (:func:`_pattern`),
+    the LQ by :func:`_lq_sparse`, an uncertified state by LAPACK's SVD (never the Jacobi sweeps,
+    which rotate ``B`` in place)."""
+    return m > DENSE_INVERSE_MAX_ROWS and m > JACOBI_MAX_ROWS
+
+
+@njit(cache=True, inline="always")
+def _pattern(X, m, n, P):  # type: ignore[no-untyped-def]
+    """``P[i] = [count, k …]``: the columns of row i of ``X`` (m × n) with a nonzero entry
+    (a NaN counts), in increasing order."""
+    for i in range(m):
+        c = 0
+        for k in range(n):
+            if X[i, k] != 0.0:
+                P[i, 1 + c] = k
+                c += 1
+        P[i, 0] = c
+
+
+@njit(cache=True, inline="always")
+def _pattern_norm(X, i, n, P):  # type: ignore[no-untyped-def]
+    """:func:`_row_norm` over row i's pattern ``P[i]`` (the same partial sums, bitwise)."""
+    n4 = n - n % 4
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    for t in range(P[i, 0]):
+        k = P[i, 1 + t]
+        x = X[i, k]
+        if k >= n4:
+            s0 += x * x
+        else:
+            r = k % 4
+            if r == 0:
+                s0 += x * x
+            elif r == 1:
+                s1 += x * x
+            elif r == 2:
+                s2 += x * x
+            else:
+                s3 += x * x
+    return math.sqrt((s0 + s1) + (s2 + s3))
+
+
+@njit(cache=True, inline="always")
+def _pattern_dot(X, i, P, v, s):  # type: ignore[no-untyped-def]
+    """``s + X[i] · v`` over row i's pattern (the terms of the dense sum that are not zero)."""
+    for t in range(P[i, 0]):
+        k = P[i, 1 + t]
+        s += X[i, k] * v[k]
+    return s
+
+
 @njit(cache=True)
-def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx, G, Lf, Ro, Pc, Lr):  # type: ignore[no-untyped-def]
+def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx, Lf, Ro, Pc, Lr, Rl, In):  # type: ignore[no-untyped-def]
     """LQ factorization ``D A = L Q`` of ``B[:, :n]`` (m ≤ n, every row nonzero), if full rank
     is certain.
 
@@ -174,8 +243,9 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx, G, Lf, Ro, Pc, Lr):  
     the SVD's rule would keep all m rows. Then writes ``cv = L⁻¹ D γ`` (``D γ = B[:, n]``), so
     ``(D A)⁺ D γ = Qᵀ cv``, keeps the reflectors in ``Hv``/``beta`` (:func:`_lq_rows`,
     :func:`_lq_min_norm`) and returns :data:`LQ_INVERSE`. Returns :data:`LQ_NONE` when the
-    bound fails. With more than :data:`DENSE_INVERSE_MAX_ROWS` rows the certificate is
-    :func:`_certify_profile` (:data:`LQ_PROFILE`).
+    bound fails. This is the variant for few rows (at most :data:`DENSE_INVERSE_MAX_ROWS`):
+    rows in their order, the pivot of reflector j is column j (``Ro`` and ``Pc`` the
+    identity); many rows take :func:`_lq_sparse`.
 
     Sparsity: constraint Jacobians in absolute coordinates are sparse (a planar pin row has
     3 nonzeros of ``n``), and so are the first reflectors. ``Hx[j] = [c, k_1 … k_c]`` lists
@@ -183,48 +253,20 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx, G, Lf, Ro, Pc, Lr):  
     maps row j); every product with it runs over those only, and only over the rows that can
     be nonzero there (``Lr[k]``: the last row that may have a nonzero in column k). The sums
     skip exact zero terms only, so the results are those of the dense loops (up to the sign
-    of a zero). With few rows the pivot of reflector j is column j and the rows are taken in
-    their order. With many rows (a large mechanism, where the dense order would fill L and
-    the reflectors: A02 N = 40 has a profile of 121 columns in the builder's order) the rows
-    are taken in the order of their first nonzero column (``Ro``) and the pivot is the first
-    column of the row not pivoted yet with a nonzero entry: the reflectors then stay within
-    the bodies a constraint couples. ``Pc`` lists the pivot columns, then the others, so that
-    row ``i`` of ``H_{m−1} ⋯ H_0`` is ``e_{Pc[i]}ᵀ H_{m−1} ⋯ H_0``; L is in that order.
+    of a zero). ``Rl`` and ``In`` are :func:`_lq_sparse`'s (not used here).
     """
-    sparse = m > DENSE_INVERSE_MAX_ROWS
-    if sparse:  # rows by their first nonzero column (a stable sort)
-        for i in range(m):
-            f = 0
-            while f < n - 1 and B[i, f] == 0.0:
-                f += 1
-            cv[i] = f * float(m) + i
-        order = np.argsort(cv[:m])
-        for i in range(m):
-            Ro[i] = order[i]
-    else:
-        for i in range(m):
-            Ro[i] = i
     for k in range(n):
         Pc[k] = 0  # 1 once pivoted
         Lr[k] = -1
     for i in range(m):
-        src = Ro[i]
+        Ro[i] = i
         for k in range(n):
-            x = B[src, k]
+            x = B[i, k]
             Wq[i, k] = x
             if x != 0.0:
                 Lr[k] = i
     for j in range(m):
-        if sparse:
-            p = -1
-            for k in range(n):
-                if Pc[k] == 0 and Wq[j, k] != 0.0:
-                    p = k
-                    break
-            if p < 0:
-                return LQ_NONE
-        else:
-            p = j
+        p = j
         x0 = Wq[j, p]
         s = x0 * x0
         Hv[j, p] = x0
@@ -244,61 +286,8 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx, G, Lf, Ro, Pc, Lr):  
                 if Lr[k] > imax:
                     imax = Lr[k]
         Hx[j, 0] = cnt
-        if s == 0.0:
+        if not _reflect(Wq, Hv, Hx, beta, Lr, j, p, x0, s, imax, Rl, In, False):
             return LQ_NONE
-        nrm = math.sqrt(s)
-        alpha = -nrm if x0 >= 0.0 else nrm
-        v0 = x0 - alpha
-        Hv[j, p] = v0
-        bj = 2.0 / (s - x0 * x0 + v0 * v0)
-        beta[j] = bj
-        Wq[j, p] = alpha
-        for t in range(2, cnt + 1):
-            Wq[j, Hx[j, t]] = 0.0
-        # rows below that can be nonzero in the reflector's columns: four at a time, so four
-        # independent dot products are in flight (each still one sequential sum over k, so the
-        # result is that of a row-by-row loop)
-        i = j + 1
-        while i + 3 <= imax:
-            d0 = 0.0
-            d1 = 0.0
-            d2 = 0.0
-            d3 = 0.0
-            for t in range(1, cnt + 1):
-                k = Hx[j, t]
-                hk = Hv[j, k]
-                d0 += Wq[i, k] * hk
-                d1 += Wq[i + 1, k] * hk
-                d2 += Wq[i + 2, k] * hk
-                d3 += Wq[i + 3, k] * hk
-            if d0 != 0.0 or d1 != 0.0 or d2 != 0.0 or d3 != 0.0:
-                d0 *= bj
-                d1 *= bj
-                d2 *= bj
-                d3 *= bj
-                for t in range(1, cnt + 1):
-                    k = Hx[j, t]
-                    hk = Hv[j, k]
-                    Wq[i, k] -= d0 * hk
-                    Wq[i + 1, k] -= d1 * hk
-                    Wq[i + 2, k] -= d2 * hk
-                    Wq[i + 3, k] -= d3 * hk
-            i += 4
-        while i <= imax:
-            d = 0.0
-            for t in range(1, cnt + 1):
-                k = Hx[j, t]
-                d += Wq[i, k] * Hv[j, k]
-            if d != 0.0:
-                d *= bj
-                for t in range(1, cnt + 1):
-                    k = Hx[j, t]
-                    Wq[i, k] -= d * Hv[j, k]
-            i += 1
-        for t in range(1, cnt + 1):  # those rows may now be nonzero in all its columns
-            k = Hx[j, t]
-            if imax > Lr[k]:
-                Lr[k] = imax
     for i in range(m):  # Pc: the pivot columns in order, then the others
         Pc[i] = Hx[i, 1]
         Lr[Hx[i, 1]] = -2
@@ -307,8 +296,6 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx, G, Lf, Ro, Pc, Lr):  
         if Lr[k] != -2:
             Pc[c] = k
             c += 1
-    if sparse:
-        return _certify_profile(B, m, n, rtol, Wq, Li, cv, G, Lf, Ro, Pc)
     fl = 0.0
     for i in range(m):
         for k in range(i + 1):
@@ -346,9 +333,220 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx, G, Lf, Ro, Pc, Lr):  
     return LQ_INVERSE
 
 
+@njit(cache=True, inline="always")
+def _reflect(Wq, Hv, Hx, beta, Lr, j, p, x0, s, imax, Rl, In, track):  # type: ignore[no-untyped-def]
+    """Finish reflector ``j`` of the LQ factorization and apply it to rows ``j+1 … imax``.
+
+    On entry ``Hv[j]`` holds row j's entries at the reflector's columns ``Hx[j, 1 … c]``
+    (pivot ``p = Hx[j, 1]`` first, ``x0`` its entry, ``s`` the sum of their squares in the
+    order of ``Hx``) and ``imax`` is the last row that may be nonzero there. Writes
+    ``Hv[j, p] = x0 − α``, ``β_j``, row j's ``α`` at the pivot and zeros at the other columns,
+    and updates the rows below (``Lr``: those rows may now be nonzero in all its columns).
+    With ``track`` every updated row's column list ``Rl[i] = [count, k …]`` (``In[i, k]`` its
+    membership marks) gains the reflector's columns (see :func:`_lq_sparse`). Returns False for
+    an all-zero row.
+    """
+    cnt = Hx[j, 0]
+    if s == 0.0:
+        return False
+    nrm = math.sqrt(s)
+    alpha = -nrm if x0 >= 0.0 else nrm
+    v0 = x0 - alpha
+    Hv[j, p] = v0
+    bj = 2.0 / (s - x0 * x0 + v0 * v0)
+    beta[j] = bj
+    Wq[j, p] = alpha
+    for t in range(2, cnt + 1):
+        Wq[j, Hx[j, t]] = 0.0
+    # rows below that can be nonzero in the reflector's columns: four at a time, so four
+    # independent dot products are in flight (each still one sequential sum over k, so the
+    # result is that of a row-by-row loop)
+    i = j + 1
+    while i + 3 <= imax:
+        d0 = 0.0
+        d1 = 0.0
+        d2 = 0.0
+        d3 = 0.0
+        for t in range(1, cnt + 1):
+            k = Hx[j, t]
+            hk = Hv[j, k]
+            d0 += Wq[i, k] * hk
+            d1 += Wq[i + 1, k] * hk
+            d2 += Wq[i + 2, k] * hk
+            d3 += Wq[i + 3, k] * hk
+        if d0 != 0.0 or d1 != 0.0 or d2 != 0.0 or d3 != 0.0:
+            d0 *= bj
+            d1 *= bj
+            d2 *= bj
+            d3 *= bj
+            for t in range(1, cnt + 1):
+                k = Hx[j, t]
+                hk = Hv[j, k]
+                Wq[i, k] -= d0 * hk
+                Wq[i + 1, k] -= d1 * hk
+                Wq[i + 2, k] -= d2 * hk
+                Wq[i + 3, k] -= d3 * hk
+            if track:  # (a row with d = 0 is unchanged: its zeros stay zeros)
+                if d0 != 0.0:
+                    _merge_columns(Rl, In, i, Hx, j, cnt)
+                if d1 != 0.0:
+                    _merge_columns(Rl, In, i + 1, Hx, j, cnt)
+                if d2 != 0.0:
+                    _merge_columns(Rl, In, i + 2, Hx, j, cnt)
+                if d3 != 0.0:
+                    _merge_columns(Rl, In, i + 3, Hx, j, cnt)
+        i += 4
+    while i <= imax:
+        d = 0.0
+        for t in range(1, cnt + 1):
+            k = Hx[j, t]
+            d += Wq[i, k] * Hv[j, k]
+        if d != 0.0:
+            d *= bj
+            for t in range(1, cnt + 1):
+                k = Hx[j, t]
+                Wq[i, k] -= d * Hv[j, k]
+            if track:
+                _merge_columns(Rl, In, i, Hx, j, cnt)
+        i += 1
+    for t in range(1, cnt + 1):  # those rows may now be nonzero in all its columns
+        k = Hx[j, t]
+        if imax > Lr[k]:
+            Lr[k] = imax
+    return True
+
+
+@njit(cache=True, inline="always")
+def _merge_columns(Rl, In, i, Hx, j, cnt):  # type: ignore[no-untyped-def]
+    """Add reflector ``j``'s columns ``Hx[j, 1 … cnt]`` to row ``i``'s column list."""
+    for t in range(1, cnt + 1):
+        k = Hx[j, t]
+        if In[i, k] == 0:
+            In[i, k] = 1
+            c = Rl[i, 0]
+            Rl[i, 1 + c] = k
+            Rl[i, 0] = c + 1
+
+
+@njit(cache=True)
+def _lq_sparse(B, m, n, rtol, Wz, Hv, Li, cv, beta, Hx, G, Lf, Ro, Pc, Lr, Rl, In, Ap):  # type: ignore[no-untyped-def]
+    """:func:`_lq_certified` for many rows (more than :data:`DENSE_INVERSE_MAX_ROWS`), in time
+    proportional to the nonzeros; certificate :func:`_certify_profile` (:data:`LQ_PROFILE`).
+
+    A large mechanism's Jacobian is sparse and the dense row order would fill L and the
+    reflectors (A02 N = 40 has a profile of 121 columns in the builder's order). So the rows
+    are taken in the order of their first nonzero column (``Ro``, a stable sort), and the
+    pivot of reflector j is the first column of row j not pivoted yet with a nonzero entry:
+    the reflectors then stay within the bodies a constraint couples. ``Pc`` lists the pivot
+    columns, then the others (row ``i`` of ``H_{m−1} ⋯ H_0`` is ``e_{Pc[i]}ᵀ H_{m−1} ⋯ H_0``);
+    L is in that order.
+
+    Nothing here is dense: ``B`` is read over the pattern ``Ap`` of A (``B = D A`` is zero
+    elsewhere), and row i of the work matrix ``Wz`` (all zero
+    on entry and on return: only listed entries are written, and cleared at the end) keeps
+    the list of columns where it may be nonzero, ``Rl[i] = [count, k …]`` with membership
+    marks ``In`` (zero on entry and return too); a reflector's update adds its columns to
+    the list of each row it changes. Every sum runs over the same nonzero terms in the same
+    order as the dense loops of the rows-in-order variant, so the factors are those of the
+    dense factorization with this row order and these pivots (up to the sign of a zero).
+    """
+    for i in range(m):  # rows by their first nonzero column (a stable sort)
+        f = n - 1
+        for t in range(Ap[i, 0]):
+            k = Ap[i, 1 + t]
+            if B[i, k] != 0.0:
+                f = k
+                break
+        cv[i] = f * float(m) + i
+    order = np.argsort(cv[:m])
+    for k in range(n):
+        Pc[k] = 0  # 1 once pivoted
+        Lr[k] = -1
+    for i in range(m):  # the rows in that order, with their column lists
+        src = order[i]
+        Ro[i] = src
+        c = 0
+        for t in range(Ap[src, 0]):
+            k = Ap[src, 1 + t]
+            x = B[src, k]
+            if x != 0.0:
+                Wz[i, k] = x
+                In[i, k] = 1
+                Rl[i, 1 + c] = k
+                c += 1
+                Lr[k] = i
+        Rl[i, 0] = c
+    res = LQ_NONE
+    ok = True
+    for j in range(m):
+        c = Rl[j, 0]
+        p = -1
+        for t in range(c):  # the pivot: first unpivoted nonzero column
+            k = Rl[j, 1 + t]
+            if Pc[k] == 0 and Wz[j, k] != 0.0 and (p < 0 or k < p):
+                p = k
+        if p < 0:
+            ok = False
+            break
+        x0 = Wz[j, p]
+        Hv[j, p] = x0
+        Hx[j, 1] = p
+        Pc[p] = 1
+        cnt = 1
+        for t in range(c):  # the other unpivoted nonzero columns, in increasing order
+            k = Rl[j, 1 + t]
+            if Pc[k] == 0:
+                x = Wz[j, k]
+                if x != 0.0:
+                    Hv[j, k] = x
+                    a = 1 + cnt
+                    while a > 2 and Hx[j, a - 1] > k:
+                        Hx[j, a] = Hx[j, a - 1]
+                        a -= 1
+                    Hx[j, a] = k
+                    cnt += 1
+        s = x0 * x0
+        imax = Lr[p]
+        for t in range(2, cnt + 1):
+            k = Hx[j, t]
+            x = Hv[j, k]
+            s += x * x
+            if Lr[k] > imax:
+                imax = Lr[k]
+        Hx[j, 0] = cnt
+        if not _reflect(Wz, Hv, Hx, beta, Lr, j, p, x0, s, imax, Rl, In, True):
+            ok = False
+            break
+    if ok:
+        for i in range(m):  # Pc: the pivot columns in order, then the others
+            Pc[i] = Hx[i, 1]
+            Lr[Hx[i, 1]] = -2
+        c = m
+        for k in range(n):
+            if Lr[k] != -2:
+                Pc[c] = k
+                c += 1
+        for c in range(n):  # Lr: a column's position in that order
+            Lr[Pc[c]] = c
+        for i in range(m):  # L's row profile: its first nonzero column (L in the order Pc)
+            f = i
+            for t in range(Rl[i, 0]):
+                k = Rl[i, 1 + t]
+                if Lr[k] < f and Wz[i, k] != 0.0:
+                    f = Lr[k]
+            Lf[i] = f
+        res = _certify_profile(B, m, n, rtol, Wz, Li, cv, G, Lf, Ro, Pc)
+    for i in range(m):  # Wz and In back to zero
+        for t in range(Rl[i, 0]):
+            k = Rl[i, 1 + t]
+            Wz[i, k] = 0.0
+            In[i, k] = 0
+    return res
+
+
 @njit(cache=True)
 def _certify_profile(B, m, n, rtol, Wq, Li, cv, G, Lf, Ro, Pc):  # type: ignore[no-untyped-def]
-    """The certification of :func:`_lq_certified` for many rows, in O(m b²) (b: L's bandwidth).
+    """The certification of :func:`_lq_sparse` (many rows), in O(m b²) (b: L's bandwidth).
 
     ``‖L‖_F ‖L⁻¹‖_F ≥ m`` cannot certify a cutoff ``rtol ≥ 1/m`` (the projection's 1e-2 with
     over 100 rows), and the dense ``L⁻¹`` costs O(m³). Instead: ``T = L Lᵀ = (D A)(D A)ᵀ`` has
@@ -357,19 +555,16 @@ def _certify_profile(B, m, n, rtol, Wq, Li, cv, G, Lf, Ro, Pc):  # type: ignore[
     ``σ_i² > τ`` (to round-off ~m·eps·‖T‖, which the floor keeps ≥ 1e3 times below τ), so every
     σ_i is above ``rtol · σ_max`` and the SVD's rule would keep all m rows. L keeps the row
     profile of ``D A`` (a constraint row touches a few bodies), and ``T`` and its factor keep
-    L's, so both are formed over the profile only: row i of L starts at column ``Lf[i]``.
+    L's, so both are formed over the profile only: row i of L starts at column ``Lf[i]``
+    (given; ``Wq`` holds L's rows in the columns' own order).
 
     On success ``Li`` holds ``L`` itself (rows in the order ``Ro``, columns in the pivot order
     ``Pc``; lower triangle over the profile, the rest is not read), ``cv = L⁻¹ (D γ)[Ro]`` by
     forward substitution, and it returns :data:`LQ_PROFILE`; else
     :data:`LQ_NONE`. Scratch: ``G`` (m × m, the factor of ``T − τI``), ``cv``.
     """
-    for i in range(m):  # L (in the pivot order Pc) and its row profile
-        f = 0
-        while f < i and Wq[i, Pc[f]] == 0.0:
-            f += 1
-        Lf[i] = f
-        for c in range(f, i + 1):
+    for i in range(m):  # L (in the pivot order Pc) over its row profile
+        for c in range(Lf[i], i + 1):
             Li[i, c] = Wq[i, Pc[c]]
     for i in range(m):  # T = L Lᵀ over the profile: T_ij = 0 for j < Lf[i]
         cv[i] = 0.0
@@ -750,7 +945,9 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
     n = M.shape[1]
     m = A.shape[1]
     nmu = mu_in.shape[0]
-    B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, _ist, _mu1, Li, dsc, info, Hx, Lf, Ro, Pc, Lr = work
+    (B, V, Kt, Tt, Et, Ft, G, W, cw, g, wv, u, sig, cv, dinv, Bw, Tn, _ist, _mu1, Li, dsc, info, Hx,
+     Lf, Ro, Pc, Lr, Wz, Rl, In, Ap, _An) = work
+    sparse = _sparse_rows(m)
     for b in range(lo, hi):
         if again:  # solve_again: the factorization left by the last call; new h, f, γ
             if info[0] == 0.0:
@@ -795,9 +992,15 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             for i in range(n):
                 for j in range(n):
                     cw[j] += M[b, i, j] * 0.0
-            for i in range(m):
-                for j in range(n):
-                    cw[j] += A[b, i, j] * 0.0
+            if sparse:  # B back to zero (it was nonzero on the last pattern only), A's pattern
+                for i in range(m):
+                    for ip in range(Ap[i, 0]):
+                        B[i, Ap[i, 1 + ip]] = 0.0
+                _pattern(A[b], m, n, Ap)  # (A's finiteness: from its row norms, step 2)
+            else:
+                for i in range(m):
+                    for j in range(n):
+                        cw[j] += A[b, i, j] * 0.0
             bad = False
             for j in range(n):
                 bad |= cw[j] != 0.0
@@ -834,20 +1037,45 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             # ---------------------------------------------------------------- 2. equilibration
             big = 0.0
             Ab = A[b]
+            finite = True
             for i in range(m):
-                nrm = _row_norm(Ab, i, n)
+                nrm = _pattern_norm(Ab, i, n, Ap) if sparse else _row_norm(Ab, i, n)
+                finite &= math.isfinite(nrm)
                 sig[i] = nrm
                 if nrm > big:
                     big = nrm
+            if sparse and not finite:  # a non-finite entry, or only an overflowing square?
+                for j in range(n):
+                    cw[j] = 0.0
+                for i in range(m):
+                    for j in range(n):
+                        cw[j] += A[b, i, j] * 0.0
+                for j in range(n):
+                    if cw[j] != 0.0:
+                        code = NONFINITE
+                if code != OK:
+                    status[b] = code
+                    rank[b] = 0
+                    mu_out[b] = 0.0
+                    ratio[b] = 0.0
+                    continue
             thr = rtol * big
             for i in range(m):
                 nrm = sig[i]
                 if nrm > thr:
                     di = 1.0 / nrm
-                    for j in range(n):
-                        B[i, j] = A[b, i, j] * di
+                    if sparse:  # (B is zero off the pattern)
+                        for ip in range(Ap[i, 0]):
+                            k = Ap[i, 1 + ip]
+                            B[i, k] = A[b, i, k] * di
+                    else:
+                        for j in range(n):
+                            B[i, j] = A[b, i, j] * di
                     B[i, n] = di * gam[b, i]
                     dsc[i] = di
+                elif sparse:
+                    B[i, n] = 0.0
+                    dsc[i] = 0.0
                 else:
                     for j in range(n + 1):
                         B[i, j] = 0.0
@@ -867,7 +1095,12 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                     if sig[i] > thr:
                         live += 1
                 if live == m:
-                    lq = _lq_certified(B, m, n, rtol, Et, Ft, Li, cv, sig, Hx, G, Lf, Ro, Pc, Lr)
+                    if sparse:
+                        lq = _lq_sparse(B, m, n, rtol, Wz, Ft, Li, cv, sig, Hx, G, Lf, Ro, Pc, Lr,
+                                        Rl, In, Ap)  # fmt: skip
+                    else:
+                        lq = _lq_certified(B, m, n, rtol, Et, Ft, Li, cv, sig, Hx, Lf, Ro, Pc, Lr,
+                                           Rl, In)  # fmt: skip
                     if lq != LQ_NONE:
                         r = m
                         # few degrees of freedom (n − m ≤ m): work with the null-space basis Z
@@ -878,7 +1111,7 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
                         else:
                             _lq_rows(Ft, sig, m, n, 0, m, V, Hx, Pc)
             qr_ok = lq != LQ_NONE
-            lapack = not qr_ok and m > JACOBI_MAX_ROWS
+            lapack = not qr_ok and sparse
             if lapack:  # many rows: LAPACK's SVD (the Jacobi sweeps cost O(m² n) each)
                 r, zmode = _svd_lapack(B, m, n, rtol, V, Kt, Li, cv)
             elif not qr_ok:
@@ -1241,13 +1474,16 @@ def _apply_pinv(Hv, beta, Li, dsc, m, n, t, cv, x, Hx, mode, Lf, Ro, Pc):  # typ
 
 
 @njit(cache=True, inline="always")
-def _scaled_residual(A, x, b, dsc, m, n, res):  # type: ignore[no-untyped-def]
-    """``res = A x + b`` and ``max_i |D (A x + b)|_i``."""
+def _scaled_residual(A, x, b, dsc, m, n, res, sp, P):  # type: ignore[no-untyped-def]
+    """``res = A x + b`` and ``max_i |D (A x + b)|_i`` (with ``sp`` over A's pattern ``P``)."""
     big = 0.0
     for i in range(m):
         s = b[i]
-        for j in range(n):
-            s += A[i, j] * x[j]
+        if sp:
+            s = _pattern_dot(A, i, P, x, s)
+        else:
+            for j in range(n):
+                s += A[i, j] * x[j]
         res[i] = s
         a = abs(s) * dsc[i]
         if a > big:
@@ -1292,8 +1528,12 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: igno
     mode = int(info[5])
     k = n - m
     tol = 64.0 * _EPS
+    An = work[31]
+    sp = _sparse_rows(m)
     res = Bw[0]  # scratch (n + 1 ≥ m entries)
     reuse = same and info[7] != 0.0  # Z', S, Ls and μ of the last call are this A's
+    if sp and not reuse:  # products with A over its row pattern (reuse: the last call's)
+        _pattern(A, m, n, An)
     info[7] = 0.0
     # the refined basis Z' (rows of Tt), from Z_h (rows of Kt)
     if not reuse:
@@ -1306,10 +1546,13 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: igno
         for a in range(k):
             zr = Tt[a]
             for i in range(m):
-                s = 0.0
-                for j in range(n):
-                    s += A[i, j] * zr[j]
-                res[i] = s
+                if sp:
+                    res[i] = _pattern_dot(A, i, An, zr, 0.0)
+                else:
+                    s = 0.0
+                    for j in range(n):
+                        s += A[i, j] * zr[j]
+                    res[i] = s
             _apply_pinv(Ft, sig, Li, dsc, m, n, res, cv, u, Hx, mode, Lf, Ro, Pc)
             for j in range(n):
                 zr[j] -= u[j]
@@ -1318,7 +1561,7 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: igno
         for a in range(k):
             for i in range(m):
                 cv[i] = 0.0
-            e = _scaled_residual(A, Tt[a], cv, dsc, m, n, res)
+            e = _scaled_residual(A, Tt[a], cv, dsc, m, n, res, sp, An)
             if e > big:
                 big = e
         if big <= tol:
@@ -1337,7 +1580,7 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: igno
         gs = max(gs, abs(gam[i]) * dsc[i])
     ok = False
     for _ in range(NEAR_PASSES):
-        e = _scaled_residual(A, wv, gam, dsc, m, n, res)
+        e = _scaled_residual(A, wv, gam, dsc, m, n, res, sp, An)
         wmax = 0.0
         for j in range(n):
             wmax = max(wmax, abs(wv[j]))

@@ -63,25 +63,49 @@ def workspace(n, m, S, n_var, T):  # type: ignore[no-untyped-def]
     with the ``q`` and rank tolerance it was taken at; ``ws[19]`` is the ``q`` of the last
     :func:`~nonmin.core._fast_kernels.solve_near` (whether its result is still held, the core
     knows: see :func:`_solve_at`). ``A = ws[3]`` is a view of the flat buffer ``ws[1]`` the model kernel
-    writes (row-major, one spare entry)."""
+    writes (row-major, one spare entry). ``ws[20]`` and ``ws[21]`` are the row patterns
+    ``[count, k …]`` of A (every entry that can be nonzero: the program's constant nonzeros and
+    its variable entries) and of the constant M, set by :func:`carry`: the loop's products
+    with them skip only entries that are always zero (bitwise the dense sums)."""
     buf = np.empty(m * n + 1)
     return (np.full(2 * n + 2, np.nan), buf, np.empty((2, m)), buf[: m * n].reshape((m, n)),
             np.empty(m), np.zeros(n), np.empty(2 * n + 3), np.empty((n, n)), np.empty((n, n)),
             np.empty(n), np.empty(n), scratch(n, m), T, np.empty((9, S)), np.empty(n_var),
-            np.empty(m), np.empty((n, n)), np.empty(n), np.zeros(2), np.full(n, np.nan))  # fmt: skip
+            np.empty(m), np.empty((n, n)), np.empty(n), np.zeros(2), np.full(n, np.nan),
+            np.zeros((m, n + 1), dtype=np.int64), np.zeros((n, n + 1), dtype=np.int64))  # fmt: skip
 
 
 @njit(cache=True)
-def carry(n, m, S, n_var, A0):  # type: ignore[no-untyped-def]
+def carry(n, m, S, n_var, A0, var_idx, M):  # type: ignore[no-untyped-def]
     """The state :func:`rk4_planar` carries from call to call: ``(ws, (k1, kp, y1, yp, (K, ys)),
     flag)`` — the :func:`workspace` (warm-start rotation included; A's buffer holds the
-    program's constant entries ``A0``), ``k1 = F(t, y)`` and the loop's other buffers, and
-    ``flag[0] = 1`` when ``k1`` is known."""
+    program's constant entries ``A0``; the patterns of A — ``A0``'s nonzeros and the variable
+    entries ``var_idx`` — and of the constant ``M``), ``k1 = F(t, y)`` and the loop's other
+    buffers, and ``flag[0] = 1`` when ``k1`` is known."""
     loop = (np.empty(2 * n), np.empty(2 * n), np.empty(2 * n), np.empty(2 * n),
             (np.empty((3, 2 * n)), np.empty(2 * n)))  # fmt: skip
     ws = workspace(n, m, S, n_var, np.eye(m))
     for i in range(A0.shape[0]):
         ws[1][i] = A0[i]
+    live = A0[: m * n] != 0.0
+    for k in range(var_idx.shape[0]):
+        if var_idx[k] < m * n:
+            live[var_idx[k]] = True
+    Ap, Mp = ws[20], ws[21]
+    for i in range(m):
+        c = 0
+        for j in range(n):
+            if live[i * n + j]:
+                Ap[i, 1 + c] = j
+                c += 1
+        Ap[i, 0] = c
+    for i in range(n):
+        c = 0
+        for j in range(n):
+            if M[i, j] != 0.0:
+                Mp[i, 1 + c] = j
+                c += 1
+        Mp[i, 0] = c
     return ws, loop, np.zeros(1, dtype=np.int64)
 
 
@@ -132,16 +156,18 @@ def _evaluate(prog, q, qd, ws):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, inline="always")
-def _drift_rtol(A, phi, base, factor, nrm):  # type: ignore[no-untyped-def]
-    """:func:`nonmin.sim._simulate.drift_rank_rtol` (every row holonomic; scratch ``nrm``)."""
-    m, n = A.shape
+def _drift_rtol(A, phi, base, factor, nrm, P):  # type: ignore[no-untyped-def]
+    """:func:`nonmin.sim._simulate.drift_rank_rtol` (every row holonomic; scratch ``nrm``; A's
+    row pattern ``P``)."""
+    m = A.shape[0]
     if m == 0:
         return base
     big = 0.0
     for i in range(m):
         s = 0.0
-        for j in range(n):
-            s += A[i, j] * A[i, j]
+        for t in range(P[i, 0]):
+            a = A[i, P[i, 1 + t]]
+            s += a * a
         nrm[i] = math.sqrt(s)
         if nrm[i] > big:
             big = nrm[i]
@@ -157,11 +183,12 @@ def _drift_rtol(A, phi, base, factor, nrm):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, inline="always")
-def _matvec_rows(A, v, out):  # type: ignore[no-untyped-def]
-    m, n = A.shape
-    for i in range(m):
+def _matvec_rows(A, v, out, P):  # type: ignore[no-untyped-def]
+    """``out = A v`` over A's row pattern ``P``."""
+    for i in range(A.shape[0]):
         s = 0.0
-        for j in range(n):
+        for t in range(P[i, 0]):
+            j = P[i, 1 + t]
             s += A[i, j] * v[j]
         out[i] = s
 
@@ -225,7 +252,7 @@ def _rhs(prog, ws, cfg, t, yy, kk, near):  # type: ignore[no-untyped-def]
         q[i] = yy[i]
         qd[i] = yy[n + i]
     _evaluate(prog, q, qd, ws)
-    rtol = _drift_rtol(ws[3], ws[2][0], cfg[BASE_RTOL], cfg[DRIFT_FACTOR], ws[15])
+    rtol = _drift_rtol(ws[3], ws[2][0], cfg[BASE_RTOL], cfg[DRIFT_FACTOR], ws[15], ws[20])
     st = _solve_at(prog, ws, cfg, prog[1], ws[2][1], rtol, 0, near)
     if st != 0:
         return st
@@ -287,9 +314,11 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
         if err <= cfg[PTOL] or err == 0.0:
             break  # converged
         floor = True  # every row at its round-off level (see _stabilization.ROUNDOFF_FLOOR)
+        Ap = ws[20]
         for i in range(m):
             s = 0.0
-            for j in range(n):
+            for t in range(Ap[i, 0]):
+                j = Ap[i, 1 + t]
                 s += abs(A[i, j]) * abs(yy[j])
             if abs(PG[0, i]) > cfg[FLOOR] * (1.0 + s):
                 floor = False
@@ -320,7 +349,7 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
         prev = err
         for i in range(n):
             q[i] = q[i] + out[i]
-    _matvec_rows(A, qd, vres)
+    _matvec_rows(A, qd, vres, ws[20])
     # near: the factorization held is this projection's last linearization, if it took one
     st = _solve_at(prog, ws, cfg, zero, vres, cfg[VEL_RTOL], 0, 1 if lin else 0)
     if st != 0:
@@ -412,7 +441,7 @@ def _point(prog, ws, cfg, tt, yy, recs, k, kk):  # type: ignore[no-untyped-def]
         q[i] = yy[i]
         qd[i] = yy[n + i]
     _evaluate(prog, q, qd, ws)
-    rtol = _drift_rtol(A, PG[0], cfg[BASE_RTOL], cfg[DRIFT_FACTOR], ws[15])
+    rtol = _drift_rtol(A, PG[0], cfg[BASE_RTOL], cfg[DRIFT_FACTOR], ws[15], ws[20])
     st = _solve_at(prog, ws, cfg, f, PG[1], rtol, 0, 1)
     if st != 0:
         return st
@@ -430,7 +459,9 @@ def _point(prog, ws, cfg, tt, yy, recs, k, kk):  # type: ignore[no-untyped-def]
         kk[i] = qd[i]
         kk[n + i] = out[i]
         s = 0.0
-        for j in range(n):
+        Mp = ws[21]
+        for t in range(Mp[i, 0]):
+            j = Mp[i, 1 + t]
             s += M[i, j] * qd[j]
         e_kin += qd[i] * s
         e_pot += f[i] * q[i]
@@ -444,7 +475,7 @@ def _point(prog, ws, cfg, tt, yy, recs, k, kk):  # type: ignore[no-untyped-def]
         if a > pn:
             pn = a
     rec_phi[k] = pn
-    _matvec_rows(A, qd, vres)
+    _matvec_rows(A, qd, vres, ws[20])
     vn = 0.0
     for i in range(m):
         a = abs(vres[i])

@@ -179,7 +179,8 @@ def run(
     blocks: list[dict[str, Any]] = []
     m = prog.m
     # owned here for the whole run: the loop works on borrowed views of them
-    state = kern.carry(n, m, prog.I6.shape[1], prog.var_idx.shape[0], prog.A0)
+    state = kern.carry(n, m, prog.I6.shape[1], prog.var_idx.shape[0], prog.A0, prog.var_idx,
+                       prog.M)
     chunk = 64
     failed = False
     while t < t1 and steps_total < max_steps:
