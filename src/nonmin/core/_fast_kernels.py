@@ -288,14 +288,7 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx, Lf, Ro, Pc, Lr, Rl, I
         Hx[j, 0] = cnt
         if not _reflect(Wq, Hv, Hx, beta, Lr, j, p, x0, s, imax, Rl, In, False):
             return LQ_NONE
-    for i in range(m):  # Pc: the pivot columns in order, then the others
-        Pc[i] = Hx[i, 1]
-        Lr[Hx[i, 1]] = -2
-    c = m
-    for k in range(n):
-        if Lr[k] != -2:
-            Pc[c] = k
-            c += 1
+    _pivot_order(Hx, Lr, Pc, m, n)
     fl = 0.0
     for i in range(m):
         for k in range(i + 1):
@@ -331,6 +324,38 @@ def _lq_certified(B, m, n, rtol, Wq, Hv, Li, cv, beta, Hx, Lf, Ro, Pc, Lr, Rl, I
         return LQ_NONE
     _apply_linv(LQ_INVERSE, Li, Lf, Ro, m, B[:, n], cv)
     return LQ_INVERSE
+
+
+@njit(cache=True, inline="always")
+def _reflect_row(X, i, Hv, Hx, j, bj):  # type: ignore[no-untyped-def]
+    """Row i of ``X`` times reflector j (``I − β_j v vᵀ``, ``v = Hv[j]`` over its columns
+    ``Hx[j]``); returns whether the row changed (its product with ``v`` was not zero)."""
+    cnt = Hx[j, 0]
+    d = 0.0
+    for t in range(1, cnt + 1):
+        k = Hx[j, t]
+        d += X[i, k] * Hv[j, k]
+    if d == 0.0:
+        return False
+    d *= bj
+    for t in range(1, cnt + 1):
+        k = Hx[j, t]
+        X[i, k] -= d * Hv[j, k]
+    return True
+
+
+@njit(cache=True, inline="always")
+def _pivot_order(Hx, Lr, Pc, m, n):  # type: ignore[no-untyped-def]
+    """``Pc``: the reflectors' pivot columns ``Hx[:, 1]`` in order, then the other columns
+    (``Lr`` is scratch: -2 marks a pivot column)."""
+    for i in range(m):
+        Pc[i] = Hx[i, 1]
+        Lr[Hx[i, 1]] = -2
+    c = m
+    for k in range(n):
+        if Lr[k] != -2:
+            Pc[c] = k
+            c += 1
 
 
 @njit(cache=True, inline="always")
@@ -397,17 +422,8 @@ def _reflect(Wq, Hv, Hx, beta, Lr, j, p, x0, s, imax, Rl, In, track):  # type: i
                     _merge_columns(Rl, In, i + 3, Hx, j, cnt)
         i += 4
     while i <= imax:
-        d = 0.0
-        for t in range(1, cnt + 1):
-            k = Hx[j, t]
-            d += Wq[i, k] * Hv[j, k]
-        if d != 0.0:
-            d *= bj
-            for t in range(1, cnt + 1):
-                k = Hx[j, t]
-                Wq[i, k] -= d * Hv[j, k]
-            if track:
-                _merge_columns(Rl, In, i, Hx, j, cnt)
+        if _reflect_row(Wq, i, Hv, Hx, j, bj) and track:
+            _merge_columns(Rl, In, i, Hx, j, cnt)
         i += 1
     for t in range(1, cnt + 1):  # those rows may now be nonzero in all its columns
         k = Hx[j, t]
@@ -518,14 +534,7 @@ def _lq_sparse(B, m, n, rtol, Wz, Hv, Li, cv, beta, Hx, G, Lf, Ro, Pc, Lr, Rl, I
             ok = False
             break
     if ok:
-        for i in range(m):  # Pc: the pivot columns in order, then the others
-            Pc[i] = Hx[i, 1]
-            Lr[Hx[i, 1]] = -2
-        c = m
-        for k in range(n):
-            if Lr[k] != -2:
-                Pc[c] = k
-                c += 1
+        _pivot_order(Hx, Lr, Pc, m, n)
         for c in range(n):  # Lr: a column's position in that order
             Lr[Pc[c]] = c
         for i in range(m):  # L's row profile: its first nonzero column (L in the order Pc)
@@ -678,18 +687,8 @@ def _lq_rows(Hv, beta, m, n, first, count, E, Hx, Pc):  # type: ignore[no-untype
             E[i, k] = 0.0
         E[i, Pc[first + i]] = 1.0
     for j in range(m - 1, -1, -1):
-        bj = beta[j]
-        cnt = Hx[j, 0]
         for i in range(count):
-            d = 0.0
-            for t in range(1, cnt + 1):
-                k = Hx[j, t]
-                d += E[i, k] * Hv[j, k]
-            if d != 0.0:
-                d *= bj
-                for t in range(1, cnt + 1):
-                    k = Hx[j, t]
-                    E[i, k] -= d * Hv[j, k]
+            _reflect_row(E, i, Hv, Hx, j, beta[j])
 
 
 @njit(cache=True)

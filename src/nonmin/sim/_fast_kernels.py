@@ -34,6 +34,8 @@ from numba import njit
 
 from ..core._borrow import borrow
 from ..core._fast_kernels import (
+    _pattern,
+    _pattern_dot,
     orthonormalize_row,
     scratch,
     solve_again,
@@ -91,21 +93,8 @@ def carry(n, m, S, n_var, A0, var_idx, M):  # type: ignore[no-untyped-def]
     for k in range(var_idx.shape[0]):
         if var_idx[k] < m * n:
             live[var_idx[k]] = True
-    Ap, Mp = ws[20], ws[21]
-    for i in range(m):
-        c = 0
-        for j in range(n):
-            if live[i * n + j]:
-                Ap[i, 1 + c] = j
-                c += 1
-        Ap[i, 0] = c
-    for i in range(n):
-        c = 0
-        for j in range(n):
-            if M[i, j] != 0.0:
-                Mp[i, 1 + c] = j
-                c += 1
-        Mp[i, 0] = c
+    _pattern(live.reshape((m, n)), m, n, ws[20])
+    _pattern(M, n, n, ws[21])
     return ws, loop, np.zeros(1, dtype=np.int64)
 
 
@@ -186,11 +175,7 @@ def _drift_rtol(A, phi, base, factor, nrm, P):  # type: ignore[no-untyped-def]
 def _matvec_rows(A, v, out, P):  # type: ignore[no-untyped-def]
     """``out = A v`` over A's row pattern ``P``."""
     for i in range(A.shape[0]):
-        s = 0.0
-        for t in range(P[i, 0]):
-            j = P[i, 1 + t]
-            s += A[i, j] * v[j]
-        out[i] = s
+        out[i] = _pattern_dot(A, i, P, v, 0.0)
 
 
 @njit(cache=True, inline="always")
@@ -458,12 +443,7 @@ def _point(prog, ws, cfg, tt, yy, recs, k, kk):  # type: ignore[no-untyped-def]
         rec_fc[k, i] = out[n + i]
         kk[i] = qd[i]
         kk[n + i] = out[i]
-        s = 0.0
-        Mp = ws[21]
-        for t in range(Mp[i, 0]):
-            j = Mp[i, 1 + t]
-            s += M[i, j] * qd[j]
-        e_kin += qd[i] * s
+        e_kin += qd[i] * _pattern_dot(M, i, ws[21], qd, 0.0)
         e_pot += f[i] * q[i]
     rec_rank[k] = int(out[2 * n])
     rec_mu[k] = out[2 * n + 1]
