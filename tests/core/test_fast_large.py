@@ -232,3 +232,70 @@ def test_large_nonfinite_and_huge_entries():
                     none, none, scratch(n, m), np.eye(m), False)  # fmt: skip
     assert st == OK  # not NONFINITE; the NumPy path decides the same (rank 0: that row's
     _agree(M, h, Ah, g, 1e-10)  # infinite norm makes every other row negligible)
+
+
+@pytest.mark.parametrize("theta", [1.3, 0.3, 0.0])
+def test_known_inputs_give_bitwise_the_checked_results(theta):
+    """``known`` (a caller that validated a constant M and holds a superset of A's row pattern,
+    like the simulation loop) skips checks and scans only: solve_work, solve_near and
+    solve_again give bitwise the results of ``known = 0``, also when the given pattern has
+    columns that are zero in A (the superset) and at a singular state (θ = 0: LAPACK's SVD)."""
+    from nonmin.core._fast_kernels import (
+        KNOWN_M_DIAGONAL,
+        KNOWN_M_VALID,
+        KNOWN_PATTERN,
+        OK,
+        scratch,
+        solve_again,
+        solve_near,
+        solve_work,
+    )
+
+    M, h, A, gam = _terms(12, theta)
+    n, m = M.shape[0], A.shape[0]
+    assert m > 32 and np.count_nonzero(M - np.diag(np.diag(M))) == 0
+    rng = np.random.default_rng(7)
+    superset = (A != 0.0) | (rng.uniform(size=A.shape) < 0.02)  # extra (zero) columns
+    A2 = A + 1e-9 * rng.standard_normal(A.shape) * (A != 0.0)
+    h1, g1 = rng.standard_normal(n), A @ rng.standard_normal(n)
+    none = np.empty((0, 0))
+    results = []
+    for known in (0, KNOWN_M_VALID | KNOWN_M_DIAGONAL | KNOWN_PATTERN):
+        work = scratch(n, m)
+        if known:
+            P = work[30]
+            for i in range(m):
+                cols = np.flatnonzero(superset[i])
+                P[i, 0] = cols.size
+                P[i, 1 : 1 + cols.size] = cols
+        outs = [np.empty(2 * n + 3) for _ in range(3)]
+        st = solve_work(M, h, h, False, A, gam, 1.0, False, 1e-10, 1e-13, 1e-12, False, outs[0],
+                        none, none, work, np.eye(m), False, False, known)  # fmt: skip
+        assert st == OK
+        assert solve_again(M, h1, h1, False, g1, False, outs[1], none, none, work) == OK
+        st_near = solve_near(M, h1, h1, False, A2, g1, 1e-13, outs[2], work, False, known)
+        results.append((outs, st_near, int(work[21][5])))
+    (ref, st_ref, lq_ref), (got, st_got, lq_got) = results
+    assert lq_ref == lq_got and st_ref == st_got
+    assert (lq_ref == 0) == (theta == 0.0)  # the horizontal state is not certified
+    for a, b in zip(ref if st_ref == OK else ref[:2], got):  # (a declined solve_near: no result)
+        assert np.array_equal(a, b)
+
+
+def test_known_diagonal_flag_is_what_the_kernel_uses():
+    """With KNOWN_M_VALID and without KNOWN_M_DIAGONAL a diagonal M is treated as full (same
+    solution to round-off); the flags only skip work, they never change the checks' outcome
+    for valid inputs."""
+    from nonmin.core._fast_kernels import KNOWN_M_VALID, OK, scratch, solve_work
+
+    M, h, A, gam = _terms(12, 1.1)
+    n, m = M.shape[0], A.shape[0]
+    none = np.empty((0, 0))
+    outs = []
+    for known in (0, KNOWN_M_VALID):
+        out = np.empty(2 * n + 3)
+        st = solve_work(M, h, h, False, A, gam, 1.0, False, 1e-10, 1e-13, 1e-12, False, out,
+                        none, none, scratch(n, m), np.eye(m), False, False, known)  # fmt: skip
+        assert st == OK
+        outs.append(out)
+    assert np.allclose(outs[0], outs[1], rtol=1e-12, atol=1e-12 * float(np.max(np.abs(outs[0]))))

@@ -238,19 +238,19 @@ def test_simplified_steps_land_where_gauss_newton_does(size: float) -> None:
         assert np.max(np.abs(q - ref)) < 1e-12 + 1e-3 * size**2, (size, np.max(np.abs(q - ref)))
 
 
-def test_a_stalled_chord_step_at_the_cut_goes_to_the_full_rank(monkeypatch: pytest.MonkeyPatch) -> None:
-    # A02 (N = 2) at t = 0.71 s: σ_min/σ_max of the equilibrated A ~ 4e-3, below the cutoff
-    # POSITION_CUT_RTOL. An error of 1e-8 has a part along the cut direction that no step at
-    # the cut reduces: after the first Gauss–Newton step the chord step stalls, and the next
-    # linearization is at the full rank (it used to be a second one at the cut, a Jacobi SVD).
+def _projection_cutoffs(
+    monkeypatch: pytest.MonkeyPatch, t: float, size: float, seed: int = 3
+) -> tuple[list[float | None], float, float]:
+    """Rank tolerances of the position steps of one projection of the A02 (N = 2) exact state
+    at ``t`` perturbed by ``size``, and the residuals ‖φ‖∞, ‖A qd‖∞ it leaves."""
     from nonmin.library import get
     from nonmin.sim import _stabilization as stab_mod
 
     n = 2
     mech = get("A02_n_four_bar", N=n)
-    q, qd = _a02_state_on_the_mode(n, 0.71)
-    rng = np.random.default_rng(3)
-    q = q + 1e-8 * rng.standard_normal(q.shape[0])
+    q, qd = _a02_state_on_the_mode(n, t)
+    rng = np.random.default_rng(seed)
+    q = q + size * rng.standard_normal(q.shape[0])
     calls: list[float | None] = []
     orig = stab_mod._correction
 
@@ -260,9 +260,48 @@ def test_a_stalled_chord_step_at_the_cut_goes_to_the_full_rank(monkeypatch: pyte
 
     monkeypatch.setattr(stab_mod, "_correction", spy)
     active = frozenset(mech.state.active)
-    q1, qd1 = stab_mod.Projection().project(mech.model, 0.71, q, qd, active, None)
-    pos = calls[:-1]  # the last call is the velocity correction
-    assert pos[0] == stab_mod.POSITION_CUT_RTOL and pos[-1] == pytest.approx(1e-10)
-    assert pos.count(stab_mod.POSITION_CUT_RTOL) <= 2  # the Gauss–Newton step and one chord step
-    ct = mech.model.constraint_terms(0.71, q1, qd1, active)
-    assert np.max(np.abs(ct.phi)) < 1e-14 and np.max(np.abs(ct.A @ qd1)) < 1e-12
+    q1, qd1 = stab_mod.Projection().project(mech.model, t, q, qd, active, None)
+    ct = mech.model.constraint_terms(t, q1, qd1, active)
+    return calls[:-1], float(np.max(np.abs(ct.phi))), float(np.max(np.abs(ct.A @ qd1)))
+
+
+def test_a_real_residual_at_a_regular_configuration_takes_the_full_rank(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A02 (N = 2) at t = 0.71 s: σ_min/σ_max of the equilibrated A ~ 4e-3, between
+    # SINGULAR_CUT_RTOL and POSITION_CUT_RTOL. An error of 1e-8 is a real residual (≫ its
+    # round-off floor), partly along that direction: the first Gauss–Newton step keeps every
+    # direction (it used to cut it, stall in the chord step and linearize again at the full
+    # rank), and the chord steps converge on that one linearization.
+    from nonmin.sim import _stabilization as stab_mod
+
+    pos, phi, vel = _projection_cutoffs(monkeypatch, 0.71, 1e-8)
+    assert pos and all(c == stab_mod.SINGULAR_CUT_RTOL for c in pos), pos
+    assert len(pos) <= 3
+    assert phi < 1e-14 and vel < 1e-12
+
+
+def test_a_roundoff_residual_keeps_the_cut(monkeypatch: pytest.MonkeyPatch) -> None:
+    # The same state with an error of 1e-15: the residual is within ROUNDOFF_RESIDUAL_RATIO of
+    # its round-off floor, so its component along the small singular direction is noise, and
+    # the first step cuts that direction (POSITION_CUT_RTOL) instead of dividing the noise by it.
+    from nonmin.sim import _stabilization as stab_mod
+
+    pos, phi, vel = _projection_cutoffs(monkeypatch, 0.71, 1e-15)
+    assert pos and pos[0] == stab_mod.POSITION_CUT_RTOL, pos
+    assert phi < 1e-14 and vel < 1e-12
+
+
+def test_a_real_residual_next_to_a_singular_configuration_keeps_the_cut(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # 1e-6 s after a horizontal configuration two singular values are ~1e-6 relative (below
+    # SINGULAR_CUT_RTOL): even with a real residual the first step cuts them; they are left
+    # to the later steps only if the cut steps stall (then at the full rank).
+    from nonmin.sim import _stabilization as stab_mod
+    from nonmin.validation._suite import _a02_horizontal_times
+
+    t_c = float(_a02_horizontal_times(2, 1.0)[0])
+    pos, phi, vel = _projection_cutoffs(monkeypatch, t_c + 1e-6, 1e-8)
+    assert pos and pos[0] == stab_mod.POSITION_CUT_RTOL, pos
+    assert phi < 1e-14 and vel < 1e-12

@@ -14,7 +14,9 @@ Per state (``n`` coordinates, ``m`` constraint rows):
 1. input checks: every entry finite (per-column sums of ``x·0``, which are 0 iff all entries
    are finite), ``max|M − Mᵀ| ≤ SYMMETRY_RTOL · max|M|`` (exactly the
    decision of :func:`nonmin._validation.symmetric`); a failure returns a status code and the
-   caller re-runs the NumPy path, which raises the typed error;
+   caller re-runs the NumPy path, which raises the typed error (a caller that has validated a
+   constant M once, or holds A's row pattern, says so with ``known``: those checks and scans
+   are skipped, the results bitwise unchanged);
 2. row equilibration ``B = D A`` with the policy of :mod:`nonmin.core.linalg` (rows with norm
    ``≤ rtol · max norm`` are zero rows), augmented with the column ``D γ``;
 3. one-sided (Hestenes) Jacobi SVD of ``B`` by plane rotations of its rows: at convergence the
@@ -64,6 +66,18 @@ SMALL_PIVOT = 2
 NONFINITE = 3
 ASYMMETRIC = 4
 NO_FACTOR = 6  # solve_again without a reusable factorization (5 is the simulation loop's)
+
+#: Bits of the ``known`` argument of :func:`solve_work` and :func:`solve_near`: what the caller
+#: has established, so the kernel skips the corresponding checks and scans (a simulation loop
+#: with a constant M validated once and the static row pattern of its A).
+#: M is finite and symmetric within ``sym_rtol`` (input checks of step 1 skipped for M).
+KNOWN_M_VALID = 1
+#: M is diagonal (only with :data:`KNOWN_M_VALID`; otherwise M is treated as full).
+KNOWN_M_DIAGONAL = 2
+#: ``work[30]`` holds a superset of A's row pattern (many-row path only: :func:`_pattern` is
+#: not called; the extra columns are zero entries, which every sum skips by value, so the
+#: results are bitwise those of the scanned pattern).
+KNOWN_PATTERN = 4
 
 #: Maximum number of Jacobi sweeps (convergence is quadratic; m ≤ 30 needs < 10).
 MAX_SWEEPS = 60
@@ -928,7 +942,7 @@ _FM: set[str] = set()
 @njit(cache=True, fastmath=_FM, inline="always")  # numba-level inlining: no call, no refcounts
 def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
                 qdd, fc, P, L, want_pl, status, rank, mu_out, ratio, work, T, warm,
-                again):  # fmt: skip
+                again, known):  # fmt: skip
     """Evaluate states ``lo … hi−1`` of the batch arrays, one after the other.
 
     Inputs ``M`` (N, n, n), ``h``, ``f`` (N, n) (``f`` read only if ``has_f``), ``A``
@@ -940,6 +954,8 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
     reference counting cost ~0.2 µs per state) and reuses one set of scratch arrays. See the
     module docstring for the steps. With ``again`` (single state, see :func:`solve_again`) steps
     1–5 are skipped: ``w`` comes from the factorization the last call left in ``work``.
+    ``known`` (bits, see :data:`KNOWN_M_VALID`) states what the caller has established about
+    every state of the range, so its checks are skipped (0: nothing, check everything).
     """
     n = M.shape[1]
     m = A.shape[1]
@@ -988,14 +1004,17 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             if has_f:
                 for j in range(n):
                     cw[j] += f[b, j] * 0.0
-            for i in range(n):
-                for j in range(n):
-                    cw[j] += M[b, i, j] * 0.0
+            m_valid = (known & KNOWN_M_VALID) != 0
+            if not m_valid:
+                for i in range(n):
+                    for j in range(n):
+                        cw[j] += M[b, i, j] * 0.0
             if sparse:  # B back to zero (it was nonzero on the last pattern only), A's pattern
                 for i in range(m):
                     for ip in range(Ap[i, 0]):
                         B[i, Ap[i, 1 + ip]] = 0.0
-                _pattern(A[b], m, n, Ap)  # (A's finiteness: from its row norms, step 2)
+                if (known & KNOWN_PATTERN) == 0:  # (else the caller's, a superset: same sums)
+                    _pattern(A[b], m, n, Ap)  # (A's finiteness: from its row norms, step 2)
             else:
                 for i in range(m):
                     for j in range(n):
@@ -1008,7 +1027,9 @@ def solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, s
             code = NONFINITE if bad else OK
             asym = 0.0
             offd = 0.0  # largest off-diagonal |M_ij|: 0 for a diagonal M (planar bodies, point masses)
-            if code == OK:
+            if m_valid:
+                offd = 0.0 if (known & KNOWN_M_DIAGONAL) != 0 else 1.0
+            elif code == OK:
                 for i in range(n):
                     for j in range(i):
                         d = abs(M[b, i, j] - M[b, j, i])
@@ -1382,7 +1403,7 @@ def solve_one(M, h, f, A, gam, params, out):  # type: ignore[no-untyped-def]
         params[2] != 0.0, params[3], params[4], params[5], res[0:1], res[1:2],
         P.reshape((1, P.shape[0], P.shape[1])), L.reshape((1, L.shape[0], L.shape[1])),
         params[6] != 0.0, ist[0:1], ist[1:2], out[2 * n + 1 : 2 * n + 2],
-        out[2 * n + 2 : 2 * n + 3], work, _NO_T, False, False,
+        out[2 * n + 2 : 2 * n + 3], work, _NO_T, False, False, 0,
     )  # fmt: skip
     out[2 * n] = ist[1]
     return ist[0]
@@ -1390,7 +1411,7 @@ def solve_one(M, h, f, A, gam, params, out):  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def solve_work(M, h, f, has_f, A, gam, mu, has_mu, rtol, spd_rtol, sym_rtol, want_pl, out, P, L,
-               work, T, warm, again=False):  # type: ignore[no-untyped-def]  # fmt: skip
+               work, T, warm, again=False, known=0):  # type: ignore[no-untyped-def]  # fmt: skip
     """Single state with caller-owned scratch (``work = scratch(n, m)``) and a warm start.
 
     For integration loops: no allocation per call, and with ``warm`` true the Jacobi SVD
@@ -1398,7 +1419,10 @@ def solve_work(M, h, f, has_f, A, gam, mu, has_mu, rtol, spd_rtol, sym_rtol, wan
     in place; start with the identity), so a state close to the previous one converges in
     fewer sweeps. Same result as a cold start up to round-off (same rank policy). ``f`` is read
     only if ``has_f``, ``mu`` only if ``has_mu``. Writes ``out = [qdd (n), f_c (n), rank, mu,
-    pivot_ratio]`` (``P`` and ``L`` if ``want_pl``); returns the status.
+    pivot_ratio]`` (``P`` and ``L`` if ``want_pl``); returns the status. ``known``: what the
+    caller has established (bits :data:`KNOWN_M_VALID`, :data:`KNOWN_M_DIAGONAL`,
+    :data:`KNOWN_PATTERN`; e.g. a simulation loop with a constant, validated M and the static
+    pattern of its A in ``work[30]``); those checks and scans are skipped.
     """
     n = M.shape[0]
     ist = work[17]
@@ -1409,7 +1433,7 @@ def solve_work(M, h, f, has_f, A, gam, mu, has_mu, rtol, spd_rtol, sym_rtol, wan
         0, 1, M[None], h[None], f[None], has_f, A[None], gam[None], mu_in, has_mu, rtol,
         spd_rtol, sym_rtol, out[:n][None], out[n : 2 * n][None], P[None], L[None], want_pl,
         ist[0:1], ist[1:2], out[2 * n + 1 : 2 * n + 2], out[2 * n + 2 : 2 * n + 3], work, T,
-        warm, again,
+        warm, again, known,
     )  # fmt: skip
     out[2 * n] = ist[1]
     return ist[0]
@@ -1491,7 +1515,7 @@ def _scaled_residual(A, x, b, dsc, m, n, res, sp, P):  # type: ignore[no-untyped
 
 
 @njit(cache=True)
-def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: ignore[no-untyped-def]
+def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same, known=0):  # type: ignore[no-untyped-def]
     """Solve at a constraint matrix ``A`` close to the ``A_h`` of the factorization held in
     ``work`` (a certified LQ in the null-space form), without factorizing ``A``.
 
@@ -1512,6 +1536,9 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: igno
     Cholesky factor of ``S`` and μ are reused and only ``w`` is computed for the new ``γ``
     (the velocity projection and the evaluation at the projected state share one ``A``).
 
+    ``known``: as for :func:`solve_work` (only :data:`KNOWN_PATTERN` is used: M is not checked
+    here in any case, the held factorization's call did).
+
     Writes ``out`` as :func:`solve_work` (``S`` in the scratch, for cond(M̄)); returns
     :data:`OK`, the SPD status of ``S``, or :data:`NO_FACTOR` when nothing suitable is held or
     the passes do not reach round-off (then factorize ``A``).
@@ -1527,11 +1554,12 @@ def solve_near(M, h, f, has_f, A, gam, spd_rtol, out, work, same):  # type: igno
     mode = int(info[5])
     k = n - m
     tol = 64.0 * _EPS
-    An = work[31]
+    given = (known & KNOWN_PATTERN) != 0
+    An = work[30] if given else work[31]
     sp = _sparse_rows(m)
     res = Bw[0]  # scratch (n + 1 ≥ m entries)
     reuse = same and info[7] != 0.0  # Z', S, Ls and μ of the last call are this A's
-    if sp and not reuse:  # products with A over its row pattern (reuse: the last call's)
+    if sp and not reuse and not given:  # products with A over its row pattern (reuse: the last call's)
         _pattern(A, m, n, An)
     info[7] = 0.0
     # the refined basis Z' (rows of Tt), from Z_h (rows of Kt)
@@ -1633,7 +1661,7 @@ def solve_batch_serial(M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sy
     """Batch of states (leading axis), one after the other."""
     solve_range(0, M.shape[0], M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
                 qdd, fc, P, L, want_pl, status, rank, mu_out, ratio,
-                scratch(M.shape[1], A.shape[1]), _NO_T, False, False)  # fmt: skip
+                scratch(M.shape[1], A.shape[1]), _NO_T, False, False, 0)  # fmt: skip
 
 
 @njit(cache=True, parallel=True)
@@ -1646,7 +1674,7 @@ def solve_batch_parallel(M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, 
         hi = ((c + 1) * N) // nchunks
         solve_range(lo, hi, M, h, f, has_f, A, gam, mu_in, has_mu, rtol, spd_rtol, sym_rtol,
                     qdd, fc, P, L, want_pl, status, rank, mu_out, ratio,
-                    scratch(M.shape[1], A.shape[1]), _NO_T, False, False)  # fmt: skip
+                    scratch(M.shape[1], A.shape[1]), _NO_T, False, False, 0)  # fmt: skip
 
 
 def num_threads() -> int:

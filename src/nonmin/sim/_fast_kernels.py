@@ -34,6 +34,9 @@ from numba import njit
 
 from ..core._borrow import borrow
 from ..core._fast_kernels import (
+    KNOWN_M_DIAGONAL,
+    KNOWN_M_VALID,
+    KNOWN_PATTERN,
     _pattern,
     _pattern_dot,
     orthonormalize_row,
@@ -51,7 +54,8 @@ FAILED = 1  # a kernel status ≠ OK or a non-finite acceleration: hand over to 
 
 
 #: Entries of the ``cfg`` parameter vector of :func:`rk4_planar`.
-BASE_RTOL, DRIFT_FACTOR, VEL_RTOL, PTOL, MAX_ITER, SPD_RTOL, SYM_RTOL, FLOOR, WARM, POS_CUT, CHORD = range(11)
+(BASE_RTOL, DRIFT_FACTOR, VEL_RTOL, PTOL, MAX_ITER, SPD_RTOL, SYM_RTOL, FLOOR, WARM, POS_CUT, CHORD,
+ SING_CUT, RES_RATIO) = range(13)
 
 #: Status of a non-finite acceleration (the core kernel's codes are 0–4).
 NONFINITE_QDD = 5
@@ -68,13 +72,16 @@ def workspace(n, m, S, n_var, T):  # type: ignore[no-untyped-def]
     writes (row-major, one spare entry). ``ws[20]`` and ``ws[21]`` are the row patterns
     ``[count, k …]`` of A (every entry that can be nonzero: the program's constant nonzeros and
     its variable entries) and of the constant M, set by :func:`carry`: the loop's products
-    with them skip only entries that are always zero (bitwise the dense sums)."""
+    with them skip only entries that are always zero (bitwise the dense sums). ``ws[22][0]``
+    is the ``known`` argument of the core kernels (what :func:`carry` established about M and
+    A's pattern)."""
     buf = np.empty(m * n + 1)
     return (np.full(2 * n + 2, np.nan), buf, np.empty((2, m)), buf[: m * n].reshape((m, n)),
             np.empty(m), np.zeros(n), np.empty(2 * n + 3), np.empty((n, n)), np.empty((n, n)),
             np.empty(n), np.empty(n), scratch(n, m), T, np.empty((9, S)), np.empty(n_var),
             np.empty(m), np.empty((n, n)), np.empty(n), np.zeros(2), np.full(n, np.nan),
-            np.zeros((m, n + 1), dtype=np.int64), np.zeros((n, n + 1), dtype=np.int64))  # fmt: skip
+            np.zeros((m, n + 1), dtype=np.int64), np.zeros((n, n + 1), dtype=np.int64),
+            np.zeros(1, dtype=np.int64))  # fmt: skip
 
 
 @njit(cache=True)
@@ -95,6 +102,28 @@ def carry(n, m, S, n_var, A0, var_idx, M):  # type: ignore[no-untyped-def]
             live[var_idx[k]] = True
     _pattern(live.reshape((m, n)), m, n, ws[20])
     _pattern(M, n, n, ws[21])
+    # what the core kernels need not check or scan again: M (constant) finite and exactly
+    # symmetric, diagonal or not; A's static pattern, in the core scratch's pattern slot
+    known = 0
+    finite = True
+    sym = True
+    diag = True
+    for i in range(n):
+        for j in range(n):
+            finite &= math.isfinite(M[i, j])
+            sym &= M[i, j] == M[j, i]
+            diag &= i == j or M[i, j] == 0.0
+    if finite and sym:
+        known |= KNOWN_M_VALID
+        if diag:
+            known |= KNOWN_M_DIAGONAL
+    Ap = ws[11][30]
+    if Ap.shape[0] == m:  # (the core's many-row path only)
+        for i in range(m):
+            for k in range(n + 1):
+                Ap[i, k] = ws[20][i, k]
+        known |= KNOWN_PATTERN
+    ws[22][0] = known
     return ws, loop, np.zeros(1, dtype=np.int64)
 
 
@@ -186,7 +215,7 @@ def _solve(prog, ws, cfg, h, gam, rtol, want_pl):  # type: ignore[no-untyped-def
     # literal combination (~20 s each on first use)
     st = solve_work(prog[0], h, h, cfg[WARM] < 0.0, ws[3], gam, 1.0, cfg[WARM] < 0.0, rtol,
                     cfg[SPD_RTOL], cfg[SYM_RTOL], want_pl != 0, ws[6], ws[7], ws[8], ws[11],
-                    ws[12], cfg[WARM] != 0.0)  # fmt: skip
+                    ws[12], cfg[WARM] != 0.0, False, ws[22][0])  # fmt: skip
     q, tag = ws[9], ws[18]
     for i in range(q.shape[0]):
         ws[17][i] = q[i]
@@ -219,7 +248,7 @@ def _solve_at(prog, ws, cfg, h, gam, rtol, want_pl, near):  # type: ignore[no-un
         return _again(prog, ws, h, gam, want_pl)
     if near != 0 and want_pl == 0 and tag[0] != 0.0 and tag[1] >= rtol:
         st = solve_near(prog[0], h, h, False, ws[3], gam, cfg[SPD_RTOL], ws[6], ws[11],
-                        _equal(nq, q, n))  # fmt: skip
+                        _equal(nq, q, n), ws[22][0])  # fmt: skip
         if st == 0:
             for i in range(n):
                 nq[i] = q[i]
@@ -299,6 +328,7 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
         if err <= cfg[PTOL] or err == 0.0:
             break  # converged
         floor = True  # every row at its round-off level (see _stabilization.ROUNDOFF_FLOOR)
+        real = False  # some row above RES_RATIO × that level (see _stabilization._first_cut)
         Ap = ws[20]
         for i in range(m):
             s = 0.0
@@ -307,7 +337,9 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
                 s += abs(A[i, j]) * abs(yy[j])
             if abs(PG[0, i]) > cfg[FLOOR] * (1.0 + s):
                 floor = False
-                break
+                if abs(PG[0, i]) > cfg[RES_RATIO] * (cfg[FLOOR] * (1.0 + s)):
+                    real = True
+                    break
         if floor:
             break
         # the same decisions as Projection.project
@@ -324,7 +356,16 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
             if it >= cfg[MAX_ITER]:
                 break
             it += 1
-            st = _solve(prog, ws, cfg, zero, PG[0], cut, 0)
+            c2 = max(cfg[SING_CUT], cfg[BASE_RTOL])
+            st = -1
+            if it == 1 and real and cut > c2:  # Projection: first cut by _stabilization._first_cut
+                st = _solve(prog, ws, cfg, zero, PG[0], c2, 0)
+                if st == 0 and out[2 * n] == m:  # full rank at c2: keep that cutoff
+                    cut = c2
+                elif st == 0:
+                    st = -1  # near a singular configuration: the cutoff POS_CUT
+            if st == -1:
+                st = _solve(prog, ws, cfg, zero, PG[0], cut, 0)
             lin = True
         else:
             st = _again(prog, ws, zero, PG[0], 0)

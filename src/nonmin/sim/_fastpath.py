@@ -34,7 +34,14 @@ from ..core._fast import AUTO_NUMBA_MAX_N, auto_compiled, backend_setting, get_b
 from ..core.linalg import DEFAULT_RTOL, SPD_RTOL
 from ..errors import InputError, MissingDependencyError
 from ._integrators import RK4
-from ._stabilization import CHORD_RATE, POSITION_CUT_RTOL, ROUNDOFF_FLOOR, Projection
+from ._stabilization import (
+    CHORD_RATE,
+    POSITION_CUT_RTOL,
+    ROUNDOFF_FLOOR,
+    ROUNDOFF_RESIDUAL_RATIO,
+    SINGULAR_CUT_RTOL,
+    Projection,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -168,7 +175,8 @@ def run(
     vr = stab.velocity_rank_rtol(rank_rtol)
     vtol = base if vr is None else float(vr)
     cfg = np.array([base, drift_factor, vtol, float(stab.tol), float(stab.max_iter), SPD_RTOL,
-                    SYMMETRY_RTOL, ROUNDOFF_FLOOR, 1.0, POSITION_CUT_RTOL, CHORD_RATE])  # fmt: skip
+                    SYMMETRY_RTOL, ROUNDOFF_FLOOR, 1.0, POSITION_CUT_RTOL, CHORD_RATE,
+                    SINGULAR_CUT_RTOL, ROUNDOFF_RESIDUAL_RATIO])  # fmt: skip
     pr = (prog.M, prog.f, prog.A0, prog.I6, prog.SL, prog.prm, prog.rows, prog.var_idx,
           prog.counts, prog.angle_rows, prog.G, prog.angle_const)  # fmt: skip
     every = t_out is None
