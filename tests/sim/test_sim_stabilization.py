@@ -254,9 +254,11 @@ def _projection_cutoffs(
     calls: list[float | None] = []
     orig = stab_mod._correction
 
-    def spy(M: np.ndarray, A: np.ndarray, r: np.ndarray, rtol: float | None) -> np.ndarray:
+    def spy(
+        M: np.ndarray, A: np.ndarray, r: np.ndarray, rtol: float | None, ranks: list[int] | None = None
+    ) -> np.ndarray:
         calls.append(rtol)
-        return orig(M, A, r, rtol)
+        return orig(M, A, r, rtol, ranks)
 
     monkeypatch.setattr(stab_mod, "_correction", spy)
     active = frozenset(mech.state.active)
@@ -303,5 +305,6 @@ def test_a_real_residual_next_to_a_singular_configuration_keeps_the_cut(
 
     t_c = float(_a02_horizontal_times(2, 1.0)[0])
     pos, phi, vel = _projection_cutoffs(monkeypatch, t_c + 1e-6, 1e-8)
-    assert pos and pos[0] == stab_mod.POSITION_CUT_RTOL, pos
+    # the step at SINGULAR_CUT_RTOL is taken and dropped (it was not of full rank), then the cut
+    assert pos[:2] == [stab_mod.SINGULAR_CUT_RTOL, stab_mod.POSITION_CUT_RTOL], pos
     assert phi < 1e-14 and vel < 1e-12

@@ -194,16 +194,17 @@ def auto_compiled(n: int, m: int) -> bool:
     """Whether ``"auto"`` takes the compiled path for n coordinates and m constraint rows."""
     return n <= AUTO_NUMBA_MAX_N or n - m <= AUTO_NUMBA_MAX_N
 
-#: ``what`` codes of :func:`solve`.
-QDD, FC, ALL = 0, 1, 2
+#: ``what`` codes of :func:`solve` (``QDD_RANK``: ``(qdd, rank)``, single states only).
+QDD, FC, ALL, QDD_RANK = 0, 1, 2, 3
 
 
 def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | None,
           what: int) -> Any:  # fmt: skip
     """Compiled evaluation, or None when the caller must take the NumPy path.
 
-    Returns ``qdd`` (``what=QDD``), ``f_c`` (``FC``) or ``(qdd, f_c, P, L, rank, mu)`` (``ALL``),
-    all with the broadcast batch shape. None is returned when the backend is NumPy or when the
+    Returns ``qdd`` (``what=QDD``), ``f_c`` (``FC``), ``(qdd, f_c, P, L, rank, mu)`` (``ALL``),
+    all with the broadcast batch shape, or ``(qdd, rank)`` (``QDD_RANK``, a single state;
+    None for a batch). None is returned when the backend is NumPy or when the
     inputs are not regular (shapes, non-finite entries, asymmetric M, M̄ not positive definite):
     the NumPy path then raises the typed error.
     """
@@ -255,6 +256,8 @@ def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | N
             out = np.empty(2 * n + 3)
             if kern.solve_one(Mm, hv, fv, Am, gv, params, out):
                 return None
+            if what == QDD_RANK:
+                return out[:n], int(out[2 * n])
             return out[:n] if what == QDD else out[n : 2 * n]
         out = np.empty(2 * n + 3 + 2 * n * n)  # P and L follow the scalars
         if kern.solve_one(Mm, hv, fv, Am, gv, params, out):
@@ -270,11 +273,15 @@ def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | N
         and Mm.shape[0] == hv.shape[0] == Am.shape[0] == gv.shape[0] == fv.shape[0] == 1
         and (not has_mu or np.ndim(mu) == 0)
     ):  # a batch of one state: the (cheaper) single-state path  # fmt: skip
+        if what == QDD_RANK:
+            return None
         one = solve(Mm[0], hv[0], Am[0], gv[0], fv[0] if has_f else None, mu, rtol, what)
         if one is None or what != ALL:
             return None if one is None else one[None]
         return (one[0][None], one[1][None], one[2][None], one[3][None], one[4][None],
                 one[5] if has_mu else one[5][None])  # fmt: skip
+    if what == QDD_RANK:
+        return None
     return _solve_batch(kern, Mm, hv, Am, gv, fv, has_f, mu, rtol, what)
 
 

@@ -30,7 +30,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from ..core import forward_dynamics
+from ..core import _fast, forward_dynamics
 from ..core.linalg import DEFAULT_RTOL, range_basis
 from ..errors import InputError
 from ..model import ConstraintTerms, Model
@@ -144,8 +144,13 @@ ROUNDOFF_RESIDUAL_RATIO = 1e3
 CHORD_RATE = 0.1
 
 
-def _correction(M: FloatArray, A: FloatArray, r: FloatArray, rtol: float | None) -> FloatArray:
+def _correction(
+    M: FloatArray, A: FloatArray, r: FloatArray, rtol: float | None, ranks: list[int] | None = None
+) -> FloatArray:
     """Minimum mass-metric correction ``Δ = Sᵀ(−A⁺r)``: minimizes ``½ΔᵀMΔ`` s.t. ``AΔ = −r``.
+
+    With ``ranks`` (a list) the rank of A the correction used is appended to it (from the
+    compiled kernel when it evaluates the correction, else from :func:`range_basis`).
 
     This is :func:`nonmin.core.position_correction`; it is evaluated through the (compiled when
     available) dynamics kernel: with ``f + h = 0`` and bias ``r``,
@@ -153,19 +158,31 @@ def _correction(M: FloatArray, A: FloatArray, r: FloatArray, rtol: float | None)
     ``M̄ x = μ x`` for ``x ∈ R(Aᵀ)`` and ``M̄⁻¹P = PM̄⁻¹``) — the same formula, same rank policy.
     With ``M = I`` it is the Euclidean correction ``−A⁺r``.
     """
+    if ranks is None:
+        return forward_dynamics(M, np.zeros(M.shape[0]), A, r, rtol=rtol)
+    fast = _fast.solve(M, np.zeros(M.shape[0]), A, r, None, None, rtol, _fast.QDD_RANK)
+    if fast is not None:
+        ranks.append(fast[1])
+        return np.asarray(fast[0])
+    ranks.append(int(range_basis(A, rtol).rank))
     return forward_dynamics(M, np.zeros(M.shape[0]), A, r, rtol=rtol)
 
 
-def _first_cut(A: FloatArray, phi: FloatArray, aq: FloatArray, full: float) -> float:
-    """Cutoff of the first Gauss–Newton steps at a state with residual ``phi`` (the rule of
-    :data:`SINGULAR_CUT_RTOL`; ``aq = |q|``, ``full``: the rank tolerance of the simulation)."""
+def _first_step(
+    M: FloatArray, A: FloatArray, phi: FloatArray, aq: FloatArray, full: float
+) -> tuple[float, FloatArray]:
+    """Cutoff and correction of the first Gauss–Newton step at a state with residual ``phi``
+    (the rule of :data:`SINGULAR_CUT_RTOL`; ``aq = |q|``, ``full``: the rank tolerance of the
+    simulation). The step at :data:`SINGULAR_CUT_RTOL` is kept if it had the full rank."""
     floor = ROUNDOFF_FLOOR * (1.0 + np.abs(A) @ aq)
-    if np.all(np.abs(phi) <= ROUNDOFF_RESIDUAL_RATIO * floor):
-        return max(POSITION_CUT_RTOL, full)  # round-off residual
-    cut = max(SINGULAR_CUT_RTOL, full)
-    if int(range_basis(A, cut).rank) == A.shape[0]:
-        return cut  # no singular value below it: the full-rank step
-    return max(POSITION_CUT_RTOL, full)  # near a singular configuration
+    if not np.all(np.abs(phi) <= ROUNDOFF_RESIDUAL_RATIO * floor):  # a real residual
+        cut = max(SINGULAR_CUT_RTOL, full)
+        ranks: list[int] = []
+        dq = _correction(M, A, phi, cut, ranks)
+        if ranks[0] == A.shape[0]:
+            return cut, dq  # no singular value below the cutoff: the full-rank step
+    cut = max(POSITION_CUT_RTOL, full)  # round-off residual, or next to a singular configuration
+    return cut, _correction(M, A, phi, cut)
 
 
 @dataclass(frozen=True)
@@ -267,14 +284,17 @@ class Projection(Stabilization):
                         break
                     lin_count += 1
                     A_lin = ct.A[hol]
-                    if A_lin.shape[0] and lin_count == 1 and cut > max(SINGULAR_CUT_RTOL, full):
-                        cut = _first_cut(A_lin, phi, aq, full)
                 fresh = relin
                 assert A_lin is not None
                 prev = err
                 # M at the uncorrected q: the corrections are at the integrator's error level,
                 # so the metric change is of second order
-                q = q + _correction(M if eye is None else eye, A_lin, phi, cut)
+                Mq = M if eye is None else eye
+                if lin_count == 1 and fresh and cut > max(SINGULAR_CUT_RTOL, full):
+                    cut, dq = _first_step(Mq, A_lin, phi, aq, full)
+                else:
+                    dq = _correction(Mq, A_lin, phi, cut)
+                q = q + dq
                 ct = model.constraint_terms(t, q, qd, active)
         if self.velocity and ct.A.shape[0]:
             qd = qd + _correction(M if eye is None else eye, ct.A, ct.velocity,
