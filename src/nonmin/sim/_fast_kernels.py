@@ -278,7 +278,7 @@ def _rhs(prog, ws, cfg, t, yy, kk, near):  # type: ignore[no-untyped-def]
     return 0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (one call site; inlined: no reference counting of its tuples)
 def _advance(prog, ws, cfg, t, yy, kk1, h, res, stages):  # type: ignore[no-untyped-def]
     """One raw RK4 step of size h from ``(t, yy)`` with ``k1 = kk1`` given, into ``res``.
 
@@ -304,7 +304,7 @@ def _advance(prog, ws, cfg, t, yy, kk1, h, res, stages):  # type: ignore[no-unty
 _hermite = njit(cache=True)(hermite_into)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (one call site in rk4_planar)
 def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
     """:meth:`nonmin.sim.Projection.project` in the mass metric, in place on ``yy``."""
     q, qd, out, PG, A, vres, zero = ws[9], ws[10], ws[6], ws[2], ws[3], ws[4], ws[5]
@@ -455,7 +455,7 @@ def _cond_from_s(S, k, mu):  # type: ignore[no-untyped-def]
     return max(mu, hi) / min(mu, lo)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # (one call site in rk4_planar)
 def _point(prog, ws, cfg, tt, yy, recs, k, kk):  # type: ignore[no-untyped-def]
     """The full evaluation recorded at a sample (row ``k`` of ``recs``); ``kk = F(tt, yy)``."""
     rec_t, rec_q, rec_qd, rec_qdd, rec_fc, rec_rank, rec_cond, rec_mu, rec_energy, rec_phi, rec_vel = recs
@@ -553,10 +553,6 @@ def rk4_planar(prog, t, t1, dt, y, t_out, out_i, every, max_steps, cfg, recs, st
             flag[0] = 0
             return FAILED, t, steps, n_rhs, n_rec, out_i
         t_new = t1 if h == t1 - t else t + h
-        st = _project(prog, ws, cfg, y1)
-        if st != 0:
-            flag[0] = 0
-            return FAILED, t, steps, n_rhs, n_rec, out_i
         k = n_rec
         oi = out_i
         oe = oi  # the requested samples of this step: t_out[oi:oe]
@@ -567,28 +563,42 @@ def rk4_planar(prog, t, t1, dt, y, t_out, out_i, every, max_steps, cfg, recs, st
         n_s = 1 if every else oe - oi
         last_end = every or (n_s > 0 and abs((t_out[oe - 1] - t) - h) <= end_tol)
         have_kp = n_s > 0 or t_new < t1
-        if have_kp:  # kp = F(t_new, y1): the next step's k1 and the interpolant's end slope
-            if last_end:
-                st = _point(prog, ws, cfg, t_new, y1, recs, k + n_s - 1, kp)
-            else:
+        # In order: the step end (it = −1: projected, then kp = F(t_new, y1), the next step's
+        # k1 and the interpolant's end slope, recorded if it is the last sample), then the
+        # samples t_out[oi:oe] (inside the step: the Hermite interpolant, projected, as the
+        # general driver; a duplicate of the step end: recorded again). One call site each
+        # for _project and _point, which are inlined.
+        for it in range(-1, 0 if every else n_s):
+            tgt = y1
+            tt = t_new
+            row = k + n_s - 1
+            dst = kp
+            inside = False
+            if it >= 0:
+                s = t_out[oi + it] - t
+                row = k + it
+                inside = abs(s - h) > end_tol
+                if inside:
+                    _hermite(y, k1, y1, kp, h, max(s, 0.0), yp)
+                    tgt = yp
+                    tt = t + s
+                    dst = stages[1]
+            if it < 0 or inside:
+                st = _project(prog, ws, cfg, tgt)
+                if st != 0:
+                    break
+            if it < 0 and not have_kp:
+                continue
+            if it < 0 and not last_end:
                 st = _rhs(prog, ws, cfg, t_new, y1, kp, 1)
-            n_rhs += 1
-        for j in range(oi, oe):
+                n_rhs += 1
+            elif it < 0 or inside or row != k + n_s - 1:  # (else: recorded at it = −1)
+                st = _point(prog, ws, cfg, tt, tgt, recs, row, dst)
+                n_rhs += 1
+            if it >= 0:
+                recs[0][row] = t_out[oi + it]
             if st != 0:
                 break
-            s = t_out[j] - t
-            row = k + j - oi
-            if abs(s - h) <= end_tol:
-                if row != k + n_s - 1:  # a duplicate of the step end
-                    st = _point(prog, ws, cfg, t_new, y1, recs, row, kp)
-                    n_rhs += 1
-            else:  # inside the step: Hermite interpolant, projected (as the general driver)
-                _hermite(y, k1, y1, kp, h, max(s, 0.0), yp)
-                st = _project(prog, ws, cfg, yp)
-                if st == 0:
-                    st = _point(prog, ws, cfg, t + s, yp, recs, row, stages[1])
-                    n_rhs += 1
-            recs[0][row] = t_out[j]
         if st != 0:
             flag[0] = 0
             return FAILED, t, steps, n_rhs, n_rec, out_i
