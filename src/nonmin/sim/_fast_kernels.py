@@ -334,7 +334,7 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
         if err <= cfg[PTOL] or err == 0.0:
             break  # converged
         floor = True  # every row at its round-off level (see _stabilization.ROUNDOFF_FLOOR)
-        real = False  # some row above RES_RATIO × that level (see _stabilization._first_cut)
+        real = False  # some row above RES_RATIO × that level (see _stabilization._first_step)
         Ap = ws[20]
         for i in range(m):
             s = 0.0
@@ -364,7 +364,7 @@ def _project(prog, ws, cfg, yy):  # type: ignore[no-untyped-def]
             it += 1
             c2 = max(cfg[SING_CUT], cfg[BASE_RTOL])
             st = -1
-            if it == 1 and real and cut > c2:  # Projection: first cut by _stabilization._first_cut
+            if it == 1 and real and cut > c2:  # Projection: first cut by _stabilization._first_step
                 st = _solve(prog, ws, cfg, zero, PG[0], c2, 0)
                 if st == 0 and out[2 * n] == m:  # full rank at c2: keep that cutoff
                     cut = c2
