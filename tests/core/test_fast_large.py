@@ -234,6 +234,11 @@ def test_large_nonfinite_and_huge_entries():
     _agree(M, h, Ah, g, 1e-10)  # infinite norm makes every other row negligible)
 
 
+# The two ``known`` tests call the kernels with that argument from Python, a specialization the
+# default suite would compile only for them (43 s on a fresh clone, measured 2026-11-22): they run
+# with the slow validation runs. The default suite exercises ``known`` through every compiled
+# simulation (the loop passes it), whose results tests/sim compares with the general driver.
+@pytest.mark.slow
 @pytest.mark.parametrize("theta", [1.3, 0.3, 0.0])
 def test_known_inputs_give_bitwise_the_checked_results(theta):
     """``known`` (a caller that validated a constant M and holds a superset of A's row pattern,
@@ -282,6 +287,7 @@ def test_known_inputs_give_bitwise_the_checked_results(theta):
         assert np.array_equal(a, b)
 
 
+@pytest.mark.slow
 def test_known_diagonal_flag_is_what_the_kernel_uses():
     """With KNOWN_M_VALID and without KNOWN_M_DIAGONAL a diagonal M is treated as full (same
     solution to round-off); the flags only skip work, they never change the checks' outcome
