@@ -21,6 +21,19 @@ import pytest
 pytest.importorskip("numba")
 
 from nonmin.core import solve_dynamics, use_backend
+from nonmin.core._fast_kernels import (
+    KNOWN_M_DIAGONAL,
+    KNOWN_M_VALID,
+    KNOWN_PATTERN,
+    NO_FACTOR,
+    NONFINITE,
+    OK,
+    scratch,
+    solve_again,
+    solve_near,
+    solve_work,
+)
+from nonmin.errors import InputError
 from nonmin.library import a02_n_four_bar
 
 BACKEND_RTOL = 1e-11
@@ -52,7 +65,6 @@ def _terms(N: int, theta: float):
 
 def _mode(M, h, A, gam, rtol):
     """What the compiled kernel did: the LQ mode it recorded (0: SVD) and the rank."""
-    from nonmin.core._fast_kernels import OK, scratch, solve_work
 
     n, m = M.shape[0], A.shape[0]
     work = scratch(n, m)
@@ -136,14 +148,6 @@ def test_large_redundant_rows_take_the_svd():
 def test_large_solve_again_and_near(theta, rtol):
     """``solve_again`` on the profile-certified LQ and on the LAPACK SVD, and ``solve_near`` on
     the former, equal a fresh factorization."""
-    from nonmin.core._fast_kernels import (
-        NO_FACTOR,
-        OK,
-        scratch,
-        solve_again,
-        solve_near,
-        solve_work,
-    )
 
     M, h, A, gam = _terms(40, theta)
     n, m = M.shape[0], A.shape[0]
@@ -181,7 +185,6 @@ def test_large_scratch_reused_across_changing_patterns():
     pattern only and cleared on the last one): every call agrees with a fresh scratch and with
     NumPy, including after an uncertified (SVD) state and a state with an exact zero that
     another state's pattern has (sin 0 at the horizontal)."""
-    from nonmin.core._fast_kernels import OK, scratch, solve_work
 
     N = 12
     states = [_terms(N, th) for th in (1.3, 0.0, 0.7, 0.1, 1.3)]
@@ -210,8 +213,6 @@ def test_large_nonfinite_and_huge_entries():
     """The sparse path learns A's finiteness from its row norms: a NaN or an infinity is
     reported (NumPy path: a typed error), a finite entry whose square overflows is not (the
     dense check decides; both backends then agree)."""
-    from nonmin.core._fast_kernels import NONFINITE, OK, scratch, solve_work
-    from nonmin.errors import InputError
 
     M, h, A, g = _terms(12, 1.3)
     n, m = M.shape[0], A.shape[0]
@@ -245,16 +246,6 @@ def test_known_inputs_give_bitwise_the_checked_results(theta):
     like the simulation loop) skips checks and scans only: solve_work, solve_near and
     solve_again give bitwise the results of ``known = 0``, also when the given pattern has
     columns that are zero in A (the superset) and at a singular state (θ = 0: LAPACK's SVD)."""
-    from nonmin.core._fast_kernels import (
-        KNOWN_M_DIAGONAL,
-        KNOWN_M_VALID,
-        KNOWN_PATTERN,
-        OK,
-        scratch,
-        solve_again,
-        solve_near,
-        solve_work,
-    )
 
     M, h, A, gam = _terms(12, theta)
     n, m = M.shape[0], A.shape[0]
@@ -292,7 +283,6 @@ def test_known_diagonal_flag_is_what_the_kernel_uses():
     """With KNOWN_M_VALID and without KNOWN_M_DIAGONAL a diagonal M is treated as full (same
     solution to round-off); the flags only skip work, they never change the checks' outcome
     for valid inputs."""
-    from nonmin.core._fast_kernels import KNOWN_M_VALID, OK, scratch, solve_work
 
     M, h, A, gam = _terms(12, 1.1)
     n, m = M.shape[0], A.shape[0]

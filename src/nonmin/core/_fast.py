@@ -268,20 +268,18 @@ def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | N
         rank = np.asarray(int(out[2 * n]), dtype=np.intp)
         mu_used = mu_v if has_mu else np.asarray(out[2 * n + 1])
         return out[:n], out[n : 2 * n], P, L, rank, mu_used
+    if what == QDD_RANK:
+        return None  # (single states only)
     if (
         Mm.ndim == 3 and hv.ndim == 2 and Am.ndim == 3 and gv.ndim == 2 and fv.ndim == 2
         and Mm.shape[0] == hv.shape[0] == Am.shape[0] == gv.shape[0] == fv.shape[0] == 1
         and (not has_mu or np.ndim(mu) == 0)
     ):  # a batch of one state: the (cheaper) single-state path  # fmt: skip
-        if what == QDD_RANK:
-            return None
         one = solve(Mm[0], hv[0], Am[0], gv[0], fv[0] if has_f else None, mu, rtol, what)
         if one is None or what != ALL:
             return None if one is None else one[None]
         return (one[0][None], one[1][None], one[2][None], one[3][None], one[4][None],
                 one[5] if has_mu else one[5][None])  # fmt: skip
-    if what == QDD_RANK:
-        return None
     return _solve_batch(kern, Mm, hv, Am, gv, fv, has_f, mu, rtol, what)
 
 

@@ -30,8 +30,8 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import NDArray
 
-from ..core import _fast, forward_dynamics
-from ..core.linalg import DEFAULT_RTOL, range_basis
+from ..core import _fast, forward_dynamics, solve_dynamics
+from ..core.linalg import DEFAULT_RTOL
 from ..errors import InputError
 from ..model import ConstraintTerms, Model
 
@@ -150,7 +150,8 @@ def _correction(
     """Minimum mass-metric correction ``Δ = Sᵀ(−A⁺r)``: minimizes ``½ΔᵀMΔ`` s.t. ``AΔ = −r``.
 
     With ``ranks`` (a list) the rank of A the correction used is appended to it (from the
-    compiled kernel when it evaluates the correction, else from :func:`range_basis`).
+    compiled kernel when it evaluates the correction, else from :func:`solve_dynamics`'s
+    factorization).
 
     This is :func:`nonmin.core.position_correction`; it is evaluated through the (compiled when
     available) dynamics kernel: with ``f + h = 0`` and bias ``r``,
@@ -164,17 +165,18 @@ def _correction(
     if fast is not None:
         ranks.append(fast[1])
         return np.asarray(fast[0])
-    ranks.append(int(range_basis(A, rtol).rank))
-    return forward_dynamics(M, np.zeros(M.shape[0]), A, r, rtol=rtol)
+    sol = solve_dynamics(M, np.zeros(M.shape[0]), A, r, rtol=rtol)  # (forward_dynamics' path)
+    ranks.append(int(sol.rank))
+    return sol.qdd
 
 
 def _first_step(
-    M: FloatArray, A: FloatArray, phi: FloatArray, aq: FloatArray, full: float
+    M: FloatArray, A: FloatArray, phi: FloatArray, floor: FloatArray, full: float
 ) -> tuple[float, FloatArray]:
     """Cutoff and correction of the first Gauss–Newton step at a state with residual ``phi``
-    (the rule of :data:`SINGULAR_CUT_RTOL`; ``aq = |q|``, ``full``: the rank tolerance of the
-    simulation). The step at :data:`SINGULAR_CUT_RTOL` is kept if it had the full rank."""
-    floor = ROUNDOFF_FLOOR * (1.0 + np.abs(A) @ aq)
+    (the rule of :data:`SINGULAR_CUT_RTOL`; ``floor``: the rows' round-off levels
+    ``ROUNDOFF_FLOOR · (1 + Σ_j |A_ij q_j|)``, ``full``: the rank tolerance of the simulation).
+    The step at :data:`SINGULAR_CUT_RTOL` is kept if it had the full rank."""
     if not np.all(np.abs(phi) <= ROUNDOFF_RESIDUAL_RATIO * floor):  # a real residual
         cut = max(SINGULAR_CUT_RTOL, full)
         ranks: list[int] = []
@@ -264,7 +266,8 @@ class Projection(Stabilization):
                 err = float(np.max(np.abs(phi)))
                 if err <= self.tol or err == 0.0:
                     break  # converged
-                if np.all(np.abs(phi) <= ROUNDOFF_FLOOR * (1.0 + np.abs(ct.A[hol]) @ aq)):
+                floor = ROUNDOFF_FLOOR * (1.0 + np.abs(ct.A[hol]) @ aq)
+                if np.all(np.abs(phi) <= floor):
                     break  # every row at its round-off level: one more iteration cannot help
                 # Gauss–Newton first, at the full rank, and when a chord step was not fast
                 relin = A_lin is None or cut == full
@@ -291,7 +294,7 @@ class Projection(Stabilization):
                 # so the metric change is of second order
                 Mq = M if eye is None else eye
                 if lin_count == 1 and fresh and cut > max(SINGULAR_CUT_RTOL, full):
-                    cut, dq = _first_step(Mq, A_lin, phi, aq, full)
+                    cut, dq = _first_step(Mq, A_lin, phi, floor, full)  # (A_lin: this q's A)
                 else:
                     dq = _correction(Mq, A_lin, phi, cut)
                 q = q + dq
