@@ -1,0 +1,10 @@
+// The list of the engine's layers: add one line per binding file (engine/bindings/<layer>.cpp).
+#include "register.hpp"
+
+namespace nonmin::bindings {
+
+void register_all(nanobind::module_& m) {
+    (void)m;
+}
+
+}  // namespace nonmin::bindings

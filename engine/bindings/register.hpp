@@ -1,0 +1,10 @@
+// Registration of the engine's layers in the extension module (see module.cpp).
+#pragma once
+#include <nanobind/nanobind.h>
+
+namespace nonmin::bindings {
+
+// Each layer's binding file defines one of these; register_all calls them in order.
+void register_all(nanobind::module_& m);
+
+}  // namespace nonmin::bindings
