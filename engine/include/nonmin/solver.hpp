@@ -1,0 +1,49 @@
+// The core layer's contract with the loop: the rank-revealing projection-dynamics solve.
+// Implemented in engine/src (core layer); specified by the NumPy kernels of nonmin.core
+// (linalg.py: the rank policy on the row-equilibrated A; dynamics.py: qdd, f_c, μ, M̄), with
+// which it agrees to round-off. One Solver per thread: it owns preallocated scratch for
+// constraint matrices of up to m_max rows and n columns; no allocation inside a call.
+#pragma once
+#include <memory>
+
+#include "types.hpp"
+
+namespace nonmin {
+
+struct SolveOptions {
+    double rtol = 1e-10;      // DEFAULT_RTOL: relative singular-value cutoff on D A
+    double spd_rtol = 1e-13;  // SPD_RTOL: M̄ Cholesky pivot test
+    double mu = 0.0;          // virtual mass; ≤ 0 means the optimal tr(PMP)/(n − r)
+};
+
+struct SolveInfo {
+    Status status = Status::ok;
+    int rank = 0;     // numerical rank of A used
+    double mu = 0.0;  // virtual mass used
+};
+
+class Solver {
+  public:
+    Solver(int m_max, int n);
+    ~Solver();
+    Solver(Solver&&) noexcept;
+    Solver& operator=(Solver&&) noexcept;
+
+    int n() const;
+    int m_max() const;
+
+    // Forward dynamics (eq. ddq_sim, corrected sign): for the total applied force g = f + h,
+    // qdd = M̄⁻¹ [P g + (μI − PM) w], w = −A⁺ γ, with A (m × n, row-major, m ≤ m_max) and γ.
+    // f_c = M qdd − g when f_c is not null. M is n × n row-major.
+    SolveInfo forward(const double* M, const double* g, const double* A, int m, const double* gamma,
+                      const SolveOptions& opt, double* qdd, double* f_c);
+
+    // Minimum-norm solution x = (DA)⁺ D b of A x = b under the same rank policy (n-vector x).
+    SolveInfo min_norm(const double* A, int m, const double* b, double rtol, double* x);
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace nonmin
