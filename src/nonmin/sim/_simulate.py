@@ -47,7 +47,6 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import brentq
 
 from ..core import forward_dynamics, solve_dynamics
 from ..core.linalg import DEFAULT_RTOL, range_basis
@@ -755,6 +754,8 @@ def simulate(
                         s_root = h
                     else:
                         try:
+                            from scipy.optimize import brentq  # lazy: 0.4 s of import
+
                             s_root = float(brentq(gfun, 0.0, h, xtol=EVENT_XTOL, rtol=1e-15, maxiter=200))
                         except ValueError:  # re-evaluated end values lost the sign change
                             s_root = h
