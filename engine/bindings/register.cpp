@@ -4,7 +4,8 @@
 namespace nonmin::bindings {
 
 void register_all(nanobind::module_& m) {
-    (void)m;
+    bind_program(m);
+    bind_planar(m);
 }
 
 }  // namespace nonmin::bindings

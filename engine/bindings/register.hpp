@@ -7,4 +7,7 @@ namespace nonmin::bindings {
 // Each layer's binding file defines one of these; register_all calls them in order.
 void register_all(nanobind::module_& m);
 
+void bind_program(nanobind::module_& m);  // program.cpp: Program, Terms, Workspace
+void bind_planar(nanobind::module_& m);   // planar.cpp: PlanarDescription, PlanarProgram
+
 }  // namespace nonmin::bindings

@@ -275,6 +275,12 @@ class Model(ABC):
                 i += c.dim
         return out
 
+    def active_mask(self, active: Iterable[str] | str | None = None) -> NDArray[np.uint8]:
+        """The active set as the engine's mask: 1 for each active constraint, in
+        :attr:`constraints` order, shape (number of constraints,)."""
+        act = self.resolve_active(active)
+        return np.array([c.name in act for c in self.constraints], dtype=np.uint8)
+
     def num_rows(self, active: Iterable[str] | None = None) -> int:
         """Number of stacked constraint rows m for an active set."""
         act = self.resolve_active(active)
@@ -394,6 +400,20 @@ class Model(ABC):
         :class:`nonmin.model.planar.PlanarProgram` (planar absolute coordinates). The default,
         None, means "evaluate through the methods above"; results never depend on the choice
         beyond round-off.
+        """
+        return None
+
+    def engine_program(self) -> Any | None:
+        """The model compiled once to a program of the engine (``nonmin._engine.Program``), or
+        None.
+
+        A source whose whole evaluation (``M``, ``h``, ``f_passive``, ``B``, ``A``, ``γ``, ``φ``,
+        the velocity residual, the energies) the engine can run without calling Python returns
+        it here: planar models (``PlanarProgram``), SymPy models (``TapeProgram``) and spatial
+        models (``SpatialProgram``). The program covers every constraint; the active set is a
+        mask (one entry per constraint, in :attr:`constraints` order) given to each
+        evaluation. The default, None, means the engine evaluates the model through a Python
+        callback of :meth:`evaluate`; results never depend on the choice beyond round-off.
         """
         return None
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -32,6 +33,10 @@ __all__ = ["PlanarModel"]
 
 #: Active-set layouts kept per model (cleared when exceeded; a run uses a handful).
 _MAX_LAYOUTS = 256
+
+#: Engine programs of live models (built on first use; not part of a model's value or pickle).
+_ENGINE_PROGRAMS: weakref.WeakKeyDictionary[PlanarModel, Any] = weakref.WeakKeyDictionary()
+_MISSING = object()
 
 Actuator = JointActuator | PointForce | Torque
 ForceElement = Spring | RotationalSpring
@@ -654,6 +659,19 @@ class PlanarModel(Model):
         if self._stiff or self._damped:
             return None
         return _compiled.program(self._layout(active), self._M, self._fg)
+
+    def engine_program(self) -> Any | None:
+        """The compiled engine's ``PlanarProgram`` of this model (see
+        :meth:`nonmin.model.Model.engine_program`), built once per model and cached; None when a
+        joint is user-defined (its :meth:`Joint.terms` is Python). It covers every constraint
+        (the active set is a mask given to each evaluation), springs, dampers, drivers and B."""
+        prog = _ENGINE_PROGRAMS.get(self, _MISSING)
+        if prog is _MISSING:
+            from ._program import engine_program
+
+            prog = engine_program(self)
+            _ENGINE_PROGRAMS[self] = prog
+        return prog
 
     def _state_arrays(self, q: ArrayLike, qd: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """``q``, ``qd`` as float64 arrays of shape (n,), checked once (shape and finiteness)."""

@@ -1,0 +1,454 @@
+// PlanarProgram: evaluation of a planar multibody description (see nonmin/planar.hpp).
+// Formulas: src/nonmin/model/planar/_elements.py (the per-joint reference) and _compiled.py.
+#include "nonmin/planar.hpp"
+
+#include <cmath>
+#include <string>
+
+namespace nonmin {
+
+namespace {
+
+// Kinematics of one body-fixed point: position p, R s, velocity ṗ, θ̇ and the body's columns
+// (−1: none, for the ground and a point mass's rotation).
+struct PointKin {
+    double px, py, rx, ry, vx, vy, om;
+    int ix, iy, ith;
+};
+
+inline PointKin point_kin(const PlanarDescription& d, const PlanarWorkspace& w, const double* q,
+                          const double* qd, const PlanarPoint& P) {
+    PointKin k;
+    if (P.body < 0) {
+        k.px = P.sx;
+        k.py = P.sy;
+        k.rx = P.sx;
+        k.ry = P.sy;
+        k.vx = k.vy = k.om = 0.0;
+        k.ix = k.iy = k.ith = -1;
+        return k;
+    }
+    const PlanarBody& B = d.bodies[static_cast<std::size_t>(P.body)];
+    const double c = w.c[static_cast<std::size_t>(P.body)];
+    const double s = w.s[static_cast<std::size_t>(P.body)];
+    k.rx = c * P.sx - s * P.sy;
+    k.ry = s * P.sx + c * P.sy;
+    k.px = q[B.ix] + k.rx;
+    k.py = q[B.iy] + k.ry;
+    k.om = B.ith >= 0 ? qd[B.ith] : 0.0;
+    k.vx = qd[B.ix] - k.om * k.ry;
+    k.vy = qd[B.iy] + k.om * k.rx;
+    k.ix = B.ix;
+    k.iy = B.iy;
+    k.ith = B.ith;
+    return k;
+}
+
+inline void add(double* v, int i, double x) {
+    if (i >= 0) v[i] += x;
+}
+
+// Σ over the two ends: D = J_b − J_a; adds coef·Dᵀw to f (w a 2-vector).
+inline void add_DT(double* f, const PointKin& a, const PointKin& b, double wx, double wy) {
+    add(f, b.ix, wx);
+    add(f, b.iy, wy);
+    add(f, b.ith, -wx * b.ry + wy * b.rx);  // w·(R s_b)^⊥
+    add(f, a.ix, -wx);
+    add(f, a.iy, -wy);
+    add(f, a.ith, wx * a.ry - wy * a.rx);
+}
+
+std::string where(const PlanarDescription& d, const PlanarPrim& p) {
+    return "constraint '" + d.constraints[static_cast<std::size_t>(p.constraint)].name + "'";
+}
+
+}  // namespace
+
+int PlanarDescription::add_body(double mass, double inertia) {
+    if (!(std::isfinite(mass) && mass > 0.0))
+        throw EngineError("planar body " + std::to_string(bodies.size()) + ": mass must be > 0, got " +
+                          std::to_string(mass));
+    PlanarBody b;
+    b.mass = mass;
+    b.inertia = inertia;
+    b.ix = n;
+    b.iy = n + 1;
+    const bool rigid = std::isfinite(inertia) && inertia > 0.0;
+    b.ith = rigid ? n + 2 : -1;
+    n += rigid ? 3 : 2;
+    bodies.push_back(b);
+    return static_cast<int>(bodies.size()) - 1;
+}
+
+int PlanarDescription::add_constraint(const std::string& name, ConstraintKind kind, int dim) {
+    if (dim < 1) throw EngineError("constraint '" + name + "': dim must be ≥ 1");
+    constraints.push_back(ConstraintInfo{name, kind, m_all, dim});
+    m_all += dim;
+    return static_cast<int>(constraints.size()) - 1;
+}
+
+PlanarProgram::PlanarProgram(PlanarDescription desc) : d_(std::move(desc)) {
+    const int nb = static_cast<int>(d_.bodies.size());
+    if (nb == 0) throw EngineError("a planar description needs at least one body");
+    if (!(std::isfinite(d_.gx) && std::isfinite(d_.gy))) throw EngineError("gravity must be finite");
+    n_ = d_.n;
+    m_all_ = d_.m_all;
+    k_ = static_cast<int>(d_.actuators.size());
+    constraints_ = d_.constraints;
+    mdiag_ = Vec::Zero(n_);
+    fg_ = Vec::Zero(n_);
+    for (const PlanarBody& b : d_.bodies) {
+        mdiag_[b.ix] = b.mass;
+        mdiag_[b.iy] = b.mass;
+        if (b.ith >= 0) mdiag_[b.ith] = b.inertia;
+        fg_[b.ix] = b.mass * d_.gx;
+        fg_[b.iy] = b.mass * d_.gy;
+    }
+    auto check_body = [&](int body, const std::string& what, bool rotation) {
+        if (body < -1 || body >= nb)
+            throw EngineError(what + ": body index " + std::to_string(body) + " out of range [-1, " +
+                              std::to_string(nb) + ")");
+        if (rotation && body >= 0 && d_.bodies[static_cast<std::size_t>(body)].ith < 0)
+            throw EngineError(what + ": body " + std::to_string(body) +
+                              " is a point mass and has no rotation coordinate");
+    };
+    auto check_point = [&](const PlanarPoint& p, const std::string& what) {
+        check_body(p.body, what, false);
+        if (!(std::isfinite(p.sx) && std::isfinite(p.sy))) throw EngineError(what + ": point not finite");
+    };
+    const int nc = static_cast<int>(d_.constraints.size());
+    prims_of_.assign(static_cast<std::size_t>(nc), {});
+    std::vector<int> cover(static_cast<std::size_t>(m_all_), 0);
+    for (std::size_t i = 0; i < d_.prims.size(); ++i) {
+        const PlanarPrim& p = d_.prims[i];
+        if (p.constraint < 0 || p.constraint >= nc)
+            throw EngineError("primitive " + std::to_string(i) + ": constraint index out of range");
+        const std::string w = where(d_, p);
+        const ConstraintInfo& c = d_.constraints[static_cast<std::size_t>(p.constraint)];
+        const int rows = p.kind == PlanarPrimKind::pin ? 2 : 1;
+        if (p.offset < 0 || p.offset + rows > c.dim)
+            throw EngineError(w + ": primitive rows outside the constraint's " + std::to_string(c.dim));
+        for (int r = 0; r < rows; ++r) cover[static_cast<std::size_t>(c.row + p.offset + r)] += 1;
+        switch (p.kind) {
+            case PlanarPrimKind::pin:
+                check_point(p.a, w);
+                check_point(p.b, w);
+                break;
+            case PlanarPrimKind::line:
+                check_point(p.a, w);
+                check_point(p.b, w);
+                if (!(std::isfinite(p.ux) && std::isfinite(p.uy)) || std::hypot(p.ux, p.uy) <= 1e-12)
+                    throw EngineError(w + ": line axis must be a finite non-zero vector");
+                break;
+            case PlanarPrimKind::rod:
+                check_point(p.a, w);
+                check_point(p.b, w);
+                if (!(std::isfinite(p.length) && p.length > 0.0))
+                    throw EngineError(w + ": rod length must be > 0");
+                if (!(p.sign == 1.0 || p.sign == -1.0)) throw EngineError(w + ": rod sign must be ±1");
+                break;
+            case PlanarPrimKind::angle:
+                if (p.angle_bodies.size() != p.angle_coefs.size())
+                    throw EngineError(w + ": angle bodies and coefficients differ in length");
+                for (int b : p.angle_bodies) check_body(b, w, true);
+                if (p.driver < -1 || p.driver >= static_cast<int>(d_.drivers.size()))
+                    throw EngineError(w + ": driver index out of range");
+                break;
+            default:
+                throw EngineError(w + ": unknown primitive kind");
+        }
+        prims_of_[static_cast<std::size_t>(p.constraint)].push_back(static_cast<int>(i));
+    }
+    for (const ConstraintInfo& c : d_.constraints)
+        for (int r = 0; r < c.dim; ++r)
+            if (cover[static_cast<std::size_t>(c.row + r)] != 1)
+                throw EngineError("constraint '" + c.name + "': row " + std::to_string(r) + " is defined " +
+                                  std::to_string(cover[static_cast<std::size_t>(c.row + r)]) +
+                                  " times by the primitives (expected once)");
+    for (const PlanarSpring& s : d_.springs) {
+        check_point(s.a, "spring");
+        check_point(s.b, "spring");
+    }
+    for (const PlanarRotationalSpring& s : d_.rotational_springs) {
+        check_body(s.body_a, "rotational spring", true);
+        check_body(s.body_b, "rotational spring", true);
+    }
+    for (const PlanarActuator& a : d_.actuators) {
+        if (a.kind == PlanarActuatorKind::torque) {
+            check_body(a.body_a, "torque actuator", true);
+            check_body(a.body_b, "torque actuator", true);
+        } else {
+            check_point(a.a, "actuator");
+            if (a.kind == PlanarActuatorKind::prismatic) check_point(a.b, "actuator");
+        }
+    }
+    for (const PlanarDriver& dr : d_.drivers)
+        if (dr.profile) thread_safe_ = false;  // a Python callable holds the GIL
+}
+
+std::unique_ptr<Workspace> PlanarProgram::make_workspace() const {
+    auto w = std::make_unique<PlanarWorkspace>();
+    w->c.assign(d_.bodies.size(), 1.0);
+    w->s.assign(d_.bodies.size(), 0.0);
+    return w;
+}
+
+Status PlanarProgram::evaluate(double t, const double* q, const double* qd, const std::uint8_t* active,
+                               unsigned need, Terms& out, Workspace& wsb) const {
+    auto& w = static_cast<PlanarWorkspace&>(wsb);
+    const int n = n_;
+    {
+        double acc = 0.0;
+        for (int i = 0; i < n; ++i) acc += q[i] * q[i] + qd[i] * qd[i];
+        if (!std::isfinite(acc) || !std::isfinite(t)) {
+            for (int i = 0; i < n; ++i)
+                if (!std::isfinite(q[i]) || !std::isfinite(qd[i])) return Status::not_finite;
+            if (!std::isfinite(t)) return Status::not_finite;
+        }
+    }
+    const std::size_t nb = d_.bodies.size();
+    for (std::size_t i = 0; i < nb; ++i) {
+        const int ith = d_.bodies[i].ith;
+        if (ith >= 0) {
+            w.c[i] = std::cos(q[ith]);
+            w.s[i] = std::sin(q[ith]);
+        } else {
+            w.c[i] = 1.0;
+            w.s[i] = 0.0;
+        }
+    }
+    if (need & NEED_M) {
+        out.M.setZero();
+        for (int i = 0; i < n; ++i) out.M(i, i) = mdiag_[i];
+    }
+    double V_springs = 0.0;
+    const bool want_springs = (need & (NEED_H | NEED_ENERGY)) != 0;
+    if (need & NEED_H) {
+        out.h = fg_;
+        out.f_passive.setZero();
+    }
+    if (want_springs) {
+        double* h = out.h.data();
+        double* fp = out.f_passive.data();
+        for (const PlanarSpring& sp : d_.springs) {
+            const PointKin a = point_kin(d_, w, q, qd, sp.a);
+            const PointKin b = point_kin(d_, w, q, qd, sp.b);
+            const double dx = b.px - a.px, dy = b.py - a.py;
+            const double ell2 = dx * dx + dy * dy;
+            const double ell = std::hypot(dx, dy);
+            if (sp.stiffness != 0.0) {
+                V_springs += 0.5 * sp.stiffness * (ell - sp.rest_length) * (ell - sp.rest_length);
+                if (need & NEED_H) {
+                    if (ell > 0.0) {
+                        const double coef = -sp.stiffness * (1.0 - sp.rest_length / ell);
+                        add_DT(h, a, b, coef * dx, coef * dy);
+                    } else if (sp.rest_length != 0.0) {
+                        return Status::not_finite;  // zero length: force direction undefined
+                    }
+                }
+            }
+            if (sp.damping != 0.0 && (need & NEED_H) && ell2 > 0.0) {
+                const double ddx = b.vx - a.vx, ddy = b.vy - a.vy;
+                const double coef = -sp.damping * (dx * ddx + dy * ddy) / ell2;
+                add_DT(fp, a, b, coef * dx, coef * dy);
+            }
+        }
+        for (const PlanarRotationalSpring& rs : d_.rotational_springs) {
+            const int ia = rs.body_a >= 0 ? d_.bodies[static_cast<std::size_t>(rs.body_a)].ith : -1;
+            const int ib = rs.body_b >= 0 ? d_.bodies[static_cast<std::size_t>(rs.body_b)].ith : -1;
+            const double rel = (ib >= 0 ? q[ib] : 0.0) - (ia >= 0 ? q[ia] : 0.0) - rs.rest_angle;
+            if (rs.stiffness != 0.0) {
+                V_springs += 0.5 * rs.stiffness * rel * rel;
+                if (need & NEED_H) {
+                    const double tau = -rs.stiffness * rel;
+                    add(h, ib, tau);
+                    add(h, ia, -tau);
+                }
+            }
+            if (rs.damping != 0.0 && (need & NEED_H)) {
+                const double tau = -rs.damping * ((ib >= 0 ? qd[ib] : 0.0) - (ia >= 0 ? qd[ia] : 0.0));
+                add(fp, ib, tau);
+                add(fp, ia, -tau);
+            }
+        }
+    }
+    if ((need & NEED_B) && k_ > 0) {
+        out.B.setZero();
+        const int k = k_;
+        double* B = out.B.data();
+        auto addB = [&](int i, int col, double v) {
+            if (i >= 0) B[static_cast<std::ptrdiff_t>(i) * k + col] += v;
+        };
+        for (int col = 0; col < k; ++col) {
+            const PlanarActuator& a = d_.actuators[static_cast<std::size_t>(col)];
+            if (a.kind == PlanarActuatorKind::torque) {
+                addB(a.body_b >= 0 ? d_.bodies[static_cast<std::size_t>(a.body_b)].ith : -1, col, 1.0);
+                addB(a.body_a >= 0 ? d_.bodies[static_cast<std::size_t>(a.body_a)].ith : -1, col, -1.0);
+            } else if (a.kind == PlanarActuatorKind::force) {
+                const PointKin p = point_kin(d_, w, q, qd, a.a);
+                addB(p.ix, col, a.ux);
+                addB(p.iy, col, a.uy);
+                addB(p.ith, col, -a.ux * p.ry + a.uy * p.rx);
+            } else {
+                const PointKin pa = point_kin(d_, w, q, qd, a.a);
+                const PointKin pb = point_kin(d_, w, q, qd, a.b);
+                double ca = 1.0, sa = 0.0, rax = 0.0, ray = 0.0;
+                int iax = -1, iay = -1, iath = -1;
+                if (a.a.body >= 0) {
+                    const PlanarBody& Ba = d_.bodies[static_cast<std::size_t>(a.a.body)];
+                    ca = w.c[static_cast<std::size_t>(a.a.body)];
+                    sa = w.s[static_cast<std::size_t>(a.a.body)];
+                    rax = q[Ba.ix];
+                    ray = q[Ba.iy];
+                    iax = Ba.ix;
+                    iay = Ba.iy;
+                    iath = Ba.ith;
+                }
+                (void)pa;
+                const double ux = ca * a.ux - sa * a.uy, uy = sa * a.ux + ca * a.uy;
+                addB(pb.ix, col, ux);
+                addB(pb.iy, col, uy);
+                addB(pb.ith, col, -ux * pb.ry + uy * pb.rx);
+                // reaction on body a at the global point p_b: lever p_b − r_a
+                const double lx = pb.px - rax, ly = pb.py - ray;
+                addB(iax, col, -ux);
+                addB(iay, col, -uy);
+                addB(iath, col, -(-ux * ly + uy * lx));
+            }
+        }
+    }
+    const unsigned cneed = need & (NEED_A | NEED_GAMMA | NEED_PHI | NEED_VELOCITY);
+    if (cneed && m_all_ > 0) {
+        const bool wantA = (need & NEED_A) != 0;
+        double* A = out.A.data();
+        double* gamma = out.gamma.data();
+        double* phi = out.phi.data();
+        double* vel = out.velocity.data();
+        const std::size_t nc = d_.constraints.size();
+        for (std::size_t ci = 0; ci < nc; ++ci) {
+            if (!active[ci]) continue;
+            const ConstraintInfo& c = d_.constraints[ci];
+            if (wantA) std::fill(A + static_cast<std::ptrdiff_t>(c.row) * n,
+                                 A + static_cast<std::ptrdiff_t>(c.row + c.dim) * n, 0.0);
+            for (int pi : prims_of_[ci]) {
+                const PlanarPrim& p = d_.prims[static_cast<std::size_t>(pi)];
+                const int row = c.row + p.offset;
+                double* Ar = A + static_cast<std::ptrdiff_t>(row) * n;
+                switch (p.kind) {
+                    case PlanarPrimKind::pin: {
+                        const PointKin a = point_kin(d_, w, q, qd, p.a);
+                        const PointKin b = point_kin(d_, w, q, qd, p.b);
+                        phi[row] = a.px - b.px;
+                        phi[row + 1] = a.py - b.py;
+                        // γ = −θ̇_a² R_a s_a + θ̇_b² R_b s_b
+                        gamma[row] = -(a.om * a.om) * a.rx + (b.om * b.om) * b.rx;
+                        gamma[row + 1] = -(a.om * a.om) * a.ry + (b.om * b.om) * b.ry;
+                        vel[row] = a.vx - b.vx;
+                        vel[row + 1] = a.vy - b.vy;
+                        if (wantA) {
+                            double* Ar1 = Ar + n;
+                            add(Ar, a.ix, 1.0);
+                            add(Ar1, a.iy, 1.0);
+                            add(Ar, a.ith, -a.ry);
+                            add(Ar1, a.ith, a.rx);
+                            add(Ar, b.ix, -1.0);
+                            add(Ar1, b.iy, -1.0);
+                            add(Ar, b.ith, b.ry);
+                            add(Ar1, b.ith, -b.rx);
+                        }
+                        break;
+                    }
+                    case PlanarPrimKind::line: {
+                        const PointKin a = point_kin(d_, w, q, qd, p.a);
+                        const PointKin b = point_kin(d_, w, q, qd, p.b);
+                        double ca = 1.0, sa = 0.0;
+                        if (p.a.body >= 0) {
+                            ca = w.c[static_cast<std::size_t>(p.a.body)];
+                            sa = w.s[static_cast<std::size_t>(p.a.body)];
+                        }
+                        // n = R_a u^⊥, n^⊥ = (−n_y, n_x)
+                        const double upx = -p.uy, upy = p.ux;
+                        const double nx = ca * upx - sa * upy, ny = sa * upx + ca * upy;
+                        const double npx = -ny, npy = nx;
+                        const double dx = b.px - a.px, dy = b.py - a.py;
+                        const double ddx = b.vx - a.vx, ddy = b.vy - a.vy;
+                        const double dn = nx * dx + ny * dy;
+                        const double dnp = dx * npx + dy * npy;
+                        // −θ̇² R s at each end
+                        const double abx = -(b.om * b.om) * b.rx + (a.om * a.om) * a.rx;
+                        const double aby = -(b.om * b.om) * b.ry + (a.om * a.om) * a.ry;
+                        phi[row] = dn;
+                        gamma[row] = 2.0 * a.om * (npx * ddx + npy * ddy) + (nx * abx + ny * aby) -
+                                     a.om * a.om * dn;
+                        vel[row] = nx * ddx + ny * ddy + dnp * a.om;
+                        if (wantA) {
+                            add_DT(Ar, a, b, nx, ny);
+                            add(Ar, a.ith, dnp);
+                        }
+                        break;
+                    }
+                    case PlanarPrimKind::rod: {
+                        const PointKin a = point_kin(d_, w, q, qd, p.a);
+                        const PointKin b = point_kin(d_, w, q, qd, p.b);
+                        const double L = p.length;
+                        const double k = p.sign / L;
+                        const double dx = b.px - a.px, dy = b.py - a.py;
+                        const double ddx = b.vx - a.vx, ddy = b.vy - a.vy;
+                        const double abx = -(b.om * b.om) * b.rx + (a.om * a.om) * a.rx;
+                        const double aby = -(b.om * b.om) * b.ry + (a.om * a.om) * a.ry;
+                        phi[row] = p.sign * ((dx * dx + dy * dy) - L * L) / (2.0 * L);
+                        gamma[row] = k * ((ddx * ddx + ddy * ddy) + (dx * abx + dy * aby));
+                        vel[row] = k * (dx * ddx + dy * ddy);
+                        if (wantA) add_DT(Ar, a, b, k * dx, k * dy);
+                        break;
+                    }
+                    case PlanarPrimKind::angle: {
+                        double ph = -p.angle_const, v = 0.0, g = 0.0;
+                        const std::size_t na = p.angle_bodies.size();
+                        for (std::size_t j = 0; j < na; ++j) {
+                            const int b = p.angle_bodies[j];
+                            if (b < 0) continue;
+                            const int ith = d_.bodies[static_cast<std::size_t>(b)].ith;
+                            const double cf = p.angle_coefs[j];
+                            ph += cf * q[ith];
+                            v += cf * qd[ith];
+                            if (wantA) Ar[ith] += cf;
+                        }
+                        if (p.driver >= 0) {
+                            const PlanarDriver& dr = d_.drivers[static_cast<std::size_t>(p.driver)];
+                            double f[3];
+                            if (dr.profile) {
+                                if (!dr.profile(t, f)) return Status::callback_error;
+                                if (!(std::isfinite(f[0]) && std::isfinite(f[1]) && std::isfinite(f[2])))
+                                    return Status::not_finite;
+                            } else {
+                                f[0] = dr.start + dr.speed * t;
+                                f[1] = dr.speed;
+                                f[2] = 0.0;
+                            }
+                            ph -= f[0];
+                            v -= f[1];
+                            g = -f[2];
+                        }
+                        phi[row] = ph;
+                        gamma[row] = g;
+                        vel[row] = v;
+                        break;
+                    }
+                }
+            }
+        }
+    }
+    if (need & NEED_ENERGY) {
+        double T = 0.0, V = 0.0;
+        for (int i = 0; i < n; ++i) {
+            T += mdiag_[i] * qd[i] * qd[i];
+            V -= fg_[i] * q[i];
+        }
+        out.kinetic = 0.5 * T;
+        out.potential = V + V_springs;
+    }
+    return Status::ok;
+}
+
+}  // namespace nonmin

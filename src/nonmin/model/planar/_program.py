@@ -1,0 +1,128 @@
+"""The planar model compiled once to the engine's :class:`PlanarProgram` (plain-data description).
+
+:func:`description` walks a :class:`~nonmin.model.planar.PlanarModel` and emits its bodies,
+gravity, every constraint as row primitives (pin, line, rod, angle: the decomposition of
+:mod:`._compiled`), springs, dampers and actuators into a ``nonmin._engine.PlanarDescription``;
+:func:`engine_program` builds the C++ ``PlanarProgram`` from it. The engine then evaluates M,
+h, f_passive, B, A, γ, φ, the velocity residual and the energies for any active set (a mask
+over the constraints) with no Python per evaluation, except the profile of an angle driver
+given as a Python callable (called back once per driver and evaluation; constant-speed
+drivers are data).
+
+Formulas: those of :mod:`._elements` (the per-joint reference); ``tests/model/
+test_planar_program.py`` demands agreement with :meth:`PlanarModel.evaluate` to round-off.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from ... import _engine  # type: ignore[attr-defined]  # the compiled extension (no stubs)
+from ._elements import (
+    GROUND,
+    AngleDriver,
+    ConstantSpeed,
+    Gear,
+    JointActuator,
+    Point,
+    PointOnLine,
+    Prismatic,
+    Revolute,
+    Rod,
+    RotationalSpring,
+    Spring,
+    Torque,
+    Weld,
+)
+
+if TYPE_CHECKING:
+    from ._model import PlanarModel
+
+__all__ = ["description", "engine_program"]
+
+#: ``nonmin._engine.ConstraintKind`` values of the protocol's kinds.
+KIND_CODES = {"holonomic": 0, "rheonomic": 1, "nonholonomic": 2, "unilateral": 3}
+
+
+def description(model: PlanarModel) -> Any | None:
+    """The engine description of ``model``, or None if a joint is user-defined (a
+    :class:`~nonmin.model.planar.Joint` subclass the compiler does not know: its
+    :meth:`Joint.terms` is Python)."""
+    d = _engine.PlanarDescription()
+    d.set_gravity(*model.gravity)
+    index: dict[str, int] = {}
+    for b in model.bodies:
+        index[b.name] = d.add_body(b.mass, -1.0 if b.inertia is None else b.inertia)
+    if d.n != model.n:  # coordinate order is the model's: body by body, (x, y[, θ])
+        raise AssertionError(f"planar description has {d.n} coordinates, model {model.n}")
+
+    def body(name: str) -> int:
+        return -1 if name == GROUND else index[name]
+
+    def pt(p: Point) -> tuple[int, float, float]:
+        return (body(p.body), p.local[0], p.local[1])
+
+    for j in model.joints:
+        c = d.add_constraint(j.name, KIND_CODES[j.kind], j.dim)
+        tj = type(j)
+        if tj is Revolute:
+            assert isinstance(j, Revolute)
+            d.add_pin(c, 0, pt(j.a), pt(j.b))
+        elif tj is Weld:
+            assert isinstance(j, Weld)
+            d.add_pin(c, 0, pt(j.a), pt(j.b))
+            d.add_angle(c, 2, [body(j.b.body), body(j.a.body)], [1.0, -1.0], j.angle)
+        elif tj is PointOnLine:
+            assert isinstance(j, PointOnLine)
+            d.add_line(c, 0, pt(j.a), j.axis[0], j.axis[1], pt(j.b))
+        elif tj is Prismatic:
+            assert isinstance(j, Prismatic)
+            d.add_angle(c, 0, [body(j.b.body), body(j.a.body)], [1.0, -1.0], j.angle)
+            d.add_line(c, 1, pt(j.a), j.axis[0], j.axis[1], pt(j.b))
+        elif tj is Rod:
+            assert isinstance(j, Rod)
+            d.add_rod(c, 0, pt(j.a), pt(j.b), j.length, -1.0 if j.unilateral else 1.0)
+        elif tj is Gear:
+            assert isinstance(j, Gear)
+            d.add_angle(
+                c, 0, [body(j.body_b), body(j.carrier), body(j.body_a)],
+                [1.0, -1.0 + j.ratio, -j.ratio], j.offset,
+            )  # fmt: skip
+        elif tj is AngleDriver:
+            assert isinstance(j, AngleDriver)
+            prof = j.profile
+            if type(prof) is ConstantSpeed:
+                drv = d.add_driver(prof.start, prof.speed)
+            else:
+                drv = d.add_driver_callback(prof)
+            d.add_angle(c, 0, [body(j.body_b), body(j.body_a)], [1.0, -1.0], 0.0, drv)
+        else:
+            return None
+    for fe in model.forces:
+        if isinstance(fe, Spring):
+            d.add_spring(pt(fe.a), pt(fe.b), fe.stiffness, fe.rest_length, fe.damping)
+        else:
+            assert isinstance(fe, RotationalSpring)
+            d.add_rotational_spring(body(fe.body_a), body(fe.body_b), fe.stiffness, fe.rest_angle,
+                                    fe.damping)  # fmt: skip
+    jmap = {j.name: j for j in model.joints}
+    for act in model.actuators:
+        if isinstance(act, Torque):
+            d.add_torque(body(act.body_a), body(act.body_b))
+        elif isinstance(act, JointActuator):
+            jt = jmap[act.joint]
+            if isinstance(jt, Prismatic):
+                d.add_prismatic_actuator(pt(jt.a), jt.axis[0], jt.axis[1], pt(jt.b))
+            else:
+                assert isinstance(jt, Revolute)
+                d.add_torque(body(jt.a.body), body(jt.b.body))
+        else:
+            d.add_force(pt(act.point), float(act.direction[0]), float(act.direction[1]))
+    return d
+
+
+def engine_program(model: PlanarModel) -> Any | None:
+    """The engine's ``PlanarProgram`` of ``model`` (all constraints; the active set is a mask
+    given to each evaluation), or None when a joint is user-defined."""
+    d = description(model)
+    return None if d is None else _engine.PlanarProgram(d)
