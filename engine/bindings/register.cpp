@@ -6,6 +6,7 @@ namespace nonmin::bindings {
 void register_all(nanobind::module_& m) {
     bind_program(m);
     bind_planar(m);
+    bind_core(m);
 }
 
 }  // namespace nonmin::bindings

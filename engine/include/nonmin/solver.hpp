@@ -10,16 +10,25 @@
 
 namespace nonmin {
 
+// Bits of SolveOptions::known: what the caller has established, so the checks are skipped
+// (results bitwise unchanged). KNOWN_M_VALID: M finite and symmetric within sym_rtol;
+// KNOWN_M_DIAGONAL (with KNOWN_M_VALID): M diagonal.
+enum Known : unsigned { KNOWN_M_VALID = 1u, KNOWN_M_DIAGONAL = 2u };
+
 struct SolveOptions {
     double rtol = 1e-10;      // DEFAULT_RTOL: relative singular-value cutoff on D A
     double spd_rtol = 1e-13;  // SPD_RTOL: M̄ Cholesky pivot test
     double mu = 0.0;          // virtual mass; ≤ 0 means the optimal tr(PMP)/(n − r)
+    double sym_rtol = 1e-9;   // SYMMETRY_RTOL: max|M − Mᵀ| ≤ sym_rtol · max|M|
+    unsigned known = 0;       // Known bits (0: check everything)
 };
 
 struct SolveInfo {
     Status status = Status::ok;
     int rank = 0;     // numerical rank of A used
     double mu = 0.0;  // virtual mass used
+    double pivot_ratio = 0.0;  // smallest L_jj² / max M̄_jj when the SPD test failed on a pivot
+    bool chol_failed = false;  // not_positive_definite because a pivot was ≤ 0
 };
 
 class Solver {
@@ -37,6 +46,12 @@ class Solver {
     // f_c = M qdd − g when f_c is not null. M is n × n row-major.
     SolveInfo forward(const double* M, const double* g, const double* A, int m, const double* gamma,
                       const SolveOptions& opt, double* qdd, double* f_c);
+
+    // Everything nonmin.core.solve_dynamics returns: qdd and f_c as forward, the null-space
+    // projector P (n × n) and the lower Cholesky factor L of M̄ (n × n, zero above the diagonal).
+    // Any output pointer may be null (not computed).
+    SolveInfo solve(const double* M, const double* g, const double* A, int m, const double* gamma,
+                    const SolveOptions& opt, double* qdd, double* f_c, double* P, double* L);
 
     // Minimum-norm solution x = (DA)⁺ D b of A x = b under the same rank policy (n-vector x).
     SolveInfo min_norm(const double* A, int m, const double* b, double rtol, double* x);

@@ -1,0 +1,184 @@
+// The rank tolerance policy and the SPD factorization (see linalg.hpp, docs/theory.md).
+#include "nonmin/linalg.hpp"
+
+#include <cmath>
+#include <limits>
+
+namespace nonmin::linalg {
+
+namespace {
+constexpr double EPS = std::numeric_limits<double>::epsilon();
+constexpr int MAX_SWEEPS = 60;
+}  // namespace
+
+double row_norm(const double* x, int n) {
+    const int n4 = n - n % 4;
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+    for (int k = 0; k < n4; k += 4) {
+        s0 += x[k] * x[k];
+        s1 += x[k + 1] * x[k + 1];
+        s2 += x[k + 2] * x[k + 2];
+        s3 += x[k + 3] * x[k + 3];
+    }
+    for (int k = n4; k < n; ++k) s0 += x[k] * x[k];
+    return std::sqrt((s0 + s1) + (s2 + s3));
+}
+
+int equilibrate(const double* A, int m, int n, const double* b, double rtol, double* B, double* d,
+                double* norms) {
+    const int ld = n + 1;
+    double big = 0.0;
+    for (int i = 0; i < m; ++i) {
+        const double nrm = row_norm(A + static_cast<long>(i) * n, n);
+        norms[i] = nrm;
+        if (nrm > big) big = nrm;
+    }
+    const double thr = rtol * big;
+    int live = 0;
+    for (int i = 0; i < m; ++i) {
+        double* Bi = B + static_cast<long>(i) * ld;
+        const double* Ai = A + static_cast<long>(i) * n;
+        if (norms[i] > thr) {
+            const double di = 1.0 / norms[i];
+            for (int j = 0; j < n; ++j) Bi[j] = Ai[j] * di;
+            Bi[n] = b ? di * b[i] : 0.0;
+            d[i] = di;
+            ++live;
+        } else {
+            for (int j = 0; j <= n; ++j) Bi[j] = 0.0;
+            d[i] = 0.0;
+        }
+    }
+    return live;
+}
+
+void jacobi_rows(double* B, int m, int n, double* T) {
+    const int ld = n + 1;
+    double frob2 = 0.0;
+    for (int i = 0; i < m; ++i)
+        for (int k = 0; k < n; ++k) frob2 += B[i * ld + k] * B[i * ld + k];
+    const double noise2 = EPS * EPS * frob2;
+    for (int sweep = 0; sweep < MAX_SWEEPS; ++sweep) {
+        bool rotated = false;
+        for (int i = 0; i < m - 1; ++i) {
+            double* Bi = B + static_cast<long>(i) * ld;
+            for (int j = i + 1; j < m; ++j) {
+                double* Bj = B + static_cast<long>(j) * ld;
+                double a0 = 0.0, a1 = 0.0, b0 = 0.0, b1 = 0.0, c0 = 0.0, c1 = 0.0;
+                const int n2 = n - n % 2;
+                for (int k = 0; k < n2; k += 2) {
+                    const double x = Bi[k], y = Bj[k], x1 = Bi[k + 1], y1 = Bj[k + 1];
+                    a0 += x * x;
+                    b0 += y * y;
+                    c0 += x * y;
+                    a1 += x1 * x1;
+                    b1 += y1 * y1;
+                    c1 += x1 * y1;
+                }
+                if (n % 2) {
+                    const double x = Bi[n - 1], y = Bj[n - 1];
+                    a0 += x * x;
+                    b0 += y * y;
+                    c0 += x * y;
+                }
+                const double aa = a0 + a1, bb = b0 + b1, cc = c0 + c1;
+                if (aa <= noise2 || bb <= noise2 || std::fabs(cc) <= EPS * std::sqrt(aa * bb))
+                    continue;
+                rotated = true;
+                const double zeta = (bb - aa) / (2.0 * cc);
+                double t;
+                if (std::fabs(zeta) > 1e150)
+                    t = 0.5 / zeta;
+                else
+                    t = std::copysign(1.0, zeta) / (std::fabs(zeta) + std::sqrt(1.0 + zeta * zeta));
+                const double cs = 1.0 / std::sqrt(1.0 + t * t);
+                const double sn = cs * t;
+                for (int k = 0; k <= n; ++k) {
+                    const double x = Bi[k], y = Bj[k];
+                    Bi[k] = cs * x - sn * y;
+                    Bj[k] = sn * x + cs * y;
+                }
+                if (T) {
+                    double* Ti = T + static_cast<long>(i) * m;
+                    double* Tj = T + static_cast<long>(j) * m;
+                    for (int k = 0; k < m; ++k) {
+                        const double x = Ti[k], y = Tj[k];
+                        Ti[k] = cs * x - sn * y;
+                        Tj[k] = sn * x + cs * y;
+                    }
+                }
+            }
+        }
+        if (!rotated) break;
+    }
+}
+
+int keep_rows(const double* B, int m, int n, double rtol, double* V, double* cv, double* sig) {
+    const int ld = n + 1;
+    double smax = 0.0;
+    for (int i = 0; i < m; ++i) {
+        sig[i] = row_norm(B + static_cast<long>(i) * ld, n);
+        if (sig[i] > smax) smax = sig[i];
+    }
+    int r = 0;
+    for (int i = 0; i < m; ++i) {
+        if (sig[i] > rtol * smax) {
+            const double inv = 1.0 / sig[i];
+            const double* Bi = B + static_cast<long>(i) * ld;
+            double* Vr = V + static_cast<long>(r) * n;
+            for (int k = 0; k < n; ++k) Vr[k] = Bi[k] * inv;
+            cv[r] = Bi[n] * inv;
+            ++r;
+        }
+    }
+    return r;
+}
+
+int cholesky_spd(double* W, int n, double spd_rtol, double dmax, double* dinv, double* cw,
+                 double* ratio) {
+    int st = CHOL_OK;
+    double rt = std::numeric_limits<double>::infinity();
+    for (int j = 0; j < n; ++j) {
+        const double s = W[j * n + j];
+        if (!(s > 0.0)) {
+            *ratio = rt;
+            return CHOL_FAIL;
+        }
+        const double ljj = std::sqrt(s);
+        const double piv = ljj * ljj;
+        if (piv <= spd_rtol * dmax) {
+            st = CHOL_SMALL_PIVOT;
+            if (piv / dmax < rt) rt = piv / dmax;
+        }
+        W[j * n + j] = ljj;
+        const double rj = 1.0 / ljj;
+        dinv[j] = rj;
+        for (int i = j + 1; i < n; ++i) {
+            const double x = W[i * n + j] * rj;
+            W[i * n + j] = x;
+            cw[i] = x;
+        }
+        for (int i = j + 1; i < n; ++i) {
+            const double a = cw[i];
+            double* Wi = W + static_cast<long>(i) * n;
+            for (int k = j + 1; k <= i; ++k) Wi[k] -= a * cw[k];
+        }
+    }
+    *ratio = rt;
+    return st;
+}
+
+void cholesky_solve(const double* W, int n, const double* dinv, double* x) {
+    for (int k = 0; k < n; ++k) {  // L y = b, column-oriented
+        const double y = x[k] * dinv[k];
+        x[k] = y;
+        for (int i = k + 1; i < n; ++i) x[i] -= W[i * n + k] * y;
+    }
+    for (int i = n - 1; i >= 0; --i) {  // Lᵀ x = y, rows of L
+        const double xi = x[i] * dinv[i];
+        x[i] = xi;
+        for (int k = 0; k < i; ++k) x[k] -= W[i * n + k] * xi;
+    }
+}
+
+}  // namespace nonmin::linalg

@@ -1,0 +1,313 @@
+// The projection-dynamics solve (solver.hpp): input checks, the rank policy (linalg.hpp), M̄,
+// its Cholesky factorization, q̈ and f_c. Specified by nonmin.core.dynamics._solve_dynamics_numpy.
+#include <Eigen/SVD>
+
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "nonmin/linalg.hpp"
+#include "nonmin/solver.hpp"
+
+namespace nonmin {
+
+namespace {
+constexpr double TINY = std::numeric_limits<double>::min();
+// Above this many rows the rank is decided by Eigen's divide-and-conquer SVD instead of the
+// Jacobi sweeps (O(m² n) per sweep).
+constexpr int JACOBI_MAX_ROWS = 32;
+}  // namespace
+
+struct Solver::Impl {
+    int m_max, n;
+    std::vector<double> B, d, sig, V, cv, Kt, Tt, Et, Ft, G, W, wv, u, g, dinv, cw;
+    Mat big;                                     // large-m SVD input (m_max × n)
+    Eigen::BDCSVD<Mat> svd;                      // large-m SVD
+
+    Impl(int m_max_, int n_)
+        : m_max(m_max_), n(n_) {
+        const long mn = static_cast<long>(m_max) * n;
+        B.assign(static_cast<long>(m_max) * (n + 1), 0.0);
+        d.assign(m_max, 0.0);
+        sig.assign(m_max, 0.0);
+        V.assign(mn, 0.0);
+        cv.assign(std::max(m_max, n) + 1, 0.0);
+        Kt.assign(mn, 0.0);
+        Tt.assign(mn, 0.0);
+        Et.assign(mn, 0.0);
+        Ft.assign(mn, 0.0);
+        G.assign(static_cast<long>(m_max) * m_max, 0.0);
+        W.assign(static_cast<long>(n) * n, 0.0);
+        wv.assign(n, 0.0);
+        u.assign(n, 0.0);
+        g.assign(n, 0.0);
+        dinv.assign(n, 0.0);
+        cw.assign(n, 0.0);
+        if (m_max > JACOBI_MAX_ROWS) {
+            big = Mat::Zero(m_max, n);
+            svd = Eigen::BDCSVD<Mat>(m_max, n, Eigen::ComputeThinU | Eigen::ComputeThinV);
+        }
+    }
+
+    // Rule 3: the rank r and the kept right singular vectors V (r × n) of D A, with
+    // cv_k = (u_kᵀ D b)_k / σ_k (B holds [D A | D b] on entry and is overwritten).
+    int rank_decision(int m, double rtol) {
+        if (m == 0) return 0;
+        if (m <= JACOBI_MAX_ROWS) {
+            linalg::jacobi_rows(B.data(), m, n, nullptr);
+            return linalg::keep_rows(B.data(), m, n, rtol, V.data(), cv.data(), sig.data());
+        }
+        const int ld = n + 1;
+        auto Bm = big.topRows(m);
+        for (int i = 0; i < m; ++i)
+            for (int k = 0; k < n; ++k) Bm(i, k) = B[i * ld + k];
+        svd.compute(Bm, Eigen::ComputeThinU | Eigen::ComputeThinV);
+        const auto& s = svd.singularValues();
+        const auto& U = svd.matrixU();
+        const auto& Vs = svd.matrixV();
+        const int p = static_cast<int>(s.size());
+        const double smax = p > 0 ? s(0) : 0.0;
+        int r = 0;
+        for (int a = 0; a < p; ++a)
+            if (s(a) > rtol * smax) ++r;
+        for (int a = 0; a < r; ++a) {
+            const double inv = 1.0 / s(a);
+            for (int k = 0; k < n; ++k) V[a * n + k] = Vs(k, a);
+            double t = 0.0;
+            for (int c = 0; c < m; ++c) t += U(c, a) * B[c * ld + n];
+            cv[a] = t * inv;
+        }
+        return r;
+    }
+
+    // out += sign · M x (M symmetric, row-major; diagonal M without the zero terms).
+    void add_m_times(const double* M, bool diag, const double* x, double sign, double* out) const {
+        if (diag) {
+            for (int i = 0; i < n; ++i) out[i] += sign * (M[i * n + i] * x[i]);
+            return;
+        }
+        for (int j = 0; j < n; ++j) {
+            const double c = sign * x[j];
+            const double* Mj = M + static_cast<long>(j) * n;
+            for (int i = 0; i < n; ++i) out[i] += Mj[i] * c;
+        }
+    }
+
+    SolveInfo solve(const double* M, const double* gin, const double* A, int m,
+                    const double* gamma, const SolveOptions& opt, double* qdd, double* fc,
+                    double* P, double* L, double* xmin);
+};
+
+SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* A, int m,
+                              const double* gamma, const SolveOptions& opt, double* qdd,
+                              double* fc, double* P, double* L, double* xmin) {
+    SolveInfo info;
+    if (m < 0 || m > m_max) {
+        info.status = Status::bad_shape;
+        return info;
+    }
+    const long nn = static_cast<long>(n) * n;
+    // ------------------------------------------------------------------ 1. input checks
+    // x·0 is 0 for finite x and NaN otherwise: the per-column sums are 0 iff all are finite.
+    const bool m_valid = (opt.known & KNOWN_M_VALID) != 0;
+    double* c = cw.data();
+    for (int j = 0; j < n; ++j) c[j] = gin ? gin[j] * 0.0 : 0.0;
+    if (M && !m_valid)
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < n; ++j) c[j] += M[i * n + j] * 0.0;
+    for (int i = 0; i < m; ++i)
+        for (int j = 0; j < n; ++j) c[j] += A[static_cast<long>(i) * n + j] * 0.0;
+    bool bad = false;
+    for (int j = 0; j < n; ++j) bad |= c[j] != 0.0;
+    for (int i = 0; i < m; ++i) bad |= (gamma[i] - gamma[i]) != 0.0;
+    if (bad) {
+        info.status = Status::not_finite;
+        return info;
+    }
+    bool diag = false;
+    if (M) {
+        double asym = 0.0, offd = 0.0;
+        if (m_valid) {
+            offd = (opt.known & KNOWN_M_DIAGONAL) ? 0.0 : 1.0;
+        } else {
+            for (int i = 0; i < n; ++i)
+                for (int j = 0; j < i; ++j) {
+                    const double a = M[i * n + j], b = M[j * n + i];
+                    const double dd = std::fabs(a - b);
+                    if (dd > asym) asym = dd;
+                    const double s = std::fabs(a) + std::fabs(b);
+                    if (s > offd) offd = s;
+                }
+        }
+        diag = offd == 0.0;
+        if (asym > 0.0) {  // the decision of nonmin._validation.symmetric
+            double scale = 0.0;
+            for (long k = 0; k < nn; ++k) scale = std::max(scale, std::fabs(M[k]));
+            if (asym > opt.sym_rtol * std::max(scale, TINY)) {
+                info.status = Status::not_symmetric;
+                return info;
+            }
+        }
+    }
+    // ------------------------------------------------------------------ 2.–3. rank policy
+    linalg::equilibrate(A, m, n, gamma, opt.rtol, B.data(), d.data(), sig.data());
+    const int r = rank_decision(m, opt.rtol);
+    info.rank = r;
+    // w = −(DA)⁺ D γ = −Σ_k v_k cv_k
+    for (int j = 0; j < n; ++j) wv[j] = 0.0;
+    for (int k = 0; k < r; ++k) {
+        const double ck = cv[k];
+        const double* Vk = V.data() + static_cast<long>(k) * n;
+        for (int j = 0; j < n; ++j) wv[j] -= Vk[j] * ck;
+    }
+    if (xmin) {  // min_norm: x = (DA)⁺ D b
+        for (int j = 0; j < n; ++j) xmin[j] = -wv[j];
+        return info;
+    }
+    // ------------------------------------------------------------------ 4. PMP, μ, M̄
+    // Q = VᵀV; Kt = V M, G = V M Vᵀ, Tt = G V: PMP = M − VᵀKt − KtᵀV + VᵀTt (rank-r updates).
+    for (int k = 0; k < r; ++k) {
+        const double* Vk = V.data() + static_cast<long>(k) * n;
+        double* Kk = Kt.data() + static_cast<long>(k) * n;
+        if (diag) {
+            for (int j = 0; j < n; ++j) Kk[j] = 0.0 + Vk[j] * M[j * n + j];
+            continue;
+        }
+        for (int j = 0; j < n; ++j) Kk[j] = 0.0;
+        for (int i = 0; i < n; ++i) {
+            const double a = Vk[i];
+            const double* Mi = M + static_cast<long>(i) * n;
+            for (int j = 0; j < n; ++j) Kk[j] += a * Mi[j];
+        }
+    }
+    for (int k = 0; k < r; ++k)
+        for (int l = 0; l < r; ++l) {
+            double s = 0.0;
+            const double* Vk = V.data() + static_cast<long>(k) * n;
+            const double* Kl = Kt.data() + static_cast<long>(l) * n;
+            for (int j = 0; j < n; ++j) s += Vk[j] * Kl[j];
+            G[k * r + l] = s;
+        }
+    for (int l = 0; l < r; ++l) {
+        double* Tl = Tt.data() + static_cast<long>(l) * n;
+        for (int j = 0; j < n; ++j) Tl[j] = 0.0;
+        for (int k = 0; k < r; ++k) {
+            const double a = G[l * r + k];
+            const double* Vk = V.data() + static_cast<long>(k) * n;
+            for (int j = 0; j < n; ++j) Tl[j] += a * Vk[j];
+        }
+    }
+    double tr_pmp = 0.0, tr_m = 0.0;
+    for (int i = 0; i < n; ++i) {  // diag(PMP) = diag(M − QM − MQ + QMQ)
+        double s = 0.0;
+        for (int k = 0; k < r; ++k)
+            s += (2.0 * Kt[k * n + i] - Tt[k * n + i]) * V[k * n + i];
+        tr_pmp += M[i * n + i] - s;
+        tr_m += M[i * n + i];
+    }
+    double mu;
+    if (opt.mu > 0.0) {
+        mu = opt.mu;
+    } else {
+        mu = r < n ? tr_pmp / (n - r) : tr_m / n;
+        if (!(mu > 0.0)) mu = 1.0;
+    }
+    info.mu = mu;
+    for (int k = 0; k < r; ++k)
+        for (int j = 0; j < n; ++j) {
+            Et[k * n + j] = Kt[k * n + j] - mu * V[k * n + j];
+            Ft[k * n + j] = Kt[k * n + j] - Tt[k * n + j];
+        }
+    double dmax = -std::numeric_limits<double>::infinity();
+    for (int i = 0; i < n; ++i) {  // M̄ = M − Vᵀ Et − Ftᵀ V (lower triangle, row by row)
+        double* Wi = W.data() + static_cast<long>(i) * n;
+        for (int j = 0; j <= i; ++j) Wi[j] = M[i * n + j];
+        for (int k = 0; k < r; ++k) {
+            const double a = V[k * n + i], b = Ft[k * n + i];
+            const double* Ek = Et.data() + static_cast<long>(k) * n;
+            const double* Vk = V.data() + static_cast<long>(k) * n;
+            for (int j = 0; j <= i; ++j) Wi[j] -= a * Ek[j] + b * Vk[j];
+        }
+        if (Wi[i] > dmax) dmax = Wi[i];
+    }
+    // ------------------------------------------------------------------ 5. Cholesky (rule 6)
+    double ratio = 0.0;
+    const int st = linalg::cholesky_spd(W.data(), n, opt.spd_rtol, dmax, dinv.data(), cw.data(),
+                                        &ratio);
+    if (st != linalg::CHOL_OK) {
+        info.status = Status::not_positive_definite;
+        info.chol_failed = st == linalg::CHOL_FAIL;
+        info.pivot_ratio = st == linalg::CHOL_SMALL_PIVOT ? ratio : 0.0;
+        return info;
+    }
+    // ------------------------------------------------------------------ 6. q̈, f_c
+    // rhs = P(g − M w) + μ w; q̈ = M̄⁻¹ rhs; f_c = M q̈ − g
+    for (int i = 0; i < n; ++i) {
+        g[i] = gin[i];
+        u[i] = gin[i];
+    }
+    add_m_times(M, diag, wv.data(), -1.0, u.data());  // u = g − M w
+    for (int k = 0; k < r; ++k) {  // cv ← V u
+        double s = 0.0;
+        const double* Vk = V.data() + static_cast<long>(k) * n;
+        for (int j = 0; j < n; ++j) s += Vk[j] * u[j];
+        cv[k] = s;
+    }
+    for (int i = 0; i < n; ++i) u[i] += mu * wv[i];
+    for (int k = 0; k < r; ++k) {
+        const double ck = cv[k];
+        const double* Vk = V.data() + static_cast<long>(k) * n;
+        for (int i = 0; i < n; ++i) u[i] -= Vk[i] * ck;
+    }
+    linalg::cholesky_solve(W.data(), n, dinv.data(), u.data());
+    for (int i = 0; i < n; ++i) qdd[i] = u[i];
+    if (fc) {
+        for (int i = 0; i < n; ++i) cw[i] = 0.0;
+        add_m_times(M, diag, qdd, 1.0, cw.data());
+        for (int i = 0; i < n; ++i) fc[i] = cw[i] - g[i];
+    }
+    if (P) {
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < n; ++j) {
+                double s = 0.0;
+                for (int k = 0; k < r; ++k) s += V[k * n + i] * V[k * n + j];
+                P[i * n + j] = (i == j ? 1.0 : 0.0) - s;
+            }
+    }
+    if (L) {
+        for (int i = 0; i < n; ++i)
+            for (int j = 0; j < n; ++j) L[i * n + j] = j <= i ? W[i * n + j] : 0.0;
+    }
+    return info;
+}
+
+Solver::Solver(int m_max, int n) {
+    if (m_max < 0 || n < 1) throw EngineError("Solver: need m_max >= 0 and n >= 1");
+    impl_ = std::make_unique<Impl>(m_max, n);
+}
+Solver::~Solver() = default;
+Solver::Solver(Solver&&) noexcept = default;
+Solver& Solver::operator=(Solver&&) noexcept = default;
+
+int Solver::n() const { return impl_->n; }
+int Solver::m_max() const { return impl_->m_max; }
+
+SolveInfo Solver::forward(const double* M, const double* g, const double* A, int m,
+                          const double* gamma, const SolveOptions& opt, double* qdd,
+                          double* f_c) {
+    return impl_->solve(M, g, A, m, gamma, opt, qdd, f_c, nullptr, nullptr, nullptr);
+}
+
+SolveInfo Solver::solve(const double* M, const double* g, const double* A, int m,
+                        const double* gamma, const SolveOptions& opt, double* qdd, double* f_c,
+                        double* P, double* L) {
+    return impl_->solve(M, g, A, m, gamma, opt, qdd, f_c, P, L, nullptr);
+}
+
+SolveInfo Solver::min_norm(const double* A, int m, const double* b, double rtol, double* x) {
+    SolveOptions opt;
+    opt.rtol = rtol;
+    return impl_->solve(nullptr, nullptr, A, m, b, opt, nullptr, nullptr, nullptr, nullptr, x);
+}
+
+}  // namespace nonmin
