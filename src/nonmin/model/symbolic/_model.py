@@ -26,6 +26,7 @@ SymPy is imported only inside this package, on first use; without it a
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -643,6 +644,22 @@ class SymbolicModel(Model):
         v = _as_vector(qd, "qd", self.n)
         return self._eval("Adot", t, qv, v)[self._rows(act)]
 
+    def engine_program(self) -> Any | None:
+        """The model as the engine's ``TapeProgram`` (see :meth:`nonmin.model.Model.engine_program`).
+
+        The SymPy expressions of M, ``h = f_g − C qd``, f_passive, B, A, γ, φ, the velocity
+        residual and V are compiled once to an expression tape (:mod:`._tape`; shared by
+        :meth:`replace` variants, whose parameter values are inputs of the tape); the program
+        is built once per model. None when an expression uses a function the tape does not
+        have (the engine then calls :meth:`evaluate` back).
+        """
+        prog = _PROGRAMS.get(self, _MISSING)
+        if prog is _MISSING:
+            tape = _tape_of(self.compiled)
+            prog = None if tape is None else _tape_program(self, tape)
+            _PROGRAMS[self] = prog
+        return prog
+
     def outputs(self, t: float, q: ArrayLike, qd: ArrayLike) -> dict[str, FloatArray]:
         qv = _as_vector(q, "q", self.n)
         v = _as_vector(qd, "qd", self.n)
@@ -673,3 +690,49 @@ class SymbolicModel(Model):
                 new[k] = float(val)
             changes["params"] = new
         return dataclasses.replace(self, **changes)
+
+
+#: Tapes of compiled expression sets and programs of live models (built on first use; not part
+#: of a model's value or pickle). A tape is None when an expression cannot be compiled.
+_TAPES: weakref.WeakKeyDictionary[_Compiled, Any] = weakref.WeakKeyDictionary()
+_PROGRAMS: weakref.WeakKeyDictionary[SymbolicModel, Any] = weakref.WeakKeyDictionary()
+_MISSING = object()
+_KIND_CODES = {"holonomic": 0, "rheonomic": 1, "nonholonomic": 2, "unilateral": 3}
+
+
+def _tape_of(comp: _Compiled) -> Any | None:
+    """The expression tape of ``comp`` (compiled once), or None if it cannot be compiled."""
+    tape = _TAPES.get(comp, _MISSING)
+    if tape is _MISSING:
+        from ._tape import compile_tape
+
+        sp = _sympy()
+        qdv = sp.Matrix(comp.qd)
+        outputs = {
+            "M": comp.M,
+            "h": comp.fg - comp.C * qdv,
+            "f_passive": comp.passive,
+            "B": comp.B,
+            "A": comp.A,
+            "gamma": comp.gamma,
+            "phi": comp.phi,
+            "velocity": comp.A * qdv + comp.phi_t,
+            "V": comp.V,
+        }
+        inputs = [comp.t, *comp.q, *comp.qd, *comp.param_symbols]
+        try:
+            tape = compile_tape(sp, inputs, outputs)
+        except ModelError:
+            tape = None
+        _TAPES[comp] = tape
+    return tape
+
+
+def _tape_program(model: SymbolicModel, tape: Any) -> Any:
+    from ... import _engine  # type: ignore[attr-defined]  # the compiled extension (no stubs)
+
+    cons = [(s.name, _KIND_CODES[s.kind], s.dim) for s in model.compiled.specs]
+    return _engine.TapeProgram(
+        model.n, model.k, cons, tape.op, tape.a, tape.b, tape.c, tape.out_target,
+        tape.out_index, tape.out_reg, [float(v) for v in model._pvals],
+    )  # fmt: skip

@@ -1,0 +1,252 @@
+// TapeProgram: evaluation of an expression tape (see nonmin/tape.hpp).
+#include "nonmin/tape.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+namespace nonmin {
+
+namespace {
+
+unsigned target_need(TapeTarget t) {
+    switch (t) {
+        case TapeTarget::M: return NEED_M | NEED_ENERGY;
+        case TapeTarget::h:
+        case TapeTarget::f_passive: return NEED_H;
+        case TapeTarget::B: return NEED_B;
+        case TapeTarget::A: return NEED_A;
+        case TapeTarget::gamma: return NEED_GAMMA;
+        case TapeTarget::phi: return NEED_PHI;
+        case TapeTarget::velocity: return NEED_VELOCITY;
+        case TapeTarget::V: return NEED_ENERGY;
+    }
+    return 0;
+}
+
+bool binary(TapeOp op) {
+    switch (op) {
+        case TapeOp::add:
+        case TapeOp::sub:
+        case TapeOp::mul:
+        case TapeOp::div:
+        case TapeOp::pow:
+        case TapeOp::atan2:
+        case TapeOp::min:
+        case TapeOp::max: return true;
+        default: return false;
+    }
+}
+
+inline double powi(double x, long k) {
+    if (k < 0) return 1.0 / powi(x, -k);
+    double r = 1.0;
+    while (k) {
+        if (k & 1) r *= x;
+        x *= x;
+        k >>= 1;
+    }
+    return r;
+}
+
+}  // namespace
+
+TapeProgram::TapeProgram(TapeDescription desc, std::vector<double> params)
+    : d_(std::move(desc)), params_(std::move(params)) {
+    if (d_.n < 1) throw EngineError("a tape program needs n ≥ 1 coordinates");
+    if (static_cast<int>(params_.size()) != d_.n_params)
+        throw EngineError("tape: " + std::to_string(params_.size()) + " parameter values for " +
+                          std::to_string(d_.n_params) + " parameters");
+    for (double p : params_)
+        if (!std::isfinite(p)) throw EngineError("tape: parameter values must be finite");
+    n_ = d_.n;
+    k_ = d_.k;
+    constraints_ = d_.constraints;
+    m_all_ = 0;
+    for (const ConstraintInfo& c : constraints_) {
+        if (c.row != m_all_ || c.dim < 1) throw EngineError("tape: constraint '" + c.name + "' rows out of order");
+        m_all_ += c.dim;
+    }
+    const std::size_t N = d_.op.size();
+    if (d_.a.size() != N || d_.b.size() != N || d_.c.size() != N)
+        throw EngineError("tape: op, a, b, c differ in length");
+    const int base = n_inputs();
+    for (std::size_t i = 0; i < N; ++i) {
+        const int op = d_.op[i];
+        if (op < 0 || op >= static_cast<int>(TapeOp::num_ops))
+            throw EngineError("tape: unknown op " + std::to_string(op) + " at instruction " + std::to_string(i));
+        const int self = base + static_cast<int>(i);
+        if (static_cast<TapeOp>(op) != TapeOp::constant) {
+            if (d_.a[i] < 0 || d_.a[i] >= self)
+                throw EngineError("tape: instruction " + std::to_string(i) + " reads register " +
+                                  std::to_string(d_.a[i]) + " before it is written");
+            if (binary(static_cast<TapeOp>(op)) && (d_.b[i] < 0 || d_.b[i] >= self))
+                throw EngineError("tape: instruction " + std::to_string(i) + " reads register " +
+                                  std::to_string(d_.b[i]) + " before it is written");
+        }
+    }
+    const std::size_t E = d_.out_target.size();
+    if (d_.out_index.size() != E || d_.out_reg.size() != E) throw EngineError("tape: output table lengths differ");
+    need_.assign(N, 0);
+    out_row_constraint_.assign(E, -1);
+    // constraint of each row
+    std::vector<int> row_c(static_cast<std::size_t>(m_all_));
+    for (std::size_t ci = 0; ci < constraints_.size(); ++ci)
+        for (int r = 0; r < constraints_[ci].dim; ++r)
+            row_c[static_cast<std::size_t>(constraints_[ci].row + r)] = static_cast<int>(ci);
+    for (std::size_t e = 0; e < E; ++e) {
+        const int tg = d_.out_target[e];
+        if (tg < 0 || tg > static_cast<int>(TapeTarget::V)) throw EngineError("tape: unknown output target");
+        const auto T = static_cast<TapeTarget>(tg);
+        long size = 0;
+        switch (T) {
+            case TapeTarget::M: size = static_cast<long>(n_) * n_; break;
+            case TapeTarget::h:
+            case TapeTarget::f_passive: size = n_; break;
+            case TapeTarget::B: size = static_cast<long>(n_) * k_; break;
+            case TapeTarget::A: size = static_cast<long>(m_all_) * n_; break;
+            case TapeTarget::gamma:
+            case TapeTarget::phi:
+            case TapeTarget::velocity: size = m_all_; break;
+            case TapeTarget::V: size = 1; break;
+        }
+        const int idx = d_.out_index[e];
+        if (idx < 0 || idx >= size) throw EngineError("tape: output index out of range");
+        const int reg = d_.out_reg[e];
+        if (reg < 0 || reg >= base + static_cast<int>(N)) throw EngineError("tape: output register out of range");
+        if (T == TapeTarget::A) out_row_constraint_[e] = row_c[static_cast<std::size_t>(idx / n_)];
+        if (T == TapeTarget::gamma || T == TapeTarget::phi || T == TapeTarget::velocity)
+            out_row_constraint_[e] = row_c[static_cast<std::size_t>(idx)];
+        if (reg >= base) need_[static_cast<std::size_t>(reg - base)] |= static_cast<std::uint8_t>(target_need(T));
+    }
+    // an instruction is needed by what needs the instructions that read it
+    for (std::size_t i = N; i-- > 0;) {
+        const std::uint8_t f = need_[i];
+        if (!f || static_cast<TapeOp>(d_.op[i]) == TapeOp::constant) continue;
+        if (d_.a[i] >= base) need_[static_cast<std::size_t>(d_.a[i] - base)] |= f;
+        if (binary(static_cast<TapeOp>(d_.op[i])) && d_.b[i] >= base)
+            need_[static_cast<std::size_t>(d_.b[i] - base)] |= f;
+    }
+}
+
+std::unique_ptr<Workspace> TapeProgram::make_workspace() const {
+    auto w = std::make_unique<TapeWorkspace>();
+    w->reg.assign(static_cast<std::size_t>(n_inputs()) + d_.op.size(), 0.0);
+    std::copy(params_.begin(), params_.end(), w->reg.begin() + 1 + 2 * n_);
+    // constants once
+    const int base = n_inputs();
+    for (std::size_t i = 0; i < d_.op.size(); ++i)
+        if (static_cast<TapeOp>(d_.op[i]) == TapeOp::constant) w->reg[static_cast<std::size_t>(base) + i] = d_.c[i];
+    return w;
+}
+
+Status TapeProgram::evaluate(double t, const double* q, const double* qd, const std::uint8_t* active,
+                             unsigned need, Terms& out, Workspace& wsb) const {
+    auto& w = static_cast<TapeWorkspace&>(wsb);
+    double* r = w.reg.data();
+    const int n = n_;
+    r[0] = t;
+    std::copy(q, q + n, r + 1);
+    std::copy(qd, qd + n, r + 1 + n);
+    {
+        double acc = t;
+        for (int i = 0; i < n; ++i) acc += q[i] * q[i] + qd[i] * qd[i];
+        if (!std::isfinite(acc)) {
+            if (!std::isfinite(t)) return Status::not_finite;
+            for (int i = 0; i < n; ++i)
+                if (!std::isfinite(q[i]) || !std::isfinite(qd[i])) return Status::not_finite;
+        }
+    }
+    const int base = n_inputs();
+    const std::size_t N = d_.op.size();
+    const int* op = d_.op.data();
+    const int* ia = d_.a.data();
+    const int* ib = d_.b.data();
+    const double* cc = d_.c.data();
+    const std::uint8_t* nd = need_.data();
+    double* o = r + base;
+    for (std::size_t i = 0; i < N; ++i) {
+        if (!(nd[i] & need)) continue;
+        const double x = r[ia[i]];
+        double y;
+        switch (static_cast<TapeOp>(op[i])) {
+            case TapeOp::constant: continue;  // written once by make_workspace
+            case TapeOp::add: y = x + r[ib[i]]; break;
+            case TapeOp::sub: y = x - r[ib[i]]; break;
+            case TapeOp::mul: y = x * r[ib[i]]; break;
+            case TapeOp::div: y = x / r[ib[i]]; break;
+            case TapeOp::neg: y = -x; break;
+            case TapeOp::powi: y = powi(x, static_cast<long>(cc[i])); break;
+            case TapeOp::pow: y = std::pow(x, r[ib[i]]); break;
+            case TapeOp::sqrt: y = std::sqrt(x); break;
+            case TapeOp::sin: y = std::sin(x); break;
+            case TapeOp::cos: y = std::cos(x); break;
+            case TapeOp::tan: y = std::tan(x); break;
+            case TapeOp::exp: y = std::exp(x); break;
+            case TapeOp::log: y = std::log(x); break;
+            case TapeOp::asin: y = std::asin(x); break;
+            case TapeOp::acos: y = std::acos(x); break;
+            case TapeOp::atan: y = std::atan(x); break;
+            case TapeOp::atan2: y = std::atan2(x, r[ib[i]]); break;
+            case TapeOp::sinh: y = std::sinh(x); break;
+            case TapeOp::cosh: y = std::cosh(x); break;
+            case TapeOp::tanh: y = std::tanh(x); break;
+            case TapeOp::abs: y = std::fabs(x); break;
+            case TapeOp::sign: y = x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0); break;
+            case TapeOp::min: y = std::fmin(x, r[ib[i]]); break;
+            case TapeOp::max: y = std::fmax(x, r[ib[i]]); break;
+            case TapeOp::square: y = x * x; break;
+            default: y = 0.0; break;
+        }
+        o[i] = y;
+    }
+    // outputs: zero what is asked, then scatter the table
+    if (need & NEED_M) out.M.setZero();
+    if (need & NEED_H) {
+        out.h.setZero();
+        out.f_passive.setZero();
+    }
+    if (need & NEED_B) out.B.setZero();
+    const std::size_t nc = constraints_.size();
+    for (std::size_t ci = 0; ci < nc; ++ci) {
+        if (!active[ci]) continue;
+        const ConstraintInfo& c = constraints_[ci];
+        if (need & NEED_A) out.A.middleRows(c.row, c.dim).setZero();
+        if (need & NEED_GAMMA) out.gamma.segment(c.row, c.dim).setZero();
+        if (need & NEED_PHI) out.phi.segment(c.row, c.dim).setZero();
+        if (need & NEED_VELOCITY) out.velocity.segment(c.row, c.dim).setZero();
+    }
+    double T = 0.0, V = 0.0;
+    bool finite = true;
+    const std::size_t E = d_.out_target.size();
+    for (std::size_t e = 0; e < E; ++e) {
+        const auto tg = static_cast<TapeTarget>(d_.out_target[e]);
+        if (!(target_need(tg) & need)) continue;
+        const int ci = out_row_constraint_[e];
+        if (ci >= 0 && !active[ci]) continue;
+        const double v = r[d_.out_reg[e]];
+        if (!std::isfinite(v)) finite = false;
+        const int idx = d_.out_index[e];
+        switch (tg) {
+            case TapeTarget::M:
+                if (need & NEED_M) out.M.data()[idx] = v;
+                if (need & NEED_ENERGY) T += v * qd[idx / n] * qd[idx % n];
+                break;
+            case TapeTarget::h: out.h[idx] = v; break;
+            case TapeTarget::f_passive: out.f_passive[idx] = v; break;
+            case TapeTarget::B: out.B.data()[idx] = v; break;
+            case TapeTarget::A: out.A.data()[idx] = v; break;
+            case TapeTarget::gamma: out.gamma[idx] = v; break;
+            case TapeTarget::phi: out.phi[idx] = v; break;
+            case TapeTarget::velocity: out.velocity[idx] = v; break;
+            case TapeTarget::V: V = v; break;
+        }
+    }
+    if (need & NEED_ENERGY) {
+        out.kinetic = 0.5 * T;
+        out.potential = V;
+    }
+    return finite ? Status::ok : Status::not_finite;
+}
+
+}  // namespace nonmin
