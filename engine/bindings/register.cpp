@@ -8,6 +8,7 @@ void register_all(nanobind::module_& m) {
     bind_planar(m);
     bind_core(m);
     bind_tape(m);
+    bind_spatial(m);
 }
 
 }  // namespace nonmin::bindings

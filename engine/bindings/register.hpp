@@ -11,5 +11,6 @@ void bind_program(nanobind::module_& m);  // program.cpp: Program, Terms, Worksp
 void bind_planar(nanobind::module_& m);   // planar.cpp: PlanarDescription, PlanarProgram
 void bind_core(nanobind::module_& m);     // core.cpp: Solver (single, batched), min_norm
 void bind_tape(nanobind::module_& m);     // tape.cpp: TapeProgram (SymPy models)
+void bind_spatial(nanobind::module_& m);  // spatial.cpp: SpatialDescription, SpatialProgram
 
 }  // namespace nonmin::bindings

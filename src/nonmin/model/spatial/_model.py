@@ -24,6 +24,7 @@ offset ``s``, ``p = r + R(ε) s = r + [εᵀQ_a(s)ε]_a``, ``∂p/∂ε = 2 Q(s)
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any, Literal, NamedTuple
@@ -330,6 +331,10 @@ class _RowPlan:
                 out.append(np.arange(r, r + s.dim))
             r += s.dim
         return np.concatenate(out) if out else np.zeros(0, dtype=np.intp)
+
+
+#: Engine programs of live models (built on first use; not part of a model's value or pickle).
+_ENGINE_PROGRAMS: weakref.WeakKeyDictionary[SpatialModel, Any] = weakref.WeakKeyDictionary()
 
 
 @dataclass(frozen=True, eq=False)
@@ -759,6 +764,17 @@ class SpatialModel(Model):
         qv = _as_vector(q, "q", self.n)
         v = _as_vector(qd, "qd", self.n)
         return self._all_rows(qv, v, act)[2]
+
+    def engine_program(self) -> Any:
+        """The compiled engine's ``SpatialProgram`` of this model (see
+        :meth:`nonmin.model.Model.engine_program`), built once per model and cached."""
+        prog = _ENGINE_PROGRAMS.get(self)
+        if prog is None:
+            from ._program import engine_program
+
+            prog = engine_program(self)
+            _ENGINE_PROGRAMS[self] = prog
+        return prog
 
     # ------------------------------------------------------------------ extras
     def outputs(self, t: float, q: ArrayLike, qd: ArrayLike) -> dict[str, FloatArray]:

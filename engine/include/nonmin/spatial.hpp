@@ -1,0 +1,103 @@
+// The spatial multibody model in absolute coordinates with unit quaternions as a Program
+// (model layer). Formulas: src/nonmin/model/spatial/_model.py and _quaternion.py.
+//
+// Body i owns q_i = (x, y, z, e0, e1, e2, e3): the centre of mass and the quaternion ε (scalar
+// first). Per body, block-diagonal:
+//
+//   M = blockdiag(m I₃, 4 Gᵀ J G),   C q̇ = (0, 8 G(ε̇)ᵀ J G(ε) ε̇),   f_g = (m g, 0),   V = −m gᵀ r,
+//
+// with G(ε) = [−e, e0 I − ẽ]. World-frame attachments x_k(q) — a body point r + R(ε) s, a body
+// vector R(ε) s, or a constant (on the ground) — are quadratic in ε: R(ε) s = [εᵀ Q_a(s) ε]_a
+// with the constant point tensor Q(s) (3 × 4 × 4, given by the description), so
+// ∂x/∂ε = 2 Q(s) ε and the acceleration bias is 2 [ε̇ᵀ Q_a(s) ε̇]_a exactly.
+//
+// Constraints: a norm row per body, φ = ½(εᵀε − 1), A = [0, εᵀ], γ = ε̇ᵀε̇, and joint rows
+// φ = X·Y with X = Σ_k cx_k x_k, Y = Σ_k cy_k x_k (coincident points, perpendicular vectors,
+// vector ⊥ offset, ...: the decomposition of spatial/_model.py's _RowPlan), so that
+// A = Σ_k (cx_k Y + cy_k X)ᵀ ∂x_k/∂q, A q̇ = Ẋ·Y + X·Ẏ and γ = Ȧ q̇ = 2 Ẋ·Ẏ + X·Ÿ₀ + Y·Ẍ₀
+// (Ẍ₀ = Σ cx_k 2[ε̇ᵀ Q_a ε̇]_a). Point-to-point spring-dampers and joint actuators (torque about
+// / force along a joint axis) complete it.
+#pragma once
+#include <array>
+#include <string>
+#include <vector>
+
+#include "program.hpp"
+
+namespace nonmin {
+
+struct SpatialBody {
+    double mass = 1.0;
+    std::array<double, 9> inertia{};  // body-frame inertia about the COM, row-major 3 × 3
+};
+
+// A world-frame attachment: body point r + R s (point = true), body vector R s, or, on the
+// ground (body −1), the constant `value`.
+struct SpatialAttachment {
+    int body = -1;
+    bool point = false;
+    std::array<double, 48> Q{};  // point tensor Q(s)[a][j][k], row-major (3, 4, 4)
+    std::array<double, 3> value{};
+};
+
+struct SpatialTerm {
+    int attachment = 0;
+    double coef = 1.0;
+};
+
+// One constraint row: a norm row of body `norm_body` (≥ 0), or φ = X·Y (norm_body = −1).
+struct SpatialRow {
+    int constraint = 0, offset = 0;
+    int norm_body = -1;
+    std::vector<SpatialTerm> x, y;
+};
+
+struct SpatialSpring {
+    int a = 0, b = 0;  // point attachments
+    double stiffness = 0.0, rest_length = 0.0, damping = 0.0;
+};
+
+enum class SpatialActuatorKind : int { rotation = 0, translation = 1 };
+
+// rotation: torque u about the world axis (vector attachment `axis` on body a) on body b, −u
+// on a (generalized force 2 E(ε)ᵀ axis per body). translation: the gradient of the slide
+// axis·(p_b − p_a) (point attachments pa, pb).
+struct SpatialActuator {
+    SpatialActuatorKind kind = SpatialActuatorKind::rotation;
+    int axis = 0, pa = -1, pb = -1;
+    int body_a = -1, body_b = -1;
+};
+
+struct SpatialDescription {
+    std::vector<SpatialBody> bodies;
+    std::array<double, 3> gravity{0.0, 0.0, -9.81};
+    std::vector<SpatialAttachment> attachments;
+    std::vector<ConstraintInfo> constraints;
+    std::vector<SpatialRow> rows;
+    std::vector<SpatialSpring> springs;
+    std::vector<SpatialActuator> actuators;
+    int m_all = 0;
+
+    int add_constraint(const std::string& name, ConstraintKind kind, int dim);
+};
+
+struct SpatialWorkspace : Workspace {
+    // per attachment: value, velocity, acceleration bias (3 each) and Q ε (3 × 4)
+    std::vector<double> val, vel, acc, Qe;
+    std::vector<double> col;  // one column of B
+};
+
+class SpatialProgram final : public Program {
+  public:
+    explicit SpatialProgram(SpatialDescription desc);  // validates; throws EngineError
+
+    Status evaluate(double t, const double* q, const double* qd, const std::uint8_t* active,
+                    unsigned need, Terms& out, Workspace& ws) const override;
+    std::unique_ptr<Workspace> make_workspace() const override;
+
+  private:
+    SpatialDescription d_;
+    std::vector<std::vector<int>> rows_of_;  // rows of each constraint
+};
+
+}  // namespace nonmin

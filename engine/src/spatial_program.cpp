@@ -1,0 +1,338 @@
+// SpatialProgram: evaluation of a spatial multibody description (see nonmin/spatial.hpp).
+#include "nonmin/spatial.hpp"
+
+#include <cmath>
+#include <string>
+
+namespace nonmin {
+
+namespace {
+
+// G(ε) = [−e, e0 I − ẽ] (3 × 4).
+inline void G_of(const double* e, double G[3][4]) {
+    const double e0 = e[0], e1 = e[1], e2 = e[2], e3 = e[3];
+    G[0][0] = -e1; G[0][1] = e0;  G[0][2] = e3;  G[0][3] = -e2;
+    G[1][0] = -e2; G[1][1] = -e3; G[1][2] = e0;  G[1][3] = e1;
+    G[2][0] = -e3; G[2][1] = e2;  G[2][2] = -e1; G[2][3] = e0;
+}
+
+// E(ε) = [−e, e0 I + ẽ] (3 × 4).
+inline void E_of(const double* e, double E[3][4]) {
+    const double e0 = e[0], e1 = e[1], e2 = e[2], e3 = e[3];
+    E[0][0] = -e1; E[0][1] = e0;  E[0][2] = -e3; E[0][3] = e2;
+    E[1][0] = -e2; E[1][1] = e3;  E[1][2] = e0;  E[1][3] = -e1;
+    E[2][0] = -e3; E[2][1] = -e2; E[2][2] = e1;  E[2][3] = e0;
+}
+
+}  // namespace
+
+int SpatialDescription::add_constraint(const std::string& name, ConstraintKind kind, int dim) {
+    if (dim < 1) throw EngineError("constraint '" + name + "': dim must be ≥ 1");
+    constraints.push_back(ConstraintInfo{name, kind, m_all, dim});
+    m_all += dim;
+    return static_cast<int>(constraints.size()) - 1;
+}
+
+SpatialProgram::SpatialProgram(SpatialDescription desc) : d_(std::move(desc)) {
+    const int nb = static_cast<int>(d_.bodies.size());
+    if (nb == 0) throw EngineError("a spatial description needs at least one body");
+    for (double g : d_.gravity)
+        if (!std::isfinite(g)) throw EngineError("gravity must be finite");
+    for (const SpatialBody& b : d_.bodies) {
+        if (!(std::isfinite(b.mass) && b.mass > 0.0)) throw EngineError("body mass must be > 0");
+        for (double x : b.inertia)
+            if (!std::isfinite(x)) throw EngineError("body inertia must be finite");
+    }
+    n_ = 7 * nb;
+    m_all_ = d_.m_all;
+    k_ = static_cast<int>(d_.actuators.size());
+    constraints_ = d_.constraints;
+    const int K = static_cast<int>(d_.attachments.size());
+    for (const SpatialAttachment& a : d_.attachments)
+        if (a.body < -1 || a.body >= nb) throw EngineError("attachment body index out of range");
+    auto check_att = [&](int k, const std::string& what) {
+        if (k < 0 || k >= K) throw EngineError(what + ": attachment index out of range");
+    };
+    const int nc = static_cast<int>(d_.constraints.size());
+    rows_of_.assign(static_cast<std::size_t>(nc), {});
+    std::vector<int> cover(static_cast<std::size_t>(m_all_), 0);
+    for (std::size_t i = 0; i < d_.rows.size(); ++i) {
+        const SpatialRow& r = d_.rows[i];
+        if (r.constraint < 0 || r.constraint >= nc) throw EngineError("row: constraint index out of range");
+        const ConstraintInfo& c = d_.constraints[static_cast<std::size_t>(r.constraint)];
+        const std::string w = "constraint '" + c.name + "'";
+        if (r.offset < 0 || r.offset >= c.dim) throw EngineError(w + ": row offset out of range");
+        if (r.norm_body >= nb) throw EngineError(w + ": norm body out of range");
+        for (const SpatialTerm& t : r.x) check_att(t.attachment, w);
+        for (const SpatialTerm& t : r.y) check_att(t.attachment, w);
+        cover[static_cast<std::size_t>(c.row + r.offset)] += 1;
+        rows_of_[static_cast<std::size_t>(r.constraint)].push_back(static_cast<int>(i));
+    }
+    for (const ConstraintInfo& c : d_.constraints)
+        for (int r = 0; r < c.dim; ++r)
+            if (cover[static_cast<std::size_t>(c.row + r)] != 1)
+                throw EngineError("constraint '" + c.name + "': row " + std::to_string(r) + " is defined " +
+                                  std::to_string(cover[static_cast<std::size_t>(c.row + r)]) +
+                                  " times (expected once)");
+    for (const SpatialSpring& s : d_.springs) {
+        check_att(s.a, "spring");
+        check_att(s.b, "spring");
+    }
+    for (const SpatialActuator& a : d_.actuators) {
+        check_att(a.axis, "actuator");
+        if (a.kind == SpatialActuatorKind::translation) {
+            check_att(a.pa, "actuator");
+            check_att(a.pb, "actuator");
+        } else if (a.body_a < -1 || a.body_a >= nb || a.body_b < -1 || a.body_b >= nb) {
+            throw EngineError("actuator body index out of range");
+        }
+    }
+}
+
+std::unique_ptr<Workspace> SpatialProgram::make_workspace() const {
+    auto w = std::make_unique<SpatialWorkspace>();
+    const std::size_t K = d_.attachments.size();
+    w->val.assign(3 * K, 0.0);
+    w->vel.assign(3 * K, 0.0);
+    w->acc.assign(3 * K, 0.0);
+    w->Qe.assign(12 * K, 0.0);
+    w->col.assign(static_cast<std::size_t>(n_), 0.0);
+    return w;
+}
+
+Status SpatialProgram::evaluate(double t, const double* q, const double* qd, const std::uint8_t* active,
+                                unsigned need, Terms& out, Workspace& wsb) const {
+    (void)t;
+    auto& w = static_cast<SpatialWorkspace&>(wsb);
+    const int n = n_;
+    {
+        double acc = 0.0;
+        for (int i = 0; i < n; ++i) acc += q[i] * q[i] + qd[i] * qd[i];
+        if (!std::isfinite(acc)) {
+            for (int i = 0; i < n; ++i)
+                if (!std::isfinite(q[i]) || !std::isfinite(qd[i])) return Status::not_finite;
+        }
+    }
+    const std::size_t K = d_.attachments.size();
+    // ---------------------------------------------------------------- attachment kinematics
+    for (std::size_t k = 0; k < K; ++k) {
+        const SpatialAttachment& at = d_.attachments[k];
+        double* val = &w.val[3 * k];
+        double* vel = &w.vel[3 * k];
+        double* acc = &w.acc[3 * k];
+        double* Qe = &w.Qe[12 * k];
+        if (at.body < 0) {
+            for (int a = 0; a < 3; ++a) {
+                val[a] = at.value[static_cast<std::size_t>(a)];
+                vel[a] = acc[a] = 0.0;
+            }
+            for (int j = 0; j < 12; ++j) Qe[j] = 0.0;
+            continue;
+        }
+        const int o = 7 * at.body;
+        const double* e = q + o + 3;
+        const double* ed = qd + o + 3;
+        const double* Q = at.Q.data();
+        for (int a = 0; a < 3; ++a) {
+            double v = 0.0, vd = 0.0, ac = 0.0;
+            for (int j = 0; j < 4; ++j) {
+                const double* Qaj = Q + 16 * a + 4 * j;
+                const double qe = Qaj[0] * e[0] + Qaj[1] * e[1] + Qaj[2] * e[2] + Qaj[3] * e[3];
+                const double qed = Qaj[0] * ed[0] + Qaj[1] * ed[1] + Qaj[2] * ed[2] + Qaj[3] * ed[3];
+                Qe[4 * a + j] = qe;
+                v += qe * e[j];
+                vd += qe * ed[j];
+                ac += qed * ed[j];
+            }
+            val[a] = v + (at.point ? q[o + a] : 0.0);
+            vel[a] = 2.0 * vd + (at.point ? qd[o + a] : 0.0);
+            acc[a] = 2.0 * ac;
+        }
+    }
+    // coef · J_kᵀ w added to f (n-vector): J_k = [I (points), 2 Q(s) ε] in the body's columns
+    auto add_JT = [&](double* f, int k, const double* wv, double coef) {
+        const SpatialAttachment& at = d_.attachments[static_cast<std::size_t>(k)];
+        if (at.body < 0) return;
+        const int o = 7 * at.body;
+        if (at.point)
+            for (int a = 0; a < 3; ++a) f[o + a] += coef * wv[a];
+        const double* Qe = &w.Qe[12 * static_cast<std::size_t>(k)];
+        for (int j = 0; j < 4; ++j)
+            f[o + 3 + j] += 2.0 * coef * (wv[0] * Qe[j] + wv[1] * Qe[4 + j] + wv[2] * Qe[8 + j]);
+    };
+    const std::size_t nb = d_.bodies.size();
+    // ---------------------------------------------------------------- M
+    if (need & NEED_M) {
+        out.M.setZero();
+        for (std::size_t i = 0; i < nb; ++i) {
+            const SpatialBody& b = d_.bodies[i];
+            const int o = 7 * static_cast<int>(i);
+            for (int a = 0; a < 3; ++a) out.M(o + a, o + a) = b.mass;
+            double G[3][4], JG[3][4];
+            G_of(q + o + 3, G);
+            for (int a = 0; a < 3; ++a)
+                for (int j = 0; j < 4; ++j)
+                    JG[a][j] = b.inertia[3 * a] * G[0][j] + b.inertia[3 * a + 1] * G[1][j] +
+                               b.inertia[3 * a + 2] * G[2][j];
+            for (int i2 = 0; i2 < 4; ++i2)
+                for (int j = 0; j < 4; ++j)
+                    out.M(o + 3 + i2, o + 3 + j) =
+                        4.0 * (G[0][i2] * JG[0][j] + G[1][i2] * JG[1][j] + G[2][i2] * JG[2][j]);
+        }
+    }
+    // ---------------------------------------------------------------- h, f_passive, energy
+    double V = 0.0, T = 0.0;
+    if (need & (NEED_H | NEED_ENERGY)) {
+        double* h = out.h.data();
+        double* fp = out.f_passive.data();
+        if (need & NEED_H) {
+            out.h.setZero();
+            out.f_passive.setZero();
+        }
+        for (std::size_t i = 0; i < nb; ++i) {
+            const SpatialBody& b = d_.bodies[i];
+            const int o = 7 * static_cast<int>(i);
+            const double* e = q + o + 3;
+            const double* ed = qd + o + 3;
+            double G[3][4];
+            G_of(e, G);
+            double wb[3], Jw[3];  // G ε̇ (half the body angular velocity) and J G ε̇
+            for (int a = 0; a < 3; ++a) wb[a] = G[a][0] * ed[0] + G[a][1] * ed[1] + G[a][2] * ed[2] + G[a][3] * ed[3];
+            for (int a = 0; a < 3; ++a)
+                Jw[a] = b.inertia[3 * a] * wb[0] + b.inertia[3 * a + 1] * wb[1] + b.inertia[3 * a + 2] * wb[2];
+            if (need & NEED_H) {
+                for (int a = 0; a < 3; ++a) h[o + a] = b.mass * d_.gravity[static_cast<std::size_t>(a)];
+                double Gd[3][4];
+                G_of(ed, Gd);
+                for (int j = 0; j < 4; ++j)
+                    h[o + 3 + j] = -8.0 * (Gd[0][j] * Jw[0] + Gd[1][j] * Jw[1] + Gd[2][j] * Jw[2]);
+            }
+            if (need & NEED_ENERGY) {
+                for (int a = 0; a < 3; ++a) {
+                    T += 0.5 * b.mass * qd[o + a] * qd[o + a];
+                    V -= b.mass * d_.gravity[static_cast<std::size_t>(a)] * q[o + a];
+                }
+                T += 2.0 * (wb[0] * Jw[0] + wb[1] * Jw[1] + wb[2] * Jw[2]);
+            }
+        }
+        for (const SpatialSpring& s : d_.springs) {
+            const double* pa = &w.val[3 * static_cast<std::size_t>(s.a)];
+            const double* pb = &w.val[3 * static_cast<std::size_t>(s.b)];
+            const double d[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
+            const double ell = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            V += 0.5 * s.stiffness * (ell - s.rest_length) * (ell - s.rest_length);
+            if (!(need & NEED_H)) continue;
+            if (s.stiffness != 0.0) {
+                double coef = 0.0;
+                if (s.rest_length == 0.0) coef = -s.stiffness;
+                else if (ell > 0.0) coef = -s.stiffness * (ell - s.rest_length) / ell;
+                if (coef != 0.0) {
+                    add_JT(h, s.b, d, coef);
+                    add_JT(h, s.a, d, -coef);
+                }
+            }
+            if (s.damping != 0.0 && ell > 0.0) {
+                const double* va = &w.vel[3 * static_cast<std::size_t>(s.a)];
+                const double* vb = &w.vel[3 * static_cast<std::size_t>(s.b)];
+                const double u[3] = {d[0] / ell, d[1] / ell, d[2] / ell};
+                const double rate = u[0] * (vb[0] - va[0]) + u[1] * (vb[1] - va[1]) + u[2] * (vb[2] - va[2]);
+                add_JT(fp, s.b, u, -s.damping * rate);
+                add_JT(fp, s.a, u, s.damping * rate);
+            }
+        }
+        if (need & NEED_ENERGY) {
+            out.kinetic = T;
+            out.potential = V;
+        }
+    }
+    // ---------------------------------------------------------------- B
+    if ((need & NEED_B) && k_ > 0) {
+        out.B.setZero();
+        std::vector<double>& col = w.col;
+        for (int c = 0; c < k_; ++c) {
+            const SpatialActuator& ac = d_.actuators[static_cast<std::size_t>(c)];
+            std::fill(col.begin(), col.end(), 0.0);
+            const double* axis = &w.val[3 * static_cast<std::size_t>(ac.axis)];
+            if (ac.kind == SpatialActuatorKind::rotation) {
+                const int bodies[2] = {ac.body_b, ac.body_a};
+                const double signs[2] = {1.0, -1.0};
+                for (int s = 0; s < 2; ++s) {
+                    if (bodies[s] < 0) continue;
+                    const int o = 7 * bodies[s];
+                    double E[3][4];
+                    E_of(q + o + 3, E);
+                    for (int j = 0; j < 4; ++j)
+                        col[static_cast<std::size_t>(o + 3 + j)] +=
+                            signs[s] * 2.0 * (E[0][j] * axis[0] + E[1][j] * axis[1] + E[2][j] * axis[2]);
+                }
+            } else {
+                const double* pa = &w.val[3 * static_cast<std::size_t>(ac.pa)];
+                const double* pb = &w.val[3 * static_cast<std::size_t>(ac.pb)];
+                const double d[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
+                add_JT(col.data(), ac.pb, axis, 1.0);
+                add_JT(col.data(), ac.pa, axis, -1.0);
+                add_JT(col.data(), ac.axis, d, 1.0);
+            }
+            for (int i = 0; i < n; ++i) out.B(i, c) = col[static_cast<std::size_t>(i)];
+        }
+    }
+    // ---------------------------------------------------------------- constraints
+    const unsigned cneed = need & (NEED_A | NEED_GAMMA | NEED_PHI | NEED_VELOCITY);
+    if (cneed && m_all_ > 0) {
+        const bool wantA = (need & NEED_A) != 0;
+        double* A = out.A.data();
+        for (std::size_t ci = 0; ci < d_.constraints.size(); ++ci) {
+            if (!active[ci]) continue;
+            const ConstraintInfo& c = d_.constraints[ci];
+            if (wantA) std::fill(A + static_cast<std::ptrdiff_t>(c.row) * n,
+                                 A + static_cast<std::ptrdiff_t>(c.row + c.dim) * n, 0.0);
+            for (int ri : rows_of_[ci]) {
+                const SpatialRow& r = d_.rows[static_cast<std::size_t>(ri)];
+                const int row = c.row + r.offset;
+                double* Ar = A + static_cast<std::ptrdiff_t>(row) * n;
+                if (r.norm_body >= 0) {
+                    const int o = 7 * r.norm_body + 3;
+                    const double* e = q + o;
+                    const double* ed = qd + o;
+                    out.phi[row] = 0.5 * ((e[0] * e[0] + e[1] * e[1] + e[2] * e[2] + e[3] * e[3]) - 1.0);
+                    out.gamma[row] = ed[0] * ed[0] + ed[1] * ed[1] + ed[2] * ed[2] + ed[3] * ed[3];
+                    out.velocity[row] = e[0] * ed[0] + e[1] * ed[1] + e[2] * ed[2] + e[3] * ed[3];
+                    if (wantA)
+                        for (int j = 0; j < 4; ++j) Ar[o + j] = e[j];
+                    continue;
+                }
+                double X[3] = {0, 0, 0}, Y[3] = {0, 0, 0}, Xd[3] = {0, 0, 0}, Yd[3] = {0, 0, 0};
+                double Xa[3] = {0, 0, 0}, Ya[3] = {0, 0, 0};
+                for (const SpatialTerm& tm : r.x) {
+                    const std::size_t k = static_cast<std::size_t>(tm.attachment);
+                    for (int a = 0; a < 3; ++a) {
+                        X[a] += tm.coef * w.val[3 * k + a];
+                        Xd[a] += tm.coef * w.vel[3 * k + a];
+                        Xa[a] += tm.coef * w.acc[3 * k + a];
+                    }
+                }
+                for (const SpatialTerm& tm : r.y) {
+                    const std::size_t k = static_cast<std::size_t>(tm.attachment);
+                    for (int a = 0; a < 3; ++a) {
+                        Y[a] += tm.coef * w.val[3 * k + a];
+                        Yd[a] += tm.coef * w.vel[3 * k + a];
+                        Ya[a] += tm.coef * w.acc[3 * k + a];
+                    }
+                }
+                out.phi[row] = X[0] * Y[0] + X[1] * Y[1] + X[2] * Y[2];
+                out.velocity[row] = Xd[0] * Y[0] + Xd[1] * Y[1] + Xd[2] * Y[2] + X[0] * Yd[0] + X[1] * Yd[1] +
+                                    X[2] * Yd[2];
+                out.gamma[row] = 2.0 * (Xd[0] * Yd[0] + Xd[1] * Yd[1] + Xd[2] * Yd[2]) +
+                                 (X[0] * Ya[0] + X[1] * Ya[1] + X[2] * Ya[2]) +
+                                 (Y[0] * Xa[0] + Y[1] * Xa[1] + Y[2] * Xa[2]);
+                if (wantA) {
+                    for (const SpatialTerm& tm : r.x) add_JT(Ar, tm.attachment, Y, tm.coef);
+                    for (const SpatialTerm& tm : r.y) add_JT(Ar, tm.attachment, X, tm.coef);
+                }
+            }
+        }
+    }
+    return Status::ok;
+}
+
+}  // namespace nonmin

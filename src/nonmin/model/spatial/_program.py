@@ -1,0 +1,84 @@
+"""The spatial quaternion model compiled once to the engine's ``SpatialProgram``.
+
+:func:`description` emits a :class:`~nonmin.model.spatial.SpatialModel` as plain data: bodies
+(mass, body-frame inertia), gravity, the world-frame attachments of its row plan (body points
+``r + R(ε) s`` and vectors ``R(ε) s`` given by their point tensors ``Q(s)``, constants on the
+ground), one norm row per body, every joint row as ``φ = X·Y`` over attachments (the
+decomposition of ``_model._RowPlan``), the spring-dampers and the joint actuators. The C++
+program evaluates M, h = f_g − C q̇, f_passive, B, A, γ, φ, the velocity residual and the
+energies for any active mask with no Python (formulas in ``engine/include/nonmin/spatial.hpp``).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ... import _engine  # type: ignore[attr-defined]  # the compiled extension (no stubs)
+from ._quaternion import point_tensor
+
+if TYPE_CHECKING:
+    from ._model import SpatialModel
+
+__all__ = ["description", "engine_program"]
+
+_KIND_CODES = {"holonomic": 0, "rheonomic": 1, "nonholonomic": 2, "unilateral": 3}
+
+
+def description(model: SpatialModel) -> Any:
+    """The engine description (``nonmin._engine.SpatialDescription``) of ``model``."""
+    d = _engine.SpatialDescription()
+    d.set_gravity(tuple(float(g) for g in model.gravity))
+    for b in model.bodies:
+        d.add_body(float(b.mass), tuple(float(x) for x in np.asarray(b.inertia, dtype=float).ravel()))
+    nb = len(model.bodies)
+    plan = model._plan
+    zero_q = np.zeros(48)
+    att: list[int] = []
+    for k in range(plan.att_body.shape[0]):
+        body = int(plan.att_body[k])
+        if body == nb:
+            att.append(d.add_attachment(-1, False, zero_q, tuple(float(x) for x in plan.att_const[k])))
+        else:
+            att.append(d.add_attachment(body, bool(plan.att_point[k] > 0.0),
+                                        np.ascontiguousarray(plan.att_Q[k], dtype=float).ravel(),
+                                        (0.0, 0.0, 0.0)))  # fmt: skip
+
+    def attachment(body: str, local: Any, point: bool) -> int:
+        i = model.body_index(body)
+        loc = np.asarray(local, dtype=float).reshape(3)
+        if i < 0:
+            return int(d.add_attachment(-1, False, zero_q, tuple(float(x) for x in loc)))
+        return int(d.add_attachment(i, point, point_tensor(loc).ravel(), (0.0, 0.0, 0.0)))
+
+    specs = model.constraints
+    for i in range(nb):
+        c = d.add_constraint(specs[i].name, _KIND_CODES[specs[i].kind], 1)
+        d.add_norm_row(c, 0, i)
+    r = 0
+    for spec in specs[nb:]:
+        c = d.add_constraint(spec.name, _KIND_CODES[spec.kind], spec.dim)
+        for off in range(spec.dim):
+            xs = [(att[k], float(plan.SX[r, k])) for k in np.flatnonzero(plan.SX[r])]
+            ys = [(att[k], float(plan.SY[r, k])) for k in np.flatnonzero(plan.SY[r])]
+            d.add_dot_row(c, off, xs, ys)
+            r += 1
+    for s in model.springs:
+        d.add_spring(attachment(s.body_a, s.point_a, True), attachment(s.body_b, s.point_b, True),
+                     float(s.stiffness), float(s.rest_length), float(s.damping))  # fmt: skip
+    for a in model.actuators:
+        j = model.joint(a.joint)
+        axis = attachment(j.body_a, j.vectors_a[0], False)
+        if a.dof == "rotation":
+            d.add_rotation_actuator(axis, model.body_index(j.body_a), model.body_index(j.body_b))
+        else:
+            d.add_translation_actuator(axis, attachment(j.body_a, j.point_a, True),
+                                       attachment(j.body_b, j.point_b, True))  # fmt: skip
+    return d
+
+
+def engine_program(model: SpatialModel) -> Any:
+    """The engine's ``SpatialProgram`` of ``model`` (every constraint; the active set is a mask
+    given to each evaluation)."""
+    return _engine.SpatialProgram(description(model))
