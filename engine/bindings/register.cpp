@@ -9,6 +9,7 @@ void register_all(nanobind::module_& m) {
     bind_core(m);
     bind_tape(m);
     bind_spatial(m);
+    bind_rbd(m);
 }
 
 }  // namespace nonmin::bindings

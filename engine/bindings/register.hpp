@@ -12,5 +12,6 @@ void bind_planar(nanobind::module_& m);   // planar.cpp: PlanarDescription, Plan
 void bind_core(nanobind::module_& m);     // core.cpp: Solver (single, batched), min_norm
 void bind_tape(nanobind::module_& m);     // tape.cpp: TapeProgram (SymPy models)
 void bind_spatial(nanobind::module_& m);  // spatial.cpp: SpatialDescription, SpatialProgram
+void bind_rbd(nanobind::module_& m);      // rbd.cpp: TreeProgram (robots)
 
 }  // namespace nonmin::bindings

@@ -50,9 +50,18 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ...errors import InputError, ModelError, ShapeError, UnknownNameError, missing_dependency
+from ... import _engine  # type: ignore[attr-defined]  # compiled extension, no stub
+from ...errors import (
+    InputError,
+    ModelError,
+    NonFiniteError,
+    ShapeError,
+    UnknownNameError,
+    missing_dependency,
+)
 from .._protocol import ConstraintSpec, ConstraintTerms, FloatArray, Geometry, Model, ModelTerms
 from ._constraints import FrameConstraint, JointCoupling, RobotConstraint, complete_basis
+from ._tree import compile_tree
 
 try:
     import pinocchio as pin
@@ -62,6 +71,13 @@ except ImportError as exc:  # pragma: no cover - exercised in a subprocess test
 __all__ = ["RobotModel"]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+_NEED_M, _NEED_H, _NEED_A, _NEED_GAMMA = _engine.NEED_M, _engine.NEED_H, _engine.NEED_A, _engine.NEED_GAMMA
+_NEED_PHI, _NEED_VELOCITY, _NEED_B = _engine.NEED_PHI, _engine.NEED_VELOCITY, _engine.NEED_B
+_NEED_ENERGY = _engine.NEED_ENERGY
+_NEED_CONSTRAINTS = _NEED_A | _NEED_GAMMA | _NEED_PHI | _NEED_VELOCITY
+_NEED_EVALUATE = _NEED_M | _NEED_H | _NEED_B | _NEED_CONSTRAINTS
+_NONE = np.empty(0)  # placeholder output array of a term not asked for
 
 
 # --------------------------------------------------------------------------- small math
@@ -253,6 +269,9 @@ class RobotModel(Model):
     _act_v: tuple[int, ...] = field(init=False, repr=False)
     _structural: frozenset[str] = field(init=False, repr=False)
     _damp: FloatArray = field(init=False, repr=False)
+    _program: Any = field(init=False, repr=False)
+    _scratch: Any = field(init=False, repr=False)
+    _row_cache: dict[frozenset[str], tuple[Any, Any]] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         s = object.__setattr__
@@ -340,6 +359,13 @@ class RobotModel(Model):
         s(self, "_act_v", tuple(act_v))
         s(self, "_structural", struct)
         s(self, "_damp", damp)
+        quats = [(c.name, _quat_slice(b).start) for c, b in
+                 zip(structural, [b for b in blocks if b.kind != "vector"])]
+        prog = compile_tree(pm, quats, cons, fids, jq, act_v, damp)
+        s(self, "_program", prog)
+        # the engine's scratch of the Python-side evaluations (used under the GIL)
+        s(self, "_scratch", None if prog is None else (prog.make_terms(), prog.make_workspace()))
+        s(self, "_row_cache", {})
         s(self, "default_active", frozenset())
         s(self, "default_active", self.resolve_active(dflt))
 
@@ -603,26 +629,120 @@ class RobotModel(Model):
                 qpos[sl] = np.roll(qpos[sl], 1)
         return qpos
 
+    # ------------------------------------------------------------------ the compiled engine
+    def engine_program(self) -> Any | None:
+        """The compiled engine's ``TreeProgram`` of this robot (``nonmin._engine.Program``).
+
+        Built once with the model (:mod:`nonmin.model.robots._tree`); it evaluates M, h, f_p,
+        B, the constraint rows and the energy (``engine/include/nonmin/rbd``) for a mask of
+        the active constraints (one entry per constraint of :attr:`constraints`; the
+        structural unit-quaternion rows must be active). None when the tree has a joint type
+        the engine does not evaluate; the model then evaluates through Pinocchio.
+        """
+        return self._program
+
+    def _active_rows(self, act: frozenset[str]) -> tuple[Any, Any]:
+        """Engine mask of the active constraints and their rows (None: every row)."""
+        hit = self._row_cache.get(act)
+        if hit is None:
+            mask = np.array([c.name in act for c in self.constraints], dtype=np.uint8)
+            rows = [np.arange(r, r + d) for (_, _, r, d), on in
+                    zip(self._program.constraints, mask) if on]
+            idx = np.concatenate(rows) if rows else np.zeros(0, dtype=np.intp)
+            hit = (mask, None if idx.size == self._program.m_all else idx)
+            self._row_cache[act] = hit
+        return hit
+
+    def _engine(
+        self, t: float, q: ArrayLike, qd: ArrayLike | None, act: frozenset[str], need: int
+    ) -> tuple[Any, ...]:
+        """One engine evaluation: (M, h, f_p, B, A, γ, φ, A qd, kinetic, potential).
+
+        Entries not asked for by ``need`` (``_engine.NEED_*`` bits) are None; constraint
+        arrays hold the active rows only.
+        """
+        prog = self._program
+        n, m = self.n, prog.m_all
+        qv = np.ascontiguousarray(self._q(q))
+        v = np.zeros(n) if qd is None else np.ascontiguousarray(self._q(qd, "qd"))
+        mask, rows = self._active_rows(act)
+        M = np.empty((n, n)) if need & _NEED_M else _NONE
+        h = np.empty(n) if need & _NEED_H else _NONE
+        fp = np.empty(n) if need & _NEED_H else _NONE
+        B = np.empty((n, prog.k)) if need & _NEED_B else _NONE
+        A = np.empty((m, n)) if need & _NEED_A else _NONE
+        g = np.empty(m) if need & _NEED_GAMMA else _NONE
+        p = np.empty(m) if need & _NEED_PHI else _NONE
+        vel = np.empty(m) if need & _NEED_VELOCITY else _NONE
+        terms, ws = self._scratch
+        status, kin, pot = prog.evaluate_arrays(
+            terms, ws, float(t), qv, v, mask, need, M, h, fp, B, A, g, p, vel
+        )
+        if status:
+            self.pinocchio_configuration(qv)  # names the joint of a zero quaternion
+            raise NonFiniteError(f"q and qd must be finite (robot {self.name!r})")
+        if rows is not None:
+            A = A[rows] if need & _NEED_A else A
+            g = g[rows] if need & _NEED_GAMMA else g
+            p = p[rows] if need & _NEED_PHI else p
+            vel = vel[rows] if need & _NEED_VELOCITY else vel
+        return (
+            M if need & _NEED_M else None,
+            h if need & _NEED_H else None,
+            fp if need & _NEED_H else None,
+            B if need & _NEED_B else None,
+            A if need & _NEED_A else None,
+            g if need & _NEED_GAMMA else None,
+            p if need & _NEED_PHI else None,
+            vel if need & _NEED_VELOCITY else None,
+            kin,
+            pot,
+        )
+
     # ------------------------------------------------------------------ dynamics
     def mass_matrix(self, q: ArrayLike) -> FloatArray:
-        """``M = Tᵀ M_v T`` (Pinocchio CRBA incl. armature, symmetrized), shape (n, n)."""
-        k = _Kin(self, self._q(q), np.zeros(self.n), dynamics=True)
-        return k.T.T @ k.Mv @ k.T
+        """``M = Tᵀ M_v T`` (CRBA incl. armature, symmetrized), shape (n, n)."""
+        if self._program is None:
+            k = _Kin(self, self._q(q), np.zeros(self.n), dynamics=True)
+            return k.T.T @ k.Mv @ k.T
+        M: FloatArray = self._engine(0.0, q, None, self._structural, _NEED_M)[0]
+        return M
 
     def coriolis_matrix(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
-        """``C = Tᵀ C_v T + Tᵀ M_v Ṫ`` (Pinocchio's ``computeCoriolisMatrix``), shape (n, n)."""
+        """``C = Tᵀ C_v T + Tᵀ M_v Ṫ`` (Pinocchio's ``computeCoriolisMatrix``), shape (n, n).
+
+        Not needed by the dynamics (which use ``h``); evaluated by Pinocchio.
+        """
         k = _Kin(self, self._q(q), self._q(qd, "qd"), dynamics=True)
         return k.T.T @ k.Cv @ k.T + k.T.T @ k.Mv @ k.Tdot
 
     def conservative_force(self, q: ArrayLike) -> FloatArray:
-        """Gravity ``f_g = −Tᵀ g_v`` (Pinocchio ``computeGeneralizedGravity``), shape (n,)."""
-        k = _Kin(self, self._q(q), np.zeros(self.n), dynamics=True)
-        return -k.T.T @ k.gv
+        """Gravity ``f_g = −Tᵀ g_v`` (RNEA at zero velocity), shape (n,)."""
+        if self._program is None:
+            k = _Kin(self, self._q(q), np.zeros(self.n), dynamics=True)
+            return -k.T.T @ k.gv
+        h: FloatArray = self._engine(0.0, q, None, self._structural, _NEED_H)[1]
+        return h
 
     def potential_energy(self, q: ArrayLike) -> float:
-        """Gravitational potential energy (Pinocchio ``computePotentialEnergy``)."""
-        qn = self.pinocchio_configuration(q)
-        return float(pin.computePotentialEnergy(self._pm, self._pm.createData(), qn))
+        """Gravitational potential energy ``−Σ m_i gᵀ c_i`` (Pinocchio's convention)."""
+        if self._program is None:
+            qn = self.pinocchio_configuration(q)
+            return float(pin.computePotentialEnergy(self._pm, self._pm.createData(), qn))
+        return float(self._engine(0.0, q, None, self._structural, _NEED_ENERGY)[9])
+
+    def kinetic_energy(self, q: ArrayLike, qd: ArrayLike) -> float:
+        """``T = ½ qdᵀ M qd``."""
+        if self._program is None:
+            return super().kinetic_energy(q, qd)
+        return float(self._engine(0.0, q, qd, self._structural, _NEED_ENERGY)[8])
+
+    def energy(self, q: ArrayLike, qd: ArrayLike) -> float:
+        """Total mechanical energy ``T + V``."""
+        if self._program is None:
+            return super().energy(q, qd)
+        out = self._engine(0.0, q, qd, self._structural, _NEED_ENERGY)
+        return float(out[8] + out[9])
 
     def passive_force(self, t: float, q: ArrayLike, qd: ArrayLike) -> FloatArray:
         """Joint damping ``−Tᵀ (d ⊙ T qd)``, shape (n,)."""
@@ -810,6 +930,15 @@ class RobotModel(Model):
         Rows follow :attr:`constraints` (structural unit-quaternion rows first).
         """
         act = self.resolve_active(active)
+        if self._program is None:
+            return self._constraint_terms_pinocchio(t, q, qd, act)
+        out = self._engine(t, q, qd, act, _NEED_CONSTRAINTS)
+        return ConstraintTerms(out[4], out[5], out[6], out[7], np.ones(out[4].shape[0], dtype=bool))
+
+    def _constraint_terms_pinocchio(
+        self, t: float, q: ArrayLike, qd: ArrayLike, act: frozenset[str]
+    ) -> ConstraintTerms:
+        """:meth:`constraint_terms` from Pinocchio's frame kinematics (fallback and oracle)."""
         qv, v = self._q(q), self._q(qd, "qd")
         kin = _Kin(self, qv, v, dynamics=False)
         return self._constraint_rows(kin, qv, v, act)[0]
@@ -836,8 +965,22 @@ class RobotModel(Model):
         qd: ArrayLike,
         active: Iterable[str] | None = None,
     ) -> ModelTerms:
-        """All terms in one Pinocchio pass: M, h = f_g − C qd, f_p, B and the constraints."""
+        """All terms in one engine call: M, h = f_g − C qd, f_p, B and the constraints.
+
+        The compiled engine's ``TreeProgram`` (:meth:`engine_program`) evaluates them from the
+        tree description extracted at load time; Pinocchio is not called.
+        """
         act = self.resolve_active(active)
+        if self._program is None:
+            return self._evaluate_pinocchio(t, q, qd, act)
+        M, h, fp, B, A, g, p, vel, _, _ = self._engine(t, q, qd, act, _NEED_EVALUATE)
+        cons = ConstraintTerms(A, g, p, vel, np.ones(A.shape[0], dtype=bool))
+        return ModelTerms(M=M, h=h, f_passive=fp, B=B, constraints=cons)
+
+    def _evaluate_pinocchio(
+        self, t: float, q: ArrayLike, qd: ArrayLike, act: frozenset[str]
+    ) -> ModelTerms:
+        """:meth:`evaluate` through Pinocchio's algorithms (fallback and test oracle)."""
         qv, v = self._q(q), self._q(qd, "qd")
         kin = _Kin(self, qv, v, dynamics=True)
         T = kin.T
@@ -853,6 +996,11 @@ class RobotModel(Model):
     def frame_placement(self, q: ArrayLike, frame: str) -> FloatArray:
         """World placement of a frame as a 4×4 homogeneous transform."""
         fid = self.frame_id(frame)
+        if self._program is not None:
+            placements: FloatArray = self._program.placements(
+                np.ascontiguousarray(self.pinocchio_configuration(q))
+            )[1]
+            return placements[fid]
         d = self._pm.createData()
         pin.framesForwardKinematics(self._pm, d, self.pinocchio_configuration(q))
         return np.array(d.oMf[fid].homogeneous)

@@ -1,0 +1,119 @@
+// Rigid-body trees: the plain-data model description (extracted once, at load time, from
+// Pinocchio or MuJoCo by nonmin.model.robots) and the free-function algorithms over
+// (model, data, q, v, a): forward kinematics, CRBA, RNEA, frame kinematics and Jacobians.
+//
+// Conventions are Pinocchio's, so that every quantity can be checked against it: joints are
+// numbered with parent < child, joint i's frame is oMi = oM_parent · placement_i · X_J(q_i), its
+// velocity v_i (nv_i components) is expressed in the joint frame (free flyer: body-frame linear
+// velocity and body angular velocity; spherical: body angular velocity), the generalized
+// velocity v and acceleration a are Pinocchio's (nv), and a configuration holds each quaternion
+// as (x, y, z, w) (normalized by the algorithms). Internally all spatial quantities are in world
+// axes at the world origin (spatial.hpp): the joint motion subspace J_i = Ad(oMi) S_i, the body
+// velocity ν_i = ν_parent + J_i v_i and the spatial acceleration
+// α_i = α_parent + J_i a_i + ν_i × J_i v_i (S_i is constant in the joint frame for every joint
+// type here, so the joint bias c_J is zero).
+#pragma once
+#include <vector>
+
+#include "../types.hpp"
+#include "spatial.hpp"
+
+namespace nonmin::rbd {
+
+enum class JointType : int {
+    revolute = 0,     // 1 dof about `axis` (Pinocchio RX/RY/RZ, RevoluteUnaligned)
+    prismatic = 1,    // 1 dof along `axis` (PX/PY/PZ, PrismaticUnaligned)
+    spherical = 2,    // nq 4 (quaternion), nv 3 (body angular velocity)
+    free_flyer = 3,   // nq 7 (position, quaternion), nv 6 (body linear, body angular velocity)
+    translation = 4,  // nq = nv = 3, translation in the joint frame
+};
+
+int joint_nq(JointType t);
+int joint_nv(JointType t);
+
+struct Joint {
+    JointType type = JointType::revolute;
+    int parent = -1;       // parent joint index, −1 for the world; parent < this joint's index
+    int axis_index = -1;   // 0, 1, 2 when `axis` is that coordinate axis (exact rotations), else −1
+    Vec3 axis = Vec3::UnitZ();  // unit axis in the joint frame (revolute, prismatic)
+    int iq = 0;            // first configuration index
+    int iv = 0;            // first velocity index
+    SE3 placement;         // joint frame in the parent joint frame (Pinocchio jointPlacements)
+    double mass = 0.0;     // body carried by the joint (Pinocchio inertias), in the joint frame:
+    Vec3 com = Vec3::Zero();        // centre of mass
+    Mat3 inertia = Mat3::Zero();    // rotational inertia about the centre of mass
+};
+
+// An operational frame: rigidly attached to `joint` (−1: the world) at `placement`.
+struct Frame {
+    int joint = -1;
+    SE3 placement;
+};
+
+struct TreeModel {
+    int nq = 0;
+    int nv = 0;
+    std::vector<Joint> joints;
+    Vec3 gravity = Vec3(0.0, 0.0, -9.81);
+    Vec armature;  // nv, added to the diagonal of M (Pinocchio's model.armature)
+
+    // Throws EngineError when the description is inconsistent (indices, sizes, parents).
+    void validate() const;
+    bool has_quaternions() const;
+};
+
+// Mutable scratch of the algorithms, sized once from the model (no allocation afterwards).
+struct TreeData {
+    explicit TreeData(const TreeModel& model);
+
+    std::vector<SE3> oMi;       // joint placements in the world
+    Eigen::Matrix<double, 6, Eigen::Dynamic> J;  // 6 × nv: world joint motion subspaces
+    std::vector<Inertia> oI;    // body inertias in world axes at the world origin
+    std::vector<Inertia> Ic;    // composite (subtree) inertias (crba scratch)
+    std::vector<Motion> ov;     // body spatial velocities
+    std::vector<Motion> oa;     // body spatial accelerations (without gravity)
+    std::vector<Force> of;      // subtree forces (rnea scratch)
+};
+
+// Placements oMi, world motion subspaces J and world body inertias oI at q (nq).
+void forward_kinematics(const TreeModel& model, TreeData& data, const double* q);
+
+// Spatial velocities ν_i and accelerations α_i (without gravity) for Pinocchio's joint
+// velocity v and acceleration a (nv each; a == nullptr means a = 0). Needs forward_kinematics.
+void forward_motion(const TreeModel& model, TreeData& data, const double* v, const double* a);
+
+// Joint-space inertia M (nv × nv, full symmetric, armature on the diagonal): the composite
+// rigid-body algorithm, M_ij = J_iᵀ Ic_j J_j for i in the support of j. Needs forward_kinematics.
+void crba(const TreeModel& model, TreeData& data, double* M, int ld);
+
+// Inverse dynamics τ = M a + C(q, v) v + g(q) (Pinocchio's rnea, armature included) from the
+// velocities and accelerations of forward_motion(v, a), with gravity; `a` is the same joint
+// acceleration (nullptr: 0), for the armature term. τ has nv entries.
+void rnea(const TreeModel& model, TreeData& data, const double* a, double* tau);
+
+// Gravitational potential energy −Σ m_i gᵀ c_i. Needs forward_kinematics.
+double potential_energy(const TreeModel& model, const TreeData& data);
+
+// A frame's world placement, and its world-aligned kinematics (LOCAL_WORLD_ALIGNED in
+// Pinocchio): origin velocity, angular velocity, classical acceleration of the origin and
+// angular acceleration, from forward_motion.
+struct FrameKinematics {
+    SE3 oMf;
+    Vec3 v = Vec3::Zero(), w = Vec3::Zero(), a = Vec3::Zero(), alpha = Vec3::Zero();
+};
+SE3 frame_placement(const TreeModel& model, const TreeData& data, const Frame& frame);
+void frame_kinematics(const TreeModel& model, const TreeData& data, const Frame& frame,
+                      bool motion, FrameKinematics& out);
+
+// row[0:nv] += c_linᵀ Jp + c_angᵀ Jω with Jp, Jω the LOCAL_WORLD_ALIGNED Jacobian of the point
+// p rigidly attached to `joint` (its linear rows at p, its angular rows): one constraint row
+// contributed by one frame. Touches only the columns of the joint's support.
+void add_jacobian_row(const TreeModel& model, const TreeData& data, int joint, const Vec3& p,
+                      const Vec3& c_lin, const Vec3& c_ang, double* row);
+
+// The full 6 × nv LOCAL_WORLD_ALIGNED Jacobian of a frame (rows: linear, angular; row-major
+// with leading dimension ld). Needs forward_kinematics.
+void frame_jacobian(const TreeModel& model, const TreeData& data, const Frame& frame, double* J6,
+                    int ld);
+
+}  // namespace nonmin::rbd

@@ -1,0 +1,111 @@
+// A robot (rigid-body tree + frame constraints) as a Program (model layer): what
+// nonmin.model.robots.RobotModel compiles to, once, at load time.
+//
+// Coordinates are RobotModel's: q = Pinocchio's configuration (nq, quaternions (x, y, z, w) kept
+// with a unit-norm constraint) and qd = dq/dt. Pinocchio's velocity is v = T(q) qd with T block
+// diagonal (identity on scalar/vector joints; free flyer v_lin = R(ε)ᵀ ṗ; quaternion
+// ω = 2 G(ε) ε̇ / |ε|²), and by the chain rule (docs/robots.md)
+//
+//   M = Tᵀ M_v T,   h = −Tᵀ rnea(q, v, Ṫ qd) = −Tᵀ (M_v Ṫ qd + C_v v + g_v),
+//   f_p = −Tᵀ (d ⊙ v),   B = Tᵀ S,   A = A_v T,   γ = γ_v + A_v Ṫ qd,
+//
+// where γ_v + A_v Ṫ qd is obtained in one pass by taking the classical frame accelerations at
+// the joint acceleration a = Ṫ qd. Constraint rows (types of robots/_constraints.py), stacked in
+// declaration order:
+//
+//   unit_quaternion  1  φ = ½(εᵀε − 1), A = εᵀ, γ = ε̇ᵀε̇
+//   point            3  φ = p_a − p_b
+//   weld             6  [p_a − p_b, log3(R_a R_bᵀ)], rotation rows on ω_a − ω_b
+//   hinge            5  [p_a − p_b, (R_a u₁)·(R_b k), (R_a u₂)·(R_b k)]
+//   planar_point     2  E (p_a − p_b)
+//   planar_weld      3  [E (p_a − p_b), n·log3(R_a R_bᵀ)]
+//   point_on_plane   1  (R_a k)·(p_b − p_a)     (contact: the same, unilateral)
+//   joint_coupling   1  q₁ − r₁ − c₀ − Σ c_k (q₂ − r₂)^k
+#pragma once
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "../program.hpp"
+#include "tree.hpp"
+
+namespace nonmin::rbd {
+
+enum class RowType : int {
+    unit_quaternion = 0,
+    point = 1,
+    weld = 2,
+    hinge = 3,
+    planar_point = 4,
+    planar_weld = 5,
+    point_on_plane = 6,
+    contact = 7,
+    joint_coupling = 8,
+};
+
+int row_count(RowType t);
+
+struct TreeConstraint {
+    std::string name;
+    RowType type = RowType::point;
+    int frame_a = -1, frame_b = -1;  // indices into TreeDescription::frames
+    Vec3 axis = Vec3::UnitZ();  // hinge axis / plane normal in frame a; planar: world normal n
+    Vec3 u1 = Vec3::UnitX();    // hinge: (u₁, u₂, k) orthonormal in frame a; planar: world E rows
+    Vec3 u2 = Vec3::UnitY();
+    int iq = -1;   // unit_quaternion: first of its 4 components; joint_coupling: joint 1's index
+    int iq2 = -1;  // joint_coupling: joint 2's index (−1: none)
+    std::array<double, 5> coef{{0.0, 1.0, 0.0, 0.0, 0.0}};
+    double ref1 = 0.0, ref2 = 0.0;
+};
+
+struct TreeDescription {
+    TreeModel model;
+    std::vector<Frame> frames;
+    std::vector<TreeConstraint> constraints;  // row order
+    std::vector<int> actuated;                // velocity indices: one column of B each
+    Vec damping;                              // nv viscous damping coefficients
+};
+
+struct TreeWorkspace : Workspace {
+    explicit TreeWorkspace(const TreeDescription& d);
+    TreeData data;
+    Vec qn, v, a0, tau, fv;
+    Mat Mv;  // nv × nv
+    Mat W;   // nv × nq (M_v T)
+    Mat Av;  // m_all × nv (frame rows in velocity space, robots with quaternions)
+    std::vector<Mat3> R;     // per joint: rotation of its quaternion (free flyer, spherical)
+    std::vector<Mat34> Tq;   // per joint: 2 G(ε) / |ε|²
+    FrameKinematics ka, kb;
+};
+
+class TreeProgram : public Program {
+  public:
+    explicit TreeProgram(TreeDescription description);
+
+    Status evaluate(double t, const double* q, const double* qd, const std::uint8_t* active,
+                    unsigned need, Terms& out, Workspace& ws) const override;
+    std::unique_ptr<Workspace> make_workspace() const override;
+
+    const TreeDescription& description() const { return d_; }
+    bool has_quaternions() const { return quat_; }
+
+    // ws.qn = q with every quaternion divided by its norm (Status::not_finite if one is zero or
+    // q is not finite) and the blocks of T (ws.R, ws.Tq); then the velocity map v = T(q) qd and
+    // a0 = Ṫ(q, qd) qd. Used by evaluate(); public for the bindings' kinematics queries.
+    Status normalize(const double* q, TreeWorkspace& ws) const;
+    void velocity_map(const double* q, const double* qd, TreeWorkspace& ws) const;
+
+  private:
+    void apply_Tt(const TreeWorkspace& ws, const double* fv, double* fq) const;  // fq = Tᵀ fv
+    void congruence(TreeWorkspace& ws, double* M) const;                        // M = Tᵀ M_v T
+    void map_row(const TreeWorkspace& ws, const double* av, double* aq) const;  // aq = av T
+    // Rows, γ and φ of one frame constraint (A rows in velocity space, nv columns).
+    void frame_rows(const TreeConstraint& c, TreeWorkspace& ws, bool rows, bool gamma, bool phi,
+                    double* A, double* g, double* p) const;
+
+    TreeDescription d_;
+    bool quat_ = false;
+};
+
+}  // namespace nonmin::rbd

@@ -1,0 +1,390 @@
+// TreeProgram: a robot's M, h, f_p, B, constraint rows and energy from the tree algorithms
+// (see nonmin/rbd/tree_program.hpp for the formulas). No allocation in evaluate().
+#include <cmath>
+#include <string>
+
+#include "nonmin/rbd/tree_program.hpp"
+
+namespace nonmin::rbd {
+
+int row_count(RowType t) {
+    switch (t) {
+        case RowType::unit_quaternion: return 1;
+        case RowType::point: return 3;
+        case RowType::weld: return 6;
+        case RowType::hinge: return 5;
+        case RowType::planar_point: return 2;
+        case RowType::planar_weld: return 3;
+        case RowType::point_on_plane:
+        case RowType::contact:
+        case RowType::joint_coupling: return 1;
+    }
+    throw EngineError("unknown constraint row type");
+}
+
+namespace {
+
+bool is_quat(JointType t) { return t == JointType::spherical || t == JointType::free_flyer; }
+
+// First configuration / velocity index of a joint's quaternion / angular velocity.
+int quat_q(const Joint& j) { return j.iq + (j.type == JointType::free_flyer ? 3 : 0); }
+int ang_v(const Joint& j) { return j.iv + (j.type == JointType::free_flyer ? 3 : 0); }
+
+}  // namespace
+
+TreeWorkspace::TreeWorkspace(const TreeDescription& d)
+    : data(d.model),
+      qn(Vec::Zero(d.model.nq)),
+      v(Vec::Zero(d.model.nv)),
+      a0(Vec::Zero(d.model.nv)),
+      tau(Vec::Zero(d.model.nv)),
+      fv(Vec::Zero(d.model.nv)),
+      Mv(Mat::Zero(d.model.nv, d.model.nv)),
+      W(Mat::Zero(d.model.nv, d.model.nq)),
+      R(d.model.joints.size(), Mat3::Identity()),
+      Tq(d.model.joints.size(), Mat34::Zero()) {
+    int m = 0;
+    for (const TreeConstraint& c : d.constraints) m += row_count(c.type);
+    Av = Mat::Zero(m, d.model.nv);
+}
+
+TreeProgram::TreeProgram(TreeDescription description) : d_(std::move(description)) {
+    const TreeModel& model = d_.model;
+    model.validate();
+    quat_ = model.has_quaternions();
+    n_ = model.nq;
+    k_ = static_cast<int>(d_.actuated.size());
+    if (d_.damping.size() != model.nv || !d_.damping.allFinite())
+        throw EngineError("tree program: damping must hold nv finite values");
+    for (int iv : d_.actuated)
+        if (iv < 0 || iv >= model.nv) throw EngineError("tree program: actuated velocity index out of range");
+    const int nf = static_cast<int>(d_.frames.size());
+    const int nj = static_cast<int>(model.joints.size());
+    for (const Frame& f : d_.frames)
+        if (f.joint < -1 || f.joint >= nj) throw EngineError("tree program: frame joint index out of range");
+    int row = 0;
+    for (const TreeConstraint& c : d_.constraints) {
+        const int dim = row_count(c.type);
+        const std::string where = "tree program: constraint '" + c.name + "': ";
+        switch (c.type) {
+            case RowType::unit_quaternion: {
+                bool ok = false;
+                for (const Joint& j : model.joints)
+                    if (is_quat(j.type) && quat_q(j) == c.iq) ok = true;
+                if (!ok) throw EngineError(where + "iq is not the start of a quaternion");
+                break;
+            }
+            case RowType::joint_coupling:
+                if (c.iq < 0 || c.iq >= n_ || c.iq2 < -1 || c.iq2 >= n_)
+                    throw EngineError(where + "joint coordinate index out of range");
+                break;
+            default:
+                if (c.frame_a < 0 || c.frame_a >= nf || c.frame_b < 0 || c.frame_b >= nf)
+                    throw EngineError(where + "frame index out of range");
+        }
+        const ConstraintKind kind =
+            c.type == RowType::contact ? ConstraintKind::unilateral : ConstraintKind::holonomic;
+        constraints_.push_back(ConstraintInfo{c.name, kind, row, dim});
+        row += dim;
+    }
+    m_all_ = row;
+}
+
+std::unique_ptr<Workspace> TreeProgram::make_workspace() const {
+    return std::make_unique<TreeWorkspace>(d_);
+}
+
+Status TreeProgram::normalize(const double* q, TreeWorkspace& ws) const {
+    const TreeModel& model = d_.model;
+    for (int i = 0; i < model.nq; ++i) {
+        if (!std::isfinite(q[i])) return Status::not_finite;
+        ws.qn[i] = q[i];
+    }
+    if (!quat_) return Status::ok;
+    for (std::size_t i = 0; i < model.joints.size(); ++i) {
+        const Joint& j = model.joints[i];
+        if (!is_quat(j.type)) continue;
+        const int s = quat_q(j);
+        const double* e = q + s;
+        const double s2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2] + e[3] * e[3];
+        if (!(s2 > 0.0) || !std::isfinite(s2)) return Status::not_finite;
+        const double nrm = std::sqrt(s2);
+        for (int k = 0; k < 4; ++k) ws.qn[s + k] = e[k] / nrm;
+        ws.Tq[i] = (2.0 / s2) * quaternion_G(e);
+        if (j.type == JointType::free_flyer) ws.R[i] = quaternion_rotation(e);
+    }
+    return Status::ok;
+}
+
+void TreeProgram::velocity_map(const double* q, const double* qd, TreeWorkspace& ws) const {
+    const TreeModel& model = d_.model;
+    for (std::size_t i = 0; i < model.joints.size(); ++i) {
+        const Joint& j = model.joints[i];
+        const int nvj = joint_nv(j.type);
+        if (!is_quat(j.type)) {
+            for (int k = 0; k < nvj; ++k) {
+                ws.v[j.iv + k] = qd[j.iq + k];
+                ws.a0[j.iv + k] = 0.0;
+            }
+            continue;
+        }
+        const int s = quat_q(j), a = ang_v(j);
+        const Eigen::Map<const Vec4> e(q + s), ed(qd + s);
+        const Vec3 w = ws.Tq[i] * ed;
+        // Ṫ qd on the quaternion block: G(ε̇) ε̇ = 0 leaves −2 (εᵀε̇)/|ε|² ω
+        const double ratio = -2.0 * e.dot(ed) / e.squaredNorm();
+        ws.v.segment<3>(a) = w;
+        ws.a0.segment<3>(a) = ratio * w;
+        if (j.type == JointType::free_flyer) {
+            const Vec3 vl = ws.R[i].transpose() * Eigen::Map<const Vec3>(qd + j.iq);
+            ws.v.segment<3>(j.iv) = vl;
+            ws.a0.segment<3>(j.iv) = -w.cross(vl);  // d/dt Rᵀ = −[ω]× Rᵀ
+        }
+    }
+}
+
+void TreeProgram::apply_Tt(const TreeWorkspace& ws, const double* fv, double* fq) const {
+    const TreeModel& model = d_.model;
+    for (std::size_t i = 0; i < model.joints.size(); ++i) {
+        const Joint& j = model.joints[i];
+        if (!is_quat(j.type)) {
+            const int nvj = joint_nv(j.type);
+            for (int k = 0; k < nvj; ++k) fq[j.iq + k] = fv[j.iv + k];
+            continue;
+        }
+        const int s = quat_q(j), a = ang_v(j);
+        Eigen::Map<Vec4>(fq + s) = ws.Tq[i].transpose() * Eigen::Map<const Vec3>(fv + a);
+        if (j.type == JointType::free_flyer)
+            Eigen::Map<Vec3>(fq + j.iq) = ws.R[i] * Eigen::Map<const Vec3>(fv + j.iv);
+    }
+}
+
+void TreeProgram::map_row(const TreeWorkspace& ws, const double* av, double* aq) const {
+    const TreeModel& model = d_.model;
+    for (std::size_t i = 0; i < model.joints.size(); ++i) {
+        const Joint& j = model.joints[i];
+        if (!is_quat(j.type)) {
+            const int nvj = joint_nv(j.type);
+            for (int k = 0; k < nvj; ++k) aq[j.iq + k] = av[j.iv + k];
+            continue;
+        }
+        const int s = quat_q(j), a = ang_v(j);
+        Eigen::Map<Vec4>(aq + s) = ws.Tq[i].transpose() * Eigen::Map<const Vec3>(av + a);
+        if (j.type == JointType::free_flyer)
+            Eigen::Map<Vec3>(aq + j.iq) = ws.R[i] * Eigen::Map<const Vec3>(av + j.iv);
+    }
+}
+
+void TreeProgram::congruence(TreeWorkspace& ws, double* M) const {
+    // W = M_v T row by row (each row of M_v mapped like a constraint row); then column c of
+    // Tᵀ W is Tᵀ W[:, c], stored as row c (M is symmetric) and symmetrized.
+    const int nv = d_.model.nv, nq = d_.model.nq;
+    for (int r = 0; r < nv; ++r) map_row(ws, ws.Mv.row(r).data(), ws.W.row(r).data());
+    double* col = ws.fv.data();  // nv scratch
+    Eigen::Map<Mat> out(M, nq, nq);
+    for (int c = 0; c < nq; ++c) {
+        for (int r = 0; r < nv; ++r) col[r] = ws.W(r, c);
+        apply_Tt(ws, col, out.row(c).data());
+    }
+    for (int r = 0; r < nq; ++r)
+        for (int c = r + 1; c < nq; ++c) {
+            const double s = 0.5 * (out(r, c) + out(c, r));
+            out(r, c) = s;
+            out(c, r) = s;
+        }
+}
+
+void TreeProgram::frame_rows(const TreeConstraint& c, TreeWorkspace& ws, bool rows, bool gamma,
+                             bool phi, double* A, double* g, double* p) const {
+    const TreeModel& model = d_.model;
+    const TreeData& data = ws.data;
+    const Frame& fa = d_.frames[c.frame_a];
+    const Frame& fb = d_.frames[c.frame_b];
+    FrameKinematics& ka = ws.ka;
+    FrameKinematics& kb = ws.kb;
+    frame_kinematics(model, data, fa, gamma, ka);
+    frame_kinematics(model, data, fb, gamma, kb);
+    const int nv = model.nv;
+    const Vec3 zero = Vec3::Zero();
+    auto row = [&](int r, const Vec3& la, const Vec3& aa, const Vec3& lb, const Vec3& ab) {
+        double* a = A + static_cast<std::ptrdiff_t>(r) * nv;
+        for (int k = 0; k < nv; ++k) a[k] = 0.0;
+        if (fa.joint >= 0) add_jacobian_row(model, data, fa.joint, ka.oMf.p, la, aa, a);
+        if (fb.joint >= 0) add_jacobian_row(model, data, fb.joint, kb.oMf.p, lb, ab, a);
+    };
+    const Vec3& pa = ka.oMf.p;
+    const Vec3& pb = kb.oMf.p;
+    const Mat3& Ra = ka.oMf.R;
+    const Mat3& Rb = kb.oMf.R;
+    switch (c.type) {
+        case RowType::point:
+        case RowType::weld:
+        case RowType::hinge: {
+            for (int i = 0; i < 3; ++i) {
+                const Vec3 e = Vec3::Unit(i);
+                if (rows) row(i, e, zero, -e, zero);
+                if (gamma) g[i] = ka.a[i] - kb.a[i];
+                if (phi) p[i] = pa[i] - pb[i];
+            }
+            if (c.type == RowType::weld) {
+                for (int i = 0; i < 3; ++i) {
+                    const Vec3 e = Vec3::Unit(i);
+                    if (rows) row(3 + i, zero, e, zero, -e);
+                    if (gamma) g[3 + i] = ka.alpha[i] - kb.alpha[i];
+                }
+                if (phi) Eigen::Map<Vec3>(p + 3) = log3(Ra * Rb.transpose());
+            } else if (c.type == RowType::hinge) {
+                const Vec3 Kb = Rb * c.axis;
+                for (int i = 0; i < 2; ++i) {
+                    const Vec3 U = Ra * (i == 0 ? c.u1 : c.u2);
+                    const Vec3 r = U.cross(Kb);
+                    if (rows) row(3 + i, zero, r, zero, -r);
+                    if (gamma) {
+                        const Vec3 rdot = ka.w.cross(U).cross(Kb) + U.cross(kb.w.cross(Kb));
+                        g[3 + i] = rdot.dot(ka.w - kb.w) + r.dot(ka.alpha - kb.alpha);
+                    }
+                    if (phi) p[3 + i] = U.dot(Kb);
+                }
+            }
+            return;
+        }
+        case RowType::planar_point:
+        case RowType::planar_weld: {
+            for (int i = 0; i < 2; ++i) {
+                const Vec3& e = i == 0 ? c.u1 : c.u2;
+                if (rows) row(i, e, zero, -e, zero);
+                if (gamma) g[i] = e.dot(ka.a - kb.a);
+                if (phi) p[i] = e.dot(pa - pb);
+            }
+            if (c.type == RowType::planar_weld) {
+                const Vec3& n = c.axis;
+                if (rows) row(2, zero, n, zero, -n);
+                if (gamma) g[2] = n.dot(ka.alpha - kb.alpha);
+                if (phi) p[2] = n.dot(log3(Ra * Rb.transpose()));
+            }
+            return;
+        }
+        case RowType::point_on_plane:
+        case RowType::contact: {
+            const Vec3 N = Ra * c.axis;
+            const Vec3 d = pb - pa;
+            const Vec3 Nxd = N.cross(d);
+            if (rows) row(0, -N, Nxd, N, zero);
+            if (gamma) {
+                const Vec3 dv = kb.v - ka.v;
+                const Vec3 Nd = ka.w.cross(N);
+                g[0] = ka.alpha.dot(Nxd) + ka.w.dot(Nd.cross(d) + N.cross(dv)) + Nd.dot(dv) +
+                       N.dot(kb.a - ka.a);
+            }
+            if (phi) p[0] = N.dot(d);
+            return;
+        }
+        default: return;
+    }
+}
+
+Status TreeProgram::evaluate(double /*t*/, const double* q, const double* qd,
+                             const std::uint8_t* active, unsigned need, Terms& out,
+                             Workspace& wsb) const {
+    TreeWorkspace& ws = static_cast<TreeWorkspace&>(wsb);
+    const TreeModel& model = d_.model;
+    const int nq = model.nq, nv = model.nv;
+    Status st = normalize(q, ws);
+    if (st != Status::ok) return st;
+    for (int i = 0; i < nq; ++i)
+        if (!std::isfinite(qd[i])) return Status::not_finite;
+    velocity_map(q, qd, ws);
+
+    const bool want_M = need & NEED_M;
+    const bool want_h = need & NEED_H;
+    const bool want_energy = need & NEED_ENERGY;
+    const bool want_rows = need & (NEED_A | NEED_VELOCITY);
+    const bool want_gamma = need & NEED_GAMMA;
+    const bool want_phi = need & NEED_PHI;
+    bool any_frame = false;
+    if (want_rows || want_gamma || want_phi)
+        for (std::size_t c = 0; c < d_.constraints.size(); ++c)
+            if ((active == nullptr || active[c]) && d_.constraints[c].type != RowType::unit_quaternion &&
+                d_.constraints[c].type != RowType::joint_coupling)
+                any_frame = true;
+    const bool motion = want_h || (want_gamma && any_frame);
+    if (want_M || want_h || want_energy || any_frame) forward_kinematics(model, ws.data, ws.qn.data());
+    if (motion) forward_motion(model, ws.data, ws.v.data(), ws.a0.data());
+
+    if (want_M || want_energy) {
+        crba(model, ws.data, ws.Mv.data(), nv);
+        if (want_M) {
+            if (quat_)
+                congruence(ws, out.M.data());
+            else
+                out.M = ws.Mv;
+        }
+        if (want_energy) {
+            ws.fv.noalias() = ws.Mv * ws.v;
+            out.kinetic = 0.5 * ws.v.dot(ws.fv);
+            out.potential = potential_energy(model, ws.data);
+        }
+    }
+    if (want_h) {
+        rnea(model, ws.data, ws.a0.data(), ws.tau.data());
+        ws.tau = -ws.tau;
+        apply_Tt(ws, ws.tau.data(), out.h.data());
+        for (int k = 0; k < nv; ++k) ws.fv[k] = -d_.damping[k] * ws.v[k];
+        apply_Tt(ws, ws.fv.data(), out.f_passive.data());
+    }
+    if (need & NEED_B) {
+        out.B.setZero();
+        for (int c = 0; c < k_; ++c) {
+            for (int k = 0; k < nv; ++k) ws.fv[k] = 0.0;
+            ws.fv[d_.actuated[c]] = 1.0;
+            apply_Tt(ws, ws.fv.data(), ws.W.row(0).data());  // nq scratch
+            for (int r = 0; r < nq; ++r) out.B(r, c) = ws.W(0, r);
+        }
+    }
+    if (!(want_rows || want_gamma || want_phi)) return Status::ok;
+
+    Mat& target = quat_ ? ws.Av : out.A;  // frame rows in velocity space
+    for (std::size_t ci = 0; ci < d_.constraints.size(); ++ci) {
+        if (active != nullptr && !active[ci]) continue;
+        const TreeConstraint& c = d_.constraints[ci];
+        const int r0 = constraints_[ci].row;
+        const int dim = constraints_[ci].dim;
+        double* g = out.gamma.data() + r0;
+        double* p = out.phi.data() + r0;
+        if (c.type == RowType::unit_quaternion) {
+            const Eigen::Map<const Vec4> e(q + c.iq), ed(qd + c.iq);
+            if (want_rows) {
+                out.A.row(r0).setZero();
+                for (int k = 0; k < 4; ++k) out.A(r0, c.iq + k) = e[k];
+            }
+            if (want_gamma) g[0] = ed.squaredNorm();
+            if (want_phi) p[0] = 0.5 * (e.squaredNorm() - 1.0);
+        } else if (c.type == RowType::joint_coupling) {
+            const auto& a = c.coef;
+            double val = q[c.iq] - c.ref1 - a[0], d1 = 0.0, d2 = 0.0, qd2 = 0.0;
+            if (c.iq2 >= 0) {
+                const double x = q[c.iq2] - c.ref2;
+                val -= a[1] * x + a[2] * x * x + a[3] * x * x * x + a[4] * x * x * x * x;
+                d1 = a[1] + 2 * a[2] * x + 3 * a[3] * x * x + 4 * a[4] * x * x * x;
+                d2 = 2 * a[2] + 6 * a[3] * x + 12 * a[4] * x * x;
+                qd2 = qd[c.iq2];
+            }
+            if (want_rows) {
+                out.A.row(r0).setZero();
+                out.A(r0, c.iq) = 1.0;
+                if (c.iq2 >= 0) out.A(r0, c.iq2) -= d1;
+            }
+            if (want_gamma) g[0] = -d2 * qd2 * qd2;
+            if (want_phi) p[0] = val;
+        } else {
+            frame_rows(c, ws, want_rows, want_gamma, want_phi, target.row(r0).data(), g, p);
+            if (want_rows && quat_)
+                for (int r = 0; r < dim; ++r) map_row(ws, ws.Av.row(r0 + r).data(), out.A.row(r0 + r).data());
+        }
+        if (need & NEED_VELOCITY)
+            for (int r = 0; r < dim; ++r) out.velocity[r0 + r] = out.A.row(r0 + r).dot(CVecMap(qd, nq));
+    }
+    return Status::ok;
+}
+
+}  // namespace nonmin::rbd

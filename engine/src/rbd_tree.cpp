@@ -1,0 +1,274 @@
+// Rigid-body tree algorithms (see nonmin/rbd/tree.hpp): forward kinematics, CRBA, RNEA, frame
+// kinematics and Jacobian rows, in world axes at the world origin. No allocation after
+// TreeData's constructor.
+#include <string>
+
+#include "nonmin/rbd/tree.hpp"
+
+namespace nonmin::rbd {
+
+int joint_nq(JointType t) {
+    switch (t) {
+        case JointType::revolute:
+        case JointType::prismatic: return 1;
+        case JointType::spherical: return 4;
+        case JointType::free_flyer: return 7;
+        case JointType::translation: return 3;
+    }
+    throw EngineError("unknown joint type");
+}
+
+int joint_nv(JointType t) {
+    switch (t) {
+        case JointType::revolute:
+        case JointType::prismatic: return 1;
+        case JointType::spherical: return 3;
+        case JointType::free_flyer: return 6;
+        case JointType::translation: return 3;
+    }
+    throw EngineError("unknown joint type");
+}
+
+void TreeModel::validate() const {
+    if (nq < 0 || nv < 0) throw EngineError("tree model: negative nq or nv");
+    std::vector<int> qused(nq, 0), vused(nv, 0);
+    for (std::size_t i = 0; i < joints.size(); ++i) {
+        const Joint& j = joints[i];
+        const int t = static_cast<int>(j.type);
+        if (t < 0 || t > 4) throw EngineError("tree model: joint " + std::to_string(i) + " has an unknown type");
+        if (j.parent < -1 || j.parent >= static_cast<int>(i))
+            throw EngineError("tree model: joint " + std::to_string(i) + " must have a parent in [-1, " +
+                              std::to_string(i) + "), got " + std::to_string(j.parent));
+        if (j.axis_index < -1 || j.axis_index > 2)
+            throw EngineError("tree model: joint " + std::to_string(i) + ": axis_index must be -1, 0, 1 or 2");
+        const int nqj = joint_nq(j.type), nvj = joint_nv(j.type);
+        if (j.iq < 0 || j.iq + nqj > nq || j.iv < 0 || j.iv + nvj > nv)
+            throw EngineError("tree model: joint " + std::to_string(i) + " indices out of range");
+        for (int k = 0; k < nqj; ++k) qused[j.iq + k] += 1;
+        for (int k = 0; k < nvj; ++k) vused[j.iv + k] += 1;
+        if (!(j.mass >= 0.0) || !j.com.allFinite() || !j.inertia.allFinite() || !j.axis.allFinite() ||
+            !j.placement.R.allFinite() || !j.placement.p.allFinite())
+            throw EngineError("tree model: joint " + std::to_string(i) + " has a non-finite or negative parameter");
+        if ((j.type == JointType::revolute || j.type == JointType::prismatic) &&
+            std::abs(j.axis.norm() - 1.0) > 1e-12)
+            throw EngineError("tree model: joint " + std::to_string(i) + ": axis must be a unit vector");
+    }
+    for (int k = 0; k < nq; ++k)
+        if (qused[k] != 1) throw EngineError("tree model: configuration index " + std::to_string(k) + " is not owned by exactly one joint");
+    for (int k = 0; k < nv; ++k)
+        if (vused[k] != 1) throw EngineError("tree model: velocity index " + std::to_string(k) + " is not owned by exactly one joint");
+    if (armature.size() != nv || !armature.allFinite())
+        throw EngineError("tree model: armature must hold nv finite values");
+    if (!gravity.allFinite()) throw EngineError("tree model: gravity must be finite");
+}
+
+bool TreeModel::has_quaternions() const {
+    for (const Joint& j : joints)
+        if (j.type == JointType::spherical || j.type == JointType::free_flyer) return true;
+    return false;
+}
+
+TreeData::TreeData(const TreeModel& model)
+    : oMi(model.joints.size()),
+      J(Eigen::Matrix<double, 6, Eigen::Dynamic>::Zero(6, model.nv)),
+      oI(model.joints.size()),
+      Ic(model.joints.size()),
+      ov(model.joints.size()),
+      oa(model.joints.size()),
+      of(model.joints.size()) {}
+
+void forward_kinematics(const TreeModel& model, TreeData& data, const double* q) {
+    const int nj = static_cast<int>(model.joints.size());
+    for (int i = 0; i < nj; ++i) {
+        const Joint& jt = model.joints[i];
+        const double* qi = q + jt.iq;
+        SE3 XJ;
+        switch (jt.type) {
+            case JointType::revolute:
+                XJ.R = jt.axis_index >= 0 ? coordinate_rotation(jt.axis_index, qi[0])
+                                          : axis_rotation(jt.axis, qi[0]);
+                break;
+            case JointType::prismatic: XJ.p = qi[0] * jt.axis; break;
+            case JointType::spherical: XJ.R = quaternion_rotation(qi); break;
+            case JointType::free_flyer:
+                XJ.R = quaternion_rotation(qi + 3);
+                XJ.p = Vec3(qi[0], qi[1], qi[2]);
+                break;
+            case JointType::translation: XJ.p = Vec3(qi[0], qi[1], qi[2]); break;
+        }
+        const SE3 liMi = jt.placement * XJ;
+        SE3& X = data.oMi[i];
+        X = jt.parent >= 0 ? data.oMi[jt.parent] * liMi : liMi;
+        auto col = [&](int k, const Vec3& lin, const Vec3& ang) {
+            data.J.col(jt.iv + k).head<3>() = lin;
+            data.J.col(jt.iv + k).tail<3>() = ang;
+        };
+        switch (jt.type) {
+            case JointType::revolute: {
+                const Vec3 a = X.R * jt.axis;
+                col(0, X.p.cross(a), a);
+                break;
+            }
+            case JointType::prismatic: col(0, X.R * jt.axis, Vec3::Zero()); break;
+            case JointType::spherical:
+                for (int k = 0; k < 3; ++k) col(k, X.p.cross(X.R.col(k)), X.R.col(k));
+                break;
+            case JointType::free_flyer:
+                for (int k = 0; k < 3; ++k) {
+                    col(k, X.R.col(k), Vec3::Zero());
+                    col(3 + k, X.p.cross(X.R.col(k)), X.R.col(k));
+                }
+                break;
+            case JointType::translation:
+                for (int k = 0; k < 3; ++k) col(k, X.R.col(k), Vec3::Zero());
+                break;
+        }
+        data.oI[i] = Inertia::from_body(jt.mass, jt.com, jt.inertia, X);
+    }
+}
+
+void forward_motion(const TreeModel& model, TreeData& data, const double* v, const double* a) {
+    const int nj = static_cast<int>(model.joints.size());
+    for (int i = 0; i < nj; ++i) {
+        const Joint& jt = model.joints[i];
+        const int nvj = joint_nv(jt.type);
+        Motion vJ, aJ;
+        for (int k = 0; k < nvj; ++k) {
+            const auto c = data.J.col(jt.iv + k);
+            vJ.lin += c.head<3>() * v[jt.iv + k];
+            vJ.ang += c.tail<3>() * v[jt.iv + k];
+            if (a != nullptr) {
+                aJ.lin += c.head<3>() * a[jt.iv + k];
+                aJ.ang += c.tail<3>() * a[jt.iv + k];
+            }
+        }
+        Motion& vi = data.ov[i];
+        Motion& ai = data.oa[i];
+        if (jt.parent >= 0) {
+            vi = data.ov[jt.parent];
+            ai = data.oa[jt.parent];
+        } else {
+            vi.set_zero();
+            ai.set_zero();
+        }
+        vi += vJ;
+        ai += aJ;
+        ai += cross(vi, vJ);
+    }
+}
+
+void crba(const TreeModel& model, TreeData& data, double* M, int ld) {
+    const int nj = static_cast<int>(model.joints.size());
+    for (int i = 0; i < nj; ++i) data.Ic[i] = data.oI[i];
+    for (int i = nj - 1; i >= 0; --i) {
+        const Joint& jt = model.joints[i];
+        const int nvi = joint_nv(jt.type);
+        for (int c = 0; c < nvi; ++c) {
+            const int col = jt.iv + c;
+            Motion S;
+            S.lin = data.J.col(col).head<3>();
+            S.ang = data.J.col(col).tail<3>();
+            const Force F = data.Ic[i] * S;
+            for (int j = i; j >= 0; j = model.joints[j].parent) {
+                const Joint& js = model.joints[j];
+                const int nvj = joint_nv(js.type);
+                for (int d = 0; d < nvj; ++d) {
+                    const int row = js.iv + d;
+                    if (j == i && d > c) continue;  // upper part of the diagonal block below
+                    const double val =
+                        data.J.col(row).head<3>().dot(F.lin) + data.J.col(row).tail<3>().dot(F.ang);
+                    M[row * ld + col] = val;
+                    M[col * ld + row] = val;
+                }
+            }
+        }
+        if (jt.parent >= 0) data.Ic[jt.parent] += data.Ic[i];
+    }
+    for (int k = 0; k < model.nv; ++k) M[k * ld + k] += model.armature[k];
+}
+
+void rnea(const TreeModel& model, TreeData& data, const double* a, double* tau) {
+    const int nj = static_cast<int>(model.joints.size());
+    for (int i = 0; i < nj; ++i) {
+        Motion ag = data.oa[i];
+        ag.lin -= model.gravity;
+        data.of[i] = data.oI[i] * ag;
+        data.of[i] += cross_force(data.ov[i], data.oI[i] * data.ov[i]);
+    }
+    for (int i = nj - 1; i >= 0; --i) {
+        const Joint& jt = model.joints[i];
+        const int nvi = joint_nv(jt.type);
+        for (int c = 0; c < nvi; ++c) {
+            const auto col = data.J.col(jt.iv + c);
+            tau[jt.iv + c] = col.head<3>().dot(data.of[i].lin) + col.tail<3>().dot(data.of[i].ang);
+        }
+        if (jt.parent >= 0) data.of[jt.parent] += data.of[i];
+    }
+    if (a != nullptr)
+        for (int k = 0; k < model.nv; ++k) tau[k] += model.armature[k] * a[k];
+}
+
+double potential_energy(const TreeModel& model, const TreeData& data) {
+    Vec3 h = Vec3::Zero();
+    for (std::size_t i = 0; i < model.joints.size(); ++i) h += data.oI[i].h;
+    return -model.gravity.dot(h);
+}
+
+SE3 frame_placement(const TreeModel& /*model*/, const TreeData& data, const Frame& frame) {
+    return frame.joint >= 0 ? data.oMi[frame.joint] * frame.placement : frame.placement;
+}
+
+void frame_kinematics(const TreeModel& model, const TreeData& data, const Frame& frame, bool motion,
+                      FrameKinematics& out) {
+    out.oMf = frame_placement(model, data, frame);
+    if (!motion) return;
+    if (frame.joint < 0) {
+        out.v.setZero();
+        out.w.setZero();
+        out.a.setZero();
+        out.alpha.setZero();
+        return;
+    }
+    const Vec3& p = out.oMf.p;
+    const Motion& v = data.ov[frame.joint];
+    const Motion& a = data.oa[frame.joint];
+    out.w = v.ang;
+    out.v = v.lin + v.ang.cross(p);
+    out.alpha = a.ang;
+    out.a = a.lin + a.ang.cross(p) + out.w.cross(out.v);
+}
+
+void add_jacobian_row(const TreeModel& model, const TreeData& data, int joint, const Vec3& p,
+                      const Vec3& c_lin, const Vec3& c_ang, double* row) {
+    const Vec3 wa = c_ang + p.cross(c_lin);
+    for (int j = joint; j >= 0; j = model.joints[j].parent) {
+        const Joint& jt = model.joints[j];
+        const int nvj = joint_nv(jt.type);
+        for (int k = 0; k < nvj; ++k) {
+            const auto col = data.J.col(jt.iv + k);
+            row[jt.iv + k] += col.head<3>().dot(c_lin) + col.tail<3>().dot(wa);
+        }
+    }
+}
+
+void frame_jacobian(const TreeModel& model, const TreeData& data, const Frame& frame, double* J6,
+                    int ld) {
+    for (int r = 0; r < 6; ++r)
+        for (int k = 0; k < model.nv; ++k) J6[r * ld + k] = 0.0;
+    const Vec3 p = frame_placement(model, data, frame).p;
+    for (int j = frame.joint; j >= 0; j = model.joints[j].parent) {
+        const Joint& jt = model.joints[j];
+        const int nvj = joint_nv(jt.type);
+        for (int k = 0; k < nvj; ++k) {
+            const auto col = data.J.col(jt.iv + k);
+            const Vec3 ang = col.tail<3>();
+            const Vec3 lin = col.head<3>() + ang.cross(p);
+            for (int r = 0; r < 3; ++r) {
+                J6[r * ld + jt.iv + k] = lin[r];
+                J6[(3 + r) * ld + jt.iv + k] = ang[r];
+            }
+        }
+    }
+}
+
+}  // namespace nonmin::rbd
