@@ -8,11 +8,17 @@ Exit codes
 2  usage error, malformed scenario file, unknown model or file, invalid input
 3  a missing optional dependency (the message names the extra to install)
 4  an unexpected internal error (a bug: please report it with the traceback)
+130  interrupted (Ctrl-C); ``run`` first saves the samples computed so far
+
+Trust: scenario files are data unless they name code (``[model] entry_point``, an event
+``guard``): those run only with ``--allow-code``. Trajectory files are data: ``plot`` and
+``animate`` never rebuild a model from their metadata; name the model with ``--model``.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 import traceback
@@ -21,9 +27,11 @@ from pathlib import Path
 from typing import Any
 
 from . import __version__
-from .errors import InputError, MissingDependencyError, NonminError, ScenarioError
+from ._files import write_text
+from .errors import InputError, MissingDependencyError, NonminError, OutputError, ScenarioError
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_MISSING_DEP, EXIT_INTERNAL = 0, 1, 2, 3, 4
+EXIT_INTERRUPTED = 130
 
 DEMO_SCENARIOS = ("n_four_bar", "crossed_four_bar", "arm_wall")
 
@@ -94,7 +102,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
             print(f"    {kind:11s} {f}")
     print()
     print(_format_rows(rows))
-    (out / "summary.txt").write_text(_format_rows(rows) + "\n")
+    write_text(out / "summary.txt", _format_rows(rows) + "\n")
     print(f"\nplots, animations and trajectories written to {out.resolve()}")
     return EXIT_FAILED if failed else EXIT_OK
 
@@ -102,27 +110,31 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_run(args: argparse.Namespace) -> int:
     from .io import load_scenario, run_scenario
 
-    sc = load_scenario(args.scenario)
+    sc = load_scenario(args.scenario, allow_code=args.allow_code)
     t0 = time.perf_counter()
     res = run_scenario(sc, args.out, progress=args.progress, t_final=args.t_final)
     wall = time.perf_counter() - t0
     traj = res.trajectory
-    print(_format_rows([_summary_row(sc.name, traj, wall)]))
+    if len(traj):
+        print(_format_rows([_summary_row(sc.name, traj, wall)]))
     for kind, f in res.files.items():
         print(f"{kind:11s} {f}")
+    if _status_name(traj) == "interrupted":
+        print(f"nonmin: interrupted: {traj.message}; {len(traj)} samples saved", file=sys.stderr)
+        return EXIT_INTERRUPTED
     if _status_name(traj) == "failed":
         print(f"simulation failed: {traj.message}", file=sys.stderr)
         return EXIT_FAILED
     return EXIT_OK
 
 
-def _load_model_arg(spec: str) -> tuple[Any, Any]:
+def _load_model_arg(spec: str, allow_code: bool = False) -> tuple[Any, Any]:
     """MODEL argument: a library name or a scenario file."""
     p = Path(spec)
     if p.suffix == ".toml":
         from .io import load_scenario
 
-        sc = load_scenario(p)
+        sc = load_scenario(p, allow_code=allow_code)
         model, default = sc.build_model()
         return model, sc.initial_state(model, default)
     from . import library
@@ -134,7 +146,7 @@ def _load_model_arg(spec: str) -> tuple[Any, Any]:
 def cmd_check(args: argparse.Namespace) -> int:
     from .model import check_model
 
-    model, state = _load_model_arg(args.model)
+    model, state = _load_model_arg(args.model, args.allow_code)
     report = check_model(model, state, duration=args.duration, samples=args.samples)
     print(report.format())
     return EXIT_OK if report.passed else EXIT_FAILED
@@ -158,33 +170,44 @@ def _load_result(path: str) -> Any:
     return load_trajectory(path)
 
 
-def _model_for_result(traj: Any) -> Any:
-    """Rebuild the model a saved trajectory came from (its metadata names the source)."""
-    meta = getattr(traj, "metadata", {}) or {}
-    src = meta.get("source") or {}
-    if isinstance(src, dict) and src.get("scenario"):
-        from .io import load_scenario
+def _model_for_result(traj: Any, spec: str | None, allow_code: bool, verb: str) -> Any:
+    """The model named by the user (``--model``) for a saved trajectory, checked against it.
 
-        sc = load_scenario(src["scenario"])
-        return sc.build_model()[0]
-    if isinstance(src, dict) and src.get("library"):
-        from . import library
-
-        return library.get(src["library"], **dict(src.get("params", {}))).model
-    raise InputError(
-        "the trajectory file does not say which model it came from (metadata 'source'); "
-        "animate results written by `nonmin run`/`nonmin demo` or saved with source metadata"
-    )
+    A trajectory's metadata is provenance only: it is shown in the error message as a hint,
+    never used to rebuild a model (a file from elsewhere must not make nonmin build, or run,
+    what it names).
+    """
+    if spec is None:
+        meta = getattr(traj, "metadata", {}) or {}
+        src = meta.get("source") if isinstance(meta, dict) else None
+        hint = ""
+        if isinstance(src, dict) and isinstance(src.get("library"), str):
+            hint = f" (its metadata says it came from library model {src['library']!r}"
+            if src.get("params"):
+                hint += f" with params {src['params']!r}"
+            hint += ")"
+        elif isinstance(src, dict) and isinstance(src.get("scenario"), str):
+            hint = f" (its metadata says it came from scenario {src['scenario']!r})"
+        raise InputError(
+            f"{verb}: --model is required: name the library model or scenario file the "
+            f"trajectory came from{hint}; nonmin does not rebuild models from a file's metadata"
+        )
+    model, _ = _load_model_arg(spec, allow_code)
+    names = tuple(getattr(traj, "coordinate_names", ()))
+    if tuple(model.coordinate_names) != names:
+        raise InputError(
+            f"{verb}: --model {spec!r} has coordinates {list(model.coordinate_names)[:8]}"
+            f"{'...' if model.n > 8 else ''} ({model.n}); the trajectory has {len(names)}: "
+            "not the model it came from"
+        )
+    return model
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
     from .viz import plot_trajectory, save_figure
 
     traj = _load_result(args.result)
-    try:
-        model = _model_for_result(traj)
-    except NonminError:
-        model = None
+    model = None if args.model is None else _model_for_result(traj, args.model, args.allow_code, "plot")
     out = Path(args.output or Path(args.result).with_suffix(".png"))
     save_figure(plot_trajectory(traj, model), out)
     print(out)
@@ -195,7 +218,9 @@ def cmd_animate(args: argparse.Namespace) -> int:
     from .viz import animate
 
     traj = _load_result(args.result)
-    model = _model_for_result(traj)
+    model = _model_for_result(traj, args.model, args.allow_code, "animate")
+    if len(traj) == 0:
+        raise InputError(f"animate: {args.result!r} holds no samples")
     out = animate(traj, model, args.output, fps=args.fps, speed=args.speed)
     print(out)
     return EXIT_OK
@@ -225,6 +250,30 @@ def cmd_list(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------- parser
 
 
+def _number(low: float, high: float, *, low_open: bool = True, kind: type = float) -> Any:
+    """An argparse type: a finite number in (low, high] (or [low, high])."""
+
+    def parse(text: str) -> Any:
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {'an integer' if kind is int else 'a number'}, got {text!r}") from None
+        if not (math.isfinite(v) and (v > low if low_open else v >= low) and v <= high):
+            raise argparse.ArgumentTypeError(
+                f"expected a finite number in {'(' if low_open else '['}{low:g}, {high:g}], got {text!r}"
+            )
+        return v
+
+    parse.__name__ = "integer" if kind is int else "number"
+    return parse
+
+
+_TIME = _number(0.0, 1e9)
+_FPS = _number(0.0, 1000.0)
+_SPEED = _number(0.0, 1e6)
+_SAMPLES = _number(2, 1_000_000, low_open=False, kind=int)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="nonmin",
@@ -249,12 +298,30 @@ def build_parser() -> argparse.ArgumentParser:
             "--no-progress", dest="progress", action="store_false", help="never show progress"
         )
 
+    def allow_code_flag(sp: argparse.ArgumentParser) -> None:
+        sp.add_argument(
+            "--allow-code",
+            action="store_true",
+            help="let the scenario import and run the code it names ([model] entry_point, event "
+            "guards): scenario files with entry points are programs, use only trusted ones",
+        )
+
+    def model_flag(sp: argparse.ArgumentParser, required: bool) -> None:
+        sp.add_argument(
+            "--model",
+            default=None,
+            help="library model name or SCENARIO.toml the trajectory came from"
+            + ("" if required else " (draws the model-based panels)")
+            + "; the file's metadata is never used to rebuild one",
+        )
+        allow_code_flag(sp)
+
     sp = sub.add_parser(
         "demo", help="run the built-in scenarios; write plots, animations and a summary"
     )
     sp.add_argument("--out", default="nonmin-demo", help="output folder (default ./nonmin-demo)")
     sp.add_argument("--only", nargs="+", choices=DEMO_SCENARIOS, help="run only these scenarios")
-    sp.add_argument("--t-final", type=float, default=None, help="shorten every scenario to this end time [s]")
+    sp.add_argument("--t-final", type=_TIME, default=None, help="shorten every scenario to this end time [s]")
     progress_flags(sp)
     sp.set_defaults(func=cmd_demo)
 
@@ -263,16 +330,18 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument(
         "--out", default=None, help="output folder (default: [output] dir or SCENARIO-out)"
     )
-    sp.add_argument("--t-final", type=float, default=None, help="override the scenario's end time [s]")
+    sp.add_argument("--t-final", type=_TIME, default=None, help="override the scenario's end time [s]")
+    allow_code_flag(sp)
     progress_flags(sp)
     sp.set_defaults(func=cmd_run)
 
     sp = sub.add_parser("check", help="verify a model (library name or scenario file)")
     sp.add_argument("model", help="library model name (see `nonmin list`) or SCENARIO.toml")
     sp.add_argument(
-        "--duration", type=float, default=1.0, help="length of the diagnostic trajectory [s]"
+        "--duration", type=_TIME, default=1.0, help="length of the diagnostic trajectory [s]"
     )
-    sp.add_argument("--samples", type=int, default=200)
+    sp.add_argument("--samples", type=_SAMPLES, default=200)
+    allow_code_flag(sp)
     sp.set_defaults(func=cmd_check)
 
     sp = sub.add_parser(
@@ -287,13 +356,15 @@ def build_parser() -> argparse.ArgumentParser:
     sp = sub.add_parser("plot", help="plot a saved trajectory")
     sp.add_argument("result", help="trajectory file (.npz) written by run/demo")
     sp.add_argument("-o", "--output", default=None, help="image file (default RESULT.png)")
+    model_flag(sp, required=False)
     sp.set_defaults(func=cmd_plot)
 
     sp = sub.add_parser("animate", help="animate a saved trajectory")
     sp.add_argument("result", help="trajectory file (.npz) written by run/demo")
     sp.add_argument("-o", "--output", required=True, help="FILE.gif or FILE.mp4")
-    sp.add_argument("--fps", type=float, default=25.0)
-    sp.add_argument("--speed", type=float, default=1.0, help="playback speed factor")
+    sp.add_argument("--fps", type=_FPS, default=25.0)
+    sp.add_argument("--speed", type=_SPEED, default=1.0, help="playback speed factor")
+    model_flag(sp, required=True)
     sp.set_defaults(func=cmd_animate)
 
     sp = sub.add_parser("list", help="list models, integrators, stabilizers and controllers")
@@ -310,6 +381,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MissingDependencyError as exc:
         print(f"nonmin: {exc}", file=sys.stderr)
         return EXIT_MISSING_DEP
+    except OutputError as exc:
+        print(f"nonmin: error: {exc}", file=sys.stderr)
+        return EXIT_FAILED
     except (ScenarioError, InputError, FileNotFoundError) as exc:
         print(f"nonmin: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -318,7 +392,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_FAILED
     except KeyboardInterrupt:
         print("nonmin: interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
     except Exception:
         traceback.print_exc()
         print(

@@ -8,7 +8,8 @@ built-in exception a Python user would expect, so ``except ValueError`` keeps wo
     │   ├── ShapeError                          wrong shape / dimension
     │   ├── NonFiniteError                      NaN or inf in an input
     │   ├── NotSymmetricError                   M (or another matrix) not symmetric
-    │   └── UnknownNameError (also KeyError)    unknown body, joint, constraint, registry name
+    │   ├── UnknownNameError (also KeyError)    unknown body, joint, constraint, registry name
+    │   └── FileFormatError                     a corrupt, truncated or inconsistent data file
     ├── NotPositiveDefiniteError (ValueError)   M not positive definite on N(A): M̄ not SPD
     ├── InfeasibleActuationError (ValueError)   rank(PB) < n - rank(A)
     ├── ModelError (ValueError)                 a model that is not physical or not consistent
@@ -16,6 +17,8 @@ built-in exception a Python user would expect, so ``except ValueError`` keeps wo
     ├── SimulationError (RuntimeError)          an integration that cannot go on
     │   └── ZenoError                           too many impacts in too short a time
     ├── ScenarioError (ValueError)              malformed scenario file (file, key, expected)
+    │   └── UntrustedCodeError                  a data file names code to run without opt-in
+    ├── OutputError (OSError)                   a result file that cannot be written
     └── MissingDependencyError (ImportError)    optional extra not installed (names the extra)
 
 Messages name the argument and give what was expected and what came.
@@ -25,6 +28,7 @@ from __future__ import annotations
 
 __all__ = [
     "AssemblyError",
+    "FileFormatError",
     "InfeasibleActuationError",
     "InputError",
     "MissingDependencyError",
@@ -33,10 +37,12 @@ __all__ = [
     "NonminError",
     "NotPositiveDefiniteError",
     "NotSymmetricError",
+    "OutputError",
     "ScenarioError",
     "ShapeError",
     "SimulationError",
     "UnknownNameError",
+    "UntrustedCodeError",
     "ZenoError",
 ]
 
@@ -68,6 +74,13 @@ class UnknownNameError(InputError, KeyError):
         return str(self.args[0]) if self.args else ""
 
 
+class FileFormatError(InputError):
+    """A data file (trajectory, robot description) that is corrupt, truncated or inconsistent.
+
+    The message names the file and the entry (array, key, XML element) at fault.
+    """
+
+
 class NotPositiveDefiniteError(NonminError, ValueError):
     """M̄ = PMP + μQ is not positive definite: M is not positive definite on N(A)."""
 
@@ -94,6 +107,19 @@ class ZenoError(SimulationError):
 
 class ScenarioError(NonminError, ValueError):
     """A malformed scenario file: names the file, the key, what was expected and what came."""
+
+
+class UntrustedCodeError(ScenarioError):
+    """A data file names code to import and run (an entry point, a guard function) and the
+    caller did not opt in with ``allow_code=True`` / ``--allow-code``.
+
+    Scenario files with entry points are programs: run them only when you trust their author.
+    """
+
+
+class OutputError(NonminError, OSError):
+    """A result file that cannot be written (permissions, full disk, file-size limit, a
+    folder in the way). The message names the file; the previous file there is unchanged."""
 
 
 class MissingDependencyError(NonminError, ImportError):

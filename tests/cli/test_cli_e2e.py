@@ -44,7 +44,8 @@ def test_run_writes_all_outputs(tmp_path, capsys):
     # plot and animate read the saved result
     assert main(["plot", str(out / "trajectory.npz"), "-o", str(tmp_path / "p.png")]) == EXIT_OK
     _png_ok(tmp_path / "p.png")
-    assert main(["animate", str(out / "trajectory.npz"), "-o", str(tmp_path / "a.gif"), "--fps", "10"]) == EXIT_OK
+    assert main(["animate", str(out / "trajectory.npz"), "-o", str(tmp_path / "a.gif"), "--fps", "10",
+                 "--model", "crossed_four_bar"]) == EXIT_OK
     assert (tmp_path / "a.gif").stat().st_size > 10_000
 
 
@@ -131,6 +132,8 @@ def test_entry_point_model_and_events(tmp_path, monkeypatch, capsys):
         '[output]\nplots = false\nanimation = false\n'
     )
     code = main(["run", str(sc), "--out", str(tmp_path / "o")])
+    assert code == EXIT_USAGE and "--allow-code" in capsys.readouterr().err  # code needs opt-in
+    code = main(["run", str(sc), "--out", str(tmp_path / "o"), "--allow-code"])
     assert code == EXIT_OK, capsys.readouterr().err
     traj = load_trajectory(tmp_path / "o" / "trajectory.npz")
     assert [e.name for e in traj.events] == ["cut D"]
@@ -142,6 +145,6 @@ def test_entry_point_model_and_events(tmp_path, monkeypatch, capsys):
 def test_bad_entry_point(tmp_path, capsys):
     sc = tmp_path / "bad.toml"
     sc.write_text('[model]\nentry_point = "no_such_module_xyz:build"\n')
-    assert main(["run", str(sc)]) == EXIT_USAGE
+    assert main(["run", str(sc), "--allow-code"]) == EXIT_USAGE
     err = capsys.readouterr().err
     assert "model.entry_point" in err and "no_such_module_xyz" in err

@@ -227,12 +227,20 @@ def test_large_nonfinite_and_huge_entries():
         with use_backend("numba"), pytest.raises(InputError, match="A"):
             solve_dynamics(M, h, Ab, g)
     Ah = A.copy()
-    Ah[3] *= 1e160  # its squares overflow; the row is still finite (and equilibrated away)
+    Ah[3] *= 1e160  # its squares overflow; the row is still finite
     out = np.empty(2 * n + 3)
     st = solve_work(M, h, h, False, Ah, g, 1.0, False, 1e-10, 1e-13, 1e-12, False, out,
                     none, none, scratch(n, m), np.eye(m), False)  # fmt: skip
-    assert st == OK  # not NONFINITE; the NumPy path decides the same (rank 0: that row's
-    _agree(M, h, Ah, g, 1e-10)  # infinite norm makes every other row negligible)
+    assert st == OK  # not NONFINITE; the NumPy path decides the same
+    _agree(M, h, Ah, g, 1e-10)
+    # the overflowing row's norm is computed scaled, so that row is kept (its infinite norm
+    # made every row look negligible, itself included: rank 0, every constraint dropped); the
+    # rows 1e160 times smaller are below rtol · max norm: vanished by the equilibration rule
+    for backend in ("numpy", "numba"):
+        with use_backend(backend):
+            sol = solve_dynamics(M, h, Ah, g)
+        assert sol.rank == 1
+        assert abs(Ah[3] @ sol.qdd + g[3]) <= 1e-9 * np.linalg.norm(Ah[3]) * (1 + np.abs(sol.qdd).max())
 
 
 # The two ``known`` tests call the kernels with that argument from Python, a specialization the

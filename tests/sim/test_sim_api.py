@@ -148,9 +148,15 @@ def test_throw_false_returns_the_partial_trajectory() -> None:
 
 
 def test_max_steps_and_step_underflow_fail_cleanly() -> None:
-    with pytest.raises(SimulationError, match="max_steps"):
+    # a fixed-step run that needs more than max_steps is refused before it starts
+    with pytest.raises(InputError, match="max_steps"):
         simulate(make_pendulum(), (0.0, 1.0), [1.0, 0.0], dt=0.01, max_steps=5)
-    tr = simulate(make_pendulum(), (0.0, 1.0), [1.0, 0.0], dt=0.01, max_steps=5, throw=False)
+    with pytest.raises(InputError, match="max_steps"):
+        simulate(make_pendulum(), (0.0, 1.0), [1.0, 0.0], dt=0.01, max_steps=5, throw=False)
+    # an adaptive one stops when it reaches max_steps (its step count is not known up front)
+    with pytest.raises(SimulationError, match="max_steps"):
+        simulate(make_pendulum(), (0.0, 1.0), [1.0, 0.0], method="dopri5", max_steps=5)
+    tr = simulate(make_pendulum(), (0.0, 1.0), [1.0, 0.0], method="dopri5", max_steps=5, throw=False)
     assert tr.status is Status.FAILED and len(tr) == 6
 
 

@@ -87,6 +87,12 @@ _EPS = float(np.finfo(np.float64).eps)
 _TINY = float(np.finfo(np.float64).tiny)
 
 
+#: Row norms whose sum of squares leaves [_NORM_SMALL, _NORM_BIG] are recomputed on the row
+#: divided by its largest entry (no overflow above ~1e154, no underflow below ~1e-154); inside
+#: that range the plain sum is kept, bitwise as before (the NumPy spec: core.linalg.row_norms).
+_NORM_BIG = 1e300
+_NORM_SMALL = 1e-290
+
 @njit(cache=True, inline="always")
 def _cut(buf, o, r, c):  # type: ignore[no-untyped-def]
     """The r × c view of ``buf`` at offset ``o`` and the offset after it."""
@@ -232,7 +238,19 @@ def _pattern_norm(X, i, n, P):  # type: ignore[no-untyped-def]
                 s2 += x * x
             else:
                 s3 += x * x
-    return math.sqrt((s0 + s1) + (s2 + s3))
+    s = (s0 + s1) + (s2 + s3)
+    if s > _NORM_BIG or s < _NORM_SMALL:  # overflowed or underflowed squares: rescale
+        scale = 0.0
+        for t in range(P[i, 0]):
+            scale = max(scale, abs(X[i, P[i, 1 + t]]))
+        if not scale > 0.0:
+            return math.sqrt(s) if scale == 0.0 else scale
+        s = 0.0
+        for t in range(P[i, 0]):
+            x = X[i, P[i, 1 + t]] / scale
+            s += x * x
+        return scale * math.sqrt(s)
+    return math.sqrt(s)
 
 
 @njit(cache=True, inline="always")
@@ -742,7 +760,19 @@ def _row_norm(X, i, n):  # type: ignore[no-untyped-def]
         s3 += X[i, k + 3] * X[i, k + 3]
     for k in range(n4, n):
         s0 += X[i, k] * X[i, k]
-    return math.sqrt((s0 + s1) + (s2 + s3))
+    s = (s0 + s1) + (s2 + s3)
+    if s > _NORM_BIG or s < _NORM_SMALL:  # overflowed or underflowed squares: rescale
+        scale = 0.0
+        for k in range(n):
+            scale = max(scale, abs(X[i, k]))
+        if not scale > 0.0:
+            return math.sqrt(s) if scale == 0.0 else scale
+        s = 0.0
+        for k in range(n):
+            x = X[i, k] / scale
+            s += x * x
+        return scale * math.sqrt(s)
+    return math.sqrt(s)
 
 
 @njit(cache=True, inline="always")

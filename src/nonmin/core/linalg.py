@@ -34,6 +34,11 @@ from numpy.typing import NDArray
 
 from ..errors import NotPositiveDefiniteError
 
+#: Sums of squares outside [ROW_NORM_SMALL, ROW_NORM_BIG] are recomputed scaled in
+#: :func:`row_norms` (the plain formula over- or underflows near 1e±308).
+ROW_NORM_BIG = 1e300
+ROW_NORM_SMALL = 1e-290
+
 FloatArray = NDArray[np.float64]
 
 #: Default relative singular-value cutoff for rank decisions on the equilibrated A.
@@ -139,7 +144,7 @@ def range_basis(A: FloatArray, rtol: float | None = None) -> RangeBasis:
             rank=np.zeros(batch, dtype=np.intp),
             n=n,
         )
-    norms = np.sqrt(np.einsum("...ij,...ij->...i", A, A))
+    norms = row_norms(A)
     big = np.max(norms, axis=-1, keepdims=True)
     live = norms > tol * big
     d = np.where(live, 1.0 / np.where(live, norms, 1.0), 0.0)
@@ -148,6 +153,37 @@ def range_basis(A: FloatArray, rtol: float | None = None) -> RangeBasis:
     inv_s = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
     rank = np.count_nonzero(keep, axis=-1).astype(np.intp)
     return RangeBasis(U=U, s=s, Vh=Vh, keep=keep, inv_s=inv_s, d=d, rank=rank, n=n)
+
+
+def row_norms(A: FloatArray) -> FloatArray:
+    """Euclidean norms of the rows of ``A`` without overflow or underflow, shape (..., m).
+
+    The plain ``sqrt(Σ a_j²)`` overflows to inf above ~1.3e154 (a row of inf norm then made
+    every other row look negligible: they were dropped without a word) and underflows to 0
+    below ~1e-154. Rows whose sum of squares leaves ``[ROW_NORM_SMALL, ROW_NORM_BIG]`` are
+    recomputed as ``s·‖a/s‖`` with ``s = max_j |a_j|``; the others keep the plain sum (so
+    results on ordinary data are bitwise those of the plain formula). NaN stays NaN and an
+    infinite entry gives a non-finite norm, so finiteness checks on the norms still work.
+
+    Parameters
+    ----------
+    A : ndarray, shape (..., m, n)
+
+    Returns
+    -------
+    ndarray, shape (..., m)
+    """
+    sq = np.einsum("...ij,...ij->...i", A, A)
+    norms = np.sqrt(sq)
+    risky = (sq > ROW_NORM_BIG) | (sq < ROW_NORM_SMALL)
+    if np.any(risky):
+        with np.errstate(invalid="ignore", over="ignore"):
+            scale = np.max(np.abs(A), axis=-1, initial=0.0)
+            safe = np.where(scale > 0.0, scale, 1.0)
+            scaled = A / safe[..., None]
+            fixed = scale * np.sqrt(np.einsum("...ij,...ij->...i", scaled, scaled))
+        norms = np.where(risky, fixed, norms)
+    return np.asarray(norms)
 
 
 def pseudo_inverse(A: FloatArray, rtol: float | None = None) -> FloatArray:

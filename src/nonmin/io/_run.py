@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..errors import NonminError, ScenarioError, UnknownNameError
+from .._files import confined
+from ..errors import InputError, NonminError, ScenarioError, UnknownNameError
 from ._scenario import Scenario, resolve_entry_point
 
 __all__ = ["ScenarioResult", "build_controller", "build_events", "run_scenario", "simulate_kwargs"]
@@ -93,7 +95,9 @@ def build_events(sc: Scenario, model: Any) -> tuple[Any, ...]:
 
             direction = 1
         else:
-            guard = resolve_entry_point(ev["guard"], sc.path, key + ".guard")
+            guard = resolve_entry_point(
+                ev["guard"], sc.path, key + ".guard", allow_code=sc.allow_code
+            )
             direction = int(ev.get("direction", 0))
         kind = ev.get("transition", "none")
         names = ev.get("constraints", [])
@@ -132,6 +136,49 @@ class ScenarioResult:
     files: dict[str, Path] = field(default_factory=dict)
 
 
+#: Largest number of output samples a scenario may ask for through ``output_dt`` (each sample
+#: holds several vectors of n numbers: 10 million samples of a 10-coordinate model are ~5 GB).
+MAX_OUTPUT_SAMPLES = 10_000_000
+
+
+def _end_time(sc: Scenario, t0: float, horizon: float | None, t_final: float | None) -> float:
+    sim = sc.section("simulate")
+    if t_final is not None:
+        key, value = "t_final (argument)", t_final
+    elif "t_final" in sim:
+        key, value = "simulate.t_final", sim["t_final"]
+    elif horizon is not None:
+        key, value = "the model's horizon", horizon
+    else:
+        key, value = "simulate.t_final (default t0 + 1)", t0 + 1.0
+    try:
+        t1 = float(value)
+    except (TypeError, ValueError):
+        raise ScenarioError(f"{sc.path}: key {key!r}: expected a number, got {value!r}") from None
+    if not (math.isfinite(t1) and t1 > t0):
+        raise ScenarioError(
+            f"{sc.path}: key {key!r}: expected a finite end time after the start time "
+            f"t0 = {t0:g}, got {value!r}"
+        )
+    return t1
+
+
+def _output_times(sc: Scenario, t0: float, t1: float) -> Any:
+    sim = sc.section("simulate")
+    if "output_dt" not in sim:
+        return None
+    dt_out = float(sim["output_dt"])
+    count = (t1 - t0) / dt_out
+    if not count < MAX_OUTPUT_SAMPLES:
+        raise ScenarioError(
+            f"{sc.path}: key 'simulate.output_dt': {dt_out:g} s over [{t0:g}, {t1:g}] asks for "
+            f"{count:.3g} samples, more than {MAX_OUTPUT_SAMPLES}; take a larger output_dt"
+        )
+    t_eval = np.arange(t0, t1 + 0.5 * dt_out, dt_out)
+    t_eval[-1] = min(t_eval[-1], t1)
+    return t_eval
+
+
 def run_scenario(
     sc: Scenario,
     out_dir: str | Path | None = None,
@@ -140,56 +187,86 @@ def run_scenario(
     write: bool = True,
     t_final: float | None = None,
 ) -> ScenarioResult:
-    """Build the model, state, controller and events of a scenario, simulate, write outputs."""
+    """Build the model, state, controller and events of a scenario, simulate, write outputs.
+
+    Code named by the scenario (``entry_point``, ``guard``) runs only if it was loaded with
+    ``allow_code=True``. A simulation stopped by ``KeyboardInterrupt`` returns (and writes) the
+    samples computed so far with status ``interrupted``.
+    """
     from ..sim import simulate
 
+    if t_final is not None:
+        try:
+            tf = float(t_final)
+        except (TypeError, ValueError):
+            raise InputError(f"t_final must be a number, got {t_final!r}") from None
+        if not (math.isfinite(tf) and tf > 0):
+            raise InputError(f"t_final must be a positive finite time [s], got {t_final!r}")
+    out = sc.output_dir(out_dir) if write else None  # refuse a bad [output] before the run
+    if write:
+        _output_names(sc, out)  # type: ignore[arg-type]
     model, default_state, horizon = sc.build_source()
     state = sc.initial_state(model, default_state)
     kw = simulate_kwargs(sc)
-    sim = sc.section("simulate")
-    t_override = t_final
-    if "t_final" in sim:
-        t_final = float(sim["t_final"])
-    elif horizon is not None:
-        t_final = horizon
-    else:
-        t_final = state.t + 1.0
-    if t_override is not None:
-        t_final = float(t_override)
-    if "output_dt" in sim:
-        kw["t_eval"] = np.arange(
-            state.t, t_final + 0.5 * float(sim["output_dt"]), float(sim["output_dt"])
-        )
-        kw["t_eval"][-1] = min(kw["t_eval"][-1], t_final)
+    t_end = _end_time(sc, state.t, horizon, t_final)
+    t_eval = _output_times(sc, state.t, t_end)
+    if t_eval is not None:
+        kw["t_eval"] = t_eval
     controller = build_controller(sc, model)
     events = build_events(sc, model)
-    traj = simulate(
-        model,
-        (state.t, t_final),
-        state.q,
-        state.qd,
-        active=state.active,
-        controller=controller,
-        events=events,
-        throw=False,
-        progress=progress,
-        **kw,
-    )
+    try:
+        traj = simulate(
+            model,
+            (state.t, t_end),
+            state.q,
+            state.qd,
+            active=state.active,
+            controller=controller,
+            events=events,
+            throw=False,
+            progress=progress,
+            **kw,
+        )
+    except InputError as exc:
+        raise ScenarioError(f"{sc.path}: table [simulate]: {exc}") from None
     result = ScenarioResult(scenario=sc, model=model, trajectory=traj)
     if write:
-        result.files = write_outputs(result, sc.output_dir(out_dir))
+        assert out is not None
+        result.files = write_outputs(result, out)
     return result
 
 
+def _output_names(sc: Scenario, out: Path) -> dict[str, Path | None]:
+    """The files of the [output] table, each confined to the output folder ``out``."""
+    opts = sc.section("output")
+    names: dict[str, Path | None] = {
+        "trajectory": confined(out, opts.get("trajectory", "trajectory.npz"), file=sc.path,
+                               key="output.trajectory", suffixes=(".npz",)),
+        "csv": out / "trajectory.csv" if opts.get("csv", True) else None,
+        "plot": out / "trajectory.png" if opts.get("plots", True) else None,
+    }
+    anim = opts.get("animation", "animation.gif")
+    names["animation"] = (
+        confined(out, "animation.gif" if anim is True else anim, file=sc.path,
+                 key="output.animation", suffixes=(".gif", ".mp4"))
+        if anim else None
+    )
+    return names
+
+
 def write_outputs(result: ScenarioResult, out: Path) -> dict[str, Path]:
-    """Write trajectory file, CSV, plots and animation as the [output] table asks."""
+    """Write trajectory file, CSV, plots and animation as the [output] table asks.
+
+    Every file is written durably (temporary + fsync + rename: the previous file survives any
+    failure); names from the scenario are confined to ``out``. The trajectory file is written
+    first, so an interrupted or failed run keeps its samples even if a later output fails.
+    """
     from ..sim import Trajectory
 
     sc, model, traj = result.scenario, result.model, result.trajectory
     opts = sc.section("output")
-    out.mkdir(parents=True, exist_ok=True)
+    names = _output_names(sc, out)
     files: dict[str, Path] = {}
-    traj_name = opts.get("trajectory", "trajectory.npz")
     source: dict[str, Any] = {"scenario": str(sc.path.resolve())}
     lib = sc.section("model").get("library")
     if lib:
@@ -197,21 +274,24 @@ def write_outputs(result: ScenarioResult, out: Path) -> dict[str, Path]:
     if isinstance(traj, Trajectory):
         traj = dataclasses.replace(traj, metadata={**traj.metadata, "source": source, "scenario_name": sc.name})
         result.trajectory = traj
-    files["trajectory"] = Path(traj.save(out / traj_name) or (out / traj_name))
-    if opts.get("csv", True):
-        files["csv"] = Path(traj.to_csv(out / "trajectory.csv") or (out / "trajectory.csv"))
-    if opts.get("plots", True):
+    target = names["trajectory"]
+    assert target is not None
+    traj.save(target)
+    files["trajectory"] = target
+    if names["csv"] is not None:
+        traj.to_csv(names["csv"])
+        files["csv"] = names["csv"]
+    if len(traj) == 0:
+        return files
+    if names["plot"] is not None:
         from ..viz import plot_trajectory, save_figure
 
-        files["plot"] = save_figure(
-            plot_trajectory(traj, model, title=sc.name), out / "trajectory.png"
-        )
-    anim = opts.get("animation", "animation.gif")
-    if anim and model.geometry(traj.q[0]) is not None:
+        files["plot"] = save_figure(plot_trajectory(traj, model, title=sc.name), names["plot"])
+    anim = names["animation"]
+    if anim is not None and model.geometry(traj.q[0]) is not None:
         from ..viz import animate
 
-        name = "animation.gif" if anim is True else str(anim)
         files["animation"] = animate(
-            traj, model, out / name, fps=float(opts.get("fps", 20)), title=sc.name
+            traj, model, anim, fps=float(opts.get("fps", 20)), title=sc.name
         )
     return files

@@ -4,6 +4,7 @@ duration and outputs. Every key maps to an API keyword (see ``docs/scenarios.md`
 from __future__ import annotations
 
 import importlib
+import math
 import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -12,7 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import NonminError, ScenarioError, UnknownNameError
+from .._files import confined
+from ..errors import NonminError, ScenarioError, UnknownNameError, UntrustedCodeError
 from ._schema import Key, Section, check
 
 __all__ = ["SCENARIO_SCHEMA", "Scenario", "load_scenario", "resolve_entry_point"]
@@ -66,7 +68,7 @@ SCENARIO_SCHEMA = Section(
                 "q": _NUMLIST,
                 "qd": _NUMLIST,
                 "active": Key((list,), item_types=(str,), help="active constraint names"),
-                "t0": Key(_NUM),
+                "t0": Key(_NUM, help="start time [s]"),
                 "assemble": Key((bool,), help="assemble q, qd onto the constraints first"),
                 "fixed": Key((list,), item_types=(str,), help="coordinates assembly keeps"),
             }
@@ -75,13 +77,13 @@ SCENARIO_SCHEMA = Section(
             keys={
                 "t_final": Key(_NUM, help="end time [s]"),
                 "method": Key((str,), help="integrator name (see `nonmin list`)"),
-                "dt": Key(_NUM, help="(initial) step size [s]"),
-                "rtol": Key(_NUM),
-                "atol": Key(_NUM),
+                "dt": Key(_NUM, low=0.0, low_open=True, help="(initial) step size [s]"),
+                "rtol": Key(_NUM, low=0.0, low_open=True, high=1.0),
+                "atol": Key(_NUM, low=0.0, low_open=True),
                 "stabilization": Key((str,), help="stabilizer name (see `nonmin list`)"),
                 "contact": Key((bool,), help="automatic unilateral contact handling"),
-                "restitution": Key(_NUM, help="restitution of automatic contact impacts"),
-                "output_dt": Key(_NUM, help="sampling of the stored trajectory [s]"),
+                "restitution": Key(_NUM, low=0.0, high=1.0, help="restitution of automatic contact impacts"),
+                "output_dt": Key(_NUM, low=0.0, low_open=True, help="sampling of the stored trajectory [s]"),
             },
             sections={"options": Section(open_keys=True, help="further simulate() keywords")},
         ),
@@ -92,12 +94,12 @@ SCENARIO_SCHEMA = Section(
         ),
         "output": Section(
             keys={
-                "dir": Key((str,), help="output folder (relative to the scenario file)"),
+                "dir": Key((str,), help="output folder, relative, inside the scenario's folder"),
                 "plots": Key((bool,)),
                 "animation": Key((str, bool), help="animation file name (.gif/.mp4) or false"),
                 "csv": Key((bool,)),
                 "trajectory": Key((str,), help="trajectory file name (.npz)"),
-                "fps": Key(_NUM),
+                "fps": Key(_NUM, low=0.0, low_open=True, high=1000.0),
             }
         ),
     },
@@ -113,20 +115,38 @@ SCENARIO_SCHEMA = Section(
                 "terminal": Key((bool,)),
                 "transition": Key((str,), choices=("none", "activate", "deactivate")),
                 "constraints": Key((list,), item_types=(str,)),
-                "restitution": Key(_NUM),
+                "restitution": Key(_NUM, low=0.0, high=1.0),
             }
         )
     },
 )
 
 
-def resolve_entry_point(spec: str, file: str | Path, key: str) -> Callable[..., Any]:
-    """Import ``'package.module:attr'``; errors name the scenario file and key."""
-    if ":" not in spec:
+def resolve_entry_point(
+    spec: str, file: str | Path, key: str, *, allow_code: bool = False
+) -> Callable[..., Any]:
+    """Import ``'package.module:attr'``; errors name the scenario file and key.
+
+    Importing a module runs its code, and the function is then called: a scenario file that
+    names an entry point is a program. Without ``allow_code=True`` (``--allow-code`` on the
+    command line) this raises :class:`~nonmin.errors.UntrustedCodeError` before importing
+    anything.
+    """
+    if not allow_code:
+        raise UntrustedCodeError(
+            f"{file}: key {key!r}: {spec!r} names code to import and run; scenario files with "
+            "entry points are programs — run them only if you trust their author, with "
+            "--allow-code (command line) or allow_code=True (load_scenario / run_scenario)"
+        )
+    if not isinstance(spec, str) or spec.count(":") != 1:
         raise ScenarioError(
             f"{file}: key {key!r}: expected 'package.module:function', got {spec!r}"
         )
     mod_name, _, attr = spec.partition(":")
+    if not mod_name or not attr or not all(p.isidentifier() for p in (*mod_name.split("."), *attr.split("."))):
+        raise ScenarioError(
+            f"{file}: key {key!r}: expected 'package.module:function' (dotted identifiers), got {spec!r}"
+        )
     try:
         mod = importlib.import_module(mod_name)
     except ImportError as exc:
@@ -155,10 +175,14 @@ class Scenario:
         The scenario file.
     data : dict
         The parsed TOML (validated against :data:`SCENARIO_SCHEMA`).
+    allow_code : bool
+        Whether ``entry_point`` and ``guard`` keys may import and run code (see
+        :func:`load_scenario`).
     """
 
     path: Path
     data: Mapping[str, Any] = field(repr=False)
+    allow_code: bool = False
 
     @property
     def name(self) -> str:
@@ -172,10 +196,14 @@ class Scenario:
         return p if p.is_absolute() else (self.path.parent / p)
 
     def output_dir(self, override: str | Path | None = None) -> Path:
+        """The output folder: ``override`` (the caller's, e.g. ``--out``), else ``[output] dir``
+        (relative, inside the scenario file's folder), else ``./<scenario stem>-out``."""
         if override is not None:
             return Path(override)
         rel = self.section("output").get("dir")
-        return self.resolve_path(rel) if rel else Path.cwd() / f"{self.path.stem}-out"
+        if rel:
+            return confined(self.path.parent, rel, file=self.path, key="output.dir")
+        return Path.cwd() / f"{self.path.stem}-out"
 
     # ------------------------------------------------------------------ building
     def build_model(self) -> tuple[Any, Any]:
@@ -213,7 +241,9 @@ class Scenario:
                 if src == "spatial":
                     return obj, obj.state(obj.reference_configuration()), None
             elif src == "entry_point":
-                fn = resolve_entry_point(m["entry_point"], self.path, "model.entry_point")
+                fn = resolve_entry_point(
+                    m["entry_point"], self.path, "model.entry_point", allow_code=self.allow_code
+                )
                 obj = fn(**params)
             else:
                 from ..model import robots
@@ -293,21 +323,56 @@ class Scenario:
         return state
 
 
-def load_scenario(path: str | Path) -> Scenario:
+def _finite_everywhere(data: Any, file: Path, prefix: str = "") -> None:
+    """TOML accepts ``inf`` and ``nan``: refuse them in every table, open ones included."""
+    if isinstance(data, dict):
+        for k, v in data.items():
+            _finite_everywhere(v, file, f"{prefix}{k}" if not prefix else f"{prefix}.{k}")
+    elif isinstance(data, list):
+        for i, v in enumerate(data):
+            _finite_everywhere(v, file, f"{prefix}[{i}]")
+    elif isinstance(data, float) and not math.isfinite(data):
+        raise ScenarioError(f"{file}: key {prefix!r}: expected a finite number, got {data!r}")
+
+
+#: Largest scenario file read (bytes): scenario files are small, anything bigger is a mistake.
+MAX_SCENARIO_BYTES = 4 * 2**20
+
+
+def load_scenario(path: str | Path, *, allow_code: bool = False) -> Scenario:
     """Read and validate a TOML scenario file.
+
+    Parameters
+    ----------
+    path : str or Path
+    allow_code : bool, default False
+        Let ``[model] entry_point`` and ``[[events]] guard`` import and run the functions they
+        name. Scenario files with entry points are programs: opt in only for files you trust.
+        Without it such a scenario raises :class:`~nonmin.errors.UntrustedCodeError` when it is
+        built (nothing is imported).
 
     Raises
     ------
     ScenarioError
-        If the file is missing, is not valid TOML, or has unknown keys / wrong types (the
-        message names the file, the key, what was expected and what came).
+        If the file is missing, is not valid TOML, or has unknown keys / wrong types / numbers
+        out of range (the message names the file, the key, what was expected and what came).
     """
     p = Path(path)
-    if not p.exists():
+    if not p.is_file():
         raise ScenarioError(f"{p}: scenario file not found")
     try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
+        size = p.stat().st_size
+        if size > MAX_SCENARIO_BYTES:
+            raise ScenarioError(f"{p}: {size} bytes; scenario files are at most {MAX_SCENARIO_BYTES}")
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"{p}: not UTF-8 text: {exc}") from None
+    except OSError as exc:
+        raise ScenarioError(f"{p}: cannot read the scenario file: {exc.strerror or exc}") from None
+    try:
+        data = tomllib.loads(text)
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
         raise ScenarioError(f"{p}: not valid TOML: {exc}") from None
+    _finite_everywhere(data, p)
     check(data, SCENARIO_SCHEMA, p)
-    return Scenario(path=p, data=data)
+    return Scenario(path=p, data=data, allow_code=bool(allow_code))

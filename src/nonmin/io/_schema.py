@@ -3,6 +3,7 @@ name the file, the key (dotted path), what was expected and what came."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +23,25 @@ class Key:
     help: str = ""
     choices: tuple[Any, ...] | None = None
     item_types: tuple[type, ...] | None = None  # for lists
+    #: numbers (and numbers in lists) must lie in [low, high]; open ends with low_open/high_open.
+    #: Every number must be finite (TOML accepts inf and nan) unless ``finite`` is False.
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    finite: bool = True
+    max_items: int | None = None
+
+    def range_text(self) -> str:
+        lo = "-inf" if self.low is None else f"{self.low:g}"
+        hi = "inf" if self.high is None else f"{self.high:g}"
+        return f"{'(' if self.low_open or self.low is None else '['}{lo}, {hi}{']' if self.high is not None else ')'}"
+
+    def number_ok(self, v: float) -> bool:
+        if self.finite and not math.isfinite(v):
+            return False
+        if self.low is not None and (v < self.low or (self.low_open and v == self.low)):
+            return False
+        return not (self.high is not None and v > self.high)
 
     def expected(self) -> str:
         names = {
@@ -105,6 +125,16 @@ def check(data: Mapping[str, Any], schema: Section, file: str | Path, prefix: st
                         raise ScenarioError(
                             f"{where}: key {path}[{i}]: expected {spec.expected()}, got {_type_name(item)} {item!r}"
                         )
+            if spec.max_items is not None and isinstance(value, list) and len(value) > spec.max_items:
+                raise ScenarioError(
+                    f"{where}: key {path!r}: expected at most {spec.max_items} items, got {len(value)}"
+                )
+            numbers = value if isinstance(value, list) else [value]
+            for i, item in enumerate(numbers):
+                if isinstance(item, int | float) and not isinstance(item, bool) and not spec.number_ok(float(item)):
+                    at = f"{path}[{i}]" if isinstance(value, list) else path
+                    want = "a finite number" if spec.low is None and spec.high is None else f"a finite number in {spec.range_text()}"
+                    raise ScenarioError(f"{where}: key {at!r}: expected {want}, got {item!r}")
             if spec.choices is not None and value not in spec.choices:
                 raise ScenarioError(
                     f"{where}: key {path!r}: expected one of {list(spec.choices)}, got {value!r}"

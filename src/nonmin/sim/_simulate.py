@@ -40,6 +40,7 @@ throughout with the projection.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from functools import partial
@@ -49,9 +50,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..core import forward_dynamics, solve_dynamics
-from ..core.linalg import DEFAULT_RTOL, range_basis
+from ..core.linalg import DEFAULT_RTOL, range_basis, row_norms
 from ..errors import (
     InputError,
+    ModelError,
     NonFiniteError,
     ShapeError,
     SimulationError,
@@ -59,7 +61,7 @@ from ..errors import (
     ZenoError,
 )
 from ..model import ConstraintTerms, Model, State
-from . import _fastpath
+from . import _durable, _fastpath
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
 from ._integrators import METHODS, Integrator, StepperState, hermite_quintic
 from ._progress import Progress
@@ -142,7 +144,7 @@ def drift_rank_rtol(ct: ConstraintTerms, rtol: float | None) -> float:
     if ct.A.shape[0] == 0 or not np.any(hol):
         return base
     A = ct.A[hol]
-    norms = np.sqrt(np.einsum("ij,ij->i", A, A))
+    norms = row_norms(A)
     live = norms > base * float(np.max(norms))
     if not np.any(live):
         return base
@@ -174,9 +176,8 @@ class _System:
         terms = self.model.evaluate(t, q, qd, self.active)
         g = terms.h + terms.f_passive
         if self.controller is not None:
-            u = np.asarray(self.controller(t, q, qd, self.cstate, active=self.active), dtype=float)
-            if u.shape != (self.k,):
-                raise ShapeError(f"controller must return u of shape ({self.k},), got shape {u.shape}")
+            raw = _durable.user_call("controller", t, self.controller, t, q, qd, self.cstate, active=self.active)
+            u = _durable.finite_output("controller", t, raw, (self.k,), self.model.actuator_names)
             g = g + terms.B @ u
         else:
             u = np.zeros(self.k)
@@ -244,7 +245,13 @@ class _Watch(NamedTuple):
 def _guard_value(sys: _System, w: _Watch, p: _Point) -> float:
     if w.kind == "user":
         assert w.event is not None
-        val = float(w.event.guard(p.t, p.q, p.qd, p.f_c))
+        raw = _durable.user_call(f"event {w.name!r}: guard", p.t, w.event.guard, p.t, p.q, p.qd, p.f_c)
+        try:
+            val = float(raw)
+        except (TypeError, ValueError):
+            raise SimulationError(
+                f"event {w.name!r}: guard returned {type(raw).__name__} {raw!r}, not a number, at t = {p.t:.12g}"
+            ) from None
         if not math.isfinite(val):
             raise SimulationError(f"event {w.name!r}: guard returned {val} at t = {p.t:.12g}")
         return val
@@ -280,8 +287,22 @@ class _Recorder:
         self.n, self.k = model.n, model.k
         self.blocks: list[dict[str, Any]] = []
         self.cols: dict[str, list[Any]] = {key: [] for key in self.KEYS}
+        self.count = 0
+        self.max_count = _durable.MAX_RECORD_BYTES // _durable.sample_bytes(self.n, self.k, len(self.names))
+
+    def last_t(self, default: float) -> float:
+        """Time of the last recorded sample (``default`` before the first)."""
+        if self.cols["t"]:
+            return float(self.cols["t"][-1])
+        return float(self.blocks[-1]["t"][-1]) if self.blocks and len(self.blocks[-1]["t"]) else default
 
     def add(self, p: _Point, active: frozenset[str]) -> None:
+        self.count += 1
+        if self.count > self.max_count:
+            raise SimulationError(
+                f"{self.count - 1} samples recorded by t = {p.t:.12g} fill the "
+                f"{_durable.MAX_RECORD_BYTES / 2**30:g} GiB budget of a run; pass a coarser t_eval"
+            )
         c = self.cols
         c["t"].append(p.t)
         c["q"].append(p.q.copy())
@@ -303,6 +324,7 @@ class _Recorder:
         """Append a block of samples (arrays with the keys of :meth:`arrays`)."""
         self._flush()
         self.blocks.append(block)
+        self.count += len(block["t"])
 
     def _flush(self) -> None:
         if self.cols["t"]:
@@ -311,7 +333,8 @@ class _Recorder:
 
     def _rows(self) -> dict[str, Any]:
         c, n, k = self.cols, self.n, self.k
-        N = len(c["t"])
+        N = min(len(v) for v in c.values())  # an interrupt inside add() leaves a ragged row
+        c = {key: v[:N] for key, v in c.items()}
         return {
             "t": np.asarray(c["t"], dtype=float),
             "q": np.asarray(c["q"], dtype=float).reshape(N, n),
@@ -389,6 +412,13 @@ def _vector(x: ArrayLike, name: str, n: int) -> FloatArray:
     return arr
 
 
+def _real(x: Any, name: str) -> float:
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a real number, got {x!r}") from None
+
+
 def _check_names(model: Model, names: Iterable[str], what: str) -> None:
     unknown = sorted(set(names).difference(model.constraint_names))
     if unknown:
@@ -435,6 +465,9 @@ def simulate(
     project_initial: bool | None = None,
     h0: float | None = None,
     engine: str = "auto",
+    checkpoint: str | os.PathLike[str] | None = None,
+    checkpoint_every: float | None = None,
+    resume: str | os.PathLike[str] | Trajectory | None = None,
     **unknown: Any,
 ) -> Trajectory:
     """Simulate a constrained mechanical system through singularities and topology switches.
@@ -512,10 +545,24 @@ def simulate(
         compiled when possible, else the general driver. ``trajectory.metadata["engine"]``
         tells which ran. If a kernel fails in the compiled loop, the general driver takes over
         at the last accepted step (and raises the typed error).
+    checkpoint : path, optional
+        A ``.npz`` file that receives the samples so far (status ``interrupted``) every
+        ``checkpoint_every`` seconds of simulated time, and when the run is interrupted.
+        Written durably: temporary file, fsync, rename — the file is always complete.
+    checkpoint_every : float, optional
+        Simulated seconds between checkpoints (needs ``checkpoint``).
+    resume : path or Trajectory, optional
+        Continue an interrupted run (a checkpoint, or any trajectory of the same model ending
+        before ``t1``) from its last sample: its samples are kept in front of the new ones.
+        The integrator, the controller's internal state and the events' re-arming restart at
+        that sample, so a resumed run matches an uninterrupted one to the integration error
+        (to round-off with a fixed-step method, the same ``dt`` and every step recorded).
 
     Returns
     -------
     Trajectory
+        With status ``interrupted`` and the samples computed so far when ``KeyboardInterrupt``
+        (Ctrl-C) stops the run (whatever ``throw``).
 
     Raises
     ------
@@ -556,6 +603,13 @@ def simulate(
             active = st0.active
     n, k = model.n, model.k
     t0, t1 = _t_span(t_span)
+    prev = None
+    if resume is not None:
+        prev = _durable.resume_point(resume, model, t1)
+        t0, q0, qd0, active = float(prev.t[-1]), prev.q[-1], prev.qd[-1], prev.active[-1]
+        if project_initial is None:
+            project_initial = False
+    ck_path, ck_every = _durable.check_checkpoint(checkpoint, checkpoint_every)
     if q0 is None:
         raise InputError("simulate: q0 is required for a bare model (shape (n,))")
     q = _vector(q0, "q0", n)
@@ -582,34 +636,46 @@ def simulate(
     if isinstance(restitution, dict):
         _check_names(model, restitution, "restitution")
         for nm, e in restitution.items():
-            if not 0.0 <= float(e) <= 1.0:
+            if not 0.0 <= _real(e, f"restitution[{nm!r}]") <= 1.0:
                 raise InputError(f"restitution[{nm!r}] must lie in [0, 1], got {e!r}")
-    elif not 0.0 <= float(restitution) <= 1.0:
+    elif not 0.0 <= _real(restitution, "restitution") <= 1.0:
         raise InputError(f"restitution must lie in [0, 1], got {restitution!r}")
     t_out: FloatArray | None = None
     if t_eval is not None:
-        t_out = np.asarray(t_eval, dtype=float).ravel()
+        try:
+            t_out = np.asarray(t_eval, dtype=float).ravel()
+        except (TypeError, ValueError):
+            raise InputError(f"t_eval must be an array of times, got {type(t_eval).__name__}") from None
+        if not np.isfinite(t_out).all():
+            raise NonFiniteError(f"t_eval must be finite, got NaN/inf at index {int(np.argmax(~np.isfinite(t_out)))}")
+        if prev is not None:
+            t_out = t_out[t_out > t0]
         if t_out.size and (np.any(np.diff(t_out) < 0) or t_out[0] < t0 or t_out[-1] > t1):
             raise InputError(f"t_eval must be non-decreasing and inside t_span {(t0, t1)}")
     if controller is not None and not callable(controller):
         raise InputError(f"controller must be callable, got {type(controller).__name__}")
-    if int(max_steps) < 1:
-        raise InputError(f"max_steps must be ≥ 1, got {max_steps!r}")
+    if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
+        raise InputError(f"max_steps must be an integer ≥ 1, got {max_steps!r}")
+    _durable.check_budget(t0=t0, t1=t1, h=None if integ.adaptive else h_init, max_steps=int(max_steps),
+                          t_out=t_out, n=n, k=k, c=len(model.constraint_names))
     if rank_rtol is None and integ.adaptive:
         rank_rtol = ADAPTIVE_RANK_RTOL
-    elif rank_rtol is not None and not (0.0 < float(rank_rtol) < 1.0):
+    elif rank_rtol is not None and not (0.0 < _real(rank_rtol, "rank_rtol") < 1.0):
         raise InputError(f"rank_rtol must lie in (0, 1), got {rank_rtol!r}")
-    v_thresh = float(impact_velocity_threshold)
-    if not v_thresh >= 0.0:
+    v_thresh = _real(impact_velocity_threshold, "impact_velocity_threshold")
+    if not (v_thresh >= 0.0 and math.isfinite(v_thresh)):
         raise InputError(f"impact_velocity_threshold must be ≥ 0, got {impact_velocity_threshold!r}")
+    if isinstance(zeno_max_events, bool) or not isinstance(zeno_max_events, int | np.integer) or zeno_max_events < 1:
+        raise InputError(f"zeno_max_events must be an integer ≥ 1, got {zeno_max_events!r}")
     zeno_max = int(zeno_max_events)
     zeno_window = _positive(zeno_window, "zeno_window")
-    rearm_tol = float(event_rearm)
-    if not rearm_tol >= 0.0:
+    rearm_tol = _real(event_rearm, "event_rearm")
+    if not (rearm_tol >= 0.0 and math.isfinite(rearm_tol)):
         raise InputError(f"event_rearm must be ≥ 0, got {event_rearm!r}")
     project_initial = isinstance(stab, Projection) if project_initial is None else bool(project_initial)
 
-    cstate = controller.initial_state() if hasattr(controller, "initial_state") else None
+    cstate = (_durable.user_call("controller.initial_state", t0, controller.initial_state)
+              if hasattr(controller, "initial_state") else None)
     unilateral = tuple(c.name for c in model.constraints if c.kind == "unilateral") if contact else ()
     system = _System(model, controller, stab, rank_rtol, n, k, act, cstate, unilateral=unilateral)
     prog = _fastpath.program_for(engine, model, integ, stab, controller, events, unilateral, act)
@@ -639,7 +705,25 @@ def simulate(
     message = "reached the end of t_span"
     n_steps = 0
     n_rejected = 0
-    bar = Progress(t0, t1, progress)
+
+    def snapshot(st: Status, msg: str) -> Trajectory:
+        """The samples so far as a Trajectory (checkpoints, interruption, the final result)."""
+        return Trajectory(
+            **rec.arrays(),
+            constraint_names=model.constraint_names,
+            coordinate_names=model.coordinate_names,
+            actuator_names=model.actuator_names,
+            events=tuple(records),
+            status=st,
+            message=msg,
+            n_steps=n_steps,
+            n_rhs=system.n_rhs,
+            n_rejected=n_rejected,
+            metadata=meta,
+        )
+
+    bar = _durable.Checkpointer(Progress(t0, t1, progress), ck_path, ck_every, t0, snapshot)
+    t = t0
     try:
         if project_initial and act:
             q, qd = stab.project(model, t0, q, qd, act, rank_rtol) if isinstance(stab, Projection) \
@@ -807,7 +891,8 @@ def simulate(
                 qn, qdn = p.q, p.qd
                 t = te
                 if controller is not None and hasattr(controller, "update"):
-                    system.cstate = controller.update(te, qn, qdn, system.cstate, active=system.active)
+                    system.cstate = _durable.user_call("controller.update", te, controller.update, te, qn,
+                                                       qdn, system.cstate, active=system.active)
                 watches = _watches(events, system.active, unilateral)
                 gvals = [_guard_value(system, w2, p) for w2 in watches]
                 h_next = state.h if not integ.adaptive else res.state.h
@@ -836,30 +921,34 @@ def simulate(
                 f_next = np.concatenate((qd1, p1.qdd))
             state = StepperState(t, np.concatenate((q1, qd1)), f_next, res.state.h)
             if controller is not None and hasattr(controller, "update"):
-                system.cstate = controller.update(t, q1, qd1, system.cstate, active=system.active)
+                system.cstate = _durable.user_call("controller.update", t, controller.update, t, q1, qd1,
+                                                   system.cstate, active=system.active)
             bar.update(t)
+    except KeyboardInterrupt:  # Ctrl-C: keep what was computed
+        status = Status.INTERRUPTED
+        message = f"interrupted (KeyboardInterrupt) after t = {rec.last_t(t0):.12g}"
     except Exception as exc:  # throw=False: any failure ends the run with a partial result
+        if isinstance(exc, InputError | ModelError):  # raised mid-run: the state, not the arguments
+            err: Exception = SimulationError(f"the simulation cannot go on after t = {rec.last_t(t0):.12g}: "
+                                             f"{type(exc).__name__}: {exc}")
+            err.__cause__ = exc
+        else:
+            err = exc
         if throw:
             bar.close()
-            raise
+            if err is exc:
+                raise
+            raise err from exc
         status = Status.FAILED
-        message = f"{type(exc).__name__}: {exc}"
+        message = f"{type(err).__name__}: {err}"
     finally:
         bar.close()
-    arrays = rec.arrays()
-    return Trajectory(
-        **arrays,
-        constraint_names=model.constraint_names,
-        coordinate_names=model.coordinate_names,
-        actuator_names=model.actuator_names,
-        events=tuple(records),
-        status=status,
-        message=message,
-        n_steps=n_steps,
-        n_rhs=system.n_rhs,
-        n_rejected=n_rejected,
-        metadata=meta,
-    )
+    result = snapshot(status, message)
+    if status is Status.INTERRUPTED and ck_path is not None:
+        result.save(ck_path)
+    if prev is not None:
+        result = _durable.join(prev, result, drop_last=t_out is None)
+    return result
 
 
 # --------------------------------------------------------------------------- helpers
@@ -970,11 +1059,14 @@ def _apply(
         elif isinstance(tr, Deactivate):
             act = act - frozenset(tr.names)
         elif isinstance(tr, Reset):
-            out = tr.fn(p.t, q, qd, act)
+            out = _durable.user_call(f"event {ev.name!r}: Reset fn", p.t, tr.fn, p.t, q, qd, act)
             if not (isinstance(out, tuple) and len(out) == 3):
-                raise InputError(f"event {ev.name!r}: Reset fn must return (q, qd, active)")
-            q = _vector(out[0], f"event {ev.name!r} reset q", system.n)
-            qd = _vector(out[1], f"event {ev.name!r} reset qd", system.n)
+                raise SimulationError(f"event {ev.name!r}: Reset fn must return (q, qd, active), got "
+                                      f"{type(out).__name__} at t = {p.t:.12g}")
+            q = _durable.finite_output(f"event {ev.name!r}: Reset fn q", p.t, out[0], (system.n,),
+                                       system.model.coordinate_names)
+            qd = _durable.finite_output(f"event {ev.name!r}: Reset fn qd", p.t, out[1], (system.n,),
+                                        system.model.coordinate_names)
             act = model.resolve_active(out[2])
         return q, qd, act, ev.name, ev.terminal, 0.0
     if w.kind == "impact":

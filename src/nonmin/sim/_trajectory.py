@@ -18,7 +18,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InputError
+from .._files import atomic_write
+from ..errors import FileFormatError
 from ._events import EventRecord
 
 __all__ = ["FORMAT_VERSION", "Status", "Trajectory", "load_trajectory"]
@@ -51,6 +52,7 @@ class Status(enum.Enum):
     SUCCESS = "success"
     EVENT_TERMINATED = "event_terminated"
     FAILED = "failed"
+    INTERRUPTED = "interrupted"  #: stopped by KeyboardInterrupt (or a checkpoint of a running job)
 
 
 @dataclass(frozen=True, eq=False)
@@ -127,8 +129,8 @@ class Trajectory:
 
     @property
     def success(self) -> bool:
-        """True unless the run failed."""
-        return self.status is not Status.FAILED
+        """True when the run reached its end (or a terminal event): not failed, not interrupted."""
+        return self.status in (Status.SUCCESS, Status.EVENT_TERMINATED)
 
     @property
     def active(self) -> tuple[frozenset[str], ...]:
@@ -197,11 +199,20 @@ class Trajectory:
         return json.dumps(meta, default=_json_default)
 
     def save(self, path: str | os.PathLike[str]) -> None:
-        """Write the trajectory to one ``.npz`` file (arrays + JSON metadata)."""
+        """Write the trajectory to one ``.npz`` file (arrays + JSON metadata).
+
+        The file is written to a temporary name in the same folder, fsync'd and renamed over
+        ``path``: a failure in mid-write (kill, full disk) leaves the previous file intact, and
+        concurrent writers of one path leave the last complete file.
+
+        Raises
+        ------
+        OutputError
+            The file cannot be written (the message names it).
+        """
         arrays = {name: np.asarray(getattr(self, name)) for name in _ARRAYS}
         arrays["__metadata__"] = np.array(self._metadata_json())
-        p = os.fspath(path)
-        with open(p, "wb") as fh:
+        with atomic_write(path, "wb") as fh:
             np.savez_compressed(fh, **arrays)  # type: ignore[arg-type]
 
     @classmethod
@@ -240,7 +251,8 @@ class Trajectory:
             ]
         )
         header = "nonmin trajectory; metadata: " + self._metadata_json() + "\n" + ",".join(cols)
-        np.savetxt(os.fspath(path), data, delimiter=",", header=header, comments="# ", fmt="%.17g")
+        with atomic_write(path, "wb") as fh:
+            np.savetxt(fh, data, delimiter=",", header=header, comments="# ", fmt="%.17g")
 
 
 def _json_default(obj: Any) -> Any:
@@ -253,43 +265,168 @@ def _json_default(obj: Any) -> Any:
     return repr(obj)
 
 
-def load_trajectory(path: str | os.PathLike[str]) -> Trajectory:
+#: Default cap (bytes, uncompressed) of what :func:`load_trajectory` reads: a file that declares
+#: more (a zip bomb, or metadata claiming absurd sizes) is refused before anything is inflated.
+MAX_LOAD_BYTES = 4 * 2**30
+
+_FLOAT_ROWS = ("q", "qd", "qdd", "f_c")
+_DIAGNOSTICS = ("cond", "mu", "energy", "phi_norm", "velocity_residual_norm")
+
+
+def _bad(p: str, entry: str, what: str) -> FileFormatError:
+    return FileFormatError(f"load_trajectory: {p!r}: entry {entry!r}: {what}")
+
+
+def _names(meta: dict[str, Any], key: str, p: str) -> tuple[str, ...]:
+    val = meta.get(key)
+    if not isinstance(val, list) or not all(isinstance(v, str) for v in val):
+        raise _bad(p, f"__metadata__.{key}", f"expected a list of strings, got {type(val).__name__}")
+    return tuple(val)
+
+
+def _count(meta: dict[str, Any], key: str, p: str) -> int:
+    val = meta.get(key)
+    if isinstance(val, bool) or not isinstance(val, int) or val < 0:
+        raise _bad(p, f"__metadata__.{key}", f"expected a non-negative integer, got {val!r}")
+    return val
+
+
+def _check_arrays(arrays: dict[str, Any], n: int, k: int, c: int, p: str) -> None:
+    t = arrays["t"]
+    if t.ndim != 1 or t.dtype.kind != "f":
+        raise _bad(p, "t", f"expected a float array of shape (N,), got {t.dtype} shape {t.shape}")
+    N = t.shape[0]
+    want: dict[str, tuple[tuple[int, ...], str]] = {
+        **{a: ((N, n), "f") for a in _FLOAT_ROWS},
+        "u": ((N, k), "f"),
+        "active_mask": ((N, c), "b"),
+        "rank": ((N,), "iu"),
+        **{a: ((N,), "f") for a in _DIAGNOSTICS},
+    }
+    for name, (shape, kinds) in want.items():
+        arr = arrays[name]
+        if arr.shape != shape or arr.dtype.kind not in kinds:
+            kind = {"f": "float", "b": "bool", "iu": "integer"}[kinds]
+            raise _bad(p, name, f"expected a {kind} array of shape {shape} (N = {N} samples, "
+                       f"{n} coordinates, {k} actuators, {c} constraints), got {arr.dtype} shape {arr.shape}")
+    for name in ("t", *_FLOAT_ROWS):
+        bad = ~np.isfinite(arrays[name])
+        if bad.any():
+            raise _bad(p, name, f"{int(bad.sum())} NaN/inf values (first at index "
+                       f"{tuple(int(i) for i in np.argwhere(bad)[0])})")
+    if N > 1 and np.any(np.diff(t) < 0):
+        i = int(np.argmax(np.diff(t) < 0))
+        raise _bad(p, "t", f"sample times must be non-decreasing, t[{i + 1}] = {t[i + 1]!r} < t[{i}] = {t[i]!r}")
+
+
+def load_trajectory(path: str | os.PathLike[str], *, max_bytes: int = MAX_LOAD_BYTES) -> Trajectory:
     """Load a :class:`Trajectory` saved with :meth:`Trajectory.save`.
+
+    The file is data only: nothing in it is executed (no pickles), and its metadata is
+    provenance (where the run came from) that nothing acts on. Every entry is checked before
+    a :class:`Trajectory` is built: the JSON metadata and its types, the shape and dtype of every
+    array against the sample count and the name lists, finite and non-decreasing times.
+
+    Parameters
+    ----------
+    path : str or path-like
+    max_bytes : int
+        Refuse files whose arrays declare more than this many uncompressed bytes
+        (default :data:`MAX_LOAD_BYTES`, 4 GiB).
 
     Raises
     ------
-    InputError
-        If the file is not a nonmin trajectory file or has a newer format version.
+    FileFormatError
+        Missing, unreadable, truncated, corrupt (bad zip, bad CRC, bad JSON) or inconsistent
+        file, a newer format version, or too large; the message names the file and the entry.
     """
+    import zipfile
+    import zlib
+
     p = os.fspath(path)
+    if not os.path.isfile(p):
+        raise FileFormatError(f"load_trajectory: {p!r}: no such file")
     try:
-        data = np.load(p, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"load_trajectory: cannot read {p!r} as a .npz file: {exc}") from None
-    with data:
-        if "__metadata__" not in data.files:
-            raise InputError(f"load_trajectory: {p!r} has no __metadata__ entry (not a nonmin trajectory)")
-        meta = json.loads(str(data["__metadata__"]))
-        if meta.get("format") != "nonmin.Trajectory":
-            raise InputError(f"load_trajectory: {p!r} is not a nonmin trajectory file")
-        if int(meta.get("format_version", 0)) > FORMAT_VERSION:
-            raise InputError(
-                f"load_trajectory: {p!r} has format version {meta['format_version']}, "
-                f"this nonmin reads up to {FORMAT_VERSION}"
-            )
-        missing = [a for a in _ARRAYS if a not in data.files]
-        if missing:
-            raise InputError(f"load_trajectory: {p!r} lacks arrays {missing}")
-        arrays: dict[str, Any] = {a: np.array(data[a]) for a in _ARRAYS}
-    events = tuple(EventRecord.from_dict(e) for e in meta.pop("events", []))
-    kw: dict[str, Any] = {
-        "constraint_names": tuple(meta.pop("constraint_names")),
-        "coordinate_names": tuple(meta.pop("coordinate_names")),
-        "actuator_names": tuple(meta.pop("actuator_names")),
-        "status": Status(meta.pop("status")),
-        "message": meta.pop("message"),
-        "n_steps": int(meta.pop("n_steps")),
-        "n_rhs": int(meta.pop("n_rhs")),
-        "n_rejected": int(meta.pop("n_rejected")),
-    }
-    return Trajectory(**arrays, events=events, metadata=meta, **kw)
+        with zipfile.ZipFile(p) as zf:
+            declared = sum(i.file_size for i in zf.infolist())
+            names = [i.filename for i in zf.infolist()]
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError) as exc:
+        raise FileFormatError(f"load_trajectory: {p!r}: not a readable .npz (zip) file: {exc}") from None
+    if declared > max_bytes:
+        raise FileFormatError(
+            f"load_trajectory: {p!r}: its entries declare {declared} uncompressed bytes, more than "
+            f"max_bytes = {max_bytes}"
+        )
+    entry = "__metadata__"
+    try:
+        with np.load(p, allow_pickle=False) as data:
+            if "__metadata__" not in data.files:
+                raise FileFormatError(
+                    f"load_trajectory: {p!r} has no __metadata__ entry (not a nonmin trajectory); "
+                    f"entries: {sorted(names)}"
+                )
+            raw = data["__metadata__"]
+            if raw.dtype.kind != "U" or raw.ndim != 0:
+                raise _bad(p, entry, f"expected a JSON string, got {raw.dtype} shape {raw.shape}")
+            try:
+                meta = json.loads(str(raw))
+            except (json.JSONDecodeError, RecursionError) as exc:
+                raise _bad(p, entry, f"not valid JSON: {exc}") from None
+            if not isinstance(meta, dict):
+                raise _bad(p, entry, f"expected a JSON object, got {type(meta).__name__}")
+            if meta.get("format") != "nonmin.Trajectory":
+                raise FileFormatError(f"load_trajectory: {p!r} is not a nonmin trajectory file "
+                                      f"(__metadata__.format = {meta.get('format')!r})")
+            version = meta.get("format_version", 0)
+            if isinstance(version, bool) or not isinstance(version, int):
+                raise _bad(p, "__metadata__.format_version", f"expected an integer, got {version!r}")
+            if version > FORMAT_VERSION:
+                raise FileFormatError(
+                    f"load_trajectory: {p!r} has format version {version}, this nonmin reads up "
+                    f"to {FORMAT_VERSION}"
+                )
+            missing = [a for a in _ARRAYS if a not in data.files]
+            if missing:
+                raise FileFormatError(f"load_trajectory: {p!r} lacks arrays {missing}")
+            arrays: dict[str, Any] = {}
+            for a in _ARRAYS:
+                entry = a
+                arrays[a] = np.array(data[a])
+    except FileFormatError:
+        raise
+    except (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, KeyError, MemoryError) as exc:
+        raise _bad(p, entry, f"cannot be read ({type(exc).__name__}: {exc})") from None
+    coords = _names(meta, "coordinate_names", p)
+    cons = _names(meta, "constraint_names", p)
+    acts = _names(meta, "actuator_names", p)
+    _check_arrays(arrays, len(coords), len(acts), len(cons), p)
+    try:
+        status = Status(meta.get("status"))
+    except ValueError:
+        raise _bad(p, "__metadata__.status", f"expected one of {[s.value for s in Status]}, "
+                   f"got {meta.get('status')!r}") from None
+    message = meta.get("message", "")
+    if not isinstance(message, str):
+        raise _bad(p, "__metadata__.message", f"expected a string, got {type(message).__name__}")
+    counters = {key: _count(meta, key, p) for key in ("n_steps", "n_rhs", "n_rejected")}
+    raw_events = meta.get("events", [])
+    if not isinstance(raw_events, list):
+        raise _bad(p, "__metadata__.events", f"expected a list, got {type(raw_events).__name__}")
+    events = []
+    n = len(coords)
+    for i, e in enumerate(raw_events):
+        try:
+            rec = EventRecord.from_dict(e)
+            if any(np.shape(getattr(rec, f)) != (n,) for f in ("q_before", "qd_before", "q_after", "qd_after")):
+                raise ValueError(f"state vectors must have {n} entries")
+            if not all(isinstance(nm, str) for nm in (*rec.active_before, *rec.active_after)):
+                raise ValueError("active sets must hold constraint names")
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise _bad(p, f"__metadata__.events[{i}]", f"malformed event record ({type(exc).__name__}: {exc})") from None
+        events.append(rec)
+    for key in ("constraint_names", "coordinate_names", "actuator_names", "status", "message",
+                "n_steps", "n_rhs", "n_rejected", "events"):
+        meta.pop(key, None)
+    return Trajectory(**arrays, constraint_names=cons, coordinate_names=coords, actuator_names=acts,
+                      events=tuple(events), status=status, message=message, metadata=meta,
+                      n_steps=counters["n_steps"], n_rhs=counters["n_rhs"], n_rejected=counters["n_rejected"])

@@ -45,8 +45,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         records = run_all(quick=not args.full, only=args.only, jobs=args.jobs,
                           log=lambda s: print(s, file=sys.stderr, flush=True))
     if args.json:
-        Path(args.json).write_text(json.dumps([r.to_dict() for r in records], indent=1),
-                                   encoding="utf-8")
+        from .._files import write_text
+
+        write_text(args.json, json.dumps([r.to_dict() for r in records], indent=1))
     print(format_table(records))
     if args.report:
         kw = {"command": args.command} if args.command else {}

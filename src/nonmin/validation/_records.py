@@ -355,7 +355,6 @@ def write_report(
         if r.notes:
             out.append(r.notes)
             out.append("")
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text("\n".join(out) + "\n", encoding="utf-8")
-    return p
+    from .._files import write_text
+
+    return write_text(Path(path), "\n".join(out) + "\n")

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from .._files import atomic_path
 from ..errors import InputError, missing_dependency
 from ..model._protocol import Geometry, Model
 from ._mpl import pyplot
@@ -36,6 +37,10 @@ def frame_geometries(
         raise InputError(
             f"animate: need t shape (T,) and q shape (T, n), got {t.shape} and {q.shape}"
         )
+    if not (np.isfinite(t).all() and np.isfinite(q).all()):
+        raise InputError("animate: the trajectory's t and q must be finite")
+    if np.any(np.diff(t) < 0):
+        raise InputError("animate: the trajectory's times t must be non-decreasing")
     duration = float(t[-1] - t[0])
     count = int(np.clip(round(duration / speed * fps) + 1, 2, max_frames)) if duration > 0 else 1
     tf = np.linspace(t[0], t[-1], count)
@@ -103,8 +108,24 @@ def animate(
     from matplotlib import animation
 
     out = Path(path)
+    for name_, val, top in (("fps", fps, 1000.0), ("speed", speed, 1e6), ("dpi", dpi, 2000.0)):
+        try:
+            val_f = float(val)
+        except (TypeError, ValueError):
+            val_f = float("nan")
+        if not (np.isfinite(val_f) and 0 < val_f <= top):
+            raise InputError(f"animate: {name_} must be a number in (0, {top:g}], got {val!r}")
+    if isinstance(max_frames, bool) or not isinstance(max_frames, int | np.integer) or not 1 <= max_frames <= 100_000:
+        raise InputError(f"animate: max_frames must be an integer in [1, 100000], got {max_frames!r}")
+    if round(fps) < 1:
+        raise InputError(f"animate: fps must be at least 1 frame per second once rounded, got {fps!r}")
     writer = _writer(out, fps)
     geometry = model.geometry if isinstance(model, Model) else model
+    if isinstance(model, Model) and np.shape(traj.q)[-1:] != (model.n,):
+        raise InputError(
+            f"animate: the trajectory has {np.shape(traj.q)[-1]} coordinates, the model "
+            f"{model.name!r} has {model.n}: not the model this trajectory came from"
+        )
     name = model.name if isinstance(model, Model) else "mechanism"
     tf, geoms = frame_geometries(
         geometry, traj.t, traj.q, fps=fps, speed=speed, max_frames=max_frames
@@ -161,7 +182,9 @@ def animate(
         return [*lines, pts, label]
 
     anim = animation.FuncAnimation(fig, update, frames=len(geoms), blit=False)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    anim.save(str(out), writer=writer, dpi=dpi)
-    plt.close(fig)
+    try:
+        with atomic_path(out) as tmp:
+            anim.save(str(tmp), writer=writer, dpi=dpi)
+    finally:
+        plt.close(fig)
     return out

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .._files import atomic_path
+from ..errors import InputError
 from ..model._protocol import Geometry, Model
 from ._mpl import pyplot
 
@@ -217,8 +220,6 @@ def plot_snapshot(
     qarr = np.atleast_2d(np.asarray(qs, dtype=float))
     geoms = [model.geometry(q) for q in qarr]
     if any(g is None for g in geoms):
-        from ..errors import InputError
-
         raise InputError(f"model {model.name!r} has no geometry to draw")
     gs: list[Geometry] = [g for g in geoms if g is not None]
     dim = gs[0].dim
@@ -239,10 +240,34 @@ def plot_snapshot(
 
 
 def save_figure(fig: Any, path: str | Path, dpi: int = 110) -> Path:
-    """Save a figure and close it; returns the path."""
+    """Save a figure durably (temporary file, fsync, rename) and close it; returns the path.
+
+    Raises
+    ------
+    InputError
+        ``dpi`` is not a positive number or the file name has no image format Matplotlib knows.
+    OutputError
+        The file cannot be written (the previous file there is unchanged).
+    """
     plt = pyplot()
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(p, dpi=dpi)
-    plt.close(fig)
+    try:
+        dpi_v = float(dpi)
+    except (TypeError, ValueError):
+        dpi_v = float("nan")
+    if not (math.isfinite(dpi_v) and 0 < dpi_v <= 2000):
+        plt.close(fig)
+        raise InputError(f"save_figure: dpi must be a number in (0, 2000], got {dpi!r}")
+    fmt = p.suffix.lower().lstrip(".")
+    if fmt not in fig.canvas.get_supported_filetypes():
+        plt.close(fig)
+        raise InputError(
+            f"save_figure: cannot tell the image format of {str(p)!r}; expected one of "
+            f"{sorted('.' + k for k in fig.canvas.get_supported_filetypes())}"
+        )
+    try:
+        with atomic_path(p) as tmp:
+            fig.savefig(tmp, dpi=dpi_v, format=fmt)
+    finally:
+        plt.close(fig)
     return p

@@ -147,6 +147,26 @@ def _lambdify_all(args: list[Any], exprs: Mapping[str, Any]) -> dict[str, Callab
     }
 
 
+def _no_strings(x: Any, what: str, _depth: int = 0) -> None:
+    """Refuse strings anywhere in a SymPy input: ``sympify`` of a string runs ``eval`` on it
+    (``T="__import__('os').system(...)"`` would run a command). Build expressions from
+    SymPy symbols instead (``sympy.symbols``, ``sympy.Matrix``)."""
+    if isinstance(x, str | bytes):
+        raise InputError(
+            f"{what} must be a SymPy expression (or numbers), not the string {str(x)[:60]!r}: "
+            "strings are parsed with eval by sympify, so nonmin does not accept them; build it "
+            "from sympy.symbols"
+        )
+    if _depth > 8:
+        return
+    if isinstance(x, dict):
+        for k, v in x.items():
+            _no_strings(v, f"{what}[{k!r}]", _depth + 1)
+    elif isinstance(x, list | tuple):
+        for i, v in enumerate(x):
+            _no_strings(v, f"{what}[{i}]", _depth + 1)
+
+
 def _as_matrix(sp: Any, x: Any, what: str) -> Any:
     try:
         m = sp.Matrix(x)
@@ -429,6 +449,9 @@ class SymbolicModel(Model):
             SymPy is not installed.
         """
         sp = _sympy()
+        for arg, val in (("T", T), ("V", V), ("B", B), ("passive", passive), ("outputs", outputs),
+                         ("q", q), ("qd", qd), ("t", t)):
+            _no_strings(val, f"from_energy: {arg}")
         qd_t = tuple(qd)
         if len(qd_t) != len(tuple(q)):
             raise ModelError(f"q and qd must have the same length, got {len(tuple(q))} and {len(qd_t)}")
@@ -478,6 +501,9 @@ class SymbolicModel(Model):
         in :meth:`from_energy`.
         """
         sp = _sympy()
+        for arg, val in (("M", M), ("V", V), ("B", B), ("passive", passive), ("outputs", outputs),
+                         ("q", q), ("qd", qd), ("t", t)):
+            _no_strings(val, f"from_mass_matrix: {arg}")
         q_t = tuple(q)
         n = len(q_t)
         Mm = _as_matrix(sp, M, "M")
@@ -524,6 +550,7 @@ class SymbolicModel(Model):
         cons = tuple(constraints)
         for c in cons:
             if isinstance(c, SymbolicConstraint):
+                _no_strings(c.expr, f"constraint {c.name!r}")
                 free |= set(_as_matrix(sp, c.expr if isinstance(c.expr, list | tuple) else [c.expr],
                                        f"constraint {c.name!r}").free_symbols)
         for extra in (B, passive):
