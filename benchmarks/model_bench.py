@@ -15,11 +15,29 @@ Timed, each from Python, in one run:
 Each evaluation timing is the median over ``--repeat`` calls after a warm-up; the simulation
 timing is the median of three runs after one warm-up run (JIT compilation excluded).
 
+``--robots`` times instead one evaluation of model + kernel from (q, qd) on two robots: the
+UR5 (example-robot-data, 6 DoF) with its tool frame held by a point loop closure to the world,
+and the dual-arm grasp (``two_arm_grasp``: two 4-DoF arms welded / pinned to a free-floating
+box, n = 15, nv = 14, 10 rows). Each in one process, at one consistent state:
+
+* ``engine model+kernel``: ``_engine.program_forward`` — the robot's TreeProgram evaluates M,
+  h, A, γ and the engine's Solver returns q̈, in one call from Python;
+* ``engine evaluate``: ``Program.evaluate_into`` (M, h, A, γ) alone;
+* ``python API``: ``RobotModel.evaluate`` + ``nonmin.core.forward_dynamics``;
+* ``pin constraintDynamics``: Pinocchio's exact KKT (proximal mu = 0, one iteration) on the same
+  tree and constraint frames (CONTACT_3D / CONTACT_6D, LOCAL), from a Python loop;
+
+with the ratio engine / Pinocchio of the medians (wall and thread CPU time), and the largest
+relative difference of the accelerations (nonmin's q̈ mapped to Pinocchio's a = T q̈ + Ṫ q̇).
+The machine is shared: medians of wall time move with the load; the thread CPU time is the
+steadier figure.
+
 Usage::
 
     python benchmarks/model_bench.py                  # prints a Markdown table
     python benchmarks/model_bench.py --label after --json benchmarks/results/model_after.json
     python benchmarks/model_bench.py --quick          # few repeats (smoke test)
+    python benchmarks/model_bench.py --robots --json benchmarks/results/model_robots.json
     python benchmarks/model_bench.py --report benchmarks/results/model_before.json \
         benchmarks/results/model_after.json            # tables into MODEL.md
 
@@ -148,7 +166,147 @@ def run(repeat: int, sim_T: float) -> dict[str, Any]:
     return {"machine": info, "repeat": repeat, "evaluate": rows, "simulate": sims}
 
 
+def _ur5_point() -> tuple[Any, Any]:
+    """UR5 with the tool frame pinned to the world where it is at q0 (3-row point closure)."""
+    import numpy as np
+    import pinocchio as pin
+
+    from nonmin.model.robots import FrameConstraint, RobotModel
+
+    root = Path(pin.__file__).resolve().parents[4] / "share" / "example-robot-data" / "robots"
+    path = root / "ur_description" / "urdf" / "ur5_robot.urdf"
+    if not path.is_file():
+        raise SystemExit(f"--robots needs example-robot-data ({path} is missing)")
+    base = RobotModel.from_urdf(path)
+    q0 = np.array([0.3, -1.0, 1.4, -0.6, 1.2, 0.4])
+    pinned = base.frame_placement(q0, "tool0")[:3, 3]
+    robot = base.replace(robot_constraints=(FrameConstraint.point("closure", "tool0", placement_b=pinned),))
+    return robot, robot.state(q0)
+
+
+def _admissible(robot: Any, state: Any, rng: Any) -> Any:
+    """A velocity in the null space of the active constraints' A (scale ~1 rad/s)."""
+    import numpy as np
+
+    A = robot.constraint_terms(state.t, state.q, np.zeros(robot.n), state.active).A
+    _, sv, Vt = np.linalg.svd(A)
+    r = int(np.sum(sv > 1e-10 * max(1.0, sv[0])))
+    return state.replace(qd=Vt[r:].T @ rng.normal(size=robot.n - r))
+
+
+def _pin_setup(robot: Any) -> tuple[Any, ...]:
+    import pinocchio as pin
+
+    pm = robot.pinocchio_model
+    models = pin.StdVec_RigidConstraintModel()
+    datas = pin.StdVec_RigidConstraintData()
+    for c in robot.robot_constraints:
+        fa = pm.frames[robot.frame_id(f"{c.name}:a")]
+        fb = pm.frames[robot.frame_id(f"{c.name}:b")]
+        kind = {"point": pin.ContactType.CONTACT_3D, "weld": pin.ContactType.CONTACT_6D}[c.type]
+        cm = pin.RigidConstraintModel(kind, pm, fa.parentJoint, fa.placement, fb.parentJoint,
+                                      fb.placement, pin.ReferenceFrame.LOCAL)
+        models.append(cm)
+        datas.append(cm.createData())
+    data = pm.createData()
+    pin.initConstraintDynamics(pm, data, models, datas)
+    return pm, data, models, datas, pin.ProximalSettings(1e-12, 0.0, 1)
+
+
+def run_robots(repeat: int) -> dict[str, Any]:
+    """Model + kernel from (q, qd) on the robots: the engine against Pinocchio (see doc)."""
+    import numpy as np
+    import pinocchio as pin
+
+    from nonmin import _engine
+    from nonmin.core import forward_dynamics
+    from nonmin.model.robots import two_arm_grasp
+
+    rng = np.random.default_rng(0)
+    rows = []
+    for label, make in (("UR5 + point closure", _ur5_point), ("dual-arm grasp", two_arm_grasp)):
+        robot, state = make()
+        state = _admissible(robot, state, rng)
+        t, q, qd, act = state.t, state.q, state.qd, state.active
+        prog = robot.engine_program()
+        terms, ws = prog.make_terms(), prog.make_workspace()
+        mask = np.array([c.name in act for c in robot.constraints], dtype=np.uint8)
+        qdd = np.empty(robot.n)
+        need = _engine.NEED_M | _engine.NEED_H | _engine.NEED_A | _engine.NEED_GAMMA
+
+        def engine(prog=prog, terms=terms, ws=ws, t=t, q=q, qd=qd, mask=mask, qdd=qdd) -> None:
+            _engine.program_forward(prog, terms, ws, t, q, qd, mask, None, qdd)
+
+        def evaluate(prog=prog, terms=terms, ws=ws, t=t, q=q, qd=qd, mask=mask, need=need) -> None:
+            prog.evaluate_into(terms, ws, t, q, qd, mask, need)
+
+        def python_api(robot=robot, t=t, q=q, qd=qd, act=act) -> Any:
+            mt = robot.evaluate(t, q, qd, act)
+            return forward_dynamics(mt.M, mt.h + mt.f_passive, mt.constraints.A, mt.constraints.gamma)
+
+        pm, data, cms, cds, prox = _pin_setup(robot)
+        qn = robot.pinocchio_configuration(q)
+        v = robot.to_pinocchio_velocity(q, qd)
+        tau = np.zeros(robot.nv)
+
+        def pinocchio(pm=pm, data=data, qn=qn, v=v, tau=tau, cms=cms, cds=cds, prox=prox) -> Any:
+            return pin.constraintDynamics(pm, data, qn, v, tau, cms, cds, prox)
+
+        assert _engine.program_forward(prog, terms, ws, t, q, qd, mask, None, qdd) == 0
+        a_pin = np.array(pinocchio())
+        a_eng = robot.to_pinocchio_acceleration(q, qd, qdd)
+        a_api = robot.to_pinocchio_acceleration(q, qd, python_api())
+        scale = max(1.0, float(np.abs(a_pin).max()))
+        timings = {name: median_us(fn, repeat) for name, fn in
+                   (("engine", engine), ("evaluate", evaluate), ("python_api", python_api),
+                    ("pinocchio", pinocchio))}
+        rows.append({
+            "case": label,
+            "n": robot.n,
+            "nv": robot.nv,
+            "m": robot.num_rows(act),
+            **{f"{k}_us": v_[0] for k, v_ in timings.items()},
+            **{f"{k}_cpu_us": v_[1] for k, v_ in timings.items()},
+            "ratio_wall": timings["engine"][0] / timings["pinocchio"][0],
+            "ratio_cpu": timings["engine"][1] / timings["pinocchio"][1],
+            "max_rel_diff_engine_vs_pin": float(np.abs(a_eng - a_pin).max()) / scale,
+            "max_rel_diff_api_vs_pin": float(np.abs(a_api - a_pin).max()) / scale,
+        })
+    import nonmin
+
+    info = machine()
+    info["nonmin"] = str(Path(nonmin.__file__).parent)
+    info["pinocchio"] = pin.__version__
+    info["loadavg"] = os.getloadavg()
+    return {"machine": info, "repeat": repeat, "robots": rows}
+
+
+def markdown_robots(res: dict[str, Any], label: str) -> str:
+    lines = [
+        f"**{label}** (repeat={res['repeat']}, commit {res['machine']['commit']}, Pinocchio "
+        f"{res['machine']['pinocchio']}, load average {res['machine']['loadavg'][0]:.1f}); "
+        "medians in µs, wall / thread CPU",
+        "",
+        "| robot | n / nv / m | engine model+kernel | engine evaluate | python API | pin "
+        "constraintDynamics | ratio wall | ratio CPU | max rel diff a (engine, API) |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    for r in res["robots"]:
+        lines.append(
+            f"| {r['case']} | {r['n']} / {r['nv']} / {r['m']} "
+            f"| {r['engine_us']:.2f} / {r['engine_cpu_us']:.2f} "
+            f"| {r['evaluate_us']:.2f} / {r['evaluate_cpu_us']:.2f} "
+            f"| {r['python_api_us']:.1f} / {r['python_api_cpu_us']:.1f} "
+            f"| {r['pinocchio_us']:.2f} / {r['pinocchio_cpu_us']:.2f} "
+            f"| {r['ratio_wall']:.2f} | {r['ratio_cpu']:.2f} "
+            f"| {r['max_rel_diff_engine_vs_pin']:.1e}, {r['max_rel_diff_api_vs_pin']:.1e} |"
+        )
+    return "\n".join(lines)
+
+
 def markdown(res: dict[str, Any], label: str) -> str:
+    if "robots" in res:
+        return markdown_robots(res, label)
     lines = [
         f"**{label}** (repeat={res['repeat']}, commit {res['machine']['commit']}, "
         f"nonmin from {res['machine']['nonmin']}, load average {res['machine']['loadavg'][0]:.1f})",
@@ -195,6 +353,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--sim-T", type=float, default=1.0, help="simulated seconds per simulate() run")
     ap.add_argument("--quick", action="store_true", help="few repeats, short simulation")
     ap.add_argument("--label", default="run")
+    ap.add_argument("--robots", action="store_true",
+                    help="model + kernel on the robots, engine vs Pinocchio constraintDynamics")
     ap.add_argument("--json", type=Path, default=None, help="write the results to this JSON file")
     ap.add_argument("--report", type=Path, nargs="+", default=None, metavar="JSON",
                     help="only rewrite the results section of MODEL.md from these result files")
@@ -203,7 +363,7 @@ def main(argv: list[str] | None = None) -> None:
         report(args.report)
         return
     repeat, sim_T = (100, 0.1) if args.quick else (args.repeat, args.sim_T)
-    res = run(repeat, sim_T)
+    res = run_robots(repeat) if args.robots else run(repeat, sim_T)
     res["label"] = args.label
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)

@@ -88,6 +88,26 @@ TreeProgram::TreeProgram(TreeDescription description) : d_(std::move(description
         row += dim;
     }
     m_all_ = row;
+    for (std::size_t i = 0; i < model.joints.size(); ++i) {
+        const Joint& j = model.joints[i];
+        if (is_quat(j.type)) {
+            qblocks_.push_back(QuatBlock{static_cast<int>(i), quat_q(j), ang_v(j), j.iq, j.iv,
+                                         j.type == JointType::free_flyer});
+            continue;
+        }
+        const int len = joint_nv(j.type);
+        if (!runs_.empty() && runs_.back().iq + runs_.back().len == j.iq &&
+            runs_.back().iv + runs_.back().len == j.iv)
+            runs_.back().len += len;
+        else
+            runs_.push_back(Run{j.iq, j.iv, len});
+    }
+    for (int iv : d_.actuated) {
+        int q = -1;
+        for (const Run& r : runs_)
+            if (iv >= r.iv && iv < r.iv + r.len) q = r.iq + (iv - r.iv);
+        act_q_.push_back(q);
+    }
 }
 
 std::unique_ptr<Workspace> TreeProgram::make_workspace() const {
@@ -144,47 +164,32 @@ void TreeProgram::velocity_map(const double* q, const double* qd, TreeWorkspace&
 }
 
 void TreeProgram::apply_Tt(const TreeWorkspace& ws, const double* fv, double* fq) const {
-    const TreeModel& model = d_.model;
-    for (std::size_t i = 0; i < model.joints.size(); ++i) {
-        const Joint& j = model.joints[i];
-        if (!is_quat(j.type)) {
-            const int nvj = joint_nv(j.type);
-            for (int k = 0; k < nvj; ++k) fq[j.iq + k] = fv[j.iv + k];
-            continue;
-        }
-        const int s = quat_q(j), a = ang_v(j);
-        Eigen::Map<Vec4>(fq + s) = ws.Tq[i].transpose() * Eigen::Map<const Vec3>(fv + a);
-        if (j.type == JointType::free_flyer)
-            Eigen::Map<Vec3>(fq + j.iq) = ws.R[i] * Eigen::Map<const Vec3>(fv + j.iv);
-    }
-}
-
-void TreeProgram::map_row(const TreeWorkspace& ws, const double* av, double* aq) const {
-    const TreeModel& model = d_.model;
-    for (std::size_t i = 0; i < model.joints.size(); ++i) {
-        const Joint& j = model.joints[i];
-        if (!is_quat(j.type)) {
-            const int nvj = joint_nv(j.type);
-            for (int k = 0; k < nvj; ++k) aq[j.iq + k] = av[j.iv + k];
-            continue;
-        }
-        const int s = quat_q(j), a = ang_v(j);
-        Eigen::Map<Vec4>(aq + s) = ws.Tq[i].transpose() * Eigen::Map<const Vec3>(av + a);
-        if (j.type == JointType::free_flyer)
-            Eigen::Map<Vec3>(aq + j.iq) = ws.R[i] * Eigen::Map<const Vec3>(av + j.iv);
+    for (const Run& r : runs_)
+        for (int k = 0; k < r.len; ++k) fq[r.iq + k] = fv[r.iv + k];
+    for (const QuatBlock& b : qblocks_) {
+        Eigen::Map<Vec4>(fq + b.qs) = ws.Tq[b.joint].transpose() * Eigen::Map<const Vec3>(fv + b.a);
+        if (b.free) Eigen::Map<Vec3>(fq + b.iq) = ws.R[b.joint] * Eigen::Map<const Vec3>(fv + b.iv);
     }
 }
 
 void TreeProgram::congruence(TreeWorkspace& ws, double* M) const {
-    // W = M_v T row by row (each row of M_v mapped like a constraint row); then column c of
-    // Tᵀ W is Tᵀ W[:, c], stored as row c (M is symmetric) and symmetrized.
+    // W = M_v T (each row of M_v mapped like a constraint row), then M = Tᵀ W by rows (row
+    // copies on the identity runs, 4 × 3 / 3 × 3 blocks on the quaternion joints), symmetrized.
     const int nv = d_.model.nv, nq = d_.model.nq;
-    for (int r = 0; r < nv; ++r) map_row(ws, ws.Mv.row(r).data(), ws.W.row(r).data());
-    double* col = ws.fv.data();  // nv scratch
+    for (int r = 0; r < nv; ++r) apply_Tt(ws, ws.Mv.row(r).data(), ws.W.row(r).data());
     Eigen::Map<Mat> out(M, nq, nq);
-    for (int c = 0; c < nq; ++c) {
-        for (int r = 0; r < nv; ++r) col[r] = ws.W(r, c);
-        apply_Tt(ws, col, out.row(c).data());
+    for (const Run& r : runs_) out.middleRows(r.iq, r.len) = ws.W.middleRows(r.iv, r.len);
+    for (const QuatBlock& b : qblocks_) {
+        const Mat34& G = ws.Tq[b.joint];
+        for (int c = 0; c < nq; ++c) {
+            const Vec3 w(ws.W(b.a, c), ws.W(b.a + 1, c), ws.W(b.a + 2, c));
+            for (int k = 0; k < 4; ++k) out(b.qs + k, c) = G.col(k).dot(w);
+            if (b.free) {
+                const Vec3 l(ws.W(b.iv, c), ws.W(b.iv + 1, c), ws.W(b.iv + 2, c));
+                const Vec3 x = ws.R[b.joint] * l;
+                for (int k = 0; k < 3; ++k) out(b.iq + k, c) = x[k];
+            }
+        }
     }
     for (int r = 0; r < nq; ++r)
         for (int c = r + 1; c < nq; ++c) {
@@ -332,13 +337,20 @@ Status TreeProgram::evaluate(double /*t*/, const double* q, const double* qd,
         for (int k = 0; k < nv; ++k) ws.fv[k] = -d_.damping[k] * ws.v[k];
         apply_Tt(ws, ws.fv.data(), out.f_passive.data());
     }
-    if (need & NEED_B) {
+    if (need & NEED_B) {  // column c of B = Tᵀ e_{actuated[c]}
         out.B.setZero();
         for (int c = 0; c < k_; ++c) {
-            for (int k = 0; k < nv; ++k) ws.fv[k] = 0.0;
-            ws.fv[d_.actuated[c]] = 1.0;
-            apply_Tt(ws, ws.fv.data(), ws.W.row(0).data());  // nq scratch
-            for (int r = 0; r < nq; ++r) out.B(r, c) = ws.W(0, r);
+            if (act_q_[c] >= 0) {
+                out.B(act_q_[c], c) = 1.0;
+                continue;
+            }
+            const int iv = d_.actuated[c];
+            for (const QuatBlock& b : qblocks_) {
+                if (iv >= b.a && iv < b.a + 3)
+                    for (int k = 0; k < 4; ++k) out.B(b.qs + k, c) = ws.Tq[b.joint](iv - b.a, k);
+                if (b.free && iv >= b.iv && iv < b.iv + 3)
+                    for (int k = 0; k < 3; ++k) out.B(b.iq + k, c) = ws.R[b.joint](k, iv - b.iv);
+            }
         }
     }
     if (!(want_rows || want_gamma || want_phi)) return Status::ok;
@@ -379,7 +391,7 @@ Status TreeProgram::evaluate(double /*t*/, const double* q, const double* qd,
         } else {
             frame_rows(c, ws, want_rows, want_gamma, want_phi, target.row(r0).data(), g, p);
             if (want_rows && quat_)
-                for (int r = 0; r < dim; ++r) map_row(ws, ws.Av.row(r0 + r).data(), out.A.row(r0 + r).data());
+                for (int r = 0; r < dim; ++r) apply_Tt(ws, ws.Av.row(r0 + r).data(), out.A.row(r0 + r).data());
         }
         if (need & NEED_VELOCITY)
             for (int r = 0; r < dim; ++r) out.velocity[r0 + r] = out.A.row(r0 + r).dot(CVecMap(qd, nq));

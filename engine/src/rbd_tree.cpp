@@ -7,28 +7,6 @@
 
 namespace nonmin::rbd {
 
-int joint_nq(JointType t) {
-    switch (t) {
-        case JointType::revolute:
-        case JointType::prismatic: return 1;
-        case JointType::spherical: return 4;
-        case JointType::free_flyer: return 7;
-        case JointType::translation: return 3;
-    }
-    throw EngineError("unknown joint type");
-}
-
-int joint_nv(JointType t) {
-    switch (t) {
-        case JointType::revolute:
-        case JointType::prismatic: return 1;
-        case JointType::spherical: return 3;
-        case JointType::free_flyer: return 6;
-        case JointType::translation: return 3;
-    }
-    throw EngineError("unknown joint type");
-}
-
 void TreeModel::validate() const {
     if (nq < 0 || nv < 0) throw EngineError("tree model: negative nq or nv");
     std::vector<int> qused(nq, 0), vused(nv, 0);

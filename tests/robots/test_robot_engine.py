@@ -307,3 +307,25 @@ def test_tree_program_through_the_program_interface() -> None:
             np.testing.assert_array_equal(batch[name][i][rows], getattr(mt.constraints, name))
         assert abs(batch["kinetic"][i] - 0.5 * qds[i] @ mt.M @ qds[i]) < REL * batch["kinetic"][i]
         assert batch["potential"][i] == robot.potential_energy(qs[i])
+
+
+def test_program_forward_is_model_plus_kernel() -> None:
+    """_engine.program_forward (evaluate + the engine's solve in one call) gives the q̈ of
+    RobotModel.evaluate + nonmin.core.forward_dynamics, for the full and a partial active set."""
+    from nonmin import _engine
+    from nonmin.core import forward_dynamics
+
+    robot, state = two_arm_grasp()
+    prog = robot.engine_program()
+    terms, ws = prog.make_terms(), prog.make_workspace()
+    rng = np.random.default_rng(12)
+    tau = rng.normal(size=robot.k)
+    for names, mask in ((robot.constraint_names, [1, 1, 1]), (("grasp_right",), [1, 0, 1])):
+        mt = robot.evaluate(0.0, state.q, state.qd, names)
+        f = mt.B @ tau
+        ref = forward_dynamics(mt.M, mt.h + mt.f_passive, mt.constraints.A, mt.constraints.gamma, f)
+        qdd = np.empty(robot.n)
+        status = _engine.program_forward(prog, terms, ws, 0.0, state.q, state.qd,
+                                         np.array(mask, dtype=np.uint8), f, qdd)
+        assert status == 0
+        assert _rel(qdd, ref) < 1e-10

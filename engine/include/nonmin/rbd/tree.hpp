@@ -28,8 +28,12 @@ enum class JointType : int {
     translation = 4,  // nq = nv = 3, translation in the joint frame
 };
 
-int joint_nq(JointType t);
-int joint_nv(JointType t);
+constexpr int joint_nq(JointType t) {
+    return t == JointType::free_flyer ? 7 : t == JointType::spherical ? 4 : t == JointType::translation ? 3 : 1;
+}
+constexpr int joint_nv(JointType t) {
+    return t == JointType::free_flyer ? 6 : (t == JointType::spherical || t == JointType::translation) ? 3 : 1;
+}
 
 struct Joint {
     JointType type = JointType::revolute;

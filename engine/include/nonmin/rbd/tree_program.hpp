@@ -97,9 +97,23 @@ class TreeProgram : public Program {
     void velocity_map(const double* q, const double* qd, TreeWorkspace& ws) const;
 
   private:
-    void apply_Tt(const TreeWorkspace& ws, const double* fv, double* fq) const;  // fq = Tᵀ fv
-    void congruence(TreeWorkspace& ws, double* M) const;                        // M = Tᵀ M_v T
-    void map_row(const TreeWorkspace& ws, const double* av, double* aq) const;  // aq = av T
+    // fq = Tᵀ fv (nv -> nq); also a row a_v of A_v to the row a_v T of A.
+    void apply_Tt(const TreeWorkspace& ws, const double* fv, double* fq) const;
+    void congruence(TreeWorkspace& ws, double* M) const;  // M = Tᵀ M_v T (symmetrized)
+
+    // T is the identity on runs of coordinates (iq .. iq+len ↔ iv .. iv+len) and a small block
+    // on each quaternion joint (quaternion qs..qs+4 ↔ angular velocity a..a+3; free flyer also
+    // position iq..iq+3 ↔ body linear velocity iv..iv+3 through Rᵀ).
+    struct Run {
+        int iq, iv, len;
+    };
+    struct QuatBlock {
+        int joint, qs, a, iq, iv;
+        bool free;
+    };
+    std::vector<Run> runs_;
+    std::vector<QuatBlock> qblocks_;
+    std::vector<int> act_q_;  // per actuator: its coordinate when T is the identity there, else −1
     // Rows, γ and φ of one frame constraint (A rows in velocity space, nv columns).
     void frame_rows(const TreeConstraint& c, TreeWorkspace& ws, bool rows, bool gamma, bool phi,
                     double* A, double* g, double* p) const;

@@ -30,6 +30,15 @@ generalized gravity ``g_v`` and selection S of the actuated velocity components.
 ``dM/dt − 2C = Ṫᵀ M_v T − Tᵀ M_v Ṫ + Tᵀ (dM_v/dt − 2 C_v) T`` is skew-symmetric. For robots
 without quaternions T = I and every term is Pinocchio's own.
 
+Evaluation
+----------
+The tree is compiled once (:mod:`nonmin.model.robots._tree`) into the engine's
+``TreeProgram`` (:meth:`RobotModel.engine_program`), which evaluates these terms in C++ with
+its own CRBA and RNEA (``h = −Tᵀ rnea(q, v, Ṫ qd)``, no Coriolis matrix) and frame
+kinematics; Pinocchio is the parser and the oracle (``_evaluate_pinocchio``), and evaluates
+only trees with joint types the engine does not have, ``coriolis_matrix``,
+``constraint_jacobian_dot`` and ``geometry``.
+
 Constraints
 -----------
 See :mod:`nonmin.model.robots._constraints` for the frame constraints (point, weld, hinge,
