@@ -10,6 +10,7 @@ void register_all(nanobind::module_& m) {
     bind_tape(m);
     bind_spatial(m);
     bind_rbd(m);
+    bind_sim(m);
 }
 
 }  // namespace nonmin::bindings

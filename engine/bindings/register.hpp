@@ -13,5 +13,6 @@ void bind_core(nanobind::module_& m);     // core.cpp: Solver (single, batched),
 void bind_tape(nanobind::module_& m);     // tape.cpp: TapeProgram (SymPy models)
 void bind_spatial(nanobind::module_& m);  // spatial.cpp: SpatialDescription, SpatialProgram
 void bind_rbd(nanobind::module_& m);      // rbd.cpp: TreeProgram (robots)
+void bind_sim(nanobind::module_& m);      // sim.cpp: SimLoop, SimOptions, PyProgram (needs Program)
 
 }  // namespace nonmin::bindings

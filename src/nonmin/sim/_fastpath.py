@@ -46,7 +46,7 @@ from ._stabilization import (
 FloatArray = NDArray[np.float64]
 
 #: Engines accepted by ``simulate(engine=...)``.
-ENGINES = ("auto", "compiled", "python")
+ENGINES = ("auto", "compiled", "engine", "python")
 
 #: Target wall time (s) of one compiled chunk (progress, interrupts, step budget in between).
 CHUNK_SECONDS = 0.25
@@ -87,7 +87,7 @@ def program_for(
     With ``engine="compiled"`` a run that cannot use it raises :class:`InputError` naming the
     reason (``MissingDependencyError`` when numba is missing); with ``"auto"`` it returns None.
     """
-    if engine == "python":
+    if engine in ("python", "engine"):
         return None
     reason = _ineligible(model, integ, stab, controller, events, unilateral, active)
     prog = None

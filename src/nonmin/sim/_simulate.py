@@ -61,7 +61,7 @@ from ..errors import (
     ZenoError,
 )
 from ..model import ConstraintTerms, Model, State
-from . import _durable, _fastpath
+from . import _durable, _engine, _fastpath
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
 from ._integrators import METHODS, Integrator, StepperState, hermite_quintic
 from ._progress import Progress
@@ -535,15 +535,21 @@ def simulate(
         projection stabilization, False otherwise).
     h0 : float, optional
         First step of adaptive methods (default: Hairer's starting-step heuristic).
-    engine : {"auto", "compiled", "python"}, default "auto"
-        ``"python"``: the general driver. ``"compiled"``: the whole run in numba's compiled
-        loop (same algorithm, same results to round-off, ~100× faster); it needs method
+    engine : {"auto", "compiled", "engine", "python"}, default "auto"
+        ``"python"``: the general driver. ``"engine"``: the whole loop in the compiled engine
+        (C++, :mod:`nonmin.sim._engine`; same algorithm, results to round-off): every built-in
+        method, stabilization, ``t_eval`` and controllers (called back), for any model (its
+        compiled program, or its Python ``evaluate`` called back); not yet events or
+        automatic contact (:class:`~nonmin.errors.InputError` names what is missing);
+        failures hand over to the general driver as with ``"compiled"``. ``"compiled"``: the
+        whole run in numba's compiled loop (same algorithm, same results to round-off, ~100× faster); it needs method
         ``"rk4"``, the mass-metric projection, no controller, no events, no automatic contact,
         numba, and a model with a compiled program (:meth:`nonmin.model.Model.fast_program`:
         planar models without springs, dampers, drivers or user-defined joints), and raises
         :class:`~nonmin.errors.InputError` naming what is missing otherwise. ``"auto"``:
-        compiled when possible, else the general driver. ``trajectory.metadata["engine"]``
-        tells which ran. If a kernel fails in the compiled loop, the general driver takes over
+        the numba loop when possible, else the engine when it covers the run (not with the
+        core's backend set to ``"numpy"``), else the general driver.
+        ``trajectory.metadata["engine"]`` tells which ran. If a kernel fails in the compiled loop, the general driver takes over
         at the last accepted step (and raises the typed error).
     checkpoint : path, optional
         A ``.npz`` file that receives the samples so far (status ``interrupted``) every
@@ -679,6 +685,12 @@ def simulate(
     unilateral = tuple(c.name for c in model.constraints if c.kind == "unilateral") if contact else ()
     system = _System(model, controller, stab, rank_rtol, n, k, act, cstate, unilateral=unilateral)
     prog = _fastpath.program_for(engine, model, integ, stab, controller, events, unilateral, act)
+    use_engine = False
+    if prog is None and engine in ("auto", "engine"):
+        why = _engine.ineligible(integ, stab, events, unilateral, engine)
+        if why is not None and engine == "engine":
+            raise InputError(f"engine='engine' cannot run this simulation: {why}")
+        use_engine = why is None
     meta = {
         "model": _describe(model),
         "options": {
@@ -697,7 +709,7 @@ def simulate(
             "engine": engine,
         },
         "initial_state": {"t": t0, "q": q.tolist(), "qd": qd.tolist(), "active": sorted(act)},
-        "engine": "compiled" if prog is not None else "python",
+        "engine": "compiled" if prog is not None else ("engine" if use_engine else "python"),
     }
     rec = _Recorder(model)
     records: list[EventRecord] = []
@@ -725,17 +737,49 @@ def simulate(
     bar = _durable.Checkpointer(Progress(t0, t1, progress), ck_path, ck_every, t0, snapshot)
     t = t0
     try:
-        if project_initial and act:
-            q, qd = stab.project(model, t0, q, qd, act, rank_rtol) if isinstance(stab, Projection) \
-                else Projection().project(model, t0, q, qd, act, rank_rtol)
-        t = t0
-        p = system.point(t, q, qd)
-        if t_out is None or (t_out.size and t_out[0] == t0):
-            rec.add(p, system.active)
-        out_i = 0 if t_out is None else int(np.searchsorted(t_out, t0, side="right"))
-        watches = _watches(events, system.active, unilateral)
-        gvals = [_guard_value(system, w, p) for w in watches]
-        state = integ.init(system.rhs, t, np.concatenate((q, qd)), h_init)
+        er = None
+        if use_engine:
+            ccb = None
+            if controller is not None:
+                ccb = _engine.ControllerCallback(controller, system.cstate, k, None, model)
+            opts = _engine.options(
+                integ, stab, dt=h_init, t1=t1, h0=h_init, rank_rtol=rank_rtol,
+                drift_factor=DRIFT_RANK_FACTOR, project_initial=project_initial,
+                max_steps=int(max_steps),
+            )  # fmt: skip
+            er = _engine.run(model, opts=opts, active_mask=model_mask(model, act), t0=t0, q=q, qd=qd,
+                             t_out=t_out, controller=ccb, progress=bar)  # fmt: skip
+            if ccb is not None:
+                system.cstate = ccb.state
+            if not er.started:  # the first evaluation failed: the general driver raises
+                er = None
+                meta["engine"] = "python"
+        if er is not None:
+            for blk in er.blocks:
+                blk["active_mask"] = blk["active_mask"].astype(bool)
+                rec.extend(blk)
+            n_steps += er.steps
+            n_rejected += er.n_rejected
+            system.n_rhs += er.n_rhs
+            t = er.t
+            out_i = er.out_i if t_out is not None else 0
+            q, qd = er.y[:n].copy(), er.y[n:].copy()
+            watches, gvals = [], []
+            state = StepperState(t, er.y.copy(), None, er.h if integ.adaptive else h_init)
+            if er.handover:
+                meta["engine"] = f"engine, then python from t = {t:.12g}"
+        else:
+            if project_initial and act:
+                q, qd = stab.project(model, t0, q, qd, act, rank_rtol) if isinstance(stab, Projection) \
+                    else Projection().project(model, t0, q, qd, act, rank_rtol)
+            t = t0
+            p = system.point(t, q, qd)
+            if t_out is None or (t_out.size and t_out[0] == t0):
+                rec.add(p, system.active)
+            out_i = 0 if t_out is None else int(np.searchsorted(t_out, t0, side="right"))
+            watches = _watches(events, system.active, unilateral)
+            gvals = [_guard_value(system, w, p) for w in watches]
+            state = integ.init(system.rhs, t, np.concatenate((q, qd)), h_init)
         project_y = None
         if isinstance(stab, Projection) and integ.adaptive:
 
@@ -952,6 +996,11 @@ def simulate(
 
 
 # --------------------------------------------------------------------------- helpers
+
+
+def model_mask(model: Model, active: frozenset[str]) -> NDArray[np.uint8]:
+    """The active set as the engine's mask (one entry per constraint, declaration order)."""
+    return np.array([c.name in active for c in model.constraints], dtype=np.uint8)
 
 
 def _describe(model: Model) -> dict[str, Any]:

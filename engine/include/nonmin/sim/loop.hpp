@@ -1,0 +1,216 @@
+// The simulation loop of the engine, generic over nonmin::Program (the model) and driven by
+// nonmin::Solver (the projection dynamics). Specified by the Python driver
+// (nonmin/sim/_simulate.py, _integrators.py, _stabilization.py), which stays the reference:
+// every decision below (step clipping, error control, output sampling, the projection's
+// Gauss–Newton cutoff rules, the drift-aware rank tolerance) is the driver's, in the same order,
+// so the two agree to round-off.
+//
+// One accepted step (no events on this path):
+//   1. the integrator advances y = (q, qd) with qdd = Solver::forward (corrected eq. (ddq_sim))
+//      under the drift-aware rank tolerance (drift_rank_rtol) and the stabilization's bias
+//      (γ, or γ + 2α(A qd + φ_t) + β²φ with Baumgarte);
+//   2. the stabilization projects the step end (mass-metric Gauss–Newton on φ, then the velocity
+//      correction; eq. of nonmin.core.position_correction);
+//   3. the samples of the step are recorded: the step end, or the requested output times from
+//      the method's continuous extension (DOPRI5's own; the quintic Hermite interpolant of the
+//      projected step ends for the fixed-step methods), projected.
+//
+// Everything is allocated once in make_loop() from the program's sizes; a step allocates
+// nothing (the sample buffers grow geometrically and are reused after each take).
+#pragma once
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/SVD>
+
+#include "../program.hpp"
+#include "../solver.hpp"
+#include "../types.hpp"
+
+namespace nonmin::sim {
+
+// Constants of nonmin/sim/_stabilization.py and _simulate.py (same names, same values).
+constexpr double DEFAULT_RTOL = 1e-10;                  // nonmin.core.linalg.DEFAULT_RTOL
+constexpr double ROUNDOFF_FLOOR = 4.0 * std::numeric_limits<double>::epsilon();
+constexpr double POSITION_CUT_RTOL = 1e-2;
+constexpr double SINGULAR_CUT_RTOL = 1e-4;
+constexpr double ROUNDOFF_RESIDUAL_RATIO = 1e3;
+constexpr double CHORD_RATE = 0.1;
+constexpr double DRIFT_RTOL_CAP = 1e-2;                  // drift_rank_rtol's upper bound
+
+enum class Method : int { rk4 = 0, dopri5 = 1, midpoint = 2 };
+enum class Stabilization : int { none = 0, baumgarte = 1, projection = 2 };
+
+// nonmin.sim.Projection's parameters.
+struct ProjectionOptions {
+    double tol = 0.0;
+    int max_iter = 10;
+    bool velocity = true;
+    bool euclidean = false;      // metric="euclidean"
+    double velocity_rtol = -1.0;  // ≤ 0: None
+};
+
+struct Options {
+    Method method = Method::rk4;
+    double dt = 1e-3;  // fixed step (rk4, midpoint)
+    // dopri5
+    double rtol = 1e-8, atol = 1e-10;
+    double h_max = std::numeric_limits<double>::infinity();
+    double h_min_factor = 1e-14;
+    double h0 = 0.0;  // first step (≤ 0: Hairer's heuristic)
+    // midpoint
+    double xtol = 1e-13;
+    int max_iter = 50;
+    int max_halvings = 12;
+    // stabilization
+    Stabilization stab = Stabilization::projection;
+    double alpha = 10.0, beta = 10.0;  // Baumgarte gains
+    ProjectionOptions projection;
+    bool project_initial = true;
+    ProjectionOptions initial_projection;  // used when stab != projection
+    // rank policy
+    double rank_rtol = -1.0;  // ≤ 0: None (the core default)
+    double drift_factor = 1.0;
+    double spd_rtol = 1e-13;
+    double sym_rtol = 1e-9;
+    // run
+    double t1 = 1.0;
+    long long max_steps = 10000000;
+};
+
+// A controller evaluated by the loop: u(t, q, qd) at every evaluation of the dynamics, and
+// update() after every accepted step (nonmin.control.Controller's __call__ and update).
+class Controller {
+  public:
+    virtual ~Controller() = default;
+    virtual Status control(double t, const double* q, const double* qd, const std::uint8_t* active,
+                           double* u) = 0;
+    virtual Status update(double t, const double* q, const double* qd, const std::uint8_t* active) {
+        (void)t, (void)q, (void)qd, (void)active;
+        return Status::ok;
+    }
+};
+
+// The guards watched during the steps (events and unilateral contact): check() is given the
+// evaluation at the projected step end and says whether a guard crossed (or an impact is due);
+// then the step is not accepted, and the event layer takes it (locates the crossing, applies
+// the transition) from the step start. Until the guards are compiled values, the Python
+// driver's own guard code is called back (nonmin.sim._simulate).
+class Watch {
+  public:
+    virtual ~Watch() = default;
+    virtual Status check(double t, const double* q, const double* qd, const double* f_c, bool& fired) = 0;
+};
+
+// Recorded samples (the arrays of nonmin.sim.Trajectory), row-major, appended in order.
+struct Samples {
+    int n = 0, k = 0, c = 0;
+    std::vector<double> t, q, qd, qdd, f_c, u, cond, mu, energy, phi_norm, vel_norm;
+    std::vector<std::int64_t> rank;
+    std::vector<std::uint8_t> active;
+    std::size_t size() const { return t.size(); }
+    void clear();
+};
+
+// Why a call of run() returned.
+enum class Outcome : int {
+    done = 0,      // reached t1, or the step budget of the call
+    handover = 1,  // a numerical failure (kernel status, non-finite qdd, step underflow, no
+                   // convergence, max_steps): the state is the last accepted one; the Python
+                   // driver continues from it and raises the typed error exactly as it would
+    callback = 2,  // a Python callback raised: its exception is kept by the binding
+    event = 3,     // a watched guard crossed in the step: the step was not accepted, the state
+                   // is its start (the event layer takes that step)
+};
+
+// One evaluation of the dynamics at a state (what a sample records).
+struct Point {
+    double t = 0.0;
+    Vec q, qd, qdd, f_c, u;
+    int rank = 0;
+    double mu = 0.0, cond = 1.0, energy = 0.0, phi_norm = 0.0, vel_norm = 0.0;
+};
+
+// The loop: model, solver, options, the active set (fixed on this path), the integration
+// state and every buffer. Plain data; the algorithms are the free functions below.
+struct Loop {
+    const Program* prog = nullptr;
+    Controller* ctrl = nullptr;
+    Watch* watch = nullptr;
+    Options opt;
+    std::unique_ptr<Workspace> ws;
+    Solver solver;
+    Terms T;
+    int n = 0, k = 0, c = 0, m_all = 0;
+
+    // active set and its rows
+    std::vector<std::uint8_t> active;  // one entry per constraint
+    std::vector<int> rows;             // stacked rows of the active constraints (m of them)
+    std::vector<std::uint8_t> hol;     // per active row: has a position level
+    int m = 0, m_hol = 0;
+    bool any_active = false;
+
+    // gathered terms of the active rows
+    Mat Ac, Ah, Alin;  // (m_all × n): active rows, position-level rows, last linearization
+    Vec gam, phi, vel, phih, bias, floor_, rnorm;
+    Vec g, u, qdd, fc, zero_n, aq, dq;
+    Mat Mq, L;  // the projection's metric (n × n), Cholesky factor of M̄
+
+    // integration state
+    double t = 0.0;
+    Vec y, f;          // (2n): state, F(t, y) when have_f
+    bool have_f = false;
+    double h = 0.0;    // dopri5: proposed next step
+    long long n_steps = 0, n_rhs = 0, n_rejected = 0;
+    std::vector<double> t_out;
+    bool every = true;
+    std::size_t out_i = 0;
+    std::string message;  // why the last run() handed over
+
+    // step buffers
+    Vec y0, f0, y1, yq1, ys, yp, fp1, tmp2n, k1, k2, k3, k4, kn, ev;
+    Mat K;  // (7 × 2n) dopri5 stages
+    Vec d_ydiff, d_bspl, d_r3, d_r4;  // dopri5 continuous extension
+    std::vector<Vec> half;            // midpoint halving levels
+    Point p1, ps;
+
+    // diagnostics: cond(M̄) from the singular values of L
+    Eigen::JacobiSVD<Mat> svd;
+
+    Samples rec;
+
+    explicit Loop(int m_max, int n_) : solver(m_max, n_) {}
+};
+
+// Build a loop for `prog` (which must outlive it) with the active mask (one entry per
+// constraint), the options, the output times (empty with `every`: one sample per step) and an
+// optional controller (must outlive the loop). Allocates everything.
+std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active, const Options& opt,
+                                const std::vector<double>& t_out, bool every, Controller* ctrl);
+
+// Initial projection (when asked), the first evaluation and its sample, at (t0, q0, qd0).
+Outcome start(Loop& L, double t0, const double* q0, const double* qd0);
+
+// Continue from a state reached elsewhere (after an event): no projection, no sample; F(t, y) is
+// evaluated afresh; `h` is the proposed step of adaptive methods; the counters continue.
+void resume(Loop& L, double t, const double* y, double h, long long n_steps, std::size_t out_i);
+
+// Advance by at most `max_steps` accepted steps (stops at t1).
+Outcome run(Loop& L, long long max_steps);
+
+// The pieces, exposed for tests and for the event layer.
+Status evaluate(Loop& L, double t, const double* q, const double* qd, unsigned need);
+double drift_rank_rtol(Loop& L);
+Status rhs(Loop& L, double t, const double* y, double* out);
+Status point(Loop& L, double t, const double* q, const double* qd, Point& p, bool diagnostics);
+Status project(Loop& L, double t, double* y, const ProjectionOptions& po);
+
+// hermite_quintic of _integrators.py into out (2n): y(t0 + s) from both ends of a step.
+void hermite_quintic(int n, const double* y0, const double* f0, const double* y1, const double* f1,
+                     double h, double s, double* out);
+
+}  // namespace nonmin::sim

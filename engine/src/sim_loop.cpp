@@ -1,0 +1,821 @@
+// The engine's simulation loop (see nonmin/sim/loop.hpp): evaluation and gathering of the
+// active rows, the drift-aware rank tolerance, the right-hand side, the sample evaluation with
+// its diagnostics, the mass-metric projection, the three integrators and the stepping driver.
+// Each function names the Python function it mirrors; the order of the decisions is theirs.
+#include "nonmin/sim/loop.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace nonmin::sim {
+
+namespace {
+
+constexpr double inf = std::numeric_limits<double>::infinity();
+
+// Dormand–Prince 5(4) (Hairer, Nørsett & Wanner, Solving ODEs I, Table II.5.2), as
+// _integrators.py: _DP_C, _DP_A, _DP_B, _DP_E = _DP_B − _DP_BHAT, _DP_D (dense output).
+constexpr double DP_C[7] = {0.0, 1.0 / 5, 3.0 / 10, 4.0 / 5, 8.0 / 9, 1.0, 1.0};
+constexpr double DP_A[7][6] = {
+    {0, 0, 0, 0, 0, 0},
+    {1.0 / 5, 0, 0, 0, 0, 0},
+    {3.0 / 40, 9.0 / 40, 0, 0, 0, 0},
+    {44.0 / 45, -56.0 / 15, 32.0 / 9, 0, 0, 0},
+    {19372.0 / 6561, -25360.0 / 2187, 64448.0 / 6561, -212.0 / 729, 0, 0},
+    {9017.0 / 3168, -355.0 / 33, 46732.0 / 5247, 49.0 / 176, -5103.0 / 18656, 0},
+    {35.0 / 384, 0.0, 500.0 / 1113, 125.0 / 192, -2187.0 / 6784, 11.0 / 84},
+};
+constexpr double DP_B[7] = {35.0 / 384, 0.0, 500.0 / 1113, 125.0 / 192, -2187.0 / 6784, 11.0 / 84, 0.0};
+constexpr double DP_BHAT[7] = {5179.0 / 57600, 0.0,          7571.0 / 16695, 393.0 / 640,
+                               -92097.0 / 339200, 187.0 / 2100, 1.0 / 40};
+constexpr double DP_D[7] = {-12715105075.0 / 11282082432, 0.0, 87487479700.0 / 32700410799,
+                            -10690763975.0 / 1880347072, 701980252875.0 / 199316789632,
+                            -1453857185.0 / 822651844,  69997945.0 / 29380423};
+
+bool finite(const double* x, int len) {
+    for (int i = 0; i < len; ++i)
+        if (!std::isfinite(x[i])) return false;
+    return true;
+}
+
+// _integrators._clip
+double clip(double t, double h, double t_bound) {
+    const double rem = t_bound - t;
+    if (h >= rem || rem - h <= 1e-9 * h) return rem;
+    return h;
+}
+
+double base_rtol(const Options& o) { return o.rank_rtol > 0.0 ? o.rank_rtol : DEFAULT_RTOL; }
+
+// Projection.velocity_rank_rtol(rtol) (None → the core default)
+double velocity_rtol(const Options& o, const ProjectionOptions& po) {
+    if (po.velocity_rtol <= 0.0) return base_rtol(o);
+    return std::max(po.velocity_rtol, o.rank_rtol > 0.0 ? o.rank_rtol : 0.0);
+}
+
+SolveOptions solve_options(const Loop& L, double rtol) {
+    SolveOptions so;
+    so.rtol = rtol;
+    so.spd_rtol = L.opt.spd_rtol;
+    so.sym_rtol = L.opt.sym_rtol;
+    return so;
+}
+
+// _stabilization._correction: Δ = Sᵀ(−A⁺r) = forward dynamics with zero force and bias r.
+Status correction(Loop& L, const Mat& A, int m, const double* r, double rtol, double* out, int* rank) {
+    const SolveInfo info =
+        L.solver.forward(L.Mq.data(), L.zero_n.data(), A.data(), m, r, solve_options(L, rtol), out, nullptr);
+    if (rank) *rank = info.rank;
+    if (info.status != Status::ok) return info.status;
+    return Status::ok;
+}
+
+}  // namespace
+
+void Samples::clear() {
+    for (auto* v : {&t, &q, &qd, &qdd, &f_c, &u, &cond, &mu, &energy, &phi_norm, &vel_norm}) v->clear();
+    rank.clear();
+    active.clear();
+}
+
+std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active, const Options& opt,
+                                const std::vector<double>& t_out, bool every, Controller* ctrl) {
+    const int n = prog.n(), m_all = prog.m_all();
+    auto Lp = std::make_unique<Loop>(std::max(m_all, 1), n);
+    Loop& L = *Lp;
+    L.prog = &prog;
+    L.ctrl = ctrl;
+    L.opt = opt;
+    L.ws = prog.make_workspace();
+    L.T = prog.make_terms();
+    L.n = n;
+    L.k = prog.k();
+    L.m_all = m_all;
+    const auto& cons = prog.constraints();
+    L.c = static_cast<int>(cons.size());
+    L.active.assign(active, active + L.c);
+    for (const ConstraintInfo& ci : cons) {
+        if (!L.active[&ci - cons.data()]) continue;
+        L.any_active = true;
+        for (int r = 0; r < ci.dim; ++r) {
+            L.rows.push_back(ci.row + r);
+            L.hol.push_back(ci.kind != ConstraintKind::nonholonomic);
+        }
+    }
+    L.m = static_cast<int>(L.rows.size());
+    L.m_hol = static_cast<int>(std::count(L.hol.begin(), L.hol.end(), 1));
+    const int mr = std::max(m_all, 1);
+    L.Ac = Mat::Zero(mr, n);
+    L.Ah = Mat::Zero(mr, n);
+    L.Alin = Mat::Zero(mr, n);
+    for (Vec* v : {&L.gam, &L.phi, &L.vel, &L.phih, &L.bias, &L.floor_, &L.rnorm}) *v = Vec::Zero(mr);
+    for (Vec* v : {&L.g, &L.qdd, &L.fc, &L.zero_n, &L.aq, &L.dq}) *v = Vec::Zero(n);
+    L.u = Vec::Zero(L.k);
+    L.Mq = Mat::Zero(n, n);
+    L.L = Mat::Zero(n, n);
+    for (Vec* v : {&L.y, &L.f, &L.y0, &L.f0, &L.y1, &L.yq1, &L.ys, &L.yp, &L.fp1, &L.tmp2n, &L.k1, &L.k2,
+                   &L.k3, &L.k4, &L.kn, &L.ev, &L.d_ydiff, &L.d_bspl, &L.d_r3, &L.d_r4})
+        *v = Vec::Zero(2 * n);
+    L.K = Mat::Zero(7, 2 * n);
+    L.half.assign(static_cast<std::size_t>(std::max(opt.max_halvings, 0)) + 1, Vec::Zero(2 * n));
+    for (Point* p : {&L.p1, &L.ps}) {
+        p->q = p->qd = p->qdd = p->f_c = Vec::Zero(n);
+        p->u = Vec::Zero(L.k);
+    }
+    L.svd = Eigen::JacobiSVD<Mat>(n, n);  // singular values only
+    L.t_out = t_out;
+    L.every = every;
+    L.rec.n = n;
+    L.rec.k = L.k;
+    L.rec.c = L.c;
+    return Lp;
+}
+
+// ------------------------------------------------------------------------------ evaluation
+
+Status evaluate(Loop& L, double t, const double* q, const double* qd, unsigned need) {
+    const Status s = L.prog->evaluate(t, q, qd, L.active.data(), need, L.T, *L.ws);
+    if (s != Status::ok) return s;
+    const int n = L.n;
+    int ih = 0;
+    for (int i = 0; i < L.m; ++i) {
+        const int r = L.rows[i];
+        if (need & NEED_A) L.Ac.row(i) = L.T.A.row(r);
+        if (need & NEED_GAMMA) L.gam[i] = L.T.gamma[r];
+        if (need & NEED_PHI) L.phi[i] = L.T.phi[r];
+        if (need & NEED_VELOCITY) L.vel[i] = L.T.velocity[r];
+        if (L.hol[i]) {
+            if (need & NEED_A) L.Ah.row(ih) = L.T.A.row(r);
+            if (need & NEED_PHI) L.phih[ih] = L.T.phi[r];
+            ++ih;
+        }
+    }
+    (void)n;
+    return Status::ok;
+}
+
+// _simulate.drift_rank_rtol over the gathered A and φ (position-level rows)
+double drift_rank_rtol(Loop& L) {
+    const double base = base_rtol(L.opt);
+    if (L.m == 0 || L.m_hol == 0) return base;
+    double big = 0.0;
+    for (int i = 0; i < L.m_hol; ++i) {
+        double s = 0.0;
+        for (int j = 0; j < L.n; ++j) s += L.Ah(i, j) * L.Ah(i, j);
+        const double nr = std::sqrt(s);
+        L.rnorm[i] = nr;
+        big = std::max(big, nr);
+    }
+    bool any = false;
+    double drift = 0.0;
+    for (int i = 0; i < L.m_hol; ++i) {
+        const double nr = L.rnorm[i];
+        if (nr > base * big) {
+            any = true;
+            drift = std::max(drift, std::abs(L.phih[i]) / nr);
+        }
+    }
+    if (!any) return base;
+    return std::min(std::max(base, L.opt.drift_factor * drift), DRIFT_RTOL_CAP);
+}
+
+namespace {
+
+// _System._forces (g = h + f_passive + B u) and the stabilization's bias (Stabilization.bias).
+Status forces_and_bias(Loop& L, double t, const double* q, const double* qd) {
+    const int n = L.n;
+    for (int i = 0; i < n; ++i) L.g[i] = L.T.h[i] + L.T.f_passive[i];
+    if (L.ctrl) {
+        const Status s = L.ctrl->control(t, q, qd, L.active.data(), L.u.data());
+        if (s != Status::ok) return s;
+        for (int i = 0; i < n; ++i) {
+            double bu = 0.0;
+            for (int j = 0; j < L.k; ++j) bu += L.T.B(i, j) * L.u[j];
+            L.g[i] += bu;
+        }
+    } else if (L.k) {
+        L.u.setZero();
+    }
+    if (L.opt.stab == Stabilization::baumgarte) {
+        const double a2 = 2.0 * L.opt.alpha, b2 = L.opt.beta * L.opt.beta;
+        for (int i = 0; i < L.m; ++i) L.bias[i] = L.gam[i] + a2 * L.vel[i] + b2 * L.phi[i];
+    } else {
+        for (int i = 0; i < L.m; ++i) L.bias[i] = L.gam[i];
+    }
+    return Status::ok;
+}
+
+unsigned dyn_need(const Loop& L) {
+    unsigned need = NEED_M | NEED_H | NEED_A | NEED_GAMMA | NEED_PHI;
+    if (L.opt.stab == Stabilization::baumgarte) need |= NEED_VELOCITY;
+    if (L.ctrl) need |= NEED_B;
+    return need;
+}
+
+}  // namespace
+
+// _System.rhs: F(t, y) = (qd, qdd)
+Status rhs(Loop& L, double t, const double* y, double* out) {
+    const int n = L.n;
+    const double* q = y;
+    const double* qd = y + n;
+    ++L.n_rhs;
+    Status s = evaluate(L, t, q, qd, dyn_need(L));
+    if (s != Status::ok) return s;
+    s = forces_and_bias(L, t, q, qd);
+    if (s != Status::ok) return s;
+    const double rtol = drift_rank_rtol(L);
+    const SolveInfo info = L.solver.forward(L.T.M.data(), L.g.data(), L.Ac.data(), L.m, L.bias.data(),
+                                            solve_options(L, rtol), L.qdd.data(), nullptr);
+    if (info.status != Status::ok) return info.status;
+    if (!finite(L.qdd.data(), n)) return Status::not_finite;
+    for (int i = 0; i < n; ++i) {
+        out[i] = qd[i];
+        out[n + i] = L.qdd[i];
+    }
+    return Status::ok;
+}
+
+// _System.point (and the diagnostics _Recorder.add derives from it)
+Status point(Loop& L, double t, const double* q, const double* qd, Point& p, bool diagnostics) {
+    const int n = L.n;
+    ++L.n_rhs;
+    Status s = evaluate(L, t, q, qd, dyn_need(L) | NEED_VELOCITY | NEED_ENERGY);
+    if (s != Status::ok) return s;
+    s = forces_and_bias(L, t, q, qd);
+    if (s != Status::ok) return s;
+    const double rtol = drift_rank_rtol(L);
+    const SolveInfo info =
+        L.solver.solve(L.T.M.data(), L.g.data(), L.Ac.data(), L.m, L.bias.data(), solve_options(L, rtol),
+                       p.qdd.data(), p.f_c.data(), nullptr, diagnostics ? L.L.data() : nullptr);
+    if (info.status != Status::ok) return info.status;
+    if (!finite(p.qdd.data(), n)) return Status::not_finite;
+    p.t = t;
+    for (int i = 0; i < n; ++i) {
+        p.q[i] = q[i];
+        p.qd[i] = qd[i];
+    }
+    p.u = L.u;
+    p.rank = info.rank;
+    p.mu = info.mu;
+    p.energy = L.T.kinetic + L.T.potential;
+    double pn = 0.0, vn = 0.0;
+    for (int i = 0; i < L.m_hol; ++i) pn = std::max(pn, std::abs(L.phih[i]));
+    for (int i = 0; i < L.m; ++i) vn = std::max(vn, std::abs(L.vel[i]));
+    p.phi_norm = pn;
+    p.vel_norm = vn;
+    if (diagnostics) {  // cond(M̄) = (σ_max(L)/σ_min(L))² of its Cholesky factor
+        L.svd.compute(L.L);
+        const auto& sv = L.svd.singularValues();
+        const double r = sv[0] / sv[n - 1];
+        p.cond = r * r;
+    } else {
+        p.cond = std::numeric_limits<double>::quiet_NaN();
+    }
+    return Status::ok;
+}
+
+namespace {
+
+void record(Loop& L, const Point& p, double t) {
+    Samples& R = L.rec;
+    R.t.push_back(t);
+    R.q.insert(R.q.end(), p.q.data(), p.q.data() + L.n);
+    R.qd.insert(R.qd.end(), p.qd.data(), p.qd.data() + L.n);
+    R.qdd.insert(R.qdd.end(), p.qdd.data(), p.qdd.data() + L.n);
+    R.f_c.insert(R.f_c.end(), p.f_c.data(), p.f_c.data() + L.n);
+    R.u.insert(R.u.end(), p.u.data(), p.u.data() + L.k);
+    R.active.insert(R.active.end(), L.active.begin(), L.active.end());
+    R.rank.push_back(p.rank);
+    R.cond.push_back(p.cond);
+    R.mu.push_back(p.mu);
+    R.energy.push_back(p.energy);
+    R.phi_norm.push_back(p.phi_norm);
+    R.vel_norm.push_back(p.vel_norm);
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------ projection
+
+// Projection.project (mass or Euclidean metric), in place on y = (q, qd).
+Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
+    if (!L.any_active) return Status::ok;
+    const int n = L.n;
+    double* q = y;
+    double* qd = y + n;
+    Status s = evaluate(L, t, q, qd, NEED_M | NEED_A | NEED_PHI | NEED_VELOCITY);
+    if (s != Status::ok) return s;
+    if (po.euclidean)
+        L.Mq.setIdentity();
+    else
+        L.Mq = L.T.M;  // M at the uncorrected q (the corrections are at the integrator's error)
+    const int mh = L.m_hol;
+    if (mh > 0) {
+        double prev = inf;
+        for (int j = 0; j < n; ++j) L.aq[j] = std::abs(q[j]);
+        const double full = base_rtol(L.opt);
+        double cut = std::max(POSITION_CUT_RTOL, full);
+        bool have_lin = false;  // A of a last linearization is held
+        bool fresh = false;     // the last step was a Gauss–Newton step
+        int lin_count = 0;
+        while (true) {
+            double err = 0.0;
+            for (int i = 0; i < mh; ++i) err = std::max(err, std::abs(L.phih[i]));
+            if (err <= po.tol || err == 0.0) break;  // converged
+            bool at_floor = true;
+            for (int i = 0; i < mh; ++i) {
+                double sa = 0.0;
+                for (int j = 0; j < n; ++j) sa += std::abs(L.Ah(i, j)) * L.aq[j];
+                L.floor_[i] = ROUNDOFF_FLOOR * (1.0 + sa);
+                if (!(std::abs(L.phih[i]) <= L.floor_[i])) at_floor = false;
+            }
+            if (at_floor) break;  // every row at its round-off level
+            bool relin = !have_lin || cut == full;
+            if (have_lin && err > (fresh ? 0.5 : CHORD_RATE) * prev) {
+                if (fresh) {  // a Gauss–Newton step stalled
+                    if (cut == full && err >= prev) break;  // round-off floor reached
+                    cut = full;
+                } else if (err > 0.5 * prev) {  // a chord step without real progress
+                    cut = full;
+                }
+                relin = true;
+            }
+            if (relin) {
+                if (lin_count >= po.max_iter) break;
+                ++lin_count;
+                L.Alin.topRows(mh) = L.Ah.topRows(mh);
+                have_lin = true;
+            }
+            fresh = relin;
+            prev = err;
+            const double c2 = std::max(SINGULAR_CUT_RTOL, full);
+            if (lin_count == 1 && fresh && cut > c2) {  // _stabilization._first_step
+                bool done = false;
+                bool real = false;
+                for (int i = 0; i < mh; ++i)
+                    if (!(std::abs(L.phih[i]) <= ROUNDOFF_RESIDUAL_RATIO * L.floor_[i])) real = true;
+                if (real) {
+                    int rank = 0;
+                    s = correction(L, L.Alin, mh, L.phih.data(), c2, L.dq.data(), &rank);
+                    if (s != Status::ok) return s;
+                    if (rank == mh) {  // no singular value below the cutoff: the full-rank step
+                        cut = c2;
+                        done = true;
+                    }
+                }
+                if (!done) {
+                    cut = std::max(POSITION_CUT_RTOL, full);
+                    s = correction(L, L.Alin, mh, L.phih.data(), cut, L.dq.data(), nullptr);
+                }
+            } else {
+                s = correction(L, L.Alin, mh, L.phih.data(), cut, L.dq.data(), nullptr);
+            }
+            if (s != Status::ok) return s;
+            for (int j = 0; j < n; ++j) q[j] = q[j] + L.dq[j];
+            s = evaluate(L, t, q, qd, NEED_A | NEED_PHI | NEED_VELOCITY);
+            if (s != Status::ok) return s;
+        }
+    }
+    if (po.velocity && L.m > 0) {
+        s = correction(L, L.Ac, L.m, L.vel.data(), velocity_rtol(L.opt, po), L.dq.data(), nullptr);
+        if (s != Status::ok) return s;
+        for (int j = 0; j < n; ++j) qd[j] = qd[j] + L.dq[j];
+    }
+    return Status::ok;
+}
+
+namespace {
+
+// Stabilization.project for the run's stabilization (none and Baumgarte: no correction)
+Status stab_project(Loop& L, double t, double* y) {
+    if (L.opt.stab != Stabilization::projection) return Status::ok;
+    return project(L, t, y, L.opt.projection);
+}
+
+// ------------------------------------------------------------------------------ integrators
+
+// RK4.advance: y(t + h) from (t, y) with k1 = f when given
+Status rk4_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out) {
+    const int n2 = 2 * L.n;
+    Status s;
+    if (f) {
+        L.k1 = *f;
+    } else if ((s = rhs(L, t, y.data(), L.k1.data())) != Status::ok) {
+        return s;
+    }
+    const double hh = 0.5 * h;
+    for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k1[i];
+    if ((s = rhs(L, t + 0.5 * h, L.ys.data(), L.k2.data())) != Status::ok) return s;
+    for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k2[i];
+    if ((s = rhs(L, t + 0.5 * h, L.ys.data(), L.k3.data())) != Status::ok) return s;
+    for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + h * L.k3[i];
+    if ((s = rhs(L, t + h, L.ys.data(), L.k4.data())) != Status::ok) return s;
+    const double h6 = h / 6.0;
+    for (int i = 0; i < n2; ++i) out[i] = y[i] + h6 * (((L.k1[i] + 2.0 * L.k2[i]) + 2.0 * L.k3[i]) + L.k4[i]);
+    return Status::ok;
+}
+
+// ImplicitMidpoint._solve: fixed-point iteration; returns false when it does not converge
+// (Python: None). Errors of the right-hand side inside the iteration count as divergence,
+// those of the first two evaluations are returned (they are outside the try in Python).
+Status midpoint_solve(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out, bool& ok) {
+    const int n2 = 2 * L.n;
+    ok = false;
+    Status s;
+    if (f) {
+        L.f0 = *f;
+    } else if ((s = rhs(L, t, y.data(), L.f0.data())) != Status::ok) {
+        return s;
+    }
+    const double tm = t + 0.5 * h;
+    const double hh = 0.5 * h;
+    for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.f0[i];
+    if ((s = rhs(L, tm, L.ys.data(), L.k1.data())) != Status::ok) return s;  // explicit predictor
+    double scale = 0.0;
+    for (int i = 0; i < n2; ++i) scale = std::max(scale, std::abs(y[i]));
+    scale += 1.0;
+    double prev = inf;
+    for (int it = 0; it < L.opt.max_iter; ++it) {
+        for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k1[i];
+        s = rhs(L, tm, L.ys.data(), L.kn.data());
+        if (s == Status::callback_error) return s;
+        if (s != Status::ok) return Status::ok;  // left the model's domain: not converged
+        double delta = 0.0;
+        for (int i = 0; i < n2; ++i) delta = std::max(delta, std::abs(L.kn[i] - L.k1[i]));
+        delta *= std::abs(h);
+        if (!std::isfinite(delta) || (it >= 3 && delta > prev)) return Status::ok;  // diverging
+        L.k1 = L.kn;
+        if (delta <= L.opt.xtol * scale) {
+            for (int i = 0; i < n2; ++i) out[i] = y[i] + h * L.k1[i];
+            ok = true;
+            return Status::ok;
+        }
+        prev = delta;
+    }
+    return Status::ok;
+}
+
+// ImplicitMidpoint._advance: halve the step recursively where the iteration fails
+Status midpoint_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, int depth, Vec& out) {
+    bool ok = false;
+    Status s = midpoint_solve(L, t, y, f, h, out, ok);
+    if (s != Status::ok) return s;
+    if (ok) return Status::ok;
+    if (depth <= 0) {
+        L.message = "implicit midpoint: fixed-point iteration did not converge";
+        return Status::not_finite;
+    }
+    Vec& ym = L.half[static_cast<std::size_t>(depth)];
+    if ((s = midpoint_advance(L, t, y, f, 0.5 * h, depth - 1, ym)) != Status::ok) return s;
+    return midpoint_advance(L, t + 0.5 * h, ym, nullptr, 0.5 * h, depth - 1, out);
+}
+
+// DormandPrince5._stages into L.K (K[0] = f0 given)
+Status dp_stages(Loop& L, double t, const Vec& y, double h) {
+    const int n2 = 2 * L.n;
+    for (int s = 1; s < 7; ++s) {
+        for (int i = 0; i < n2; ++i) {
+            double acc = 0.0;
+            for (int j = 0; j < s; ++j) acc += DP_A[s][j] * L.K(j, i);
+            L.ys[i] = y[i] + h * acc;
+        }
+        const Status st = rhs(L, t + DP_C[s] * h, L.ys.data(), L.tmp2n.data());
+        if (st != Status::ok) return st;
+        L.K.row(s) = L.tmp2n.transpose();
+    }
+    return Status::ok;
+}
+
+double rms(const Vec& x, const Vec& scale, int n2) {
+    double s = 0.0;
+    for (int i = 0; i < n2; ++i) {
+        const double r = x[i] / scale[i];
+        s += r * r;
+    }
+    return std::sqrt(s / n2);
+}
+
+// DormandPrince5.initial_step (Hairer's heuristic)
+Status dp_initial_step(Loop& L, double t0, const Vec& y0, const Vec& f0, double t_bound, double& h_out) {
+    const int n2 = 2 * L.n;
+    for (int i = 0; i < n2; ++i) L.ev[i] = L.opt.atol + L.opt.rtol * std::abs(y0[i]);
+    const double d0 = rms(y0, L.ev, n2);
+    const double d1 = rms(f0, L.ev, n2);
+    double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+    h0 = std::min(h0, std::abs(t_bound - t0));
+    for (int i = 0; i < n2; ++i) L.ys[i] = y0[i] + h0 * f0[i];
+    const Status s = rhs(L, t0 + h0, L.ys.data(), L.tmp2n.data());
+    if (s != Status::ok) return s;
+    for (int i = 0; i < n2; ++i) L.kn[i] = L.tmp2n[i] - f0[i];
+    const double d2 = rms(L.kn, L.ev, n2) / h0;
+    const double dm = std::max(d1, d2);
+    const double h1 = dm <= 1e-15 ? std::max(1e-6, h0 * 1e-3) : std::pow(0.01 / dm, 1.0 / 5);
+    h_out = std::min(std::min(100 * h0, h1), L.opt.h_max);
+    return Status::ok;
+}
+
+// The continuous extension of the accepted DOPRI5 step (_dp_dense): y0 = L.y0, y1 raw = L.y1.
+void dp_dense_setup(Loop& L, double h) {
+    const int n2 = 2 * L.n;
+    for (int i = 0; i < n2; ++i) {
+        L.d_ydiff[i] = L.y1[i] - L.y0[i];
+        L.d_bspl[i] = h * L.K(0, i) - L.d_ydiff[i];
+        L.d_r3[i] = L.d_ydiff[i] - h * L.K(6, i) - L.d_bspl[i];
+        double acc = 0.0;
+        for (int j = 0; j < 7; ++j) acc += DP_D[j] * L.K(j, i);
+        L.d_r4[i] = h * acc;
+    }
+}
+
+void dp_dense(const Loop& L, double t0, double h, double tt, double* out) {
+    const int n2 = 2 * L.n;
+    const double s = (tt - t0) / h;
+    const double s1 = 1.0 - s;
+    for (int i = 0; i < n2; ++i)
+        out[i] = L.y0[i] + s * (L.d_ydiff[i] + s1 * (L.d_bspl[i] + s * (L.d_r3[i] + s1 * L.d_r4[i])));
+}
+
+// DormandPrince5.step with the error measured on projected solutions (the driver's project_y
+// when the stabilization is the projection): the accepted projected end is kept in L.yq1.
+// Returns the accepted step size in h_acc, the new time in t_new.
+Status dp_step(Loop& L, double& h_acc, double& t_new) {
+    const int n2 = 2 * L.n;
+    const double t = L.t;
+    const double t_bound = L.opt.t1;
+    Status s;
+    if (!L.have_f) {
+        if ((s = rhs(L, t, L.y.data(), L.f.data())) != Status::ok) return s;
+        L.have_f = true;
+    }
+    double h = L.h;
+    if (!std::isfinite(h) || h <= 0) {
+        if ((s = dp_initial_step(L, t, L.y, L.f, t_bound, h)) != Status::ok) return s;
+    }
+    h = std::min(h, L.opt.h_max);
+    long long rejected = 0;
+    const double h_min = L.opt.h_min_factor * std::max(1.0, std::abs(t));
+    const bool proj = L.opt.stab == Stabilization::projection;
+    while (true) {
+        h = clip(t, h, t_bound);
+        if (h < h_min) {
+            L.message = "dopri5: step size underflow";
+            return Status::not_finite;
+        }
+        L.K.row(0) = L.f.transpose();
+        if ((s = dp_stages(L, t, L.y, h)) != Status::ok) return s;
+        for (int i = 0; i < n2; ++i) {
+            double b = 0.0, e = 0.0;
+            for (int j = 0; j < 7; ++j) {
+                b += DP_B[j] * L.K(j, i);
+                e += (DP_B[j] - DP_BHAT[j]) * L.K(j, i);
+            }
+            L.y1[i] = L.y[i] + h * b;
+            L.ev[i] = h * e;
+        }
+        L.yq1 = L.y1;
+        if (proj) {  // err = project(t + h, y1) − project(t + h, y1 − err)
+            if ((s = project(L, t + h, L.yq1.data(), L.opt.projection)) != Status::ok) return s;
+            for (int i = 0; i < n2; ++i) L.yp[i] = L.y1[i] - L.ev[i];
+            if ((s = project(L, t + h, L.yp.data(), L.opt.projection)) != Status::ok) return s;
+            for (int i = 0; i < n2; ++i) L.ev[i] = L.yq1[i] - L.yp[i];
+        }
+        for (int i = 0; i < n2; ++i)
+            L.tmp2n[i] = L.opt.atol + L.opt.rtol * std::max(std::abs(L.y[i]), std::abs(L.y1[i]));
+        const double err = rms(L.ev, L.tmp2n, n2);
+        if (!std::isfinite(err)) {
+            ++rejected;
+            h *= 0.2;
+            continue;
+        }
+        if (err <= 1.0) {
+            double fac = err == 0.0 ? 5.0 : std::min(5.0, std::max(0.2, 0.9 * std::pow(err, -0.2)));
+            if (rejected) fac = std::min(fac, 1.0);
+            t_new = (h == t_bound - t) ? t_bound : t + h;
+            h_acc = h;
+            L.y0 = L.y;
+            dp_dense_setup(L, h);
+            L.h = std::min(h * fac, L.opt.h_max);
+            L.n_rejected += rejected;
+            return Status::ok;
+        }
+        ++rejected;
+        h *= std::max(0.2, 0.9 * std::pow(err, -0.2));
+    }
+}
+
+bool adaptive(const Loop& L) { return L.opt.method == Method::dopri5; }
+
+// A raw step of size h of the fixed-step method from (t, y) (f: F(t, y) when known)
+Status fixed_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out) {
+    if (L.opt.method == Method::rk4) return rk4_advance(L, t, y, f, h, out);
+    return midpoint_advance(L, t, y, f, h, L.opt.max_halvings, out);
+}
+
+Outcome fail(Loop& L, Status s) {
+    if (s == Status::callback_error) return Outcome::callback;
+    if (L.message.empty()) L.message = "kernel status " + std::to_string(static_cast<int>(s));
+    return Outcome::handover;
+}
+
+}  // namespace
+
+void hermite_quintic(int n, const double* y0, const double* f0, const double* y1, const double* f1,
+                     double h, double s, double* out) {
+    const double t = s / h;
+    const double t2 = t * t, t3 = t2 * t, t4 = t3 * t, t5 = t4 * t;
+    const double b1 = 10.0 * t3 - 15.0 * t4 + 6.0 * t5;
+    const double b2 = t - 6.0 * t3 + 8.0 * t4 - 3.0 * t5;
+    const double b3 = -4.0 * t3 + 7.0 * t4 - 3.0 * t5;
+    const double b4 = 0.5 * (t2 - 3.0 * t3 + 3.0 * t4 - t5);
+    const double b5 = 0.5 * (t3 - 2.0 * t4 + t5);
+    const double d1 = 30.0 * t2 - 60.0 * t3 + 30.0 * t4;
+    const double d2 = 1.0 - 18.0 * t2 + 32.0 * t3 - 15.0 * t4;
+    const double d3 = -12.0 * t2 + 28.0 * t3 - 15.0 * t4;
+    const double d4 = t - 4.5 * t2 + 6.0 * t3 - 2.5 * t4;
+    const double d5 = 1.5 * t2 - 4.0 * t3 + 2.5 * t4;
+    const double hh = h * h;
+    for (int i = 0; i < n; ++i) {
+        const double dq = y1[i] - y0[i];
+        const double v0 = f0[i], v1 = f1[i], a0 = f0[n + i], a1 = f1[n + i];
+        out[i] = y0[i] + dq * b1 + h * (v0 * b2 + v1 * b3) + hh * (a0 * b4 + a1 * b5);
+        out[n + i] = (dq / h) * d1 + (v0 * d2 + v1 * d3) + h * (a0 * d4 + a1 * d5);
+    }
+}
+
+// ------------------------------------------------------------------------------ driver
+
+Outcome start(Loop& L, double t0, const double* q0, const double* qd0) {
+    const int n = L.n;
+    L.message.clear();
+    for (int i = 0; i < n; ++i) {
+        L.y[i] = q0[i];
+        L.y[n + i] = qd0[i];
+    }
+    Status s;
+    if (L.opt.project_initial && L.any_active) {
+        const ProjectionOptions& po =
+            L.opt.stab == Stabilization::projection ? L.opt.projection : L.opt.initial_projection;
+        if ((s = project(L, t0, L.y.data(), po)) != Status::ok) return fail(L, s);
+    }
+    L.t = t0;
+    const bool rec0 = L.every || (!L.t_out.empty() && L.t_out[0] == t0);
+    if ((s = point(L, t0, L.y.data(), L.y.data() + n, L.p1, rec0)) != Status::ok) return fail(L, s);
+    if (rec0) record(L, L.p1, t0);
+    L.out_i = static_cast<std::size_t>(std::upper_bound(L.t_out.begin(), L.t_out.end(), t0) - L.t_out.begin());
+    L.have_f = false;
+    L.h = adaptive(L) ? L.opt.h0 : L.opt.dt;
+    L.n_steps = 0;
+    return Outcome::done;
+}
+
+void resume(Loop& L, double t, const double* y, double h, long long n_steps, std::size_t out_i) {
+    for (int i = 0; i < 2 * L.n; ++i) L.y[i] = y[i];
+    L.t = t;
+    L.have_f = false;
+    L.h = adaptive(L) ? h : L.opt.dt;
+    L.n_steps = n_steps;
+    L.out_i = out_i;
+    L.message.clear();
+}
+
+Outcome run(Loop& L, long long max_steps) {
+    const int n = L.n;
+    const int n2 = 2 * n;
+    const double t1 = L.opt.t1;
+    const bool adapt = adaptive(L);
+    const std::size_t n_out = L.t_out.size();
+    L.message.clear();
+    long long taken = 0;
+    Status s;
+    while (L.t < t1 && taken < max_steps) {
+        if (L.n_steps >= L.opt.max_steps) {
+            L.message = "max_steps reached";
+            return Outcome::handover;
+        }
+        if (!L.have_f && !adapt && !L.every && L.out_i < n_out) {
+            // F at the step start: the method needs it, the output samples inside the step too
+            if ((s = rhs(L, L.t, L.y.data(), L.f.data())) != Status::ok) return fail(L, s);
+            L.have_f = true;
+        }
+        const double t_start = L.t;
+        const bool f_start = L.have_f;
+        const double h_before = L.h;
+        double h = 0.0, t_new = 0.0;
+        bool fsal = false;
+        if (adapt) {
+            const long long rej0 = L.n_rejected;
+            if ((s = dp_step(L, h, t_new)) != Status::ok) {
+                L.n_rejected = rej0;
+                return fail(L, s);
+            }
+            fsal = true;  // L.K.row(6) = F(t_new, y1 raw); L.yq1 = projected y1 (at t + h)
+            if (L.opt.stab == Stabilization::projection && t_new != t_start + h) {  // clipped to t1
+                L.yq1 = L.y1;
+                if ((s = stab_project(L, t_new, L.yq1.data())) != Status::ok) return fail(L, s);
+            }
+        } else {
+            h = clip(L.t, L.opt.dt, t1);
+            L.y0 = L.y;
+            if ((s = fixed_advance(L, L.t, L.y, f_start ? &L.f : nullptr, h, L.y1)) != Status::ok)
+                return fail(L, s);
+            t_new = (h == t1 - L.t) ? t1 : L.t + h;
+            L.yq1 = L.y1;
+            if ((s = stab_project(L, t_new, L.yq1.data())) != Status::ok) return fail(L, s);
+        }
+        const double end_tol = 1e-12 * std::max(1.0, std::abs(t_new));
+        const bool inside = !adapt && f_start && !L.every && L.out_i < n_out && L.t_out[L.out_i] < t_new - end_tol;
+        bool end_sampled = false;  // a requested time is the step end
+        for (std::size_t j = L.out_i; j < n_out && L.t_out[j] <= t_new + end_tol; ++j)
+            if (std::abs((L.t_out[j] - t_start) - h) <= end_tol) end_sampled = true;
+        bool have_p1 = false;
+        if (L.every || inside || L.watch) {
+            if ((s = point(L, t_new, L.yq1.data(), L.yq1.data() + n, L.p1, L.every || end_sampled)) != Status::ok)
+                return fail(L, s);
+            have_p1 = true;
+        }
+        if (L.watch) {  // the guards at the step end, against their values at its start
+            bool fired = false;
+            if ((s = L.watch->check(t_new, L.yq1.data(), L.yq1.data() + n, L.p1.f_c.data(), fired)) != Status::ok)
+                return fail(L, s);
+            if (fired) {  // not accepted: the event layer takes this step from its start
+                L.h = h_before;
+                L.have_f = false;
+                return Outcome::event;
+            }
+        }
+        if (inside) {  // the Hermite interpolant's end slope: F at the projected step end
+            for (int i = 0; i < n; ++i) {
+                L.fp1[i] = L.yq1[n + i];
+                L.fp1[n + i] = L.p1.qdd[i];
+            }
+        }
+        if (!L.every) {  // _sample_t_eval over (t_start, t_new + end_tol]
+            const std::size_t o0 = L.out_i;
+            std::size_t j = o0;
+            for (; j < n_out && L.t_out[j] <= t_new + end_tol; ++j) {
+                const double sj = L.t_out[j] - t_start;
+                if (std::abs(sj - h) <= end_tol) {
+                    if (!have_p1 || std::isnan(L.p1.cond)) {
+                        if ((s = point(L, t_new, L.yq1.data(), L.yq1.data() + n, L.p1, true)) != Status::ok)
+                            return fail(L, s);
+                        have_p1 = true;
+                    }
+                    record(L, L.p1, L.t_out[j]);
+                    continue;
+                }
+                const double tt = t_start + sj;
+                if (adapt) {
+                    dp_dense(L, t_start, h, tt, L.yp.data());
+                } else if (f_start && have_p1) {
+                    hermite_quintic(n, L.y0.data(), L.f.data(), L.yq1.data(), L.fp1.data(), h, tt - t_start,
+                                    L.yp.data());
+                } else {  // a partial step of the method (the driver's `at`)
+                    if (sj <= 0.0) {
+                        L.yp = L.y0;
+                    } else if ((s = fixed_advance(L, t_start, L.y0, f_start ? &L.f : nullptr, sj, L.yp)) !=
+                               Status::ok) {
+                        return fail(L, s);
+                    }
+                }
+                if ((s = stab_project(L, tt, L.yp.data())) != Status::ok) return fail(L, s);
+                if ((s = point(L, tt, L.yp.data(), L.yp.data() + n, L.ps, true)) != Status::ok) return fail(L, s);
+                record(L, L.ps, L.t_out[j]);
+            }
+            L.out_i = j;
+        } else {
+            record(L, L.p1, t_new);
+        }
+        // the next step's F(t, y): FSAL when the projection left y1 unchanged, else the full
+        // evaluation at the projected step end (without a controller, whose state updates)
+        bool changed = false;
+        for (int i = 0; i < n2; ++i)
+            if (!(L.yq1[i] == L.y1[i])) {
+                changed = true;
+                break;
+            }
+        if (!changed && fsal) {
+            L.f = L.K.row(6).transpose();
+            L.have_f = true;
+        } else if (have_p1 && !L.ctrl) {
+            for (int i = 0; i < n; ++i) {
+                L.f[i] = L.yq1[n + i];
+                L.f[n + i] = L.p1.qdd[i];
+            }
+            L.have_f = true;
+        } else {
+            L.have_f = false;
+        }
+        L.t = t_new;
+        L.y = L.yq1;
+        ++L.n_steps;
+        ++taken;
+        if (L.ctrl) {
+            s = L.ctrl->update(L.t, L.y.data(), L.y.data() + n, L.active.data());
+            if (s != Status::ok) return fail(L, s);
+        }
+    }
+    return Outcome::done;
+}
+
+}  // namespace nonmin::sim

@@ -1,0 +1,318 @@
+"""The engine path of :func:`nonmin.sim.simulate`: the whole loop in the compiled engine.
+
+``simulate(..., engine="engine")`` (and ``"auto"`` when the run is covered) runs the loop of
+``nonmin._engine`` (C++: ``engine/src/sim_loop.cpp``): the integrator (RK4, DOPRI5 with its
+error control on projected solutions and dense output, implicit midpoint), the stabilization
+(mass-metric or Euclidean projection with the Gauss–Newton cutoff rules, Baumgarte, none), the
+output sampling (every step, or ``t_eval`` from the continuous extension) and the diagnostics
+the :class:`~nonmin.sim.Trajectory` records — the algorithm of the general driver, whose
+results it reproduces to round-off.
+
+The model is the model's own compiled program when it has one
+(``Model.engine_program()``), else a :class:`nonmin._engine.PyProgram` that evaluates the model
+through :meth:`~nonmin.model.Model.evaluate` / ``mass_matrix`` / ``constraint_terms`` /
+``potential_energy`` in a Python callback (any model source runs on the engine; the GIL is
+taken only inside the callback). A controller is called back the same way (compiled
+controllers replace the callback later).
+
+Covered: the methods ``"rk4"``, ``"dopri5"``, ``"midpoint"`` (the three classes exactly), the
+stabilizations ``"none"``, ``"baumgarte"``, ``"projection"`` (exactly those classes), ``t_eval``,
+``project_initial``, ``rank_rtol``, ``max_steps``, ``h0``, controllers (Python callback). Not
+covered (the general driver runs them): user events and automatic unilateral contact, custom
+:class:`~nonmin.sim.Integrator` or :class:`~nonmin.sim.Stabilization` subclasses, and runs
+with the core's backend set to ``"numpy"`` under ``engine="auto"``.
+
+The loop runs in chunks of steps (about :data:`CHUNK_SECONDS` of wall time each) so the
+progress bar moves, ``KeyboardInterrupt`` is honoured between chunks and ``max_steps`` is
+checked. A numerical failure (kernel status, non-finite acceleration, step-size underflow,
+implicit midpoint without convergence, max_steps) ends the chunk at the last accepted step and
+the general driver continues from there: errors are raised by the same code, with the same
+types and messages, as with ``engine="python"``. An exception raised in a callback propagates
+as it is.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .._validation import SYMMETRY_RTOL
+from ..core._fast import get_backend
+from ..core.linalg import SPD_RTOL
+from ..errors import InputError, ShapeError
+from ..model import Model
+from ._integrators import RK4, DormandPrince5, ImplicitMidpoint
+from ._stabilization import Baumgarte, NoStabilization, Projection
+
+FloatArray = NDArray[np.float64]
+
+#: Target wall time (s) of one engine chunk (progress, interrupts, step budget in between).
+CHUNK_SECONDS = 0.25
+
+_KINDS = {"holonomic": 0, "rheonomic": 1, "nonholonomic": 2, "unilateral": 3}
+
+
+def _engine() -> Any:
+    from .. import _engine as eng  # type: ignore[attr-defined]  # the compiled extension (no stubs)
+
+    return eng
+
+
+# --------------------------------------------------------------------------- eligibility
+
+
+def ineligible(
+    integ: Any, stab: Any, events: tuple[Any, ...], unilateral: tuple[str, ...], engine: str
+) -> str | None:
+    """Why the engine loop cannot run this simulation, or None when it covers it."""
+    if type(integ) not in (RK4, DormandPrince5, ImplicitMidpoint):
+        return f"method {getattr(integ, 'name', '') or type(integ).__name__!r} is not one of the built-in integrators"
+    if type(stab) not in (NoStabilization, Baumgarte, Projection):
+        return f"stabilization {stab!r} is not one of the built-in stabilizations"
+    if events:
+        return "events are given (the general driver locates them)"
+    if unilateral:
+        return f"automatic contact is on for unilateral constraints {list(unilateral)} (contact=True)"
+    if engine == "auto" and get_backend() == "numpy":
+        return "the nonmin.core backend is 'numpy' (the NumPy reference kernels)"
+    return None
+
+
+# --------------------------------------------------------------------------- the model
+
+
+class ModelCallback:
+    """The callback of :class:`nonmin._engine.PyProgram`: evaluates a Python model into the
+    engine's buffers.
+
+    ``need`` (``NEED_*`` flags of the engine) selects the calls: the dynamics terms come from
+    :meth:`Model.evaluate` (as the general driver's right-hand side), the mass matrix alone from
+    ``mass_matrix`` and the constraint terms alone from ``constraint_terms`` (as its
+    projection), the potential energy from ``potential_energy`` (as its samples). The active
+    constraints' rows are written at their stacked rows over all constraints.
+    """
+
+    def __init__(self, model: Model) -> None:
+        self.model = model
+        eng = _engine()
+        self._dyn = int(eng.NEED_H | eng.NEED_B)
+        self._m = int(eng.NEED_M)
+        self._b = int(eng.NEED_B)
+        self._cons = int(eng.NEED_A | eng.NEED_GAMMA | eng.NEED_PHI | eng.NEED_VELOCITY)
+        self._energy = int(eng.NEED_ENERGY)
+        self._active: dict[bytes, tuple[frozenset[str], Any]] = {}
+        self._start: list[int] = []
+        i = 0
+        for c in model.constraints:
+            self._start.append(i)
+            i += c.dim
+        self.m_all = i
+
+    def active(self, mask: bytes) -> tuple[frozenset[str], Any]:
+        """The active set of an engine mask and its stacked rows (a slice when contiguous)."""
+        hit = self._active.get(mask)
+        if hit is None:
+            cons = self.model.constraints
+            act = frozenset(c.name for c, a in zip(cons, mask) if a)
+            rows = [r for c, s, a in zip(cons, self._start, mask) if a for r in range(s, s + c.dim)]
+            idx: Any = np.asarray(rows, dtype=np.intp)
+            if rows and rows == list(range(rows[0], rows[0] + len(rows))):
+                idx = slice(rows[0], rows[0] + len(rows))
+            hit = (act, idx)
+            self._active[mask] = hit
+        return hit
+
+    def __call__(
+        self, t: float, q: FloatArray, qd: FloatArray, mask: bytes, need: int, M: FloatArray,
+        h: FloatArray, fp: FloatArray, B: FloatArray, A: FloatArray, gamma: FloatArray,
+        phi: FloatArray, vel: FloatArray,
+    ) -> float:  # fmt: skip
+        act, rows = self.active(mask)
+        model = self.model
+        ct = None
+        if need & self._dyn:
+            terms = model.evaluate(t, q, qd, act)
+            if need & self._m:
+                M[...] = terms.M
+            h[...] = terms.h
+            fp[...] = terms.f_passive
+            if need & self._b:
+                B[...] = terms.B
+            ct = terms.constraints
+        else:
+            if need & self._m:
+                M[...] = model.mass_matrix(q)
+            if need & self._cons:
+                ct = model.constraint_terms(t, q, qd, act)
+        if ct is not None and ct.A.shape[0]:
+            A[rows] = ct.A
+            gamma[rows] = ct.gamma
+            phi[rows] = ct.phi
+            vel[rows] = ct.velocity
+        if need & self._energy:
+            return float(model.potential_energy(q))
+        return 0.0
+
+
+def program_for(model: Model) -> Any:
+    """The model's engine program: its own compiled one, else the Python callback."""
+    own = getattr(model, "engine_program", None)
+    prog = own() if callable(own) else None
+    if prog is not None:
+        return prog
+    eng = _engine()
+    cb = ModelCallback(model)
+    cons = []
+    for c, s in zip(model.constraints, cb._start):
+        cons.append((c.name, _KINDS[c.kind], s, int(c.dim)))
+    return eng.PyProgram(model.n, model.k, cons, cb)
+
+
+class ControllerCallback:
+    """A Python controller called back by the engine: ``u`` at every evaluation of the
+    dynamics (shape-checked as the general driver does), ``update`` after every accepted
+    step. The controller state lives here (:attr:`state`)."""
+
+    def __init__(self, controller: Any, state: Any, k: int, model_cb: ModelCallback | None, model: Model) -> None:
+        self.controller = controller
+        self.state = state
+        self.k = k
+        self._cb = model_cb if model_cb is not None else ModelCallback(model)
+        self._has_update = hasattr(controller, "update")
+
+    def control(self, t: float, q: FloatArray, qd: FloatArray, mask: bytes, u_out: FloatArray) -> None:
+        act = self._cb.active(mask)[0]
+        u = np.asarray(self.controller(t, q, qd, self.state, active=act), dtype=float)
+        if u.shape != (self.k,):
+            raise ShapeError(f"controller must return u of shape ({self.k},), got shape {u.shape}")
+        u_out[...] = u
+
+    def update(self, t: float, q: FloatArray, qd: FloatArray, mask: bytes) -> None:
+        if self._has_update:
+            act = self._cb.active(mask)[0]
+            self.state = self.controller.update(t, q, qd, self.state, active=act)
+
+
+# --------------------------------------------------------------------------- the run
+
+
+def _projection_options(stab: Projection) -> Any:
+    po = _engine().SimProjection()
+    po.tol = float(stab.tol)
+    po.max_iter = int(stab.max_iter)
+    po.velocity = bool(stab.velocity)
+    po.euclidean = stab.metric == "euclidean"
+    po.velocity_rtol = -1.0 if stab.velocity_rtol is None else float(stab.velocity_rtol)
+    return po
+
+
+def options(
+    integ: Any, stab: Any, *, dt: float, t1: float, h0: float, rank_rtol: float | None,
+    drift_factor: float, project_initial: bool, max_steps: int,
+) -> Any:  # fmt: skip
+    """The engine's settings of a run (:class:`nonmin._engine.SimOptions`)."""
+    eng = _engine()
+    o = eng.SimOptions()
+    if type(integ) is RK4:
+        o.method = eng.SimMethod.rk4
+        o.dt = float(dt)
+    elif type(integ) is ImplicitMidpoint:
+        o.method = eng.SimMethod.midpoint
+        o.dt = float(dt)
+        o.xtol = float(integ.xtol)
+        o.max_iter = int(integ.max_iter)
+        o.max_halvings = int(integ.max_halvings)
+    elif type(integ) is DormandPrince5:
+        o.method = eng.SimMethod.dopri5
+        o.rtol = float(integ.rtol)
+        o.atol = float(integ.atol)
+        o.h_max = float(integ.h_max)
+        o.h_min_factor = float(integ.h_min_factor)
+        o.h0 = float(h0)
+    else:  # pragma: no cover - ineligible() decides first
+        raise InputError(f"engine: unsupported integrator {integ!r}")
+    if isinstance(stab, Projection):
+        o.stabilization = eng.SimStabilization.projection
+        o.projection = _projection_options(stab)
+    elif isinstance(stab, Baumgarte):
+        o.stabilization = eng.SimStabilization.baumgarte
+        o.alpha = float(stab.alpha)
+        o.beta = float(stab.beta)
+    else:
+        o.stabilization = eng.SimStabilization.none
+    o.initial_projection = _projection_options(Projection())
+    o.project_initial = bool(project_initial)
+    o.rank_rtol = -1.0 if rank_rtol is None else float(rank_rtol)
+    o.drift_factor = float(drift_factor)
+    o.spd_rtol = float(SPD_RTOL)
+    o.sym_rtol = float(SYMMETRY_RTOL)
+    o.t1 = float(t1)
+    o.max_steps = int(max_steps)
+    return o
+
+
+class EngineResult(NamedTuple):
+    """What the engine did: new state, counters, recorded blocks, whether it handed over."""
+
+    started: bool
+    t: float
+    y: FloatArray
+    h: float
+    steps: int
+    n_rhs: int
+    n_rejected: int
+    out_i: int
+    handover: bool
+    message: str
+    blocks: list[dict[str, Any]]
+
+
+def run(
+    model: Model,
+    *,
+    opts: Any,
+    active_mask: NDArray[np.uint8],
+    t0: float,
+    q: FloatArray,
+    qd: FloatArray,
+    t_out: FloatArray | None,
+    controller: ControllerCallback | None,
+    progress: Any,
+    program: Any = None,
+) -> EngineResult:
+    """Run the engine loop from ``(t0, q, qd)`` to ``opts.t1`` (or a handover)."""
+    eng = _engine()
+    prog = program_for(model) if program is None else program
+    tv = np.zeros(0) if t_out is None else np.ascontiguousarray(t_out, dtype=np.float64)
+    if controller is not None:
+        loop = eng.SimLoop(prog, active_mask, opts, tv, t_out is None, controller.control, controller.update)
+    else:
+        loop = eng.SimLoop(prog, active_mask, opts, tv, t_out is None)
+    blocks: list[dict[str, Any]] = []
+    code = loop.start(t0, np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float))
+    if code != eng.SIM_DONE:
+        return EngineResult(False, t0, np.concatenate((q, qd)), 0.0, 0, 0, 0, 0, True, loop.message, [])
+    blocks.append(loop.take())
+    handover = False
+    chunk = 16
+    t1 = float(opts.t1)
+    while loop.t < t1:
+        w0 = time.perf_counter()
+        steps0 = loop.n_steps
+        code = loop.run(chunk)
+        elapsed = time.perf_counter() - w0
+        blk = loop.take()
+        if blk["t"].size:
+            blocks.append(blk)
+        progress.update(loop.t)
+        if code != eng.SIM_DONE:
+            handover = True
+            break
+        if loop.n_steps > steps0:
+            chunk = int(min(max(16, chunk * CHUNK_SECONDS / max(elapsed, 1e-6)), 1 << 20))
+    return EngineResult(True, float(loop.t), np.asarray(loop.y), float(loop.h), int(loop.n_steps),
+                        int(loop.n_rhs), int(loop.n_rejected), int(loop.out_i), handover,
+                        str(loop.message), blocks)  # fmt: skip

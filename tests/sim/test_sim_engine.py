@@ -1,0 +1,178 @@
+"""The engine's loop (simulate(engine="engine")) against the general driver on the NumPy
+reference kernels: same steps, same samples, same diagnostics to round-off; coverage, handover
+of failures, callbacks (Python models, controllers) and chunking."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from conftest import crossed_initial_state, make_crossed_four_bar, make_pendulum
+from nonmin import library
+from nonmin.control import Regulator
+from nonmin.core import use_backend
+from nonmin.errors import InputError, NotPositiveDefiniteError, SimulationError
+from nonmin.model import FunctionModel
+from nonmin.sim import Event, Projection, _engine, simulate
+
+FIELDS = ("q", "qd", "qdd", "f_c", "energy", "mu", "cond", "phi_norm", "velocity_residual_norm")
+
+
+def _pair(mech: Any, **kw: Any) -> tuple[Any, Any]:
+    a = simulate(mech, engine="engine", progress=False, **kw)
+    with use_backend("numpy"):  # the readable specification as the oracle
+        b = simulate(mech, engine="python", progress=False, **kw)
+    return a, b
+
+
+def _close(a: Any, b: Any, tol: float = 1e-9, tol_acc: float = 1e-7, steps: bool = True) -> None:
+    assert a.metadata["engine"] == "engine" and b.metadata["engine"] == "python"
+    assert a.success and b.success, (a.message, b.message)
+    assert len(a) == len(b)
+    if steps:
+        assert a.n_steps == b.n_steps
+        np.testing.assert_array_equal(a.rank, b.rank)
+    np.testing.assert_allclose(a.t, b.t, rtol=0, atol=1e-12 if steps else tol)
+    np.testing.assert_array_equal(a.active_mask, b.active_mask)
+    for f in FIELDS:
+        x, y = getattr(a, f), getattr(b, f)
+        scale = max(1.0, float(np.max(np.abs(y))))
+        err = float(np.max(np.abs(x - y))) / scale
+        assert err < (tol_acc if f in ("qdd", "f_c") else tol), (f, err)
+
+
+MECHS = [("crossed_four_bar", {}), ("A02_n_four_bar", {"N": 2}), ("slider_crank", {}), ("five_bar", {}),
+         ("A01_pendulum", {})]  # fmt: skip
+
+
+@pytest.mark.parametrize(("name", "kw"), MECHS)
+@pytest.mark.parametrize("sampled", [False, True])
+def test_rk4_projection_equals_general_driver(name: str, kw: dict[str, int], sampled: bool) -> None:
+    mech = library.get(name, **kw)
+    te = np.linspace(0.0, 0.3, 31) if sampled else None
+    a, b = _pair(mech, t_span=(0.0, 0.3), dt=2e-3, t_eval=te)
+    assert len(a) == (31 if sampled else 151) and a.n_steps == 150
+    _close(a, b)
+    assert float(np.max(a.phi_norm)) < 1e-13
+
+
+@pytest.mark.parametrize("name", ["slider_crank", "five_bar", "A01_pendulum"])
+@pytest.mark.parametrize(
+    "kw",
+    [{"method": "midpoint", "dt": 2e-3}, {"method": "midpoint", "dt": 2e-3, "t_eval": np.linspace(0, 0.3, 31)},
+     {"stabilization": "baumgarte", "dt": 2e-3}, {"stabilization": "none", "dt": 2e-3},
+     {"stabilization": Projection(metric="euclidean"), "dt": 2e-3, "t_eval": np.linspace(0, 0.3, 17)}],
+)  # fmt: skip
+def test_methods_and_stabilizations_equal_general_driver(name: str, kw: dict[str, Any]) -> None:
+    a, b = _pair(library.get(name), t_span=(0.0, 0.3), **kw)
+    _close(a, b)
+
+
+def test_midpoint_through_a_singular_configuration_with_rank_rtol() -> None:
+    a, b = _pair(library.get("A02_n_four_bar", N=2), t_span=(0.0, 0.3), method="midpoint", dt=2e-3,
+                 rank_rtol=1e-5)  # fmt: skip
+    _close(a, b)
+
+
+@pytest.mark.parametrize("name", ["slider_crank", "five_bar", "A01_pendulum", "crossed_four_bar"])
+@pytest.mark.parametrize("sampled", [False, True])
+def test_dopri5_equals_general_driver(name: str, sampled: bool) -> None:
+    """DOPRI5's error is measured on projected solutions, a difference of two projections at
+    their round-off floor: the step sizes of two implementations of the same arithmetic differ
+    at that level (the general driver on its numba and NumPy kernels differs as much), so the
+    comparison is to the method's tolerance, not to round-off."""
+    mech = library.get(name)
+    te = np.linspace(0.0, 0.3, 31) if sampled else None
+    a, b = _pair(mech, t_span=(0.0, 0.3), method="dopri5", t_eval=te)
+    assert abs(a.n_steps - b.n_steps) <= 1
+    if sampled:
+        _close(a, b, tol=1e-5, tol_acc=1e-4, steps=False)
+    else:
+        assert len(a) == len(b)
+        assert abs(a.t[-1] - b.t[-1]) == 0.0
+        np.testing.assert_allclose(a.t, b.t, atol=1e-5)
+    ref = simulate(mech, (0.0, 0.3), method="rk4", dt=1e-4, t_eval=a.t, engine="engine", progress=False)
+    assert float(np.max(np.abs(a.q - ref.q))) < 1e-5  # and both are the motion
+
+
+def test_python_model_runs_through_the_callback() -> None:
+    """A FunctionModel has no compiled program: the engine evaluates it through PyProgram."""
+    model = make_crossed_four_bar()
+    assert type(_engine.program_for(model)).__name__ == "PyProgram"
+    q0, qd0 = crossed_initial_state()
+    a, b = _pair(model, t_span=(0.0, 0.5), q0=q0, qd0=qd0, dt=2e-3)
+    _close(a, b)
+    pend = make_pendulum()
+    a, b = _pair(pend, t_span=(0.0, 0.5), q0=[1.0, 0.0], method="dopri5", t_eval=np.linspace(0, 0.5, 11))
+    _close(a, b, tol=1e-7, tol_acc=1e-6, steps=False)
+
+
+def test_controller_through_the_callback() -> None:
+    mech = library.get("five_bar")
+    target = library.get("five_bar", end_effector=(0.2, 1.4)).state.q
+    reg = Regulator(mech.model, target=target, Kp=400.0, Kd=40.0)
+    a, b = _pair(mech, t_span=(0.0, 0.3), dt=2e-3, controller=reg)
+    _close(a, b)
+    assert float(np.max(np.abs(a.u))) > 1.0  # the controller acted, and u is recorded
+
+
+def test_chunking_is_deterministic(monkeypatch: pytest.MonkeyPatch) -> None:
+    mech = library.get("crossed_four_bar")
+    a = simulate(mech, (0.0, 0.4), dt=1e-3, engine="engine", progress=False)
+    monkeypatch.setattr(_engine, "CHUNK_SECONDS", 1e-9)  # the smallest chunks (16 steps)
+    b = simulate(mech, (0.0, 0.4), dt=1e-3, engine="engine", progress=False)
+    for f in ("t", "q", "qd", "qdd", "f_c", "cond", "energy"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
+
+
+def test_max_steps_hands_over_and_raises_as_the_general_driver() -> None:
+    mech = library.get("crossed_four_bar")
+    with pytest.raises(SimulationError, match="max_steps = 7 reached"):
+        simulate(mech, (0.0, 0.1), dt=1e-3, max_steps=7, engine="engine", progress=False)
+    tr = simulate(mech, (0.0, 0.1), dt=1e-3, max_steps=7, engine="engine", progress=False, throw=False)
+    assert not tr.success and tr.n_steps == 7 and len(tr) == 8
+    assert tr.metadata["engine"].startswith("engine, then python from t = 0.007")
+
+
+def test_kernel_failure_raises_the_typed_error() -> None:
+    """A coordinate without inertia that no constraint fixes: M̄ is singular at the start."""
+    model = FunctionModel(
+        name="massless", coordinate_names=("x", "y"), mass=lambda q: np.diag([1.0, 0.0]),
+        coriolis=lambda q, qd: np.zeros((2, 2)), conservative=lambda q: [0.0, -1.0],
+        potential=lambda q: q[1],
+    )  # fmt: skip
+    with pytest.raises(NotPositiveDefiniteError):
+        simulate(model, 0.1, [0.0, 0.0], engine="engine", progress=False)
+
+
+def test_callback_exception_propagates() -> None:
+    class Boom(RuntimeError):
+        pass
+
+    def mass(q: Any) -> Any:
+        if q[1] < -0.1:
+            raise Boom("model failed")
+        return np.eye(2)
+
+    model = FunctionModel(
+        name="boom", coordinate_names=("x", "y"), mass=mass, coriolis=lambda q, qd: np.zeros((2, 2)),
+        conservative=lambda q: [0.0, -9.81], potential=lambda q: 9.81 * q[1],
+    )  # fmt: skip
+    with pytest.raises(Boom):
+        simulate(model, 1.0, [0.0, 0.0], engine="engine", progress=False)
+    tr = simulate(model, 1.0, [0.0, 0.0], engine="engine", progress=False, throw=False)
+    assert not tr.success and "Boom" in tr.message
+
+
+def test_engine_coverage_and_auto_choice() -> None:
+    mech = library.get("crossed_four_bar")
+    ev = Event(lambda t, q, qd, fc: t - 0.005, name="tick")
+    with pytest.raises(InputError, match="engine='engine' cannot run this simulation: events"):
+        simulate(mech, 0.01, events=[ev], engine="engine", progress=False)
+    assert simulate(mech, 0.01, events=[ev], progress=False).metadata["engine"] == "python"
+    assert simulate(mech, 0.01, method="dopri5", progress=False).metadata["engine"] == "engine"
+    assert simulate(mech, 0.01, stabilization="baumgarte", progress=False).metadata["engine"] == "engine"
+    with use_backend("numpy"):  # the NumPy reference kernels asked for: the general driver
+        assert simulate(mech, 0.01, method="dopri5", progress=False).metadata["engine"] == "python"
