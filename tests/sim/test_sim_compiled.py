@@ -94,8 +94,8 @@ def test_auto_engine_choice() -> None:
     assert simulate(loose, 0.002, q0, progress=False).metadata["engine"] == "engine"
     with use_backend("numba"):  # forced
         assert simulate(loose, 0.002, q0, progress=False).metadata["engine"] == "compiled"
-    wall = library.get("arm2r_wall")  # unilateral contact: events need the general driver
-    assert simulate(wall, 0.01, progress=False).metadata["engine"] == "python"
+    wall = library.get("arm2r_wall")  # unilateral contact: the engine (events located in Python)
+    assert simulate(wall, 0.01, progress=False).metadata["engine"] == "engine"
     assert simulate(wall, 0.01, contact=False, progress=False).metadata["engine"] == "compiled"
 
 

@@ -17,10 +17,15 @@ controllers replace the callback later).
 
 Covered: the methods ``"rk4"``, ``"dopri5"``, ``"midpoint"`` (the three classes exactly), the
 stabilizations ``"none"``, ``"baumgarte"``, ``"projection"`` (exactly those classes), ``t_eval``,
-``project_initial``, ``rank_rtol``, ``max_steps``, ``h0``, controllers (Python callback). Not
-covered (the general driver runs them): user events and automatic unilateral contact, custom
-:class:`~nonmin.sim.Integrator` or :class:`~nonmin.sim.Stabilization` subclasses, and runs
-with the core's backend set to ``"numpy"`` under ``engine="auto"``.
+``project_initial``, ``rank_rtol``, ``max_steps``, ``h0``, controllers (Python callback), user
+events and automatic unilateral contact: the engine evaluates every guard at each projected
+step end (the general driver's guard code, called back: :func:`._simulate._engine_watch`); the
+step in which one crosses is left to the general driver, which takes it from its start,
+locates the crossing and applies the transition (impact map, release, Activate/Deactivate,
+Reset, Zeno truncation) exactly as before, and the engine resumes after it. Not covered (the
+general driver runs them): custom :class:`~nonmin.sim.Integrator` or
+:class:`~nonmin.sim.Stabilization` subclasses, and runs with the core's backend set to
+``"numpy"`` under ``engine="auto"``.
 
 The loop runs in chunks of steps (about :data:`CHUNK_SECONDS` of wall time each) so the
 progress bar moves, ``KeyboardInterrupt`` is honoured between chunks and ``max_steps`` is
@@ -34,6 +39,7 @@ as it is.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -42,8 +48,9 @@ from numpy.typing import NDArray
 from .._validation import SYMMETRY_RTOL
 from ..core._fast import get_backend
 from ..core.linalg import SPD_RTOL
-from ..errors import InputError, ShapeError
+from ..errors import InputError
 from ..model import Model
+from . import _durable
 from ._integrators import RK4, DormandPrince5, ImplicitMidpoint
 from ._stabilization import Baumgarte, NoStabilization, Projection
 
@@ -72,10 +79,6 @@ def ineligible(
         return f"method {getattr(integ, 'name', '') or type(integ).__name__!r} is not one of the built-in integrators"
     if type(stab) not in (NoStabilization, Baumgarte, Projection):
         return f"stabilization {stab!r} is not one of the built-in stabilizations"
-    if events:
-        return "events are given (the general driver locates them)"
-    if unilateral:
-        return f"automatic contact is on for unilateral constraints {list(unilateral)} (contact=True)"
     if engine == "auto" and get_backend() == "numpy":
         return "the nonmin.core backend is 'numpy' (the NumPy reference kernels)"
     return None
@@ -182,18 +185,18 @@ class ControllerCallback:
         self.k = k
         self._cb = model_cb if model_cb is not None else ModelCallback(model)
         self._has_update = hasattr(controller, "update")
+        self._names = model.actuator_names
 
     def control(self, t: float, q: FloatArray, qd: FloatArray, mask: bytes, u_out: FloatArray) -> None:
         act = self._cb.active(mask)[0]
-        u = np.asarray(self.controller(t, q, qd, self.state, active=act), dtype=float)
-        if u.shape != (self.k,):
-            raise ShapeError(f"controller must return u of shape ({self.k},), got shape {u.shape}")
-        u_out[...] = u
+        raw = _durable.user_call("controller", t, self.controller, t, q, qd, self.state, active=act)
+        u_out[...] = _durable.finite_output("controller", t, raw, (self.k,), self._names)
 
     def update(self, t: float, q: FloatArray, qd: FloatArray, mask: bytes) -> None:
         if self._has_update:
             act = self._cb.active(mask)[0]
-            self.state = self.controller.update(t, q, qd, self.state, active=act)
+            self.state = _durable.user_call("controller.update", t, self.controller.update, t, q, qd,
+                                            self.state, active=act)  # fmt: skip
 
 
 # --------------------------------------------------------------------------- the run
@@ -255,9 +258,9 @@ def options(
 
 
 class EngineResult(NamedTuple):
-    """What the engine did: new state, counters, recorded blocks, whether it handed over."""
+    """What the engine did: new state, counters, and why it returned."""
 
-    started: bool
+    started: bool  # the start (initial projection and evaluation) succeeded
     t: float
     y: FloatArray
     h: float
@@ -265,38 +268,53 @@ class EngineResult(NamedTuple):
     n_rhs: int
     n_rejected: int
     out_i: int
-    handover: bool
+    handover: bool  # a numerical failure: the general driver continues from (t, y)
+    event: bool  # a watched guard crossed: the general driver takes the next step
     message: str
-    blocks: list[dict[str, Any]]
 
 
 def run(
-    model: Model,
+    program: Any,
     *,
     opts: Any,
     active_mask: NDArray[np.uint8],
-    t0: float,
-    q: FloatArray,
-    qd: FloatArray,
     t_out: FloatArray | None,
-    controller: ControllerCallback | None,
+    sink: Callable[[dict[str, Any]], None],
     progress: Any,
-    program: Any = None,
+    start: tuple[float, FloatArray, FloatArray] | None = None,
+    resume: tuple[float, FloatArray, float, int, int] | None = None,
+    controller: ControllerCallback | None = None,
+    watch: Callable[[float, FloatArray, FloatArray, FloatArray], bool] | None = None,
 ) -> EngineResult:
-    """Run the engine loop from ``(t0, q, qd)`` to ``opts.t1`` (or a handover)."""
+    """Run the engine loop to ``opts.t1``, a handover or a watched event.
+
+    Either ``start = (t0, q0, qd0)`` (initial projection, evaluation and sample) or ``resume =
+    (t, y, h, n_steps, out_i)`` (a state the general driver reached). Every block of samples is
+    given to ``sink`` as soon as it is taken (so an interruption keeps them).
+    """
     eng = _engine()
-    prog = program_for(model) if program is None else program
     tv = np.zeros(0) if t_out is None else np.ascontiguousarray(t_out, dtype=np.float64)
-    if controller is not None:
-        loop = eng.SimLoop(prog, active_mask, opts, tv, t_out is None, controller.control, controller.update)
+    ctl = (None, None) if controller is None else (controller.control, controller.update)
+    loop = eng.SimLoop(program, active_mask, opts, tv, t_out is None, ctl[0], ctl[1], watch)
+
+    def take() -> None:
+        blk = loop.take()
+        if blk["t"].size:
+            blk["active_mask"] = blk["active_mask"].astype(bool)
+            sink(blk)
+
+    if start is not None:
+        t0, q, qd = start
+        code = loop.start(t0, np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float))
+        if code != eng.SIM_DONE:
+            y0 = np.concatenate((q, qd))
+            return EngineResult(False, t0, y0, 0.0, 0, 0, 0, 0, True, False, str(loop.message))
+        take()
     else:
-        loop = eng.SimLoop(prog, active_mask, opts, tv, t_out is None)
-    blocks: list[dict[str, Any]] = []
-    code = loop.start(t0, np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float))
-    if code != eng.SIM_DONE:
-        return EngineResult(False, t0, np.concatenate((q, qd)), 0.0, 0, 0, 0, 0, True, loop.message, [])
-    blocks.append(loop.take())
-    handover = False
+        assert resume is not None
+        t, y, h, steps, out_i = resume
+        loop.resume(t, np.ascontiguousarray(y, dtype=float), float(h), int(steps), int(out_i))
+    code = eng.SIM_DONE
     chunk = 16
     t1 = float(opts.t1)
     while loop.t < t1:
@@ -304,15 +322,12 @@ def run(
         steps0 = loop.n_steps
         code = loop.run(chunk)
         elapsed = time.perf_counter() - w0
-        blk = loop.take()
-        if blk["t"].size:
-            blocks.append(blk)
+        take()
         progress.update(loop.t)
         if code != eng.SIM_DONE:
-            handover = True
             break
         if loop.n_steps > steps0:
             chunk = int(min(max(16, chunk * CHUNK_SECONDS / max(elapsed, 1e-6)), 1 << 20))
     return EngineResult(True, float(loop.t), np.asarray(loop.y), float(loop.h), int(loop.n_steps),
-                        int(loop.n_rhs), int(loop.n_rejected), int(loop.out_i), handover,
-                        str(loop.message), blocks)  # fmt: skip
+                        int(loop.n_rhs), int(loop.n_rejected), int(loop.out_i),
+                        code == eng.SIM_HANDOVER, code == eng.SIM_EVENT, str(loop.message))  # fmt: skip

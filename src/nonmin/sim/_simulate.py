@@ -538,9 +538,11 @@ def simulate(
     engine : {"auto", "compiled", "engine", "python"}, default "auto"
         ``"python"``: the general driver. ``"engine"``: the whole loop in the compiled engine
         (C++, :mod:`nonmin.sim._engine`; same algorithm, results to round-off): every built-in
-        method, stabilization, ``t_eval`` and controllers (called back), for any model (its
-        compiled program, or its Python ``evaluate`` called back); not yet events or
-        automatic contact (:class:`~nonmin.errors.InputError` names what is missing);
+        method, stabilization, ``t_eval``, controllers (called back), events and automatic
+        contact (the guards are watched at every step; the general driver takes the steps in
+        which one crosses), for any model (its compiled program, or its Python ``evaluate``
+        called back); custom Integrator or Stabilization classes are not covered
+        (:class:`~nonmin.errors.InputError` names what is missing);
         failures hand over to the general driver as with ``"compiled"``. ``"compiled"``: the
         whole run in numba's compiled loop (same algorithm, same results to round-off, ~100× faster); it needs method
         ``"rk4"``, the mass-metric projection, no controller, no events, no automatic contact,
@@ -737,27 +739,26 @@ def simulate(
     bar = _durable.Checkpointer(Progress(t0, t1, progress), ck_path, ck_every, t0, snapshot)
     t = t0
     try:
-        er = None
+        engine_on = False  # the engine takes the steps (the general driver takes event steps)
         if use_engine:
-            ccb = None
-            if controller is not None:
-                ccb = _engine.ControllerCallback(controller, system.cstate, k, None, model)
+            eng_prog = _engine.program_for(model)
             opts = _engine.options(
                 integ, stab, dt=h_init, t1=t1, h0=h_init, rank_rtol=rank_rtol,
                 drift_factor=DRIFT_RANK_FACTOR, project_initial=project_initial,
                 max_steps=int(max_steps),
             )  # fmt: skip
-            er = _engine.run(model, opts=opts, active_mask=model_mask(model, act), t0=t0, q=q, qd=qd,
-                             t_out=t_out, controller=ccb, progress=bar)  # fmt: skip
+        er = None
+        if use_engine and not (events or unilateral):  # the whole run, start included
+            ccb = _engine.ControllerCallback(controller, system.cstate, k, None, model) \
+                if controller is not None else None  # fmt: skip
+            er = _engine.run(eng_prog, opts=opts, active_mask=model_mask(model, act), t_out=t_out,
+                             sink=rec.extend, progress=bar, start=(t0, q, qd), controller=ccb)  # fmt: skip
             if ccb is not None:
                 system.cstate = ccb.state
             if not er.started:  # the first evaluation failed: the general driver raises
                 er = None
                 meta["engine"] = "python"
         if er is not None:
-            for blk in er.blocks:
-                blk["active_mask"] = blk["active_mask"].astype(bool)
-                rec.extend(blk)
             n_steps += er.steps
             n_rejected += er.n_rejected
             system.n_rhs += er.n_rhs
@@ -780,6 +781,7 @@ def simulate(
             watches = _watches(events, system.active, unilateral)
             gvals = [_guard_value(system, w, p) for w in watches]
             state = integ.init(system.rhs, t, np.concatenate((q, qd)), h_init)
+            engine_on = use_engine
         project_y = None
         if isinstance(stab, Projection) and integ.adaptive:
 
@@ -806,6 +808,32 @@ def simulate(
             state = StepperState(t, fr.y.copy(), None, h_init)
             meta["engine"] = "compiled" if not fr.failed else f"compiled, then python from t = {t:.12g}"
         while t < t1:
+            if engine_on:  # the engine's steps up to t1, a failure, or a guard crossing
+                ccb = _engine.ControllerCallback(controller, system.cstate, k, None, model) \
+                    if controller is not None else None  # fmt: skip
+                er = _engine.run(
+                    eng_prog, opts=opts, active_mask=model_mask(model, system.active), t_out=t_out,
+                    sink=rec.extend, progress=bar, controller=ccb,
+                    resume=(t, state.y, state.h if integ.adaptive else h_init, n_steps, out_i),
+                    watch=_engine_watch(system, watches, gvals, disarmed, rearm_tol) if watches else None,
+                )  # fmt: skip
+                if ccb is not None:
+                    system.cstate = ccb.state
+                n_rejected += er.n_rejected
+                system.n_rhs += er.n_rhs
+                n_steps = er.steps
+                if er.steps or er.t != t:
+                    t = er.t
+                    out_i = er.out_i if t_out is not None else out_i
+                    state = StepperState(t, er.y.copy(), None, er.h if integ.adaptive else h_init)
+                elif integ.adaptive:
+                    state = state._replace(h=er.h)
+                if er.handover:
+                    engine_on = False
+                    meta["engine"] = f"engine, then python from t = {t:.12g}"
+                if t >= t1:
+                    break
+                # er.event: the general driver takes this step (locates, applies the transition)
             if n_steps >= max_steps:
                 raise SimulationError(f"max_steps = {max_steps} reached at t = {t:.12g}")
             if state.f is None and not integ.adaptive and t_out is not None and out_i < t_out.size:
@@ -1018,6 +1046,39 @@ def _watches(events: tuple[Event, ...], active: frozenset[str], unilateral: tupl
         else:
             out.append(_Watch("impact", nm, -1, None))
     return out
+
+
+def _engine_watch(
+    system: _System, watches: list[_Watch], gvals: list[float], disarmed: set[int], rearm_tol: float
+) -> Callable[[float, FloatArray, FloatArray, FloatArray], bool]:
+    """The guards of a run as the engine's watch: at each projected step end ``(t, q, qd, f_c)``,
+    True when a guard crossed (the step is then left to the general driver, which locates the
+    crossing); else the guard values and the re-arming are updated as the driver does after an
+    accepted step."""
+    release = any(w.kind == "release" for w in watches)
+
+    def check(t: float, q: FloatArray, qd: FloatArray, f_c: FloatArray) -> bool:
+        lam = np.zeros(0)
+        ct = None
+        if release:
+            ct = system.model.constraint_terms(t, q, qd, system.active)
+            lam = range_basis(ct.A, system.rank_rtol).pinv().T @ f_c
+        z = np.zeros(0)
+        p = _Point(t, q, qd, z, f_c, z, 0, 0.0, z, lam, z, z, z, z, np.zeros(0, dtype=bool), 0.0)
+        new_g = [_guard_value(system, w, p) for w in watches]
+        for i, w in enumerate(watches):
+            if (_crossed(gvals[i], new_g[i], w.direction) and id(w.event) not in disarmed) or (
+                w.kind == "impact" and gvals[i] <= 0.0 and new_g[i] < 0.0
+            ):
+                return True
+        for key in list(disarmed):  # re-arm user events whose guard left the zero band
+            j = next((i for i, w in enumerate(watches) if id(w.event) == key), None)
+            if j is None or abs(new_g[j]) > rearm_tol:
+                disarmed.discard(key)
+        gvals[:] = new_g
+        return False
+
+    return check
 
 
 def _past_root(gfun: Callable[[float], float], s: float, h: float, g0: float) -> float:
