@@ -329,3 +329,17 @@ def test_program_forward_is_model_plus_kernel() -> None:
                                          np.array(mask, dtype=np.uint8), f, qdd)
         assert status == 0
         assert _rel(qdd, ref) < 1e-10
+
+
+def test_pickle_and_deepcopy_rebuild_the_engine_program() -> None:
+    import copy
+    import pickle
+
+    robot, state = two_arm_grasp()
+    ref = robot.evaluate(0.0, state.q, state.qd)
+    for other in (pickle.loads(pickle.dumps(robot)), copy.deepcopy(robot)):
+        assert other.engine_program() is not robot.engine_program()
+        assert other.constraint_names == robot.constraint_names
+        mt = other.evaluate(0.0, state.q, state.qd)
+        np.testing.assert_array_equal(mt.M, ref.M)
+        np.testing.assert_array_equal(mt.constraints.A, ref.constraints.A)

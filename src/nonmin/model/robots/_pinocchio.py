@@ -501,6 +501,11 @@ class RobotModel(Model):
         )
 
     # ------------------------------------------------------------------ protocol plumbing
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickle (and deep-copy) by the init fields: the engine program is built again."""
+        init = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.init}
+        return (_rebuild, (type(self), init))
+
     def replace(self, **changes: Any) -> RobotModel:
         """A copy with some init fields replaced (e.g. ``robot_constraints``, ``actuated``)."""
         init = {f.name for f in dataclasses.fields(self) if f.init}
@@ -1056,3 +1061,7 @@ class RobotModel(Model):
             labels=tuple(labels),
         )
 
+
+def _rebuild(cls: type[RobotModel], init: dict[str, Any]) -> RobotModel:
+    """Unpickle a :class:`RobotModel` (see ``RobotModel.__reduce__``)."""
+    return cls(**init)
