@@ -40,9 +40,9 @@ TreeWorkspace::TreeWorkspace(const TreeDescription& d)
       tau(Vec::Zero(d.model.nv)),
       fv(Vec::Zero(d.model.nv)),
       Mv(Mat::Zero(d.model.nv, d.model.nv)),
-      W(Mat::Zero(d.model.nv, d.model.nq)),
       R(d.model.joints.size(), Mat3::Identity()),
-      Tq(d.model.joints.size(), Mat34::Zero()) {
+      Tq(d.model.joints.size(), Mat34::Zero()),
+      Y(Mat::Zero(7, d.model.nv)) {
     int m = 0;
     for (const TreeConstraint& c : d.constraints) m += row_count(c.type);
     Av = Mat::Zero(m, d.model.nv);
@@ -172,31 +172,54 @@ void TreeProgram::apply_Tt(const TreeWorkspace& ws, const double* fv, double* fq
     }
 }
 
+double TreeProgram::tb(const TreeWorkspace& ws, const QuatBlock& b, int r, int c) {
+    if (!b.free) return ws.Tq[b.joint](r, c);
+    if (r < 3) return c < 3 ? ws.R[b.joint](c, r) : 0.0;  // Rᵀ on the position
+    return c >= 3 ? ws.Tq[b.joint](r - 3, c - 3) : 0.0;
+}
+
 void TreeProgram::congruence(TreeWorkspace& ws, double* M) const {
-    // W = M_v T (each row of M_v mapped like a constraint row), then M = Tᵀ W by rows (row
-    // copies on the identity runs, 4 × 3 / 3 × 3 blocks on the quaternion joints), symmetrized.
-    const int nv = d_.model.nv, nq = d_.model.nq;
-    for (int r = 0; r < nv; ++r) apply_Tt(ws, ws.Mv.row(r).data(), ws.W.row(r).data());
+    // M = Tᵀ M_v T with T the identity on the runs: runs × runs blocks are copies of M_v;
+    // the rows of a quaternion block b are Y = T_bᵀ M_v[v_b, :] (then Y T on other quaternion
+    // blocks), mirrored into its columns, so M is exactly symmetric.
+    const int nq = d_.model.nq, nv = d_.model.nv;
     Eigen::Map<Mat> out(M, nq, nq);
-    for (const Run& r : runs_) out.middleRows(r.iq, r.len) = ws.W.middleRows(r.iv, r.len);
-    for (const QuatBlock& b : qblocks_) {
-        const Mat34& G = ws.Tq[b.joint];
-        for (int c = 0; c < nq; ++c) {
-            const Vec3 w(ws.W(b.a, c), ws.W(b.a + 1, c), ws.W(b.a + 2, c));
-            for (int k = 0; k < 4; ++k) out(b.qs + k, c) = G.col(k).dot(w);
-            if (b.free) {
-                const Vec3 l(ws.W(b.iv, c), ws.W(b.iv + 1, c), ws.W(b.iv + 2, c));
-                const Vec3 x = ws.R[b.joint] * l;
-                for (int k = 0; k < 3; ++k) out(b.iq + k, c) = x[k];
+    for (const Run& r1 : runs_)
+        for (const Run& r2 : runs_)
+            out.block(r1.iq, r2.iq, r1.len, r2.len) = ws.Mv.block(r1.iv, r2.iv, r1.len, r2.len);
+    Mat& Y = ws.Y;
+    for (std::size_t bi = 0; bi < qblocks_.size(); ++bi) {
+        const QuatBlock& b = qblocks_[bi];
+        const int v0 = b.v0(), q0 = b.q0(), nvb = b.nv(), nqb = b.nq();
+        for (int r = 0; r < nqb; ++r)
+            for (int c = 0; c < nv; ++c) {
+                double acc = 0.0;
+                for (int k = 0; k < nvb; ++k) acc += tb(ws, b, k, r) * ws.Mv(v0 + k, c);
+                Y(r, c) = acc;
             }
+        for (const Run& r : runs_)
+            for (int i = 0; i < nqb; ++i)
+                for (int c = 0; c < r.len; ++c) {
+                    out(q0 + i, r.iq + c) = Y(i, r.iv + c);
+                    out(r.iq + c, q0 + i) = Y(i, r.iv + c);
+                }
+        for (std::size_t bj = bi; bj < qblocks_.size(); ++bj) {
+            const QuatBlock& b2 = qblocks_[bj];
+            for (int i = 0; i < nqb; ++i)
+                for (int c = 0; c < b2.nq(); ++c) {
+                    double acc = 0.0;
+                    for (int k = 0; k < b2.nv(); ++k) acc += Y(i, b2.v0() + k) * tb(ws, b2, k, c);
+                    out(q0 + i, b2.q0() + c) = acc;
+                    if (bj != bi) out(b2.q0() + c, q0 + i) = acc;
+                }
         }
+        for (int i = 0; i < nqb; ++i)  // the diagonal block T_bᵀ M_bb T_b, symmetrized
+            for (int c = i + 1; c < nqb; ++c) {
+                const double s = 0.5 * (out(q0 + i, q0 + c) + out(q0 + c, q0 + i));
+                out(q0 + i, q0 + c) = s;
+                out(q0 + c, q0 + i) = s;
+            }
     }
-    for (int r = 0; r < nq; ++r)
-        for (int c = r + 1; c < nq; ++c) {
-            const double s = 0.5 * (out(r, c) + out(c, r));
-            out(r, c) = s;
-            out(c, r) = s;
-        }
 }
 
 void TreeProgram::frame_rows(const TreeConstraint& c, TreeWorkspace& ws, bool rows, bool gamma,

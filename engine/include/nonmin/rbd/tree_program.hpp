@@ -72,10 +72,10 @@ struct TreeWorkspace : Workspace {
     TreeData data;
     Vec qn, v, a0, tau, fv;
     Mat Mv;  // nv × nv
-    Mat W;   // nv × nq (M_v T)
     Mat Av;  // m_all × nv (frame rows in velocity space, robots with quaternions)
     std::vector<Mat3> R;     // per joint: rotation of its quaternion (free flyer, spherical)
     std::vector<Mat34> Tq;   // per joint: 2 G(ε) / |ε|²
+    Mat Y;                   // 7 × nv scratch of the congruence (T_bᵀ M_v rows of one block)
     FrameKinematics ka, kb;
 };
 
@@ -110,7 +110,13 @@ class TreeProgram : public Program {
     struct QuatBlock {
         int joint, qs, a, iq, iv;
         bool free;
+        int v0() const { return free ? iv : a; }   // its velocity rows v0 .. v0 + nv
+        int q0() const { return free ? iq : qs; }  // its coordinates q0 .. q0 + nq
+        int nv() const { return free ? 6 : 3; }
+        int nq() const { return free ? 7 : 4; }
     };
+    // T_b (nv × nq of a quaternion block) entry (r, c).
+    static double tb(const TreeWorkspace& ws, const QuatBlock& b, int r, int c);
     std::vector<Run> runs_;
     std::vector<QuatBlock> qblocks_;
     std::vector<int> act_q_;  // per actuator: its coordinate when T is the identity there, else −1
