@@ -6,7 +6,9 @@
 #include <nanobind/stl/unique_ptr.h>
 
 #include <string>
+#include <thread>
 
+#include "nonmin/forward.hpp"
 #include "nonmin/program.hpp"
 #include "program_common.hpp"
 #include "register.hpp"
@@ -37,6 +39,16 @@ NpArr view(M& x, nb::handle) {
     std::size_t shape[2] = {static_cast<std::size_t>(x.rows()), static_cast<std::size_t>(x.cols())};
     return NpArr(x.data(), M::ColsAtCompileTime == 1 ? 1 : 2, shape, nb::handle());
 }
+
+// q̈ from states for one program and active mask: the model + kernel pipeline.
+struct Forward {
+    const Program* prog;
+    std::vector<std::uint8_t> active;
+    SolveOptions opt;
+    std::unique_ptr<ForwardScratch> scratch;  // single calls
+};
+
+using OArr1 = nb::ndarray<double, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
 
 }  // namespace
 
@@ -74,6 +86,83 @@ void bind_program(nb::module_& m) {
         .def_rw("potential", &Terms::potential);
 
     nb::class_<Workspace>(m, "Workspace", "Preallocated scratch of one Program (one per thread).");
+
+    nb::class_<Forward>(m, "Forward",
+                        "Forward dynamics from a state (Program evaluation + core solve) for one "
+                        "program and active mask; q̈ as nonmin.core.forward_dynamics of the model's "
+                        "terms, to round-off.")
+        .def(
+            "__init__",
+            [](Forward* self, const Program& p, CMask active, double rtol, double mu) {
+                if (active.shape(0) != p.constraints().size())
+                    raise_error("ShapeError", "active must be a mask of shape (" +
+                                                  std::to_string(p.constraints().size()) + ",)");
+                new (self) Forward();
+                self->prog = &p;
+                self->active.assign(active.data(), active.data() + active.shape(0));
+                self->opt.rtol = rtol;
+                self->opt.mu = mu;
+                self->scratch = std::make_unique<ForwardScratch>(p, self->active.data());
+            },
+            nb::arg("program"), nb::arg("active"), nb::arg("rtol") = 1e-10, nb::arg("mu") = 0.0,
+            nb::keep_alive<1, 2>())
+        .def(
+            "__call__",
+            [](Forward& f, double t, CArr1 q, CArr1 qd, OArr1 qdd) {
+                const Program& p = *f.prog;
+                check_state(p, q.shape(0), qd.shape(0), f.active.size());
+                if (qdd.shape(0) != static_cast<std::size_t>(p.n())) raise_error("ShapeError", "qdd: shape (n,)");
+                SolveInfo info;
+                if (p.thread_safe()) {
+                    nb::gil_scoped_release release;
+                    info = forward_dynamics(p, *f.scratch, t, q.data(), qd.data(), f.opt, qdd.data(), nullptr);
+                } else {
+                    info = forward_dynamics(p, *f.scratch, t, q.data(), qd.data(), f.opt, qdd.data(), nullptr);
+                }
+                if (info.status != Status::ok) raise_status(info.status, "Forward");
+                return info.rank;
+            },
+            nb::arg("t"), nb::arg("q"), nb::arg("qd"), nb::arg("qdd"),
+            "Write q̈ into qdd (shape (n,)); returns the rank of A used.")
+        .def(
+            "batch",
+            [](Forward& f, CArr1 t, CArr2 q, CArr2 qd, int nthreads) {
+                const Program& p = *f.prog;
+                const std::size_t N = t.shape(0);
+                const auto n = static_cast<std::size_t>(p.n());
+                if (q.shape(0) != N || qd.shape(0) != N)
+                    raise_error("ShapeError", "t, q and qd must have the same number of states (rows)");
+                check_state(p, q.shape(1), qd.shape(1), f.active.size());
+                NpArr qdd = new_array({N, n});
+                std::vector<int> status(N, 0);
+                auto run = [&](std::size_t lo, std::size_t hi) {
+                    ForwardScratch s(p, f.active.data());
+                    for (std::size_t i = lo; i < hi; ++i) {
+                        const SolveInfo info = forward_dynamics(p, s, t.data()[i], q.data() + i * n,
+                                                                qd.data() + i * n, f.opt, qdd.data() + i * n, nullptr);
+                        status[i] = static_cast<int>(info.status);
+                    }
+                };
+                const std::size_t T = p.thread_safe() ? std::max<std::size_t>(1, std::min<std::size_t>(
+                                                             static_cast<std::size_t>(std::max(nthreads, 1)), N))
+                                                       : 1;
+                if (p.thread_safe()) {
+                    nb::gil_scoped_release release;
+                    std::vector<std::thread> pool;
+                    for (std::size_t c = 1; c < T; ++c) pool.emplace_back(run, (c * N) / T, ((c + 1) * N) / T);
+                    run(0, N / T);
+                    for (auto& th : pool) th.join();
+                } else {
+                    run(0, N);
+                }
+                for (std::size_t i = 0; i < N; ++i)
+                    if (status[i] != 0)
+                        raise_status(static_cast<Status>(status[i]), "Forward.batch (state " + std::to_string(i) + ")");
+                return qdd;
+            },
+            nb::arg("t"), nb::arg("q"), nb::arg("qd"), nb::arg("nthreads") = 1,
+            "q̈ of N states (t: (N,), q, qd: (N, n)) on nthreads threads (one if the program "
+            "is not thread safe); an array (N, n).");
 
     nb::class_<Program>(m, "Program",
                         "A model compiled once to what the engine evaluates at (t, q, qd, active).")
