@@ -7,6 +7,7 @@ void register_all(nanobind::module_& m) {
     bind_program(m);
     bind_planar(m);
     bind_core(m);
+    bind_batch(m);
     bind_tape(m);
     bind_spatial(m);
     bind_rbd(m);

@@ -43,6 +43,7 @@ CONSTRAINT_KINDS: tuple[str, ...] = get_args(ConstraintKind)
 
 __all__ = [
     "CONSTRAINT_KINDS",
+    "Accelerations",
     "ConstraintKind",
     "ConstraintSpec",
     "ConstraintTerms",
@@ -135,6 +136,24 @@ class ModelTerms(NamedTuple):
     f_passive: FloatArray
     B: FloatArray
     constraints: ConstraintTerms
+
+
+class Accelerations(NamedTuple):
+    """Result of :meth:`Model.forward_dynamics` at one state or a batch of states.
+
+    Attributes
+    ----------
+    qdd : ndarray, shape (..., n)
+        Accelerations.
+    f_c : ndarray, shape (..., n)
+        Generalized constraint forces (``Aᵀλ``, computed without multipliers).
+    rank : ndarray of int, shape (...)
+        Numerical rank of the active constraint matrix.
+    """
+
+    qdd: FloatArray
+    f_c: FloatArray
+    rank: NDArray[np.intp]
 
 
 @dataclass(frozen=True)
@@ -416,6 +435,121 @@ class Model(ABC):
         callback of :meth:`evaluate`; results never depend on the choice beyond round-off.
         """
         return None
+
+    def forward_dynamics(
+        self,
+        q: ArrayLike,
+        qd: ArrayLike,
+        *,
+        t: ArrayLike = 0.0,
+        active: Iterable[str] | str | None = None,
+        f: ArrayLike | None = None,
+        rtol: float | None = None,
+        threads: int | None = None,
+    ) -> Accelerations:
+        """Accelerations and constraint forces at one state or a batch of states: model and
+        kernel in one call (corrected eq. (ddq_sim); f_c by eq. (fc_R)).
+
+        With a compiled program (:meth:`engine_program`) the whole batch runs in the engine,
+        threaded over the machine's cores (``nonmin._engine.forward_batch``); otherwise each
+        state is evaluated with :meth:`evaluate` and solved by :func:`nonmin.core.solve_dynamics`.
+        Both give the same results to round-off.
+
+        Parameters
+        ----------
+        q, qd : array_like, shape (..., n)
+            Coordinates and velocities (any leading batch shape, the same for both).
+        t : float or array_like, shape (...), default 0
+            Time of each state (rheonomic constraints, drivers).
+        active : iterable of str, optional
+            Active constraints (default :attr:`default_active`), the same for every state.
+        f : array_like, shape (..., n) or (n,), optional
+            Applied generalized forces besides the model's own (e.g. ``B u``).
+        rtol : float, optional
+            Rank tolerance (default :data:`nonmin.core.DEFAULT_RTOL`).
+        threads : int, optional
+            Threads of the engine's batch (default: all cores).
+
+        Returns
+        -------
+        Accelerations
+            ``qdd`` and ``f_c``, shape (..., n); ``rank`` of the active A, shape (...).
+
+        Raises
+        ------
+        ShapeError
+            ``q``, ``qd``, ``t`` or ``f`` of the wrong shape.
+        NonFiniteError, NotPositiveDefiniteError
+            For the first state where the dynamics are not defined (its index is named).
+        """
+        from ..core.linalg import DEFAULT_RTOL, SPD_RTOL, resolve_rtol
+        from ..errors import NonminError
+
+        n = self.n
+        qa = np.asarray(q, dtype=np.float64)
+        va = np.asarray(qd, dtype=np.float64)
+        if qa.ndim == 0 or qa.shape[-1] != n:
+            raise ShapeError(f"q must have shape (..., {n}), got shape {qa.shape}")
+        if va.shape != qa.shape:
+            raise ShapeError(f"qd must have the shape of q {qa.shape}, got shape {va.shape}")
+        batch = qa.shape[:-1]
+        N = int(np.prod(batch, dtype=np.int64))
+        try:
+            ta = np.broadcast_to(np.asarray(t, dtype=np.float64), batch).reshape(N)
+        except ValueError:
+            raise ShapeError(f"t must be a scalar or have shape {batch}, got shape {np.shape(t)}") from None
+        fa = None
+        if f is not None:
+            fa = np.asarray(f, dtype=np.float64)
+            if fa.shape not in ((n,), qa.shape):
+                raise ShapeError(f"f must have shape ({n},) or {qa.shape}, got shape {fa.shape}")
+            fa = np.ascontiguousarray(fa.reshape(-1, n))
+        act = self.resolve_active(active)
+        tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
+        Q = np.ascontiguousarray(qa.reshape(N, n))
+        V = np.ascontiguousarray(va.reshape(N, n))
+        prog = self.engine_program()
+        if prog is not None:
+            from .. import _engine  # type: ignore[attr-defined]
+            from .._validation import SYMMETRY_RTOL
+
+            qdd, fc, rank, status, bad = _engine.forward_batch(
+                prog, np.ascontiguousarray(ta), Q, V, self.active_mask(act), fa, tol, SPD_RTOL,
+                SYMMETRY_RTOL, 0.0, int(threads or 0), True,
+            )
+            if bad:
+                i = int(np.flatnonzero(status)[0])
+                self._raise_at(i, float(ta[i]), Q[i], V[i], act, None if fa is None else fa[min(i, len(fa) - 1)], tol)
+                raise NonminError(f"forward_dynamics: the engine failed at state {i} (status {int(status[i])})")
+            return Accelerations(qdd.reshape(qa.shape), fc.reshape(qa.shape), rank.astype(np.intp).reshape(batch))
+        qdd = np.empty((N, n))
+        fc = np.empty((N, n))
+        rank = np.empty(N, dtype=np.intp)
+        for i in range(N):
+            sol = self._solve_one(float(ta[i]), Q[i], V[i], act, None if fa is None else fa[min(i, len(fa) - 1)], tol, i)
+            qdd[i], fc[i], rank[i] = sol.qdd, sol.f_c, sol.rank
+        return Accelerations(qdd.reshape(qa.shape), fc.reshape(qa.shape), rank.reshape(batch))
+
+    def _solve_one(
+        self, t: float, q: FloatArray, qd: FloatArray, act: frozenset[str], f: FloatArray | None, tol: float, i: int
+    ) -> Any:
+        """One state through :meth:`evaluate` and the core kernel; errors name the state."""
+        from ..core.dynamics import solve_dynamics
+        from ..errors import NonminError
+
+        try:
+            terms = self.evaluate(t, q, qd, act)
+            g = terms.h + terms.f_passive if f is None else terms.h + terms.f_passive + f
+            ct = terms.constraints
+            return solve_dynamics(terms.M, g, ct.A, ct.gamma, rtol=tol)
+        except NonminError as exc:
+            raise type(exc)(f"forward_dynamics at state {i} (t = {t:g}): {exc}") from exc
+
+    def _raise_at(
+        self, i: int, t: float, q: FloatArray, qd: FloatArray, act: frozenset[str], f: FloatArray | None, tol: float
+    ) -> None:
+        """Re-run state i on the reference path, which raises the typed error naming it."""
+        self._solve_one(t, q, qd, act, f, tol, i)
 
     # ------------------------------------------------------------------ extras
     def outputs(self, t: float, q: ArrayLike, qd: ArrayLike) -> dict[str, FloatArray]:
