@@ -292,7 +292,8 @@ void bind_sim(nb::module_& m) {
         .def(
             "__init__",
             [](SimLoop* self, nb::handle program, CMask active, const sim::Options& opt, CArr1 t_out, bool every,
-               nb::object control, nb::object update, nb::object watch) {
+               nb::object control, nb::object update, nb::object watch,
+               const std::vector<std::tuple<bool, int, int, double>>& guards) {
                 new (self) SimLoop();
                 const Program& prog = nb::cast<const Program&>(program);
                 if (active.shape(0) != prog.constraints().size())
@@ -308,6 +309,16 @@ void bind_sim(nb::module_& m) {
                 }
                 std::vector<double> tv(t_out.data(), t_out.data() + t_out.shape(0));
                 self->loop = sim::make_loop(prog, active.data(), opt, tv, every, self->controller.get());
+                if (!guards.empty()) {
+                    std::vector<sim::ContactGuard> gs;
+                    for (const auto& [release, con, row, g] : guards) {
+                        if (con < 0 || con >= static_cast<int>(prog.constraints().size()) || row < 0 ||
+                            (release && row >= self->loop->m))
+                            raise_typed("InputError", "SimLoop: a contact guard names no constraint or row");
+                        gs.push_back({release, con, row, g});
+                    }
+                    sim::set_guards(*self->loop, gs);
+                }
                 if (!watch.is_none()) {
                     self->watch = std::make_unique<PyWatch>(watch);
                     self->watch->n = static_cast<std::size_t>(prog.n());
@@ -316,7 +327,8 @@ void bind_sim(nb::module_& m) {
             },
             nb::arg("program"), nb::arg("active"), nb::arg("options"), nb::arg("t_out"), nb::arg("every"),
             nb::arg("control").none() = nb::none(), nb::arg("update").none() = nb::none(),
-            nb::arg("watch").none() = nb::none())
+            nb::arg("watch").none() = nb::none(),
+            nb::arg("guards") = std::vector<std::tuple<bool, int, int, double>>{})
         .def(
             "resume",
             [](SimLoop& s, double t, CArr1 y, double h, long long n_steps, std::size_t out_i) {
@@ -378,6 +390,14 @@ void bind_sim(nb::module_& m) {
                 return d;
             },
             "The samples recorded since the last take (arrays of nonmin.sim.Trajectory), cleared.")
+        .def_prop_ro(
+            "guard_values",
+            [](const SimLoop& s) {
+                std::vector<double> v;
+                for (const sim::ContactGuard& g : s.loop->guards) v.push_back(g.g);
+                return v;
+            },
+            "The contact guards' values at the last accepted step end.")
         .def_prop_ro("t", [](const SimLoop& s) { return s.loop->t; })
         .def_prop_ro(
             "y",

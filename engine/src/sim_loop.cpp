@@ -643,6 +643,92 @@ void hermite_quintic(int n, const double* y0, const double* f0, const double* y1
     }
 }
 
+// ------------------------------------------------------------------------------ guards
+
+void set_guards(Loop& L, const std::vector<ContactGuard>& guards) {
+    L.guards = guards;
+    L.guard_new.assign(guards.size(), 0.0);
+    L.one_mask.assign(static_cast<std::size_t>(L.c), 0);
+    bool release = false;
+    for (const ContactGuard& g : guards) release |= g.release;
+    if (release && L.m > 0) {
+        L.DA = Mat::Zero(L.m, L.n);
+        L.lam_c = Vec::Zero(std::max(L.m, L.n));
+        L.lam_tmp = Vec::Zero(std::max(L.m, L.n));
+        L.svd_a = Eigen::JacobiSVD<Mat>(L.m, L.n, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    }
+}
+
+namespace {
+
+// λ = ((DA)⁺ D)ᵀ f_c over the active rows (nonmin.core.linalg.range_basis(A, rtol).pinv().T @ f_c),
+// A = L.Ac at the point just evaluated; into L.lam_c (m).
+void release_forces(Loop& L, const double* f_c) {
+    const int m = L.m, n = L.n;
+    const double tol = base_rtol(L.opt);
+    double big = 0.0;
+    for (int i = 0; i < m; ++i) {
+        double s = 0.0;
+        for (int j = 0; j < n; ++j) s += L.Ac(i, j) * L.Ac(i, j);
+        L.rnorm[i] = std::sqrt(s);
+        big = std::max(big, L.rnorm[i]);
+    }
+    for (int i = 0; i < m; ++i) {
+        const double d = L.rnorm[i] > tol * big ? 1.0 / L.rnorm[i] : 0.0;
+        L.rnorm[i] = d;
+        for (int j = 0; j < n; ++j) L.DA(i, j) = L.Ac(i, j) * d;
+    }
+    L.svd_a.compute(L.DA);
+    const auto& sv = L.svd_a.singularValues();
+    const auto& U = L.svd_a.matrixU();
+    const auto& V = L.svd_a.matrixV();
+    const int kk = static_cast<int>(sv.size());
+    for (int k = 0; k < kk; ++k) {  // c_k = (1/s_k) v_kᵀ f_c where kept
+        double c = 0.0;
+        if (sv[k] > tol * sv[0]) {
+            for (int j = 0; j < n; ++j) c += V(j, k) * f_c[j];
+            c /= sv[k];
+        }
+        L.lam_tmp[k] = c;
+    }
+    for (int i = 0; i < m; ++i) {
+        double s = 0.0;
+        for (int k = 0; k < kk; ++k) s += U(i, k) * L.lam_tmp[k];
+        L.lam_c[i] = L.rnorm[i] * s;
+    }
+}
+
+// The contact guards at the step end (the point p1 just evaluated): new values into
+// L.guard_new; `fired` when one crossed downward or an impact gap stays below zero.
+Status contact_guards(Loop& L, double t, const double* q, const double* qd, const double* f_c, bool& fired) {
+    fired = false;
+    bool lam_done = false;
+    for (std::size_t i = 0; i < L.guards.size(); ++i) {
+        const ContactGuard& G = L.guards[i];
+        double g1;
+        if (G.release) {
+            if (!lam_done) {
+                release_forces(L, f_c);
+                lam_done = true;
+            }
+            g1 = L.lam_c[G.row];
+        } else {
+            L.one_mask[static_cast<std::size_t>(G.constraint)] = 1;
+            const Status s = L.prog->evaluate(t, q, qd, L.one_mask.data(), NEED_PHI, L.T, *L.ws);
+            L.one_mask[static_cast<std::size_t>(G.constraint)] = 0;
+            if (s != Status::ok) return s;
+            g1 = L.T.phi[L.prog->constraints()[static_cast<std::size_t>(G.constraint)].row];
+            if (!std::isfinite(g1)) return Status::not_finite;
+        }
+        L.guard_new[i] = g1;
+        const double g0 = G.g;
+        if ((g0 > 0.0 && g1 <= 0.0) || (!G.release && g0 <= 0.0 && g1 < 0.0)) fired = true;
+    }
+    return Status::ok;
+}
+
+}  // namespace
+
 // ------------------------------------------------------------------------------ driver
 
 Outcome start(Loop& L, double t0, const double* q0, const double* qd0) {
@@ -729,20 +815,26 @@ Outcome run(Loop& L, long long max_steps) {
         for (std::size_t j = L.out_i; j < n_out && L.t_out[j] <= t_new + end_tol; ++j)
             if (std::abs((L.t_out[j] - t_start) - h) <= end_tol) end_sampled = true;
         bool have_p1 = false;
-        if (L.every || inside || L.watch) {
+        const bool watching = L.watch || !L.guards.empty();
+        if (L.every || inside || watching) {
             if ((s = point(L, t_new, L.yq1.data(), L.yq1.data() + n, L.p1, L.every || end_sampled)) != Status::ok)
                 return fail(L, s);
             have_p1 = true;
         }
-        if (L.watch) {  // the guards at the step end, against their values at its start
+        if (watching) {  // the guards at the step end, against their values at its start
             bool fired = false;
-            if ((s = L.watch->check(t_new, L.yq1.data(), L.yq1.data() + n, L.p1.f_c.data(), fired)) != Status::ok)
+            if (!L.guards.empty() &&
+                (s = contact_guards(L, t_new, L.yq1.data(), L.yq1.data() + n, L.p1.f_c.data(), fired)) != Status::ok)
+                return fail(L, s);
+            if (!fired && L.watch &&
+                (s = L.watch->check(t_new, L.yq1.data(), L.yq1.data() + n, L.p1.f_c.data(), fired)) != Status::ok)
                 return fail(L, s);
             if (fired) {  // not accepted: the event layer takes this step from its start
                 L.h = h_before;
                 L.have_f = false;
                 return Outcome::event;
             }
+            for (std::size_t i = 0; i < L.guards.size(); ++i) L.guards[i].g = L.guard_new[i];
         }
         if (inside) {  // the Hermite interpolant's end slope: F at the projected step end
             for (int i = 0; i < n; ++i) {

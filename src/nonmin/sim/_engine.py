@@ -271,6 +271,7 @@ class EngineResult(NamedTuple):
     handover: bool  # a numerical failure: the general driver continues from (t, y)
     event: bool  # a watched guard crossed: the general driver takes the next step
     message: str
+    guards: list[float]  # the contact guards' values at the last accepted step end
 
 
 def run(
@@ -285,6 +286,7 @@ def run(
     resume: tuple[float, FloatArray, float, int, int] | None = None,
     controller: ControllerCallback | None = None,
     watch: Callable[[float, FloatArray, FloatArray, FloatArray], bool] | None = None,
+    guards: list[tuple[bool, int, int, float]] | None = None,
 ) -> EngineResult:
     """Run the engine loop to ``opts.t1``, a handover or a watched event.
 
@@ -295,7 +297,7 @@ def run(
     eng = _engine()
     tv = np.zeros(0) if t_out is None else np.ascontiguousarray(t_out, dtype=np.float64)
     ctl = (None, None) if controller is None else (controller.control, controller.update)
-    loop = eng.SimLoop(program, active_mask, opts, tv, t_out is None, ctl[0], ctl[1], watch)
+    loop = eng.SimLoop(program, active_mask, opts, tv, t_out is None, ctl[0], ctl[1], watch, guards or [])
 
     def take() -> None:
         blk = loop.take()
@@ -308,7 +310,7 @@ def run(
         code = loop.start(t0, np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float))
         if code != eng.SIM_DONE:
             y0 = np.concatenate((q, qd))
-            return EngineResult(False, t0, y0, 0.0, 0, 0, 0, 0, True, False, str(loop.message))
+            return EngineResult(False, t0, y0, 0.0, 0, 0, 0, 0, True, False, str(loop.message), [])
         take()
     else:
         assert resume is not None
@@ -330,4 +332,5 @@ def run(
             chunk = int(min(max(16, chunk * CHUNK_SECONDS / max(elapsed, 1e-6)), 1 << 20))
     return EngineResult(True, float(loop.t), np.asarray(loop.y), float(loop.h), int(loop.n_steps),
                         int(loop.n_rhs), int(loop.n_rejected), int(loop.out_i),
-                        code == eng.SIM_HANDOVER, code == eng.SIM_EVENT, str(loop.message))  # fmt: skip
+                        code == eng.SIM_HANDOVER, code == eng.SIM_EVENT, str(loop.message),
+                        list(loop.guard_values))  # fmt: skip

@@ -811,12 +811,15 @@ def simulate(
             if engine_on:  # the engine's steps up to t1, a failure, or a guard crossing
                 ccb = _engine.ControllerCallback(controller, system.cstate, k, None, model) \
                     if controller is not None else None  # fmt: skip
+                g_idx, guards = _engine_guards(system, watches, gvals)
                 er = _engine.run(
                     eng_prog, opts=opts, active_mask=model_mask(model, system.active), t_out=t_out,
                     sink=rec.extend, progress=bar, controller=ccb,
                     resume=(t, state.y, state.h if integ.adaptive else h_init, n_steps, out_i),
-                    watch=_engine_watch(system, watches, gvals, disarmed, rearm_tol) if watches else None,
+                    watch=_engine_watch(system, watches, gvals, disarmed, rearm_tol), guards=guards,
                 )  # fmt: skip
+                for i, g in zip(g_idx, er.guards):
+                    gvals[i] = g
                 if ccb is not None:
                     system.cstate = ccb.state
                 n_rejected += er.n_rejected
@@ -1050,35 +1053,51 @@ def _watches(events: tuple[Event, ...], active: frozenset[str], unilateral: tupl
 
 def _engine_watch(
     system: _System, watches: list[_Watch], gvals: list[float], disarmed: set[int], rearm_tol: float
-) -> Callable[[float, FloatArray, FloatArray, FloatArray], bool]:
-    """The guards of a run as the engine's watch: at each projected step end ``(t, q, qd, f_c)``,
-    True when a guard crossed (the step is then left to the general driver, which locates the
-    crossing); else the guard values and the re-arming are updated as the driver does after an
-    accepted step."""
-    release = any(w.kind == "release" for w in watches)
+) -> Callable[[float, FloatArray, FloatArray, FloatArray], bool] | None:
+    """The user events' guards as the engine's watch (the contact guards are evaluated by the
+    engine itself: :func:`_engine_guards`): at each projected step end ``(t, q, qd, f_c)``, True
+    when a guard crossed (the step is then left to the general driver, which locates the
+    crossing); else their values and the re-arming are updated as the driver does after an
+    accepted step. None without user events."""
+    user = [i for i, w in enumerate(watches) if w.kind == "user"]
+    if not user:
+        return None
 
     def check(t: float, q: FloatArray, qd: FloatArray, f_c: FloatArray) -> bool:
-        lam = np.zeros(0)
-        ct = None
-        if release:
-            ct = system.model.constraint_terms(t, q, qd, system.active)
-            lam = range_basis(ct.A, system.rank_rtol).pinv().T @ f_c
         z = np.zeros(0)
-        p = _Point(t, q, qd, z, f_c, z, 0, 0.0, z, lam, z, z, z, z, np.zeros(0, dtype=bool), 0.0)
-        new_g = [_guard_value(system, w, p) for w in watches]
-        for i, w in enumerate(watches):
-            if (_crossed(gvals[i], new_g[i], w.direction) and id(w.event) not in disarmed) or (
-                w.kind == "impact" and gvals[i] <= 0.0 and new_g[i] < 0.0
-            ):
+        p = _Point(t, q, qd, z, f_c, z, 0, 0.0, z, z, z, z, z, z, np.zeros(0, dtype=bool), 0.0)
+        new_g = {i: _guard_value(system, watches[i], p) for i in user}
+        for i in user:
+            if _crossed(gvals[i], new_g[i], watches[i].direction) and id(watches[i].event) not in disarmed:
                 return True
         for key in list(disarmed):  # re-arm user events whose guard left the zero band
-            j = next((i for i, w in enumerate(watches) if id(w.event) == key), None)
+            j = next((i for i in user if id(watches[i].event) == key), None)
             if j is None or abs(new_g[j]) > rearm_tol:
                 disarmed.discard(key)
-        gvals[:] = new_g
+        for i in user:
+            gvals[i] = new_g[i]
         return False
 
     return check
+
+
+def _engine_guards(
+    system: _System, watches: list[_Watch], gvals: list[float]
+) -> tuple[list[int], list[tuple[bool, int, int, float]]]:
+    """The contact watches as the engine's guards ``(release, constraint index, first active row,
+    value)`` and their indices in ``watches``."""
+    model = system.model
+    index = {c.name: i for i, c in enumerate(model.constraints)}
+    rows = model.row_slices(system.active)
+    idx: list[int] = []
+    out: list[tuple[bool, int, int, float]] = []
+    for i, w in enumerate(watches):
+        if w.kind == "user":
+            continue
+        release = w.kind == "release"
+        idx.append(i)
+        out.append((release, index[w.name], rows[w.name].start if release else 0, float(gvals[i])))
+    return idx, out
 
 
 def _past_root(gfun: Callable[[float], float], s: float, h: float, g0: float) -> float:

@@ -106,6 +106,19 @@ class Watch {
     virtual Status check(double t, const double* q, const double* qd, const double* f_c, bool& fired) = 0;
 };
 
+// A unilateral-contact guard evaluated in the loop (the general driver's "impact" and "release"
+// watches, _simulate._guard_value): impact — the gap φ of an inactive unilateral constraint
+// (its first row), watched for a downward crossing or for staying below zero; release — the
+// normal force λ = ((DA)⁺D)ᵀ f_c of an active one (its first active row; range_basis of the
+// active A at the run's rank tolerance), watched for a downward crossing. `g` is the value at
+// the last accepted step end.
+struct ContactGuard {
+    bool release = false;
+    int constraint = 0;  // index in Program::constraints()
+    int row = 0;         // release: the constraint's first row among the active rows
+    double g = 0.0;
+};
+
 // Recorded samples (the arrays of nonmin.sim.Trajectory), row-major, appended in order.
 struct Samples {
     int n = 0, k = 0, c = 0;
@@ -181,6 +194,14 @@ struct Loop {
     // diagnostics: cond(M̄) from the singular values of L
     Eigen::JacobiSVD<Mat> svd;
 
+    // contact guards (fixed active set: the release SVD has the active rows' size)
+    std::vector<ContactGuard> guards;
+    std::vector<double> guard_new;
+    std::vector<std::uint8_t> one_mask;
+    Mat DA;
+    Vec lam_c, lam_tmp;
+    Eigen::JacobiSVD<Mat> svd_a;
+
     Samples rec;
 
     explicit Loop(int m_max, int n_) : solver(m_max, n_) {}
@@ -191,6 +212,9 @@ struct Loop {
 // optional controller (must outlive the loop). Allocates everything.
 std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active, const Options& opt,
                                 const std::vector<double>& t_out, bool every, Controller* ctrl);
+
+// Watch these contact guards during the steps (after make_loop; values at the start given).
+void set_guards(Loop& L, const std::vector<ContactGuard>& guards);
 
 // Initial projection (when asked), the first evaluation and its sample, at (t0, q0, qd0).
 Outcome start(Loop& L, double t0, const double* q0, const double* qd0);
