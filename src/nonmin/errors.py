@@ -22,6 +22,9 @@ built-in exception a Python user would expect, so ``except ValueError`` keeps wo
     └── MissingDependencyError (ImportError)    optional extra not installed (names the extra)
 
 Messages name the argument and give what was expected and what came.
+
+Warnings: :class:`JointLimitWarning` (UserWarning) — a robot file declares joint position
+limits that the dynamics do not enforce.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ __all__ = [
     "FileFormatError",
     "InfeasibleActuationError",
     "InputError",
+    "JointLimitWarning",
     "MissingDependencyError",
     "ModelError",
     "NonFiniteError",
@@ -124,6 +128,10 @@ class OutputError(NonminError, OSError):
 
 class MissingDependencyError(NonminError, ImportError):
     """An optional dependency is not installed; the message names the extra to install."""
+
+
+class JointLimitWarning(UserWarning):
+    """A robot file (URDF/MJCF) declares joint position limits that nonmin does not enforce."""
 
 
 def missing_dependency(module: str, extra: str, purpose: str) -> MissingDependencyError:

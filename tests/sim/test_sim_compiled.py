@@ -9,7 +9,7 @@ import pytest
 
 from nonmin import library
 from nonmin.core import use_backend
-from nonmin.errors import InputError, SimulationError
+from nonmin.errors import InputError
 from nonmin.model.planar import PlanarBuilder, PlanarProgram
 from nonmin.sim import Event, Reset, _fastpath, simulate
 
@@ -142,14 +142,17 @@ def test_program_describes_the_model() -> None:
     np.testing.assert_array_equal(prog.f, mech.model.conservative_force(mech.state.q))
 
 
-def test_max_steps_hands_over_to_the_general_driver() -> None:
+def test_max_steps_is_refused_before_the_run_by_both_engines() -> None:
+    # a fixed-step run needing more than max_steps steps is refused up front (issue 19), the
+    # same way by both engines, whatever throw (it was a partial run stopped at max_steps)
     mech = library.get("crossed_four_bar")
-    with pytest.raises(SimulationError, match="max_steps = 40"):
-        simulate(mech, 1.0, dt=1e-3, max_steps=40, engine="compiled", progress=False)
-    a = simulate(mech, 1.0, dt=1e-3, max_steps=40, engine="compiled", throw=False, progress=False)
-    b = simulate(mech, 1.0, dt=1e-3, max_steps=40, engine="python", throw=False, progress=False)
-    assert not a.success and a.message == b.message
-    assert a.n_steps == b.n_steps == 40 and len(a) == len(b) == 41
+    for engine in ("compiled", "python"):
+        for throw in (True, False):
+            with pytest.raises(InputError, match="max_steps = 40"):
+                simulate(mech, 1.0, dt=1e-3, max_steps=40, engine=engine, throw=throw, progress=False)
+    a = simulate(mech, 0.04, dt=1e-3, max_steps=40, engine="compiled", progress=False)
+    b = simulate(mech, 0.04, dt=1e-3, max_steps=40, engine="python", progress=False)
+    assert a.success and a.n_steps == b.n_steps == 40 and len(a) == len(b) == 41
     np.testing.assert_allclose(a.q, b.q, atol=1e-12)
 
 

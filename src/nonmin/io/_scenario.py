@@ -14,7 +14,16 @@ from typing import Any
 import numpy as np
 
 from .._files import confined
-from ..errors import NonminError, ScenarioError, UnknownNameError, UntrustedCodeError
+from ..errors import (
+    FileFormatError,
+    InputError,
+    MissingDependencyError,
+    ModelError,
+    NonminError,
+    ScenarioError,
+    UnknownNameError,
+    UntrustedCodeError,
+)
 from ._schema import Key, Section, check
 
 __all__ = ["SCENARIO_SCHEMA", "Scenario", "load_scenario", "resolve_entry_point"]
@@ -267,10 +276,14 @@ class Scenario:
                     obj = robots.RobotModel.from_urdf(path, **kw)
                 else:
                     obj = robots.RobotModel.from_mjcf(path, **params)
-        except UnknownNameError as exc:
+        except (UnknownNameError, FileFormatError) as exc:
             raise ScenarioError(f"{self.path}: key 'model.{src}': {exc}") from None
-        except TypeError as exc:
-            raise ScenarioError(f"{self.path}: table [model.params]: {exc}") from None
+        except (ScenarioError, MissingDependencyError):
+            raise
+        except (InputError, ModelError) as exc:
+            raise ScenarioError(f"{self.path}: key 'model.{src}' (with [model.params]): {exc}") from None
+        except (TypeError, ValueError, ArithmeticError) as exc:
+            raise ScenarioError(f"{self.path}: table [model.params]: {type(exc).__name__}: {exc}") from None
         if hasattr(obj, "model") and hasattr(obj, "state"):
             horizon = getattr(obj, "t_final", None)
             return obj.model, obj.state, None if horizon is None else float(horizon)

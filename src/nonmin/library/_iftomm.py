@@ -24,6 +24,10 @@ IFTOMM_REF = (
     "IFToMM Library of Computational Benchmark Problems"
 )
 
+#: Largest N of the A02 N four-bar (2N + 1 bars, 6N + 3 coordinates): beyond it a typo in a
+#: scenario or a forged file would build a model for minutes and gigabytes.
+MAX_N = 1000
+
 
 @register("A01_pendulum")
 def a01_pendulum(*, g: float = 9.81, mirror: bool = False, t_final: float = 10.0) -> Mechanism:
@@ -79,8 +83,10 @@ def a02_n_four_bar(*, N: int = 2, g: float = 9.81, t_final: float | None = None)
     Outputs: ``B0.position``, ``B0.velocity``. Horizon: 10 s for N = 2 (later spec), 20 s
     otherwise (the original N = 40 spec). Exact reference: :func:`n_four_bar_reference`.
     """
-    if not isinstance(N, int | np.integer) or N < 1:
-        raise InputError(f"N must be an integer ≥ 1, got {N!r}")
+    if isinstance(N, bool) or not isinstance(N, int | np.integer) or not 1 <= N <= MAX_N:
+        raise InputError(f"N must be an integer in [1, {MAX_N}], got {N!r}")
+    if isinstance(g, bool) or not isinstance(g, int | float | np.floating | np.integer) or not math.isfinite(g):
+        raise InputError(f"g must be a finite number, got {g!r}")
     N = int(N)
     b = PlanarBuilder(f"A02_{N}_four_bar", gravity=(0.0, -float(g)), description=f"IFToMM A02, N = {N}")
     for i in range(N + 1):

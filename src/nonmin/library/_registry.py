@@ -27,7 +27,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
-from ..errors import InputError, UnknownNameError
+from ..errors import InputError, NonminError, UnknownNameError
 from ..model import Model, State
 
 __all__ = ["Mechanism", "get", "names", "register"]
@@ -108,7 +108,15 @@ def get(name: str, **params: Any) -> Mechanism:
         raise InputError(
             f"mechanism {name!r}: unknown parameter(s) {sorted(unknown)}; accepted: {sorted(accepted)}"
         )
-    mech = fn(**params)
+    try:
+        mech = fn(**params)
+    except NonminError:
+        raise
+    except (TypeError, ValueError, ArithmeticError) as exc:
+        raise InputError(
+            f"mechanism {name!r}: cannot build it with parameters {params!r}: "
+            f"{type(exc).__name__}: {exc}"
+        ) from None
     if not mech.name:
         object.__setattr__(mech, "name", name)
     if not mech.params:

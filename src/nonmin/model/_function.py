@@ -9,18 +9,33 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..errors import InputError, ShapeError
+from ..errors import InputError, ModelError, NonFiniteError, NonminError, ShapeError
 from ._protocol import ConstraintSpec, ConstraintTerms, FloatArray, Geometry, Model
 
 __all__ = ["FunctionConstraint", "FunctionModel"]
 
 
 def _call(fn: Callable[..., Any], name: str, shape: tuple[int, ...], *args: Any) -> FloatArray:
-    out = np.asarray(fn(*args), dtype=np.float64)
+    """Call a user function of the model; its exceptions and non-numeric or non-finite
+    results become nonmin errors naming it (a simulation adds the time)."""
+    try:
+        raw = fn(*args)
+    except NonminError:
+        raise
+    except Exception as exc:
+        raise ModelError(f"user function {name} raised {type(exc).__name__}: {exc}") from exc
+    try:
+        out = np.asarray(raw, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ShapeError(f"{name} must return numbers of shape {shape}, got {type(raw).__name__}: {exc}") from None
     if out.shape != shape:
         if out.size == int(np.prod(shape)):
-            return out.reshape(shape)
-        raise ShapeError(f"{name} must return shape {shape}, got shape {out.shape}")
+            out = out.reshape(shape)
+        else:
+            raise ShapeError(f"{name} must return shape {shape}, got shape {out.shape}")
+    if not np.isfinite(out).all():
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(out))[0])
+        raise NonFiniteError(f"{name} returned a non-finite value at index {bad}: {out[bad]!r}")
     return out
 
 
@@ -273,7 +288,7 @@ class FunctionModel(Model):
         return _call(self.conservative, "conservative", (self.n,), np.asarray(q, dtype=float))
 
     def potential_energy(self, q: ArrayLike) -> float:
-        return float(self.potential(np.asarray(q, dtype=float)))
+        return float(_call(self.potential, "potential", (), np.asarray(q, dtype=float)))
 
     def passive_force(self, t: float, q: ArrayLike, qd: ArrayLike) -> FloatArray:
         if self.passive is None:

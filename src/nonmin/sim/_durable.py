@@ -33,8 +33,8 @@ MAX_RECORD_BYTES = 4 * 2**30
 
 
 def sample_bytes(n: int, k: int, c: int) -> int:
-    """Bytes of one recorded sample: t, 5 vectors of n (q, qd, qdd, f_c and the list overhead
-    is ignored), u (k), the active mask (c) and 6 scalars."""
+    """Bytes of one recorded sample: t, 4 vectors of n (q, qd, qdd, f_c), u (k), 6 scalar
+    diagnostics and the active mask (c booleans); Python list overhead is not counted."""
     return 8 * (1 + 4 * n + k + 6) + c
 
 
@@ -72,7 +72,7 @@ def check_budget(*, t0: float, t1: float, h: float | None, max_steps: int, t_out
     per = sample_bytes(n, k, c)
     if h is not None:
         steps = (t1 - t0) / h
-        if not steps <= max_steps:
+        if not steps - max_steps <= 1e-9 * max(1.0, steps):  # round-off in the span / dt
             raise InputError(
                 f"t_span {(t0, t1)} with dt = {h:g} takes {steps:.3g} steps, more than "
                 f"max_steps = {max_steps}; shorten t_span, take a larger dt or raise max_steps"

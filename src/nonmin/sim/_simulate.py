@@ -389,10 +389,15 @@ def _positive(x: Any, name: str) -> float:
 
 
 def _t_span(t_span: Any) -> tuple[float, float]:
-    if np.isscalar(t_span):
-        pair = (0.0, float(t_span))  # type: ignore[arg-type]
-    else:
-        arr = np.asarray(t_span, dtype=float)
+    try:
+        if np.isscalar(t_span):
+            pair = (0.0, float(t_span))  # type: ignore[arg-type]
+            arr = None
+        else:
+            arr = np.asarray(t_span, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"t_span must be (t0, t1) or a final time, got {t_span!r}") from None
+    if arr is not None:
         if arr.shape != (2,):
             raise ShapeError(f"t_span must be (t0, t1) or a final time, got shape {arr.shape}")
         pair = (float(arr[0]), float(arr[1]))
@@ -404,7 +409,10 @@ def _t_span(t_span: Any) -> tuple[float, float]:
 
 
 def _vector(x: ArrayLike, name: str, n: int) -> FloatArray:
-    arr = np.array(x, dtype=float)
+    try:
+        arr = np.array(x, dtype=float)
+    except (TypeError, ValueError):
+        raise ShapeError(f"{name} must be {n} numbers, got {x!r}") from None
     if arr.shape != (n,):
         raise ShapeError(f"{name} must have shape ({n},), got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
@@ -654,6 +662,8 @@ def simulate(
             t_out = np.asarray(t_eval, dtype=float).ravel()
         except (TypeError, ValueError):
             raise InputError(f"t_eval must be an array of times, got {type(t_eval).__name__}") from None
+        _durable.check_budget(t0=t0, t1=t1, h=None, max_steps=1, t_out=t_out, n=n, k=k,
+                              c=len(model.constraint_names))  # its size, before reading it
         if not np.isfinite(t_out).all():
             raise NonFiniteError(f"t_eval must be finite, got NaN/inf at index {int(np.argmax(~np.isfinite(t_out)))}")
         if prev is not None:
@@ -664,7 +674,7 @@ def simulate(
         raise InputError(f"controller must be callable, got {type(controller).__name__}")
     if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
         raise InputError(f"max_steps must be an integer ≥ 1, got {max_steps!r}")
-    _durable.check_budget(t0=t0, t1=t1, h=None if integ.adaptive else h_init, max_steps=int(max_steps),
+    _durable.check_budget(t0=t0, t1=t1, h=dt if integ.adaptive else h_init, max_steps=int(max_steps),
                           t_out=t_out, n=n, k=k, c=len(model.constraint_names))
     if rank_rtol is None and integ.adaptive:
         rank_rtol = ADAPTIVE_RANK_RTOL

@@ -438,12 +438,17 @@ class PlanarModel(Model):
 
     # ------------------------------------------------------------------ dynamics
     def mass_matrix(self, q: ArrayLike) -> FloatArray:
+        _vec(q, "q", self.n)  # constant M, but a (k, n) batch must not pass for one q
         return self._M.copy()
 
     def coriolis_matrix(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
+        _vec(q, "q", self.n)
+        _vec(qd, "qd", self.n)
         return np.zeros((self.n, self.n))
 
     def coriolis_force(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
+        _vec(q, "q", self.n)
+        _vec(qd, "qd", self.n)
         return np.zeros(self.n)
 
     def _gravity_force(self) -> FloatArray:

@@ -39,13 +39,14 @@ Constraint names are the equality names (``eq<i>`` when unnamed); those with ``a
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ...errors import InputError, ModelError, missing_dependency
+from ...errors import FileFormatError, InputError, JointLimitWarning, ModelError, missing_dependency
 from ._constraints import FrameConstraint, JointCoupling, RobotConstraint
 from ._pinocchio import pin
 
@@ -57,7 +58,10 @@ except ImportError as exc:  # pragma: no cover - exercised in a subprocess test
 if TYPE_CHECKING:
     from ._pinocchio import RobotModel
 
-__all__ = ["build_pinocchio_model", "equality_constraints", "load_mjcf"]
+__all__ = ["MAX_MJCF_BYTES", "build_pinocchio_model", "equality_constraints", "load_mjcf"]
+
+#: Largest MJCF file read (bytes).
+MAX_MJCF_BYTES = 64 * 2**20
 
 
 def _quat_wxyz_to_rot(qw: ArrayLike) -> Any:
@@ -218,15 +222,54 @@ def load_mjcf(
     actuated: Any = None,
     default_active: Any = None,
     name: str | None = None,
+    joint_limits: str = "warn",
 ) -> RobotModel:
-    """Build a :class:`RobotModel` from an MJCF file (see the module docstring)."""
+    """Build a :class:`RobotModel` from an MJCF file (see the module docstring).
+
+    Joint position limits (``limited``/``range``) are not enforced by the dynamics; with
+    ``joint_limits="warn"`` a :class:`~nonmin.errors.JointLimitWarning` names them.
+    MuJoCo's parse and compile errors become :class:`~nonmin.errors.FileFormatError`; moving
+    bodies with non-positive mass or inertia become :class:`~nonmin.errors.ModelError`.
+    """
     p = Path(path)
     if not p.is_file():
-        raise InputError(f"path: MJCF file {str(p)!r} does not exist")
+        raise FileFormatError(f"path: MJCF file {str(p)!r} does not exist")
+    if joint_limits not in ("warn", "ignore"):
+        raise InputError(f"joint_limits must be 'warn' or 'ignore', got {joint_limits!r}")
     try:
+        size = p.stat().st_size
+        if size > MAX_MJCF_BYTES:
+            raise FileFormatError(f"path: {str(p)!r}: {size} bytes, more than the {MAX_MJCF_BYTES} an MJCF may have")
+        if b"<!ENTITY" in p.read_bytes():
+            raise FileFormatError(f"path: {str(p)!r}: MJCF files must not declare XML entities (<!ENTITY>)")
         mj = mujoco.MjModel.from_xml_path(str(p))
-    except ValueError as exc:
-        raise InputError(f"path: MuJoCo could not compile {str(p)!r}: {exc}") from exc
+    except FileFormatError:
+        raise
+    except Exception as exc:  # MuJoCo raises ValueError for XML and compile errors
+        raise FileFormatError(f"path: MuJoCo could not compile {str(p)!r}: {exc}") from exc
+    for b in range(1, mj.nbody):
+        moving = int(mj.body_dofnum[b]) > 0 or int(mj.body_weldid[b]) != 0
+        mass = float(mj.body_mass[b])
+        inertia = np.asarray(mj.body_inertia[b], dtype=float)
+        if moving and not (np.isfinite(mass) and mass >= 0 and np.isfinite(inertia).all() and np.all(inertia >= 0)):
+            raise ModelError(
+                f"path: {str(p)!r}: body {_name(mj, mujoco.mjtObj.mjOBJ_BODY, b, 'body')!r} has mass "
+                f"{mass!r} and inertia {inertia.tolist()}: they must be finite and ≥ 0"
+            )
+    limited = {
+        _name(mj, mujoco.mjtObj.mjOBJ_JOINT, j, "joint"): (float(mj.jnt_range[j][0]), float(mj.jnt_range[j][1]))
+        for j in range(mj.njnt)
+        if bool(mj.jnt_limited[j])
+    }
+    if limited and joint_limits == "warn":
+        shown = ", ".join(f"{j} [{lo:g}, {hi:g}]" for j, (lo, hi) in list(limited.items())[:8])
+        warnings.warn(
+            f"{p}: joint position limits are not enforced by the dynamics: {shown}"
+            f"{' and more' if len(limited) > 8 else ''}; a joint can move past them. Pass "
+            "joint_limits='ignore' to silence this warning",
+            JointLimitWarning,
+            stacklevel=3,
+        )
     pm, info = build_pinocchio_model(mj)
     eqs, eq_active = equality_constraints(mj, info)
     user = tuple(constraints)

@@ -51,6 +51,7 @@ world-aligned point velocities and angular velocities.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -61,7 +62,9 @@ from numpy.typing import ArrayLike
 
 from ... import _engine  # type: ignore[attr-defined]  # compiled extension, no stub
 from ...errors import (
+    FileFormatError,
     InputError,
+    JointLimitWarning,
     ModelError,
     NonFiniteError,
     ShapeError,
@@ -439,8 +442,9 @@ class RobotModel(Model):
         default_active: Iterable[str] | None = None,
         damping: ArrayLike | None = None,
         name: str | None = None,
+        joint_limits: str = "warn",
     ) -> RobotModel:
-        """A robot from a URDF file (parsed by Pinocchio).
+        """A robot from a URDF file (checked by nonmin, then parsed by Pinocchio).
 
         Parameters
         ----------
@@ -449,16 +453,39 @@ class RobotModel(Model):
             ``"freeflyer"`` adds a floating base (7 coordinates: position, quaternion).
         constraints, gravity, actuated, default_active, damping, name
             As in :meth:`from_pinocchio`.
+        joint_limits : {"warn", "ignore"}
+            The dynamics do not enforce the file's joint position limits; ``"warn"`` issues a
+            :class:`~nonmin.errors.JointLimitWarning` naming them, ``"ignore"`` does not.
+
+        Raises
+        ------
+        FileFormatError
+            Missing, unreadable or malformed file (names the file and element).
+        ModelError
+            Non-physical masses or inertias, a joint to an unknown link, a kinematic cycle or a
+            link with two parents, inverted limits (names the file and element).
         """
+        from ._urdf_check import check_urdf, joint_limit_text
+
         p = Path(path)
         if not p.is_file():
-            raise InputError(f"path: URDF file {str(p)!r} does not exist")
-        if root_joint is None:
-            pm = pin.buildModelFromUrdf(str(p))
-        elif root_joint == "freeflyer":
-            pm = pin.buildModelFromUrdf(str(p), pin.JointModelFreeFlyer())
-        else:
+            raise FileFormatError(f"path: URDF file {str(p)!r} does not exist")
+        if root_joint not in (None, "freeflyer"):
             raise InputError(f"root_joint must be None or 'freeflyer', got {root_joint!r}")
+        if joint_limits not in ("warn", "ignore"):
+            raise InputError(f"joint_limits must be 'warn' or 'ignore', got {joint_limits!r}")
+        limits = check_urdf(p)
+        try:
+            if root_joint is None:
+                pm = pin.buildModelFromUrdf(str(p))
+            else:
+                pm = pin.buildModelFromUrdf(str(p), pin.JointModelFreeFlyer())
+        except Exception as exc:  # Pinocchio's parser raises ValueError/RuntimeError/...
+            raise FileFormatError(
+                f"path: Pinocchio could not build a model from {str(p)!r}: {type(exc).__name__}: {exc}"
+            ) from exc
+        if limits and joint_limits == "warn":
+            warnings.warn(joint_limit_text(limits, p), JointLimitWarning, stacklevel=2)
         return cls.from_pinocchio(
             pm,
             constraints=constraints,
@@ -480,6 +507,7 @@ class RobotModel(Model):
         actuated: Iterable[str] | None = None,
         default_active: Iterable[str] | None = None,
         name: str | None = None,
+        joint_limits: str = "warn",
     ) -> RobotModel:
         """A robot from an MJCF file, parsed by MuJoCo (extra ``mujoco``).
 
@@ -498,6 +526,7 @@ class RobotModel(Model):
             actuated=actuated,
             default_active=default_active,
             name=name,
+            joint_limits=joint_limits,
         )
 
     # ------------------------------------------------------------------ protocol plumbing
