@@ -166,8 +166,15 @@ def test_callback_exception_propagates() -> None:
         name="boom", coordinate_names=("x", "y"), mass=mass, coriolis=lambda q, qd: np.zeros((2, 2)),
         conservative=lambda q: [0.0, -9.81], potential=lambda q: 9.81 * q[1],
     )  # fmt: skip
-    with pytest.raises(Boom):
+    # a user function's exception becomes a SimulationError naming it and the time (issue 19);
+    # the original exception stays reachable through the cause chain
+    with pytest.raises(SimulationError, match=r"mass raised Boom.*|t = .*mass raised Boom") as info:
         simulate(model, 1.0, [0.0, 0.0], engine="engine", progress=False)
+    assert "t = " in str(info.value)
+    cause: BaseException | None = info.value
+    while cause is not None and not isinstance(cause, Boom):
+        cause = cause.__cause__
+    assert isinstance(cause, Boom)
     tr = simulate(model, 1.0, [0.0, 0.0], engine="engine", progress=False, throw=False)
     assert not tr.success and "Boom" in tr.message
 
