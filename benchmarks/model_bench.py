@@ -20,8 +20,8 @@ UR5 (example-robot-data, 6 DoF) with its tool frame held by a point loop closure
 and the dual-arm grasp (``two_arm_grasp``: two 4-DoF arms welded / pinned to a free-floating
 box, n = 15, nv = 14, 10 rows). Each in one process, at one consistent state:
 
-* ``engine model+kernel``: ``_engine.program_forward`` — the robot's TreeProgram evaluates M,
-  h, A, γ and the engine's Solver returns q̈, in one call from Python;
+* ``engine model+kernel``: ``_engine.Forward`` — the robot's TreeProgram evaluates M, h, A, γ
+  and the engine's Solver returns q̈, in one call from Python;
 * ``engine evaluate``: ``Program.evaluate_into`` (M, h, A, γ) alone;
 * ``python API``: ``RobotModel.evaluate`` + ``nonmin.core.forward_dynamics``;
 * ``pin constraintDynamics``: Pinocchio's exact KKT (proximal mu = 0, one iteration) on the same
@@ -233,9 +233,10 @@ def run_robots(repeat: int) -> dict[str, Any]:
         mask = np.array([c.name in act for c in robot.constraints], dtype=np.uint8)
         qdd = np.empty(robot.n)
         need = _engine.NEED_M | _engine.NEED_H | _engine.NEED_A | _engine.NEED_GAMMA
+        fwd = _engine.Forward(prog, mask)
 
-        def engine(prog=prog, terms=terms, ws=ws, t=t, q=q, qd=qd, mask=mask, qdd=qdd) -> None:
-            _engine.program_forward(prog, terms, ws, t, q, qd, mask, None, qdd)
+        def engine(fwd=fwd, t=t, q=q, qd=qd, qdd=qdd) -> None:
+            fwd(t, q, qd, qdd)
 
         def evaluate(prog=prog, terms=terms, ws=ws, t=t, q=q, qd=qd, mask=mask, need=need) -> None:
             prog.evaluate_into(terms, ws, t, q, qd, mask, need)
@@ -252,7 +253,7 @@ def run_robots(repeat: int) -> dict[str, Any]:
         def pinocchio(pm=pm, data=data, qn=qn, v=v, tau=tau, cms=cms, cds=cds, prox=prox) -> Any:
             return pin.constraintDynamics(pm, data, qn, v, tau, cms, cds, prox)
 
-        assert _engine.program_forward(prog, terms, ws, t, q, qd, mask, None, qdd) == 0
+        fwd(t, q, qd, qdd)
         a_pin = np.array(pinocchio())
         a_eng = robot.to_pinocchio_acceleration(q, qd, qdd)
         a_api = robot.to_pinocchio_acceleration(q, qd, python_api())

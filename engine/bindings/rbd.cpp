@@ -6,7 +6,6 @@
 // against Pinocchio and for kinematic queries.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
-#include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
@@ -17,7 +16,6 @@
 #include <vector>
 
 #include "nonmin/rbd/tree_program.hpp"
-#include "nonmin/solver.hpp"
 #include "program_common.hpp"
 #include "register.hpp"
 
@@ -171,73 +169,9 @@ void copy_out(const double* src, OArr& dst, std::size_t n, const char* name) {
     if (n) std::memcpy(dst.data(), src, n * sizeof(double));
 }
 
-// Model + kernel from (q, qd) for any Program: evaluate M, h, f_passive, A, γ (active rows,
-// compacted when the mask is partial) and q̈ = Solver::forward(M, h + f_passive + f, A, γ).
-// Thread-local solver and buffers, grown when a call needs more (no allocation at steady state).
-int program_forward(const Program& prog, Terms& T, Workspace& ws, double t, CArr q, CArr qd,
-                    U8Arr active, std::optional<CArr> f, OArr qdd, double rtol, double mu) {
-    const int n = prog.n(), m_all = prog.m_all();
-    expect(q, n, "q");
-    expect(qd, n, "qd");
-    expect(qdd, n, "qdd");
-    expect(active, prog.constraints().size(), "active");
-    if (f) expect(*f, n, "f");
-    if (T.M.rows() != n || T.A.rows() != m_all || T.B.cols() != prog.k())
-        raise_error("InputError", "terms must be made by this program");
-    thread_local std::unique_ptr<Solver> solver;
-    thread_local Mat A;
-    thread_local Vec g, gam;
-    auto run = [&]() -> int {
-        const unsigned need = NEED_M | NEED_H | NEED_A | NEED_GAMMA;
-        Status st = prog.evaluate(t, q.data(), qd.data(), active.data(), need, T, ws);
-        if (st != Status::ok) return static_cast<int>(st);
-        int m = 0;
-        for (const ConstraintInfo& c : prog.constraints())
-            if (active.data()[&c - prog.constraints().data()]) m += c.dim;
-        const double* Ap = T.A.data();
-        const double* gp = T.gamma.data();
-        if (m != m_all) {
-            if (A.rows() < m || A.cols() != n) A.resize(std::max<Eigen::Index>(m, A.rows()), n);
-            if (gam.size() < m) gam.resize(m);
-            int r = 0;
-            for (std::size_t c = 0; c < prog.constraints().size(); ++c) {
-                if (!active.data()[c]) continue;
-                const ConstraintInfo& ci = prog.constraints()[c];
-                A.middleRows(r, ci.dim) = T.A.middleRows(ci.row, ci.dim);
-                gam.segment(r, ci.dim) = T.gamma.segment(ci.row, ci.dim);
-                r += ci.dim;
-            }
-            Ap = A.data();
-            gp = gam.data();
-        }
-        if (!solver || solver->n() != n || solver->m_max() < m)
-            solver = std::make_unique<Solver>(std::max(m, 1), n);
-        if (g.size() != n) g.resize(n);
-        g = T.h + T.f_passive;
-        if (f) g += CVecMap(f->data(), n);
-        SolveOptions opt;
-        opt.rtol = rtol;
-        opt.mu = mu;
-        return static_cast<int>(solver->forward(T.M.data(), g.data(), Ap, m, gp, opt, qdd.data(), nullptr).status);
-    };
-    if (prog.thread_safe()) {
-        nb::gil_scoped_release release;
-        return run();
-    }
-    return run();
-}
-
 }  // namespace
 
 void bind_rbd(nb::module_& m) {
-    m.def("program_forward", &program_forward, nb::arg("program"), nb::arg("terms"),
-          nb::arg("workspace"), nb::arg("t"), nb::arg("q"), nb::arg("qd"), nb::arg("active"),
-          nb::arg("f").none(), nb::arg("qdd"), nb::arg("rtol") = 1e-10, nb::arg("mu") = 0.0,
-          "Model + kernel from (q, qd) for any Program: evaluate M, h, f_passive, A, γ of the "
-          "active constraints into `terms` (scratch from make_terms / make_workspace) and write "
-          "q̈ of the projection dynamics (Solver::forward, g = h + f_passive + f) into `qdd`. "
-          "Returns the status code (0: ok). Releases the GIL for thread-safe programs.");
-
     nb::class_<TreeProgram, Program>(
         m, "TreeProgram",
         "A robot (rigid-body tree + frame constraints) compiled for the engine "

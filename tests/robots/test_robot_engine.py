@@ -309,26 +309,33 @@ def test_tree_program_through_the_program_interface() -> None:
         assert batch["potential"][i] == robot.potential_energy(qs[i])
 
 
-def test_program_forward_is_model_plus_kernel() -> None:
-    """_engine.program_forward (evaluate + the engine's solve in one call) gives the q̈ of
-    RobotModel.evaluate + nonmin.core.forward_dynamics, for the full and a partial active set."""
+def test_engine_forward_is_model_plus_kernel() -> None:
+    """_engine.Forward on the robot's program (evaluation + the engine's solve in one call)
+    gives the q̈ of RobotModel.evaluate + nonmin.core.forward_dynamics, for the full and a
+    partial active set; Forward.batch on 2 threads is bitwise the single calls (the
+    TreeProgram is evaluated from two threads at once)."""
     from nonmin import _engine
     from nonmin.core import forward_dynamics
 
-    robot, state = two_arm_grasp()
+    robot, _ = two_arm_grasp()
     prog = robot.engine_program()
-    terms, ws = prog.make_terms(), prog.make_workspace()
+    assert prog.thread_safe
     rng = np.random.default_rng(12)
-    tau = rng.normal(size=robot.k)
+    N = 6
+    qs = np.array([robot.random_configuration(rng) for _ in range(N)])
+    qds = rng.normal(size=(N, robot.n))
     for names, mask in ((robot.constraint_names, [1, 1, 1]), (("grasp_right",), [1, 0, 1])):
-        mt = robot.evaluate(0.0, state.q, state.qd, names)
-        f = mt.B @ tau
-        ref = forward_dynamics(mt.M, mt.h + mt.f_passive, mt.constraints.A, mt.constraints.gamma, f)
+        fwd = _engine.Forward(prog, np.array(mask, dtype=np.uint8))
         qdd = np.empty(robot.n)
-        status = _engine.program_forward(prog, terms, ws, 0.0, state.q, state.qd,
-                                         np.array(mask, dtype=np.uint8), f, qdd)
-        assert status == 0
-        assert _rel(qdd, ref) < 1e-10
+        single = np.empty((N, robot.n))
+        for i in range(N):
+            mt = robot.evaluate(0.0, qs[i], qds[i], names)
+            ref = forward_dynamics(mt.M, mt.h + mt.f_passive, mt.constraints.A,
+                                   mt.constraints.gamma)
+            fwd(0.0, qs[i], qds[i], qdd)
+            assert _rel(qdd, ref) < 1e-10
+            single[i] = qdd
+        np.testing.assert_array_equal(fwd.batch(np.zeros(N), qs, qds, nthreads=2), single)
 
 
 def test_pickle_and_deepcopy_rebuild_the_engine_program() -> None:
