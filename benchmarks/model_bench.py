@@ -177,7 +177,7 @@ def _ur5_point() -> tuple[Any, Any]:
     path = root / "ur_description" / "urdf" / "ur5_robot.urdf"
     if not path.is_file():
         raise SystemExit(f"--robots needs example-robot-data ({path} is missing)")
-    base = RobotModel.from_urdf(path)
+    base = RobotModel.from_urdf(path, joint_limits="ignore")
     q0 = np.array([0.3, -1.0, 1.4, -0.6, 1.2, 0.4])
     pinned = base.frame_placement(q0, "tool0")[:3, 3]
     robot = base.replace(robot_constraints=(FrameConstraint.point("closure", "tool0", placement_b=pinned),))

@@ -336,7 +336,8 @@ Status TreeProgram::evaluate(double /*t*/, const double* q, const double* qd,
                 d_.constraints[c].type != RowType::joint_coupling)
                 any_frame = true;
     const bool motion = want_h || (want_gamma && any_frame);
-    if (want_M || want_h || want_energy || any_frame) forward_kinematics(model, ws.data, ws.qn.data());
+    const bool dynamics = want_M || want_h || want_energy;
+    if (dynamics || any_frame) forward_kinematics(model, ws.data, ws.qn.data(), dynamics);
     if (motion) forward_motion(model, ws.data, ws.v.data(), ws.a0.data());
 
     if (want_M || want_energy) {

@@ -55,7 +55,7 @@ TreeData::TreeData(const TreeModel& model)
       oa(model.joints.size()),
       of(model.joints.size()) {}
 
-void forward_kinematics(const TreeModel& model, TreeData& data, const double* q) {
+void forward_kinematics(const TreeModel& model, TreeData& data, const double* q, bool inertias) {
     const int nj = static_cast<int>(model.joints.size());
     for (int i = 0; i < nj; ++i) {
         const Joint& jt = model.joints[i];
@@ -101,7 +101,7 @@ void forward_kinematics(const TreeModel& model, TreeData& data, const double* q)
                 for (int k = 0; k < 3; ++k) col(k, X.R.col(k), Vec3::Zero());
                 break;
         }
-        data.oI[i] = Inertia::from_body(jt.mass, jt.com, jt.inertia, X);
+        if (inertias) data.oI[i] = Inertia::from_body(jt.mass, jt.com, jt.inertia, X);
     }
 }
 

@@ -79,8 +79,10 @@ struct TreeData {
     std::vector<Force> of;      // subtree forces (rnea scratch)
 };
 
-// Placements oMi, world motion subspaces J and world body inertias oI at q (nq).
-void forward_kinematics(const TreeModel& model, TreeData& data, const double* q);
+// Placements oMi, world motion subspaces J and (when `inertias`) world body inertias oI at q
+// (nq). crba, rnea and potential_energy need the inertias; frame kinematics do not.
+void forward_kinematics(const TreeModel& model, TreeData& data, const double* q,
+                        bool inertias = true);
 
 // Spatial velocities ν_i and accelerations α_i (without gravity) for Pinocchio's joint
 // velocity v and acceleration a (nv each; a == nullptr means a = 0). Needs forward_kinematics.
