@@ -7,7 +7,12 @@
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/optional.h>
 
+#include <Python.h>
+
 #include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <chrono>
 #include <memory>
 #include <thread>
 #include <vector>
@@ -51,16 +56,111 @@ SolveOptions options(double mu, double rtol, double spd_rtol, double sym_rtol) {
     return o;
 }
 
-// what: 0 q̈, 1 f_c, 2 (q̈, f_c, P, L, rank, μ), 3 (q̈, rank). None when not ok (or shapes).
+// ---------------------------------------------------------------- the public calls' fast entry
+// A float64 C-contiguous array of a given number of dimensions, read through the buffer
+// protocol (cheaper than a general ndarray conversion: the public kernels' per-call overhead).
+struct Buf {
+    Py_buffer v{};
+    bool held = false;
+    Buf() = default;
+    Buf(const Buf&) = delete;
+    Buf& operator=(const Buf&) = delete;
+    ~Buf() {
+        if (held) PyBuffer_Release(&v);
+    }
+    bool get(PyObject* o, int ndim, bool writable = false) {
+        const int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+        if (PyObject_GetBuffer(o, &v, flags) != 0) {
+            PyErr_Clear();
+            return false;
+        }
+        held = true;
+        return v.ndim == ndim && v.itemsize == 8 && v.format && v.format[0] == 'd' &&
+               v.format[1] == 0;
+    }
+    const double* data() const { return static_cast<const double*>(v.buf); }
+    double* wdata() { return static_cast<double*>(v.buf); }
+    long dim(int i) const { return static_cast<long>(v.shape[i]); }
+};
+
+// A new float64 NumPy array of n entries and its data pointer.
+nb::object new_vector(long n, double** data) {
+    static PyObject* empty = nullptr;
+    if (!empty) empty = nb::object(nb::module_::import_("numpy").attr("empty")).release().ptr();
+    nb::object out = nb::steal(PyObject_CallOneArg(empty, nb::int_(n).ptr()));
+    if (!out.is_valid()) throw nb::python_error();
+    Buf b;
+    if (!b.get(out.ptr(), 1, true)) throw nb::type_error("numpy.empty: unexpected buffer");
+    *data = b.wdata();
+    return out;
+}
+
+// forward_dynamics / constraint_force / (q̈, rank) for one state with the public arguments:
+// mu and rtol None or Python floats, f None or an array. Returns None whenever the call is not
+// the plain regular single-state case (arrays that are not float64 C-contiguous of one state's
+// shapes, other argument types, invalid values, an irregular state): the Python layer then takes
+// its general path, which converts, batches, or raises the typed error.
+nb::object fast_solve(nb::handle M, nb::handle h, nb::handle A, nb::handle gamma, nb::handle f,
+                      nb::handle mu, nb::handle rtol, int what) {
+    SolveOptions opt;
+    if (!mu.is_none()) {
+        if (!PyFloat_CheckExact(mu.ptr())) return nb::none();
+        opt.mu = PyFloat_AS_DOUBLE(mu.ptr());
+        if (!(opt.mu > 0.0) || !std::isfinite(opt.mu)) return nb::none();
+    }
+    if (!rtol.is_none()) {
+        if (!PyFloat_CheckExact(rtol.ptr())) return nb::none();
+        opt.rtol = PyFloat_AS_DOUBLE(rtol.ptr());
+        if (!(opt.rtol > 0.0 && opt.rtol < 1.0)) return nb::none();
+    }
+    Buf bM, bh, bA, bg, bf;
+    if (!bM.get(M.ptr(), 2) || !bh.get(h.ptr(), 1) || !bA.get(A.ptr(), 2) || !bg.get(gamma.ptr(), 1))
+        return nb::none();
+    const long n = bh.dim(0), m = bA.dim(0);
+    if (n == 0 || bM.dim(0) != n || bM.dim(1) != n || bA.dim(1) != n || bg.dim(0) != m)
+        return nb::none();
+    const double* g = bh.data();
+    thread_local std::vector<double> gbuf, fcbuf;
+    if (!f.is_none()) {
+        if (!bf.get(f.ptr(), 1) || bf.dim(0) != n) return nb::none();
+        gbuf.resize(n);
+        const double* fp = bf.data();
+        for (long i = 0; i < n; ++i) gbuf[i] = g[i] + fp[i];
+        g = gbuf.data();
+    }
+    Solver& s = thread_solver(static_cast<int>(m), static_cast<int>(n));
+    double* out = nullptr;
+    nb::object res = new_vector(n, &out);
+    SolveInfo info;
+    if (what == 1) {
+        fcbuf.resize(n);
+        info = s.forward(bM.data(), g, bA.data(), static_cast<int>(m), bg.data(), opt,
+                         fcbuf.data(), out);
+    } else {
+        info = s.forward(bM.data(), g, bA.data(), static_cast<int>(m), bg.data(), opt, out,
+                         nullptr);
+    }
+    if (info.status != Status::ok) return nb::none();
+    if (what == 3) return nb::make_tuple(res, info.rank);
+    return res;
+}
+
+nb::object status_of(Status s) { return nb::int_(static_cast<int>(s)); }
+
+// what: 0 q̈, 1 f_c, 2 (q̈, f_c, P, L, rank, μ), 3 (q̈, rank). None when the arrays are not those
+// of one state (a batch: the caller's batched path); the status code (int) when the state is
+// not regular (wrong sizes, non-finite, asymmetric M, M̄ not SPD).
 nb::object solve_one(In M, In h, In A, In gamma, std::optional<In> f, double mu, double rtol,
                      double spd_rtol, double sym_rtol, int what) {
-    if (M.ndim() != 2 || h.ndim() != 1 || A.ndim() != 2 || gamma.ndim() != 1) return nb::none();
+    if (M.ndim() != 2 || h.ndim() != 1 || A.ndim() != 2 || gamma.ndim() != 1 ||
+        (f && f->ndim() != 1))
+        return nb::none();
     const int n = static_cast<int>(h.shape(0));
     const int m = static_cast<int>(A.shape(0));
     if (n == 0 || M.shape(0) != static_cast<size_t>(n) || M.shape(1) != static_cast<size_t>(n) ||
-        A.shape(1) != static_cast<size_t>(n) || gamma.shape(0) != static_cast<size_t>(m))
-        return nb::none();
-    if (f && (f->ndim() != 1 || f->shape(0) != static_cast<size_t>(n))) return nb::none();
+        A.shape(1) != static_cast<size_t>(n) || gamma.shape(0) != static_cast<size_t>(m) ||
+        (f && f->shape(0) != static_cast<size_t>(n)))
+        return status_of(Status::bad_shape);
     Solver& s = thread_solver(m, n);
     const SolveOptions opt = options(mu, rtol, spd_rtol, sym_rtol);
     thread_local std::vector<double> gbuf;
@@ -76,7 +176,7 @@ nb::object solve_one(In M, In h, In A, In gamma, std::optional<In> f, double mu,
         nb::capsule own;
         double* q = fresh(un, own);
         const SolveInfo info = s.forward(M.data(), g, A.data(), m, gamma.data(), opt, q, nullptr);
-        if (info.status != Status::ok) return nb::none();
+        if (info.status != Status::ok) return status_of(info.status);
         NpOut<nb::ndim<1>> qa(q, {un}, own);
         if (what == 0) return nb::cast(qa);
         return nb::make_tuple(qa, info.rank);
@@ -86,7 +186,7 @@ nb::object solve_one(In M, In h, In A, In gamma, std::optional<In> f, double mu,
         double* buf = fresh(2 * un, own);
         const SolveInfo info =
             s.forward(M.data(), g, A.data(), m, gamma.data(), opt, buf + n, buf);
-        if (info.status != Status::ok) return nb::none();
+        if (info.status != Status::ok) return status_of(info.status);
         return nb::cast(NpOut<nb::ndim<1>>(buf, {un}, own));
     }
     nb::capsule o1, o2, o3, o4;
@@ -95,7 +195,7 @@ nb::object solve_one(In M, In h, In A, In gamma, std::optional<In> f, double mu,
     double* P = fresh(un * un, o3);
     double* L = fresh(un * un, o4);
     const SolveInfo info = s.solve(M.data(), g, A.data(), m, gamma.data(), opt, q, fc, P, L);
-    if (info.status != Status::ok) return nb::none();
+    if (info.status != Status::ok) return status_of(info.status);
     return nb::make_tuple(NpOut<nb::ndim<1>>(q, {un}, o1), NpOut<nb::ndim<1>>(fc, {un}, o2),
                           NpOut<nb::ndim<2>>(P, {un, un}, o3), NpOut<nb::ndim<2>>(L, {un, un}, o4),
                           info.rank, info.mu);
@@ -168,11 +268,16 @@ void solve_batch(In M, In h, std::optional<In> f, In A, In gamma, std::optional<
 }  // namespace
 
 void bind_core(nb::module_& m) {
+    m.def("core_fast", &fast_solve, nb::arg("M"), nb::arg("h"), nb::arg("A"), nb::arg("gamma"),
+          nb::arg("f").none(), nb::arg("mu").none(), nb::arg("rtol").none(), nb::arg("what"),
+          "The public kernels' fast entry (what 0: q̈, 1: f_c, 3: (q̈, rank)) for one regular "
+          "state of float64 C-contiguous arrays; None otherwise (take the general path).");
     m.def("core_solve_one", &solve_one, nb::arg("M"), nb::arg("h"), nb::arg("A"),
           nb::arg("gamma"), nb::arg("f").none(), nb::arg("mu"), nb::arg("rtol"),
           nb::arg("spd_rtol"), nb::arg("sym_rtol"), nb::arg("what"),
-          "One state of the projection dynamics (nonmin.core.solve_dynamics); None if the state "
-          "is not regular (the caller re-runs the NumPy path for the typed error).");
+          "One state of the projection dynamics (nonmin.core.solve_dynamics); None for arrays "
+          "that are not one state's, the status code (int) when the state is not regular (the "
+          "caller re-runs the NumPy path for the typed error).");
     m.def("core_solve_batch", &solve_batch, nb::arg("M"), nb::arg("h"), nb::arg("f").none(),
           nb::arg("A"), nb::arg("gamma"), nb::arg("mu").none(), nb::arg("sM"), nb::arg("sh"),
           nb::arg("sf"), nb::arg("sA"), nb::arg("sg"), nb::arg("smu"), nb::arg("N"),
@@ -180,6 +285,53 @@ void bind_core(nb::module_& m) {
           nb::arg("qdd"), nb::arg("fc"), nb::arg("P"), nb::arg("L"), nb::arg("status"),
           nb::arg("rank"), nb::arg("mu_out"), nb::arg("ratio"), nb::arg("nthreads"),
           "A batch of states (flat buffers with batch strides, 0 = broadcast), threaded.");
+    m.def(
+        "core_solve_info",
+        [](In M, In g, In A, In gamma, double rtol) {
+            const int n = static_cast<int>(g.shape(0)), m = static_cast<int>(A.shape(0));
+            if (M.size() != static_cast<size_t>(n) * n || A.ndim() != 2 ||
+                A.shape(1) != static_cast<size_t>(n) || gamma.size() != static_cast<size_t>(m))
+                throw nb::value_error("core_solve_info: shapes");
+            Solver s(std::max(m, 1), n);
+            std::vector<double> q(n);
+            SolveOptions opt;
+            opt.rtol = rtol;
+            const SolveInfo i = s.forward(M.data(), g.data(), A.data(), m, gamma.data(), opt,
+                                          q.data(), nullptr);
+            nb::dict d;
+            d["status"] = static_cast<int>(i.status);
+            d["rank"] = i.rank;
+            d["mu"] = i.mu;
+            d["method"] = i.method;
+            d["null_space_form"] = i.null_space_form;
+            return d;
+        },
+        nb::arg("M"), nb::arg("g"), nb::arg("A"), nb::arg("gamma"), nb::arg("rtol"),
+        "Test helper: how the Solver decided one state (status, rank, μ, method: 0 SVD, 1 "
+        "certified LQ with L⁻¹, 2 certified LQ over L's profile; null_space_form).");
+    m.def(
+        "core_time_solve",
+        [](In M, In g, In A, In gamma, long reps, int what) -> double {
+            const int n = static_cast<int>(g.shape(0)), m = static_cast<int>(A.shape(0));
+            if (M.size() != static_cast<size_t>(n) * n || A.ndim() != 2 ||
+                A.shape(1) != static_cast<size_t>(n) || gamma.size() != static_cast<size_t>(m))
+                throw nb::value_error("core_time_solve: shapes");
+            Solver s(std::max(m, 1), n);
+            std::vector<double> q(n), fc(n), P(static_cast<size_t>(n) * n), L(P.size());
+            SolveOptions opt;
+            nb::gil_scoped_release release;
+            const auto t0 = std::chrono::steady_clock::now();
+            for (long r = 0; r < reps; ++r)
+                s.solve(M.data(), g.data(), A.data(), m, gamma.data(), opt, q.data(),
+                        what >= 1 ? fc.data() : nullptr, what == 2 ? P.data() : nullptr,
+                        what == 2 ? L.data() : nullptr);
+            const auto t1 = std::chrono::steady_clock::now();
+            return std::chrono::duration<double>(t1 - t0).count() / static_cast<double>(reps);
+        },
+        nb::arg("M"), nb::arg("g"), nb::arg("A"), nb::arg("gamma"), nb::arg("reps"),
+        nb::arg("what") = 0,
+        "Benchmark helper: seconds per Solver call (one preallocated Solver, no Python in the "
+        "loop); what 0: q̈, 1: q̈ and f_c, 2: also P and L.");
     m.def(
         "core_min_norm",
         [](In A, In b, double rtol, Out x) -> int {

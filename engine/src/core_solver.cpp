@@ -20,9 +20,13 @@ constexpr int JACOBI_MAX_ROWS = 32;
 
 struct Solver::Impl {
     int m_max, n;
-    std::vector<double> B, d, sig, V, cv, Kt, Tt, Et, Ft, G, W, wv, u, g, dinv, cw;
-    Mat big;                                     // large-m SVD input (m_max × n)
-    Eigen::BDCSVD<Mat> svd;                      // large-m SVD
+    std::vector<double> B, d, sig, V, cv, Kt, Tt, Et, Ft, G, Ls, W, wv, u, g, dinv, cw;
+    Mat big;                 // large-m SVD input (m_max × n)
+    Eigen::BDCSVD<Mat> svd;  // large-m SVD (thin U, full V: the null-space basis)
+    linalg::LQWork lq;       // certified LQ scratch
+    int lqmode = linalg::LQ_NONE;  // what the last rank decision used
+    bool zmode = false;            // null-space form: Z (rows of Kt, k = n − r ≤ r) spans N(A)
+    int m_live = 0;                // rows of B the rank decision used (the live rows of A)
 
     Impl(int m_max_, int n_)
         : m_max(m_max_), n(n_) {
@@ -37,6 +41,7 @@ struct Solver::Impl {
         Et.assign(mn, 0.0);
         Ft.assign(mn, 0.0);
         G.assign(static_cast<long>(m_max) * m_max, 0.0);
+        Ls.assign(static_cast<long>(m_max) * m_max, 0.0);
         W.assign(static_cast<long>(n) * n, 0.0);
         wv.assign(n, 0.0);
         u.assign(n, 0.0);
@@ -45,14 +50,49 @@ struct Solver::Impl {
         cw.assign(n, 0.0);
         if (m_max > JACOBI_MAX_ROWS) {
             big = Mat::Zero(m_max, n);
-            svd = Eigen::BDCSVD<Mat>(m_max, n, Eigen::ComputeThinU | Eigen::ComputeThinV);
+            svd = Eigen::BDCSVD<Mat>(m_max, n, Eigen::ComputeThinU | Eigen::ComputeFullV);
         }
+        if (m_max >= linalg::QR_MIN_ROWS) lq = linalg::LQWork(m_max, n);
     }
 
-    // Rule 3: the rank r and the kept right singular vectors V (r × n) of D A, with
-    // cv_k = (u_kᵀ D b)_k / σ_k (B holds [D A | D b] on entry and is overwritten).
-    int rank_decision(int m, double rtol) {
+    // Rule 3: the rank r of D A (B holds [D A | D b], live rows of A: `live`; B is overwritten,
+    // its live rows first: a vanished row is a zero row of D A, which changes neither the SVD's
+    // nonzero singular values and vectors nor the LQ's certificate).
+    // Certified LQ (lqmode ≠ LQ_NONE): cv = L⁻¹ D b and Q (rows of V) or Z (rows of Kt, zmode).
+    // SVD: the kept right singular vectors V (r × n), cv_k = (u_kᵀ D b)/σ_k, and with many rows
+    // and few degrees of freedom (zmode) the other right singular vectors in the rows of Kt.
+    int rank_decision(int m, int live, double rtol) {
+        lqmode = linalg::LQ_NONE;
+        zmode = false;
+        if (live < m) {  // vanished rows are zero rows of D A: keep the live rows only (in order)
+            const int ld = n + 1;
+            int c = 0;
+            for (int i = 0; i < m; ++i)
+                if (d[i] != 0.0) {
+                    if (c != i)
+                        for (int k = 0; k <= n; ++k) B[c * ld + k] = B[i * ld + k];
+                    ++c;
+                }
+            m = live;
+        }
+        m_live = m;
         if (m == 0) return 0;
+        if (linalg::QR_MIN_ROWS <= m && m <= n) {
+            if (m > linalg::DENSE_INVERSE_MAX_ROWS) {
+                linalg::row_pattern(B.data(), m, n, n + 1, lq.Ap.data());
+                lqmode = linalg::lq_sparse(B.data(), m, n, rtol, lq, cv.data());
+            } else {
+                lqmode = linalg::lq_certified(B.data(), m, n, rtol, lq, cv.data());
+            }
+            if (lqmode != linalg::LQ_NONE) {
+                zmode = n - m <= m;  // few degrees of freedom: the null-space basis Z
+                if (zmode)
+                    linalg::lq_rows(lq, m, n, m, n - m, Kt.data());
+                else
+                    linalg::lq_rows(lq, m, n, 0, m, V.data());
+                return m;
+            }
+        }
         if (m <= JACOBI_MAX_ROWS) {
             linalg::jacobi_rows(B.data(), m, n, nullptr);
             return linalg::keep_rows(B.data(), m, n, rtol, V.data(), cv.data(), sig.data());
@@ -61,7 +101,7 @@ struct Solver::Impl {
         auto Bm = big.topRows(m);
         for (int i = 0; i < m; ++i)
             for (int k = 0; k < n; ++k) Bm(i, k) = B[i * ld + k];
-        svd.compute(Bm, Eigen::ComputeThinU | Eigen::ComputeThinV);
+        svd.compute(Bm, Eigen::ComputeThinU | Eigen::ComputeFullV);
         const auto& s = svd.singularValues();
         const auto& U = svd.matrixU();
         const auto& Vs = svd.matrixV();
@@ -77,7 +117,146 @@ struct Solver::Impl {
             for (int c = 0; c < m; ++c) t += U(c, a) * B[c * ld + n];
             cv[a] = t * inv;
         }
+        zmode = n - r <= r;
+        if (zmode)
+            for (int a = 0; a < n - r; ++a)
+                for (int k = 0; k < n; ++k) Kt[a * n + k] = Vs(k, r + a);
         return r;
+    }
+
+    // The null-space form's factorization: S = Z M Zᵀ (k × k, in G), μ, the Cholesky factor of S
+    // (Ls) with the SPD test of the n × n M̄ = diag(μI, S) in the basis [Q; Z] (pivots of S
+    // against max_i M̄_ii). Returns a linalg::CholStatus.
+    int null_factor(const double* M, bool diag, int k, double mu_in, double* mu_out,
+                    double spd_rtol, double* ratio) {
+        const double* Z = Kt.data();
+        double* ZM = Et.data();
+        for (int a = 0; a < k; ++a) {  // ZM = Z M
+            const double* Za = Z + static_cast<long>(a) * n;
+            double* Ya = ZM + static_cast<long>(a) * n;
+            if (diag) {
+                for (int j = 0; j < n; ++j) Ya[j] = 0.0 + Za[j] * M[j * n + j];
+                continue;
+            }
+            for (int j = 0; j < n; ++j) Ya[j] = 0.0;
+            for (int i = 0; i < n; ++i) {
+                const double c = Za[i];
+                const double* Mi = M + static_cast<long>(i) * n;
+                for (int j = 0; j < n; ++j) Ya[j] += c * Mi[j];
+            }
+        }
+        double* S = G.data();
+        double trs = 0.0;
+        for (int a = 0; a < k; ++a) {
+            for (int c = 0; c < k; ++c) {
+                double s = 0.0;
+                const double* Ya = ZM + static_cast<long>(a) * n;
+                const double* Zc = Z + static_cast<long>(c) * n;
+                for (int j = 0; j < n; ++j) s += Ya[j] * Zc[j];
+                S[a * k + c] = s;
+            }
+            trs += S[a * k + a];
+        }
+        double mu;
+        if (mu_in > 0.0) {
+            mu = mu_in;
+        } else {
+            if (k > 0) {
+                mu = trs / k;
+            } else {  // r = n: tr(M)/n
+                mu = 0.0;
+                for (int i = 0; i < n; ++i) mu += M[i * n + i];
+                mu /= n;
+            }
+            if (!(mu > 0.0)) mu = 1.0;
+        }
+        *mu_out = mu;
+        double dmax = -std::numeric_limits<double>::infinity();
+        for (int i = 0; i < n; ++i) {  // M̄_ii = μ (1 − ‖Z e_i‖²) + (Zᵀ S Z)_ii
+            double p = 0.0, t = 0.0;
+            for (int a = 0; a < k; ++a) {
+                const double za = Z[a * n + i];
+                p += za * za;
+                double s = 0.0;
+                for (int c = 0; c < k; ++c) s += S[a * k + c] * Z[c * n + i];
+                t += za * s;
+            }
+            const double dd = mu * (1.0 - p) + t;
+            if (dd > dmax) dmax = dd;
+        }
+        int st = linalg::CHOL_OK;
+        double rt = std::numeric_limits<double>::infinity();
+        double* L = Ls.data();
+        for (int j = 0; j < k; ++j) {  // Cholesky of S
+            double s = S[j * k + j];
+            for (int c = 0; c < j; ++c) s -= L[j * k + c] * L[j * k + c];
+            if (!(s > 0.0)) {
+                *ratio = rt;
+                return linalg::CHOL_FAIL;
+            }
+            if (s <= spd_rtol * dmax) {
+                st = linalg::CHOL_SMALL_PIVOT;
+                if (s / dmax < rt) rt = s / dmax;
+            }
+            const double ljj = std::sqrt(s);
+            L[j * k + j] = ljj;
+            for (int i = j + 1; i < k; ++i) {
+                double t = S[i * k + j];
+                for (int c = 0; c < j; ++c) t -= L[i * k + c] * L[j * k + c];
+                L[i * k + j] = t / ljj;
+            }
+        }
+        *ratio = rt;
+        return st;
+    }
+
+    // out = w + Zᵀ S⁻¹ Z u (S = Ls Lsᵀ): the null-space form's q̈.
+    void null_space_qdd(int k, const double* uu, const double* w, double* out) {
+        const double* Z = Kt.data();
+        const double* L = Ls.data();
+        double* y = cv.data();
+        for (int a = 0; a < k; ++a) {
+            double s = 0.0;
+            const double* Za = Z + static_cast<long>(a) * n;
+            for (int j = 0; j < n; ++j) s += Za[j] * uu[j];
+            for (int c = 0; c < a; ++c) s -= L[a * k + c] * y[c];
+            y[a] = s / L[a * k + a];
+        }
+        for (int a = k - 1; a >= 0; --a) {
+            double s = y[a];
+            for (int c = a + 1; c < k; ++c) s -= L[c * k + a] * y[c];
+            y[a] = s / L[a * k + a];
+        }
+        for (int i = 0; i < n; ++i) out[i] = w[i];
+        for (int a = 0; a < k; ++a) {
+            const double c = y[a];
+            const double* Za = Z + static_cast<long>(a) * n;
+            for (int i = 0; i < n; ++i) out[i] += Za[i] * c;
+        }
+    }
+
+    // M̄ = μI + Zᵀ(S − μI)Z (lower triangle of W) for the L output of the null-space form;
+    // returns max_i M̄_ii.
+    double mbar_from_s(int k, double mu) {
+        const double* Z = Kt.data();
+        const double* S = G.data();
+        double* Y = Tt.data();
+        for (int a = 0; a < k; ++a)  // Y = (S − μI) Z
+            for (int j = 0; j < n; ++j) {
+                double s = -mu * Z[a * n + j];
+                for (int c = 0; c < k; ++c) s += S[a * k + c] * Z[c * n + j];
+                Y[a * n + j] = s;
+            }
+        double dmax = -std::numeric_limits<double>::infinity();
+        for (int i = 0; i < n; ++i) {
+            for (int j = 0; j <= i; ++j) {
+                double s = i == j ? mu : 0.0;
+                for (int a = 0; a < k; ++a) s += Z[a * n + i] * Y[a * n + j];
+                W[i * n + j] = s;
+            }
+            if (W[i * n + i] > dmax) dmax = W[i * n + i];
+        }
+        return dmax;
     }
 
     // out += sign · M x (M symmetric, row-major; diagonal M without the zero terms).
@@ -96,6 +275,50 @@ struct Solver::Impl {
     SolveInfo solve(const double* M, const double* gin, const double* A, int m,
                     const double* gamma, const SolveOptions& opt, double* qdd, double* fc,
                     double* P, double* L, double* xmin);
+
+    // Steps 4–6 in the null-space form (k = n − r ≤ r, Z in the rows of Kt, w in wv):
+    // q̈ = w + Zᵀ S⁻¹ Z (g − M w), μ = tr S / k; M̄ and its factor only for the L output.
+    SolveInfo solve_null(const double* M, const double* gin, bool diag, int k,
+                         const SolveOptions& opt, double* qdd, double* fc, double* P, double* L,
+                         SolveInfo info) {
+        double mu = 0.0, ratio = 0.0;
+        const int st = null_factor(M, diag, k, opt.mu, &mu, opt.spd_rtol, &ratio);
+        info.mu = mu;
+        if (st != linalg::CHOL_OK) {
+            info.status = Status::not_positive_definite;
+            info.chol_failed = st == linalg::CHOL_FAIL;
+            info.pivot_ratio = st == linalg::CHOL_SMALL_PIVOT ? ratio : 0.0;
+            return info;
+        }
+        for (int i = 0; i < n; ++i) {
+            g[i] = gin[i];
+            u[i] = gin[i];
+        }
+        add_m_times(M, diag, wv.data(), -1.0, u.data());  // u = g − M w
+        null_space_qdd(k, u.data(), wv.data(), qdd);
+        if (fc) {
+            for (int i = 0; i < n; ++i) cw[i] = 0.0;
+            add_m_times(M, diag, qdd, 1.0, cw.data());
+            for (int i = 0; i < n; ++i) fc[i] = cw[i] - g[i];
+        }
+        if (P) {  // P = ZᵀZ
+            const double* Z = Kt.data();
+            for (int i = 0; i < n; ++i)
+                for (int j = 0; j < n; ++j) {
+                    double s = 0.0;
+                    for (int a = 0; a < k; ++a) s += Z[a * n + i] * Z[a * n + j];
+                    P[i * n + j] = s;
+                }
+        }
+        if (L) {
+            const double dmax = mbar_from_s(k, mu);
+            double rt = 0.0;
+            linalg::cholesky_spd(W.data(), n, 0.0, dmax, dinv.data(), cw.data(), &rt);
+            for (int i = 0; i < n; ++i)
+                for (int j = 0; j < n; ++j) L[i * n + j] = j <= i ? W[i * n + j] : 0.0;
+        }
+        return info;
+    }
 };
 
 SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* A, int m,
@@ -150,20 +373,28 @@ SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* 
         }
     }
     // ------------------------------------------------------------------ 2.–3. rank policy
-    linalg::equilibrate(A, m, n, gamma, opt.rtol, B.data(), d.data(), sig.data());
-    const int r = rank_decision(m, opt.rtol);
+    const int live = linalg::equilibrate(A, m, n, gamma, opt.rtol, B.data(), d.data(), sig.data());
+    const int r = rank_decision(m, live, opt.rtol);
     info.rank = r;
-    // w = −(DA)⁺ D γ = −Σ_k v_k cv_k
-    for (int j = 0; j < n; ++j) wv[j] = 0.0;
-    for (int k = 0; k < r; ++k) {
-        const double ck = cv[k];
-        const double* Vk = V.data() + static_cast<long>(k) * n;
-        for (int j = 0; j < n; ++j) wv[j] -= Vk[j] * ck;
+    info.method = lqmode;
+    info.null_space_form = zmode;
+    // w = −(DA)⁺ D γ: −Qᵀ cv through the reflectors, or −Σ_k v_k cv_k
+    if (zmode && lqmode != linalg::LQ_NONE) {
+        linalg::lq_min_norm(lq, m_live, n, cv.data(), wv.data());
+    } else {
+        for (int j = 0; j < n; ++j) wv[j] = 0.0;
+        for (int k = 0; k < r; ++k) {
+            const double ck = cv[k];
+            const double* Vk = V.data() + static_cast<long>(k) * n;
+            for (int j = 0; j < n; ++j) wv[j] -= Vk[j] * ck;
+        }
     }
     if (xmin) {  // min_norm: x = (DA)⁺ D b
         for (int j = 0; j < n; ++j) xmin[j] = -wv[j];
         return info;
     }
+    if (zmode)
+        return solve_null(M, gin, diag, n - r, opt, qdd, fc, P, L, info);
     // ------------------------------------------------------------------ 4. PMP, μ, M̄
     // Q = VᵀV; Kt = V M, G = V M Vᵀ, Tt = G V: PMP = M − VᵀKt − KtᵀV + VᵀTt (rank-r updates).
     for (int k = 0; k < r; ++k) {

@@ -24,12 +24,13 @@ REF_RTOL = 1e-10
 MU_RTOL = 1e-8
 
 def available_backends() -> tuple[str, ...]:
-    """The dynamics backends of nonmin.core that can run here (numpy always; numba if present)."""
+    """The dynamics backends of nonmin.core that can run here (numpy and the C++ engine always;
+    numba if present)."""
     try:
         import numba  # noqa: F401
     except ImportError:
-        return ("numpy",)
-    return ("numpy", "numba")
+        return ("numpy", "engine")
+    return ("numpy", "engine", "numba")
 
 
 KINDS = ("full", "deficient", "duplicated", "zero_rows", "all_zero", "wide", "empty")

@@ -112,20 +112,29 @@ def test_min_norm_is_the_equilibrated_pseudo_inverse():
         assert np.max(np.abs(x - ref)) <= 1e-12 * max(1.0, float(np.max(np.abs(ref))))
 
 
-def test_irregular_states_return_none():
-    """Non-finite input, asymmetric M, M̄ not positive definite, wrong shapes: no result (the
-    Python layer re-runs NumPy for the typed error), never NaN."""
+def _status(x):
+    return x if isinstance(x, int) else None
+
+
+def test_irregular_states_return_their_status():
+    """Non-finite input, asymmetric M, M̄ not positive definite, wrong sizes: the status code,
+    no result (the Python layer re-runs NumPy for the typed error), never NaN; arrays that are
+    not one state's: None."""
     I2, z2, a, z1 = np.eye(2), np.zeros(2), np.ones((1, 2)), np.zeros(1)
     args = dict(mu=0.0, rtol=DEFAULT_RTOL, spd_rtol=SPD_RTOL, sym_rtol=SYM, what=0)
-    assert E.core_solve_one(np.array([[1.0, np.nan], [np.nan, 1.0]]), z2, a, z1, None, **args) is None
-    assert E.core_solve_one(I2, np.array([0.0, np.inf]), a, z1, None, **args) is None
-    assert E.core_solve_one(I2, z2, a, np.array([np.nan]), None, **args) is None
-    assert E.core_solve_one(I2, z2, a, z1, np.array([np.nan, 0.0]), **args) is None
-    assert E.core_solve_one(np.array([[1.0, 0.5], [0.0, 1.0]]), z2, a, z1, None, **args) is None
+    nan = np.array([[1.0, np.nan], [np.nan, 1.0]])
+    assert _status(E.core_solve_one(nan, z2, a, z1, None, **args)) == 1
+    assert _status(E.core_solve_one(I2, np.array([0.0, np.inf]), a, z1, None, **args)) == 1
+    assert _status(E.core_solve_one(I2, z2, a, np.array([np.nan]), None, **args)) == 1
+    assert _status(E.core_solve_one(I2, z2, a, z1, np.array([np.nan, 0.0]), **args)) == 1
+    asym = np.array([[1.0, 0.5], [0.0, 1.0]])
+    assert _status(E.core_solve_one(asym, z2, a, z1, None, **args)) == 3
     M = np.diag([1.0, 2.0, 0.0])
-    assert E.core_solve_one(M, np.zeros(3), np.array([[1.0, 1.0, 0.0]]), z1, None, **args) is None
-    assert E.core_solve_one(I2, np.zeros(3), a, z1, None, **args) is None
-    assert E.core_solve_one(I2, z2, np.ones((1, 3)), z1, None, **args) is None
+    assert _status(E.core_solve_one(M, np.zeros(3), np.array([[1.0, 1.0, 0.0]]), z1, None,
+                                    **args)) == 2  # fmt: skip
+    assert _status(E.core_solve_one(I2, np.zeros(3), a, z1, None, **args)) == 4
+    assert _status(E.core_solve_one(I2, z2, np.ones((1, 3)), z1, None, **args)) == 4
+    assert E.core_solve_one(I2[None], z2, a, z1, None, **args) is None
 
 
 def _batch(n, m, N, seed=3):

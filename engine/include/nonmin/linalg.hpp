@@ -4,6 +4,7 @@
 // together. Specified by nonmin.core.linalg (range_basis, cholesky).
 #pragma once
 #include <cstdint>
+#include <vector>
 
 namespace nonmin::linalg {
 
@@ -48,5 +49,74 @@ int cholesky_spd(double* W, int n, double spd_rtol, double dmax, double* dinv, d
 // Solve L Lᵀ x = b in place (x = b on entry), L the lower triangle of W with reciprocal pivots
 // dinv (as cholesky_spd leaves them).
 void cholesky_solve(const double* W, int n, const double* dinv, double* x);
+
+// ---------------------------------------------------------------------------- certified LQ
+// The shortcut of rule 3 (docs/theory.md, "Compiled backend shortcut"): when every row is live
+// and m ≤ n, D A = L Q by Householder reflections from the right (Q with orthonormal rows). If
+// the factorization *proves* that the SVD rule keeps all m rows, Q spans R(Aᵀ), the rank is m
+// and (DA)⁺ D b = Qᵀ L⁻¹ D b: the SVD's projector and minimum-norm solution at a fraction of its
+// cost. Every product skips exact zero terms only (A is sparse in absolute coordinates), so the
+// results are those of the dense loops.
+
+// What an lq_* call proved: nothing (the SVD decides), full rank with the dense L⁻¹ in Li (few
+// rows), full rank with L over its row profile in Li (many rows).
+enum LQResult : int { LQ_NONE = 0, LQ_INVERSE = 1, LQ_PROFILE = 2 };
+
+// Up to this many rows: dense L⁻¹ and the Frobenius certificate ‖L‖_F ‖L⁻¹‖_F · margin · rtol
+// < 1 (margin QR_MARGIN for rtol ≤ QR_MARGIN_RTOL, else 1); above: lq_sparse.
+inline constexpr int DENSE_INVERSE_MAX_ROWS = 32;
+inline constexpr double QR_MARGIN = 10.0;
+inline constexpr double QR_MARGIN_RTOL = 1e-6;
+// The profile certificate: Cholesky of L Lᵀ − τI, τ = (CERT_SLACK · max(rtol, CERT_FLOOR))² ‖L Lᵀ‖∞.
+inline constexpr double CERT_FLOOR = 1e-5;
+inline constexpr double CERT_SLACK = 1.01;
+// The certified LQ is tried from this many live rows on. (The numba kernels used 4: there the
+// Jacobi SVD of 1–3 rows was as cheap; in C++ the LQ of a few rows costs a fraction of it.)
+inline constexpr int QR_MIN_ROWS = 1;
+
+// Scratch of the certified LQ for up to m_max rows and n columns (allocated once).
+struct LQWork {
+    int m_max = 0, n = 0;
+    std::vector<double> Wq;     // m × n: the rows being reduced; L in its lower part
+    std::vector<double> Hv;     // m × n: reflector j's vector at its columns
+    std::vector<double> beta;   // m: reflector j's 2/‖v‖²
+    std::vector<double> Li;     // m × m: L⁻¹ (LQ_INVERSE) or L over its profile (LQ_PROFILE)
+    std::vector<double> G;      // m × m: the factor of L Lᵀ − τI (profile certificate)
+    std::vector<double> key;    // m: row sort keys (lq_sparse)
+    std::vector<int> Hx;        // m × (n + 1): [count, columns…] of reflector j (pivot first)
+    std::vector<int> Lf;        // m: first column of L's row i (profile)
+    std::vector<int> Ro;        // m: row order (lq_sparse; identity for lq_certified)
+    std::vector<int> Pc;        // n: pivot columns in order, then the others
+    std::vector<int> Lr;        // n: last row that may be nonzero in column k (scratch)
+    std::vector<int> Rl;        // m × (n + 1): [count, columns…] where row i may be nonzero
+    std::vector<int> order;     // m: scratch of the row sort
+    std::vector<std::uint8_t> In;  // m × n: membership marks of Rl (zero between calls)
+    std::vector<double> Wz;     // m × n: lq_sparse's work matrix (zero between calls)
+    std::vector<int> Ap;        // m × (n + 1): the row pattern of A (lq_sparse's input)
+
+    LQWork() = default;
+    LQWork(int m_max, int n);
+};
+
+// The row pattern of A (m × n, leading dimension lda): Ap[i] = [count, columns with a nonzero
+// entry (NaN counts)…] (Ap: m × (n + 1)).
+void row_pattern(const double* A, int m, int n, int lda, int* Ap);
+
+// Few rows (m ≤ DENSE_INVERSE_MAX_ROWS, m ≤ n, every row of B = [D A | D b] live): reflector j
+// pivots on column j. On LQ_INVERSE: cv = L⁻¹ D b (m), the reflectors in w.
+int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* cv);
+
+// Many rows: rows taken in the order of their first nonzero column (w.Ro), reflector j pivots on
+// row j's first column not pivoted yet, row column lists track fill-in; B is read over w.Ap
+// (row_pattern of A, set by the caller). Certificate: Cholesky of L Lᵀ − τI over L's row profile.
+// On LQ_PROFILE: cv = L⁻¹ (D b)[Ro].
+int lq_sparse(const double* B, int m, int n, double rtol, LQWork& w, double* cv);
+
+// Rows first … first + count − 1 of the orthogonal H_{m−1} ⋯ H_0 into E (count × n): rows
+// 0 … m − 1 are Q (a basis of R(Aᵀ)), rows m … n − 1 an orthonormal basis Z of N(A).
+void lq_rows(const LQWork& w, int m, int n, int first, int count, double* E);
+
+// x = −Qᵀ cv (= −(DA)⁺ D b for cv = L⁻¹ D b), through the reflectors.
+void lq_min_norm(const LQWork& w, int m, int n, const double* cv, double* x);
 
 }  // namespace nonmin::linalg

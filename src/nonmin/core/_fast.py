@@ -1,24 +1,27 @@
 """Backend selection and the compiled fast path of the dynamics kernels.
 
 :func:`nonmin.core.forward_dynamics`, :func:`~nonmin.core.constraint_force` and
-:func:`~nonmin.core.solve_dynamics` evaluate either with the reference NumPy kernels or with
-numba-compiled kernels (:mod:`nonmin.core._fast_kernels`, optional extra ``fast``). Both give
-the same results to round-off (tests demand 1e-12 relative); a single call and the same state
-inside a batch give bitwise identical results on the compiled backend.
+:func:`~nonmin.core.solve_dynamics` evaluate with the ahead-of-time compiled C++ engine
+(``nonmin._engine``, the core layer ``engine/src/core_*.cpp``), with the reference NumPy kernels,
+or with the older numba-compiled kernels (:mod:`nonmin.core._fast_kernels`, optional extra
+``fast``; kept while the numba simulation loop uses them). All give the same results to round-off
+(tests demand 1e-12 relative); a single call and the same state inside a batch give bitwise
+identical results on each compiled backend.
 
 Choosing the backend
 --------------------
-``"auto"`` (default) uses numba when it can be imported, ``"numpy"`` always uses NumPy,
-``"numba"`` demands numba (``MissingDependencyError`` naming the extra ``fast`` otherwise).
-The initial choice comes from the environment variable ``NONMIN_BACKEND`` (read at import);
-:func:`set_backend` changes it for the process, :func:`use_backend` for a ``with`` block (the
-setting is process-wide, not per thread).
+``"auto"`` (default) and ``"engine"`` use the C++ engine (built with the package), ``"numpy"``
+always uses NumPy, ``"numba"`` demands numba (``MissingDependencyError`` naming the extra
+``fast`` otherwise). The initial choice comes from the environment variable ``NONMIN_BACKEND``
+(read at import); :func:`set_backend` changes it for the process, :func:`use_backend` for a
+``with`` block (the setting is process-wide, not per thread).
 
-The compiled path keeps the boundary contract: it accepts the same inputs, checks finiteness and
+The compiled paths keep the boundary contract: they accept the same inputs, check finiteness and
 the symmetry of M inside the kernel with the same decision rule, and whenever a state is not
-regular (invalid input, M̄ not positive definite, shapes it does not handle) it re-runs the
-NumPy path, which raises the typed error (or, in a round-off borderline case of the SPD test,
-returns the NumPy result). The first call compiles the kernels (cached on disk afterwards).
+regular (invalid input, M̄ not positive definite, shapes they do not handle) the NumPy path is
+re-run, which raises the typed error (or, in a round-off borderline case of the SPD test,
+returns the NumPy result). The engine needs no compilation at run time; numba's first call
+compiles its kernels (cached on disk afterwards).
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _engine  # type: ignore[attr-defined]  # the compiled extension (no stubs)
 from .. import _validation as V
 from ..errors import InputError, missing_dependency
 from .linalg import DEFAULT_RTOL, SPD_RTOL, FloatArray, resolve_rtol
@@ -38,7 +42,11 @@ from .linalg import DEFAULT_RTOL, SPD_RTOL, FloatArray, resolve_rtol
 __all__ = ["BACKENDS", "get_backend", "set_backend", "use_backend"]
 
 #: Accepted backend names.
-BACKENDS = ("auto", "numpy", "numba")
+BACKENDS = ("auto", "numpy", "numba", "engine")
+
+#: Batches at least this large run on several threads of the engine (one per core; smaller
+#: batches on the calling thread). See :func:`engine_threads`.
+ENGINE_PARALLEL_MIN_BATCH = 2048
 
 #: Batches at least this large run on numba's parallel driver (smaller ones serially): below, the
 #: fork/join cost is not amortized, and on a loaded machine the parallel region waits for a thread
@@ -76,8 +84,9 @@ def set_backend(name: str) -> str:
 
     Parameters
     ----------
-    name : {"auto", "numpy", "numba"}
-        ``"auto"``: numba if importable, else NumPy.
+    name : {"auto", "numpy", "numba", "engine"}
+        ``"auto"`` and ``"engine"``: the compiled C++ engine; ``"numba"``: the numba kernels
+        (extra ``fast``); ``"numpy"``: the NumPy reference kernels.
 
     Raises
     ------
@@ -94,20 +103,30 @@ def set_backend(name: str) -> str:
     return old
 
 
+#: ``ENGINE_FAST[0]``: the engine's fast entry (``nonmin._engine.core_fast``) while the backend
+#: is the engine, else None; the public kernels call it first (a regular single state of
+#: float64 C-contiguous arrays), and take the general path when it returns None.
+ENGINE_FAST: list[Any] = [None]
+
+
 def _set(name: str) -> None:
     global _active
     _state["name"] = name
     _active = _UNRESOLVED
+    ENGINE_FAST[0] = _engine.core_fast if name in ("auto", "engine") else None
 
 
 def backend_setting() -> str:
-    """The backend as set (``"auto"``, ``"numpy"`` or ``"numba"``), before resolution."""
+    """The backend as set (``"auto"``, ``"numpy"``, ``"numba"`` or ``"engine"``)."""
     return str(_state["name"])
 
 
 def get_backend() -> str:
-    """The backend actually used now: ``"numpy"`` or ``"numba"``."""
-    if _state["name"] == "numpy":
+    """The backend actually used now: ``"engine"``, ``"numpy"`` or ``"numba"``."""
+    name = str(_state["name"])
+    if name in ("auto", "engine"):
+        return "engine"
+    if name == "numpy":
         return "numpy"
     return "numba" if _load() is not None else "numpy"
 
@@ -118,7 +137,7 @@ def use_backend(name: str) -> Iterator[None]:
 
     Parameters
     ----------
-    name : {"auto", "numpy", "numba"}
+    name : {"auto", "numpy", "numba", "engine"}
         Backend used inside the ``with`` block (see :func:`set_backend`).
     """
     old = set_backend(name)
@@ -150,9 +169,17 @@ def _prep(x: Any, name: str) -> FloatArray:
     return np.ascontiguousarray(V.as_float_array(x, name))
 
 
+#: Marker of the engine backend in ``_active``.
+_ENGINE = object()
+
+
 def _resolve() -> Any:
     global _active
-    _active = None if _state["name"] == "numpy" else _load()
+    name = _state["name"]
+    if name in ("auto", "engine"):
+        _active = _ENGINE
+        return _active
+    _active = None if name == "numpy" else _load()
     if _active is None and _state["name"] == "numba":  # NONMIN_BACKEND=numba without numba
         raise missing_dependency("numba", "fast", "NONMIN_BACKEND=numba (compiled nonmin.core)")
     return _active
@@ -213,6 +240,8 @@ def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | N
         kern = _resolve()
     if kern is None:
         return None
+    if kern is _ENGINE:
+        return engine_solve(M, h, A, adot_qd, f, mu, rtol, what)
     # Coerce once (no copy for float64 C-contiguous arrays); finiteness and symmetry are checked
     # inside the kernel.
     Mm = M if type(M) is _ND and M.dtype is _F64 and M.flags.c_contiguous else _prep(M, "M")
@@ -355,4 +384,138 @@ def _solve_batch(kern: ModuleType, Mm: FloatArray, hv: FloatArray, Am: FloatArra
         L.reshape((*bshape, n, n)),
         rank.reshape(bshape),
         np.asarray(mu_v) if has_mu else mu_out.reshape(bshape),
+    )
+
+
+# --------------------------------------------------------------------------- the C++ engine
+
+_FAST = _engine.core_fast
+_SOLVE_ONE = _engine.core_solve_one
+_SOLVE_BATCH = _engine.core_solve_batch
+_SYM = V.SYMMETRY_RTOL
+
+
+def engine_threads(N: int) -> int:
+    """Threads of the engine for a batch of N states (one per usable core from
+    :data:`ENGINE_PARALLEL_MIN_BATCH` states on; ``NONMIN_THREADS`` caps it)."""
+    if N < ENGINE_PARALLEL_MIN_BATCH:
+        return 1
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # (not Linux)
+        cores = os.cpu_count() or 1
+    cap = os.environ.get("NONMIN_THREADS")
+    if cap and cap.isdigit() and int(cap) > 0:
+        cores = min(cores, int(cap))
+    return max(1, cores)
+
+
+def engine_solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | None,
+                 what: int) -> Any:  # fmt: skip
+    """:func:`solve` on the C++ engine (``nonmin._engine.core_solve_one`` / ``core_solve_batch``).
+
+    Same returns as :func:`solve`; None when the NumPy path must run (invalid input, M̄ not
+    positive definite, n = 0): it raises the typed error.
+    """
+    if what != ALL:  # the fast entry (a regular single state, arguments as given)
+        res = _FAST(M, h, A, adot_qd, f, mu, rtol, what)
+        if res is not None:
+            return res
+    tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
+    mu_v: Any = None
+    mu_s = 0.0
+    if mu is not None:
+        mu_v = V.positive_scalar_or_batch(mu, "mu")
+        if mu_v.ndim == 0:
+            mu_s = float(mu_v)
+    if mu_v is None or mu_v.ndim == 0:
+        try:
+            res = _SOLVE_ONE(M, h, A, adot_qd, f, mu_s, tol, SPD_RTOL, _SYM, what)
+        except TypeError:  # lists, objects: coerce once and retry
+            res = _SOLVE_ONE(*_coerce(M, h, A, adot_qd, f), mu_s, tol, SPD_RTOL, _SYM, what)
+        if res is not None:
+            if type(res) is int:
+                return None  # not regular: the NumPy path raises
+            if what == ALL:
+                q, fc, P, L, rank, mu_used = res
+                return (q, fc, P, L, np.asarray(rank, dtype=np.intp),
+                        mu_v if mu_v is not None else np.asarray(mu_used))  # fmt: skip
+            return res
+    if what == QDD_RANK:
+        return None  # (single states only)
+    Mm, hv, Am, gv, fv = _coerce(M, h, A, adot_qd, f)
+    return _engine_batch(Mm, hv, Am, gv, fv, mu_v, tol, what)
+
+
+def _coerce(M: Any, h: Any, A: Any, g: Any, f: Any) -> tuple[Any, Any, Any, Any, Any]:
+    return (_prep(M, "M"), _prep(h, "h"), _prep(A, "A"), _prep(g, "adot_qd"),
+            None if f is None else _prep(f, "f"))  # fmt: skip
+
+
+def _engine_batch(Mm: FloatArray, hv: FloatArray, Am: FloatArray, gv: FloatArray,
+                  fv: FloatArray | None, mu_v: FloatArray | None, tol: float, what: int) -> Any:  # fmt: skip
+    if Mm.ndim < 2 or Am.ndim < 2 or hv.ndim < 1 or gv.ndim < 1 or (fv is not None and fv.ndim < 1):
+        return None
+    n = Mm.shape[-1]
+    m = Am.shape[-2]
+    if (n == 0 or Mm.shape[-2] != n or hv.shape[-1] != n or Am.shape[-1] != n
+            or gv.shape[-1] != m or (fv is not None and fv.shape[-1] != n)):  # fmt: skip
+        return None
+    parts: list[tuple[FloatArray, tuple[int, ...]]] = [
+        (Mm, (n, n)), (hv, (n,)), (Am, (m, n)), (gv, (m,))]  # fmt: skip
+    if fv is not None:
+        parts.append((fv, (n,)))
+    if mu_v is not None:
+        parts.append((mu_v, ()))
+    shapes = [x.shape[: x.ndim - len(core)] for x, core in parts]
+    try:
+        bshape = tuple(np.broadcast_shapes(*shapes))
+    except ValueError:
+        return None
+    N = 1
+    for s in bshape:
+        N *= s
+
+    def flat(x: FloatArray, core: tuple[int, ...]) -> tuple[FloatArray, int]:
+        """x as a contiguous buffer with its batch stride (0: one array for every state)."""
+        size = 1
+        for c in core:
+            size *= c
+        lead = x.shape[: x.ndim - len(core)]
+        if lead == bshape:
+            return np.ascontiguousarray(x, dtype=np.float64), size
+        if all(d == 1 for d in lead):
+            return np.ascontiguousarray(x, dtype=np.float64), 0
+        return np.ascontiguousarray(np.broadcast_to(x, bshape + core)), size
+
+    Mb, sM = flat(Mm, (n, n))
+    hb, sh = flat(hv, (n,))
+    Ab, sA = flat(Am, (m, n))
+    gb, sg = flat(gv, (m,))
+    fb, sf = flat(fv, (n,)) if fv is not None else (None, 0)
+    mub, smu = flat(mu_v, ()) if mu_v is not None else (None, 0)
+    want_pl = what == ALL
+    qdd = np.empty((N, n))
+    fc = np.empty((0 if what == QDD else N, n))
+    P = np.empty((N, n, n) if want_pl else (0,))
+    L = np.empty((N, n, n) if want_pl else (0,))
+    status = np.empty(N, dtype=np.int64)
+    rank = np.empty(N, dtype=np.int64)
+    mu_out = np.empty(N)
+    ratio = np.empty(N)
+    _SOLVE_BATCH(Mb, hb, fb, Ab, gb, mub, sM, sh, sf, sA, sg, smu, N, n, m, tol, SPD_RTOL, _SYM,
+                 qdd, fc, P, L, status, rank, mu_out, ratio, engine_threads(N))  # fmt: skip
+    if status.any():
+        return None
+    if what == QDD:
+        return qdd.reshape((*bshape, n))
+    if what == FC:
+        return fc.reshape((*bshape, n))
+    return (
+        qdd.reshape((*bshape, n)),
+        fc.reshape((*bshape, n)),
+        P.reshape((*bshape, n, n)),
+        L.reshape((*bshape, n, n)),
+        rank.astype(np.intp, copy=False).reshape(bshape),
+        np.asarray(mu_v) if mu_v is not None else mu_out.reshape(bshape),
     )

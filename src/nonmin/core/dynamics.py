@@ -30,6 +30,8 @@ from .. import _validation as V
 from . import _fast
 from .linalg import FloatArray, RangeBasis, cho_solve, cholesky, matvec, pseudo_inverse, range_basis
 
+_ENGINE_FAST = _fast.ENGINE_FAST
+
 __all__ = [
     "DynamicsSolution",
     "baumgarte_bias",
@@ -321,6 +323,11 @@ def forward_dynamics(
     >>> np.allclose(qdd, [0.0, -9.81])
     True
     """
+    engine = _ENGINE_FAST[0]  # the C++ engine's entry for one regular state (else None)
+    if engine is not None:
+        qdd = engine(M, h, A, adot_qd, f, mu, rtol, 0)
+        if qdd is not None:
+            return qdd  # type: ignore[no-any-return]
     fast = _fast.solve(M, h, A, adot_qd, f, mu, rtol, _fast.QDD)
     if fast is not None:
         return fast
@@ -347,6 +354,11 @@ def constraint_force(
     -------
     f_c : ndarray, shape (..., n)
     """
+    engine = _ENGINE_FAST[0]
+    if engine is not None:
+        fc = engine(M, h, A, adot_qd, f, mu, rtol, 1)
+        if fc is not None:
+            return fc  # type: ignore[no-any-return]
     fast = _fast.solve(M, h, A, adot_qd, f, mu, rtol, _fast.FC)
     if fast is not None:
         return fast

@@ -1,0 +1,387 @@
+// The certified LQ factorization of the row-equilibrated constraint matrix (linalg.hpp): the
+// shortcut of the rank rule that needs no SVD when full rank is proved.
+#include <algorithm>
+#include <cmath>
+
+#include "nonmin/linalg.hpp"
+
+namespace nonmin::linalg {
+
+LQWork::LQWork(int m_max_, int n_) : m_max(m_max_), n(n_) {
+    const std::size_t m = static_cast<std::size_t>(std::max(m_max_, 1));
+    const std::size_t nn = static_cast<std::size_t>(n_);
+    Wq.assign(m * nn, 0.0);
+    Hv.assign(m * nn, 0.0);
+    beta.assign(m, 0.0);
+    Li.assign(m * m, 0.0);
+    key.assign(m, 0.0);
+    Hx.assign(m * (nn + 1), 0);
+    Lf.assign(m, 0);
+    Ro.assign(m, 0);
+    Pc.assign(nn, 0);
+    Lr.assign(nn, 0);
+    order.assign(m, 0);
+    if (m_max_ > DENSE_INVERSE_MAX_ROWS) {  // lq_sparse's scratch (many rows only)
+        G.assign(m * m, 0.0);
+        Rl.assign(m * (nn + 1), 0);
+        In.assign(m * nn, 0);
+        Wz.assign(m * nn, 0.0);
+        Ap.assign(m * (nn + 1), 0);
+    }
+}
+
+void row_pattern(const double* A, int m, int n, int lda, int* Ap) {
+    for (int i = 0; i < m; ++i) {
+        int* P = Ap + static_cast<long>(i) * (n + 1);
+        const double* Ai = A + static_cast<long>(i) * lda;
+        int c = 0;
+        for (int k = 0; k < n; ++k)
+            if (Ai[k] != 0.0) P[1 + c++] = k;
+        P[0] = c;
+    }
+}
+
+namespace {
+
+// Row i of X (leading dimension n) times reflector j (I − β_j v vᵀ over its columns Hx[j]);
+// returns whether the row changed.
+inline bool reflect_row(double* X, const LQWork& w, int j, double bj) {
+    const int n = w.n;
+    const int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
+    const double* v = w.Hv.data() + static_cast<long>(j) * n;
+    const int cnt = H[0];
+    double d = 0.0;
+    for (int t = 1; t <= cnt; ++t) d += X[H[t]] * v[H[t]];
+    if (d == 0.0) return false;
+    d *= bj;
+    for (int t = 1; t <= cnt; ++t) X[H[t]] -= d * v[H[t]];
+    return true;
+}
+
+// Add reflector j's columns to row i's column list (lq_sparse).
+inline void merge_columns(LQWork& w, int i, int j) {
+    const int n = w.n;
+    const int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
+    int* R = w.Rl.data() + static_cast<long>(i) * (n + 1);
+    std::uint8_t* mark = w.In.data() + static_cast<long>(i) * n;
+    for (int t = 1; t <= H[0]; ++t) {
+        const int k = H[t];
+        if (!mark[k]) {
+            mark[k] = 1;
+            R[1 + R[0]] = k;
+            ++R[0];
+        }
+    }
+}
+
+// Finish reflector j (pivot p, x0 its entry, s the sum of squares over its columns) of the work
+// matrix X (Wq or Wz) and apply it to rows j+1 … imax. Returns false for an all-zero row.
+bool reflect(double* X, LQWork& w, int j, int p, double x0, double s, int imax, bool track) {
+    const int n = w.n;
+    int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
+    double* v = w.Hv.data() + static_cast<long>(j) * n;
+    const int cnt = H[0];
+    if (s == 0.0) return false;
+    const double nrm = std::sqrt(s);
+    const double alpha = x0 >= 0.0 ? -nrm : nrm;
+    const double v0 = x0 - alpha;
+    v[p] = v0;
+    const double bj = 2.0 / (s - x0 * x0 + v0 * v0);
+    w.beta[j] = bj;
+    double* Xj = X + static_cast<long>(j) * n;
+    Xj[p] = alpha;
+    for (int t = 2; t <= cnt; ++t) Xj[H[t]] = 0.0;
+    for (int i = j + 1; i <= imax; ++i)
+        if (reflect_row(X + static_cast<long>(i) * n, w, j, bj) && track) merge_columns(w, i, j);
+    for (int t = 1; t <= cnt; ++t)  // those rows may now be nonzero in all its columns
+        if (imax > w.Lr[H[t]]) w.Lr[H[t]] = imax;
+    return true;
+}
+
+// Pc: the reflectors' pivot columns in order, then the other columns (Lr is scratch).
+void pivot_order(LQWork& w, int m, int n) {
+    for (int i = 0; i < m; ++i) {
+        const int p = w.Hx[static_cast<long>(i) * (n + 1) + 1];
+        w.Pc[i] = p;
+        w.Lr[p] = -2;
+    }
+    int c = m;
+    for (int k = 0; k < n; ++k)
+        if (w.Lr[k] != -2) w.Pc[c++] = k;
+}
+
+// cv ← L⁻¹ cv by forward substitution over L's row profile (Li holds L, row i from Lf[i]).
+void profile_solve(const LQWork& w, int m, double* cv) {
+    const int ld = w.m_max;
+    for (int i = 0; i < m; ++i) {
+        double s = cv[i];
+        const double* Li = w.Li.data() + static_cast<long>(i) * ld;
+        for (int k = w.Lf[i]; k < i; ++k) s -= Li[k] * cv[k];
+        cv[i] = s / Li[i];
+    }
+}
+
+// The profile certificate of lq_sparse: Cholesky of T − τI, T = L Lᵀ, over L's row profile.
+int certify_profile(const double* B, int m, int n, double rtol, LQWork& w, double* cv) {
+    const int ld = w.m_max;
+    double* Li = w.Li.data();
+    double* G = w.G.data();
+    const double* Wz = w.Wz.data();
+    for (int i = 0; i < m; ++i)  // L (columns in the pivot order Pc) over its row profile
+        for (int c = w.Lf[i]; c <= i; ++c) Li[i * ld + c] = Wz[static_cast<long>(i) * n + w.Pc[c]];
+    for (int i = 0; i < m; ++i) cv[i] = 0.0;
+    for (int i = 0; i < m; ++i) {  // T = L Lᵀ over the profile, |T| row sums
+        const int fi = w.Lf[i];
+        for (int j = fi; j <= i; ++j) {
+            double s = 0.0;
+            for (int k = std::max(fi, w.Lf[j]); k <= j; ++k) s += Li[i * ld + k] * Li[j * ld + k];
+            G[i * ld + j] = s;
+            const double a = std::fabs(s);
+            cv[i] += a;
+            if (j < i) cv[j] += a;
+        }
+    }
+    double tnorm = 0.0;
+    for (int i = 0; i < m; ++i) tnorm = std::max(tnorm, cv[i]);
+    const double rt = CERT_SLACK * std::max(rtol, CERT_FLOOR);
+    const double tau = rt * rt * tnorm;
+    for (int i = 0; i < m; ++i) {  // Cholesky of T − τI, row by row over the profile
+        const int fi = w.Lf[i];
+        double* Gi = G + static_cast<long>(i) * ld;
+        for (int j = fi; j < i; ++j) {
+            const double* Gj = G + static_cast<long>(j) * ld;
+            double s = Gi[j];
+            for (int k = std::max(fi, w.Lf[j]); k < j; ++k) s -= Gi[k] * Gj[k];
+            Gi[j] = s / Gj[j];
+        }
+        double s = Gi[i] - tau;
+        for (int k = fi; k < i; ++k) s -= Gi[k] * Gi[k];
+        if (!(s > 0.0)) return LQ_NONE;
+        Gi[i] = std::sqrt(s);
+    }
+    for (int i = 0; i < m; ++i) cv[i] = B[static_cast<long>(w.Ro[i]) * (n + 1) + n];
+    profile_solve(w, m, cv);
+    return LQ_PROFILE;
+}
+
+}  // namespace
+
+int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* cv) {
+    const int ld = w.m_max;
+    double* Wq = w.Wq.data();
+    for (int k = 0; k < n; ++k) {
+        w.Pc[k] = 0;  // 1 once pivoted
+        w.Lr[k] = -1;
+    }
+    for (int i = 0; i < m; ++i) {
+        w.Ro[i] = i;
+        const double* Bi = B + static_cast<long>(i) * (n + 1);
+        double* Wi = Wq + static_cast<long>(i) * n;
+        for (int k = 0; k < n; ++k) {
+            const double x = Bi[k];
+            Wi[k] = x;
+            if (x != 0.0) w.Lr[k] = i;
+        }
+    }
+    for (int j = 0; j < m; ++j) {
+        const int p = j;
+        double* Wj = Wq + static_cast<long>(j) * n;
+        double* v = w.Hv.data() + static_cast<long>(j) * n;
+        int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
+        const double x0 = Wj[p];
+        double s = x0 * x0;
+        v[p] = x0;
+        H[1] = p;
+        w.Pc[p] = 1;
+        int cnt = 1;
+        int imax = w.Lr[p];
+        for (int k = p + 1; k < n; ++k) {  // (columns after j are not pivoted yet)
+            const double x = Wj[k];
+            v[k] = x;
+            if (x != 0.0) {
+                s += x * x;
+                H[1 + cnt++] = k;
+                if (w.Lr[k] > imax) imax = w.Lr[k];
+            }
+        }
+        H[0] = cnt;
+        if (!reflect(Wq, w, j, p, x0, s, imax, false)) return LQ_NONE;
+    }
+    pivot_order(w, m, n);
+    double fl = 0.0;  // ‖L‖_F²
+    for (int i = 0; i < m; ++i)
+        for (int k = 0; k <= i; ++k) fl += Wq[i * n + k] * Wq[i * n + k];
+    for (int i = 0; i < m; ++i) cv[i] = 1.0 / Wq[i * n + i];  // reciprocal pivots (scratch)
+    // L⁻¹ row by row: row i = (e_i − Σ_{k<i} L_ik · row k) / L_ii (zero L_ik skipped)
+    double* Li = w.Li.data();
+    double f0 = 0.0, f1 = 0.0;
+    for (int i = 0; i < m; ++i) {
+        double* Ri = Li + static_cast<long>(i) * ld;
+        for (int c = 0; c < i; ++c) Ri[c] = 0.0;
+        Ri[i] = 1.0;
+        for (int k = 0; k < i; ++k) {
+            const double a = Wq[i * n + k];
+            if (a != 0.0) {
+                const double* Rk = Li + static_cast<long>(k) * ld;
+                for (int c = 0; c <= k; ++c) Ri[c] -= a * Rk[c];
+            }
+        }
+        const double r = cv[i];
+        for (int c = 0; c <= i; ++c) Ri[c] *= r;
+        const int i2 = (i + 1) - (i + 1) % 2;  // ‖L⁻¹‖_F²: two interleaved partial sums
+        for (int c = 0; c < i2; c += 2) {
+            f0 += Ri[c] * Ri[c];
+            f1 += Ri[c + 1] * Ri[c + 1];
+        }
+        if (i2 <= i) f0 += Ri[i] * Ri[i];
+    }
+    const double fi = f0 + f1;
+    const double margin = rtol <= QR_MARGIN_RTOL ? QR_MARGIN : 1.0;
+    if (!(std::sqrt(fl) * std::sqrt(fi) * margin * rtol < 1.0)) return LQ_NONE;
+    for (int i = 0; i < m; ++i) {  // cv = L⁻¹ D b
+        const double* Ri = Li + static_cast<long>(i) * ld;
+        double s = 0.0;
+        for (int k = 0; k <= i; ++k) s += Ri[k] * B[static_cast<long>(k) * (n + 1) + n];
+        cv[i] = s;
+    }
+    return LQ_INVERSE;
+}
+
+int lq_sparse(const double* B, int m, int n, double rtol, LQWork& w, double* cv) {
+    const long ldp = n + 1;
+    for (int i = 0; i < m; ++i) {  // rows by their first nonzero column (a stable sort)
+        int f = n - 1;
+        const int* P = w.Ap.data() + i * ldp;
+        for (int t = 0; t < P[0]; ++t)
+            if (B[i * ldp + P[1 + t]] != 0.0) {
+                f = P[1 + t];
+                break;
+            }
+        w.key[i] = static_cast<double>(f) * m + i;
+        w.order[i] = i;
+    }
+    std::sort(w.order.begin(), w.order.begin() + m,
+              [&](int a, int b) { return w.key[a] < w.key[b]; });
+    for (int k = 0; k < n; ++k) {
+        w.Pc[k] = 0;
+        w.Lr[k] = -1;
+    }
+    double* Wz = w.Wz.data();
+    for (int i = 0; i < m; ++i) {  // the rows in that order, with their column lists
+        const int src = w.order[i];
+        w.Ro[i] = src;
+        const int* P = w.Ap.data() + src * ldp;
+        int* R = w.Rl.data() + i * ldp;
+        int c = 0;
+        for (int t = 0; t < P[0]; ++t) {
+            const int k = P[1 + t];
+            const double x = B[src * ldp + k];
+            if (x != 0.0) {
+                Wz[static_cast<long>(i) * n + k] = x;
+                w.In[static_cast<long>(i) * n + k] = 1;
+                R[1 + c++] = k;
+                w.Lr[k] = i;
+            }
+        }
+        R[0] = c;
+    }
+    int res = LQ_NONE;
+    bool ok = true;
+    for (int j = 0; j < m; ++j) {
+        const int* R = w.Rl.data() + j * ldp;
+        double* Wj = Wz + static_cast<long>(j) * n;
+        double* v = w.Hv.data() + static_cast<long>(j) * n;
+        int* H = w.Hx.data() + j * ldp;
+        const int c = R[0];
+        int p = -1;
+        for (int t = 0; t < c; ++t) {  // the pivot: first unpivoted nonzero column
+            const int k = R[1 + t];
+            if (w.Pc[k] == 0 && Wj[k] != 0.0 && (p < 0 || k < p)) p = k;
+        }
+        if (p < 0) {
+            ok = false;
+            break;
+        }
+        const double x0 = Wj[p];
+        v[p] = x0;
+        H[1] = p;
+        w.Pc[p] = 1;
+        int cnt = 1;
+        for (int t = 0; t < c; ++t) {  // the other unpivoted nonzero columns, increasing
+            const int k = R[1 + t];
+            if (w.Pc[k] == 0) {
+                const double x = Wj[k];
+                if (x != 0.0) {
+                    v[k] = x;
+                    int a = 1 + cnt;
+                    while (a > 2 && H[a - 1] > k) {
+                        H[a] = H[a - 1];
+                        --a;
+                    }
+                    H[a] = k;
+                    ++cnt;
+                }
+            }
+        }
+        double s = x0 * x0;
+        int imax = w.Lr[p];
+        for (int t = 2; t <= cnt; ++t) {
+            const double x = v[H[t]];
+            s += x * x;
+            if (w.Lr[H[t]] > imax) imax = w.Lr[H[t]];
+        }
+        H[0] = cnt;
+        if (!reflect(Wz, w, j, p, x0, s, imax, true)) {
+            ok = false;
+            break;
+        }
+    }
+    if (ok) {
+        pivot_order(w, m, n);
+        for (int c = 0; c < n; ++c) w.Lr[w.Pc[c]] = c;  // a column's position in that order
+        for (int i = 0; i < m; ++i) {  // L's row profile: its first nonzero column
+            int f = i;
+            const int* R = w.Rl.data() + i * ldp;
+            for (int t = 0; t < R[0]; ++t) {
+                const int k = R[1 + t];
+                if (w.Lr[k] < f && Wz[static_cast<long>(i) * n + k] != 0.0) f = w.Lr[k];
+            }
+            w.Lf[i] = f;
+        }
+        res = certify_profile(B, m, n, rtol, w, cv);
+    }
+    for (int i = 0; i < m; ++i) {  // Wz and In back to zero
+        const int* R = w.Rl.data() + i * ldp;
+        for (int t = 0; t < R[0]; ++t) {
+            Wz[static_cast<long>(i) * n + R[1 + t]] = 0.0;
+            w.In[static_cast<long>(i) * n + R[1 + t]] = 0;
+        }
+    }
+    return res;
+}
+
+void lq_rows(const LQWork& w, int m, int n, int first, int count, double* E) {
+    for (int i = 0; i < count; ++i) {
+        double* Ei = E + static_cast<long>(i) * n;
+        for (int k = 0; k < n; ++k) Ei[k] = 0.0;
+        Ei[w.Pc[first + i]] = 1.0;
+    }
+    for (int j = m - 1; j >= 0; --j)
+        for (int i = 0; i < count; ++i) reflect_row(E + static_cast<long>(i) * n, w, j, w.beta[j]);
+}
+
+void lq_min_norm(const LQWork& w, int m, int n, const double* cv, double* x) {
+    for (int i = 0; i < n; ++i) x[i] = 0.0;
+    for (int i = 0; i < m; ++i) x[w.Pc[i]] = cv[i];
+    for (int j = m - 1; j >= 0; --j) {
+        const int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
+        const double* v = w.Hv.data() + static_cast<long>(j) * n;
+        double d = 0.0;
+        for (int t = 1; t <= H[0]; ++t) d += v[H[t]] * x[H[t]];
+        d *= w.beta[j];
+        for (int t = 1; t <= H[0]; ++t) x[H[t]] -= d * v[H[t]];
+    }
+    for (int i = 0; i < n; ++i) x[i] = -x[i];
+}
+
+}  // namespace nonmin::linalg
