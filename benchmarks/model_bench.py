@@ -42,6 +42,26 @@ Usage::
         benchmarks/results/model_after.json            # tables into MODEL.md
 
 Results of the runs quoted in ``benchmarks/MODEL.md`` are in ``benchmarks/results/model_*.json``.
+
+``--engine`` times the compiled engine's programs instead (``Model.engine_program()``), each
+against the Python evaluation and, for model + kernel, against MuJoCo, in one run:
+
+* evaluation: ``program.evaluate_into`` with everything (``NEED_ALL``) and with what a step
+  needs (h, A, γ; M once for a constant M), against ``model.evaluate``;
+* model + kernel from ``(t, q, qd)``: ``_engine.Forward`` (one C++ call: Program evaluation
+  and the core solve) against the Python pipeline (``model.evaluate`` +
+  ``nonmin.core.forward_dynamics``) and against ``mujoco.mj_forward`` on the same mechanism
+  (``sim_bench.mjcf``: hinge tree, loops closed with ``<equality connect>``);
+* batched model + kernel over ``--batch`` distinct states: ``Forward.batch`` on 1 and 2
+  threads against MuJoCo's C batch ``mujoco.rollout.rollout(..., nstep=1)`` (one ``mj_step``
+  per state: ``mj_forward`` plus the Euler update) on 1 and 2 threads.
+
+Medians of wall times; ratios are engine / peer (< 1: the engine is faster). The machine is
+shared (load average recorded): re-measure on a quiet machine before quoting. Usage::
+
+    python benchmarks/model_bench.py --engine --json benchmarks/results/model_engine.json
+    python benchmarks/model_bench.py --engine --quick
+    python benchmarks/model_bench.py --engine-report benchmarks/results/model_engine.json
 """
 
 from __future__ import annotations
@@ -348,6 +368,236 @@ def report(paths: list[Path]) -> None:
     MODEL_MD.write_text(text[:i0] + "\n" + "\n\n".join(blocks) + "\n" + text[i1:])
 
 
+# ---------------------------------------------------------------------------------------------
+# engine programs (--engine)
+# ---------------------------------------------------------------------------------------------
+#: (label, library name, parameters, sim_bench mechanism for MuJoCo or None)
+ENGINE_CASES: list[tuple[str, str, dict[str, Any], str | None]] = [
+    ("crossed_four_bar", "crossed_four_bar", {}, "crossed_four_bar"),
+    ("A02 N=2", "A02_n_four_bar", {"N": 2}, "A02_N2"),
+    ("A02 N=40", "A02_n_four_bar", {"N": 40}, "A02_N40"),
+    ("A02 N=80", "A02_n_four_bar", {"N": 80}, "A02_N80"),
+    ("five_bar", "five_bar", {}, None),
+    ("arm2r_wall", "arm2r_wall", {}, None),
+    ("slider_crank", "slider_crank", {}, None),
+    ("A04 Bricard (spatial)", "A04_bricard", {}, None),
+]
+
+
+def _bar(name: str) -> Any:
+    sys.path.insert(0, str(HERE))
+    import sim_bench
+
+    if name == "crossed_four_bar":
+        return sim_bench.crossed_four_bar_mechanism()
+    return sim_bench.a02_mechanism(int(name[5:]))
+
+
+def _mujoco(name: str) -> tuple[Any, Any]:
+    import mujoco
+    import sim_bench  # noqa: F401  (path set by _bar)
+
+    bar = _bar(name)
+    model = mujoco.MjModel.from_xml_string(sys.modules["sim_bench"].mjcf(bar, 2e-3, "default"))
+    return model, mujoco.MjData(model)
+
+
+#: Wall-time budget (s) of one timing: slow calls are repeated fewer times.
+BUDGET_S = 2.0
+
+
+def median_wall_us(fn: Callable[[], object], repeat: int, warmup: int = 20) -> float:
+    """Median wall time of ``fn()`` in microseconds (batches of 10 calls below 20 µs; at most
+    about :data:`BUDGET_S` seconds, at least 5 calls)."""
+    t0 = time.perf_counter()
+    fn()
+    once = time.perf_counter() - t0
+    for _ in range(min(warmup, int(0.2 * BUDGET_S / max(once, 1e-9)))):
+        fn()
+    repeat = max(5, min(repeat, int(BUDGET_S / max(once, 1e-9))))
+    per = 10 if once < 2e-5 else 1
+    wall = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        for _ in range(per):
+            fn()
+        wall.append((time.perf_counter() - t0) / per)
+    return 1e6 * statistics.median(wall)
+
+
+def _engine_case(label: str, name: str, kw: dict[str, Any], bar: str | None, repeat: int,
+                 batch: int) -> dict[str, Any]:
+    import numpy as np
+
+    from nonmin import _engine, library
+    from nonmin.core import forward_dynamics
+
+    mech = library.get(name, **kw)
+    m, s = mech.model, mech.state
+    prog = m.engine_program()
+    t, q, qd = float(s.t), s.q.copy(), s.qd.copy()
+    mask = m.active_mask(s.active)
+    terms, ws = prog.make_terms(), prog.make_workspace()
+    step_need = _engine.NEED_H | _engine.NEED_A | _engine.NEED_GAMMA
+    if not prog.constant_mass:
+        step_need |= _engine.NEED_M
+    r: dict[str, Any] = {"case": label, "n": m.n, "m": m.num_rows(s.active)}
+    r["python_evaluate_us"] = median_wall_us(lambda: m.evaluate(t, q, qd, s.active), max(repeat // 10, 50))
+    r["engine_evaluate_all_us"] = median_wall_us(lambda: prog.evaluate_into(terms, ws, t, q, qd, mask), repeat)
+    r["engine_evaluate_step_us"] = median_wall_us(
+        lambda: prog.evaluate_into(terms, ws, t, q, qd, mask, step_need), repeat)
+
+    def python_forward() -> Any:
+        T = m.evaluate(t, q, qd, s.active)
+        return forward_dynamics(T.M, T.h, T.constraints.A, T.constraints.gamma, T.f_passive)
+
+    r["python_forward_us"] = median_wall_us(python_forward, max(repeat // 10, 50))
+    fwd = _engine.Forward(prog, mask)
+    qdd = np.zeros(m.n)
+    r["engine_forward_us"] = median_wall_us(lambda: fwd(t, q, qd, qdd), repeat)
+    ref = python_forward()
+    r["engine_forward_max_rel_diff"] = float(np.abs(qdd - ref).max() / max(1.0, np.abs(ref).max()))
+    # a batch of at most about BUDGET_S seconds per timing (the core's large-m path is slow)
+    N = max(10, min(batch, int(BUDGET_S / max(1e-6 * r["engine_forward_us"], 1e-9))))
+    tt, Q, QD = _trajectory_states(mech, N)
+    N = tt.shape[0]
+    r["batch_states"] = N
+    reps = 3
+    for threads in (1, 2):
+        walls = []
+        for _ in range(reps):
+            t0 = time.perf_counter()
+            fwd.batch(tt, Q, QD, threads)
+            walls.append(time.perf_counter() - t0)
+        r[f"engine_batch{threads}_us_per_state"] = 1e6 * statistics.median(walls) / N
+    if bar is not None:
+        r.update(_mujoco_case(bar, repeat, N, reps))
+    return r
+
+
+def _trajectory_states(mech: Any, N: int) -> tuple[Any, Any, Any]:
+    """N distinct consistent states: the steps of a simulation (RK4, dt = 1e-3) from the
+    mechanism's initial state (on the constraint manifold, with its rank decisions)."""
+    from nonmin.sim import simulate
+
+    tr = simulate(mech, (0.0, N * 1e-3), method="rk4", dt=1e-3, progress=False)
+    return tr.t[:N].copy(), tr.q[:N].copy(), tr.qd[:N].copy()
+
+
+def _mujoco_case(bar: str, repeat: int, N: int, reps: int) -> dict[str, Any]:
+    import mujoco
+    import numpy as np
+    from mujoco import rollout
+
+    mj, dat = _mujoco(bar)
+    rng = np.random.default_rng(1)
+    dat.qvel[:] = rng.standard_normal(mj.nv)
+    r: dict[str, Any] = {"mujoco_nv": int(mj.nv)}
+    r["mujoco_forward_us"] = median_wall_us(lambda: mujoco.mj_forward(mj, dat), repeat)
+    # N distinct consistent states: the steps of MuJoCo's own trajectory from rest at qpos0
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    x0 = np.zeros((N, mujoco.mj_stateSize(mj, spec)))
+    mujoco.mj_resetData(mj, dat)
+    for i in range(N):
+        mujoco.mj_step(mj, dat)
+        mujoco.mj_getState(mj, dat, x0[i], spec)
+    for threads in (1, 2):
+        datas = [mujoco.MjData(mj) for _ in range(threads)]
+        rollout.rollout(mj, datas, x0[:10], nstep=1)  # warm-up (pool, allocation)
+        walls = []
+        for _ in range(reps):
+            t0 = time.perf_counter()
+            rollout.rollout(mj, datas, x0, nstep=1)
+            walls.append(time.perf_counter() - t0)
+        r[f"mujoco_batch{threads}_us_per_state"] = 1e6 * statistics.median(walls) / N
+    return r
+
+
+def run_engine(repeat: int, batch: int) -> dict[str, Any]:
+    rows = []
+    for label, name, kw, bar in ENGINE_CASES:
+        rows.append(_engine_case(label, name, kw, bar, repeat, batch))
+        print(f"  {label}: done", file=sys.stderr)
+    info = machine()
+    info["loadavg"] = os.getloadavg()
+    try:
+        import mujoco
+
+        info["mujoco"] = mujoco.__version__
+    except ImportError:
+        info["mujoco"] = None
+    return {"machine": info, "repeat": repeat, "batch": batch, "engine": rows}
+
+
+def engine_markdown(res: dict[str, Any]) -> str:
+    def f(x: Any, d: int = 2) -> str:
+        return "–" if x is None else f"{x:.{d}f}"
+
+    mach = res["machine"]
+    lines = [
+        f"Commit {mach['commit']}, MuJoCo {mach.get('mujoco')}, {mach['cpus']} CPUs, load average "
+        f"{mach['loadavg'][0]:.1f} (shared machine: wall times inflated and noisy), medians of "
+        f"{res['repeat']} calls; batch of {res['batch']} distinct states.",
+        "",
+        "| mechanism | n | m | Python evaluate (µs) | engine evaluate, all (µs) | engine evaluate, "
+        "step (µs) | Python evaluate / engine step |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in res["engine"]:
+        lines.append(
+            f"| {r['case']} | {r['n']} | {r['m']} | {f(r['python_evaluate_us'], 1)} "
+            f"| {f(r['engine_evaluate_all_us'])} | {f(r['engine_evaluate_step_us'])} "
+            f"| {f(r['python_evaluate_us'] / r['engine_evaluate_step_us'], 0)} |"
+        )
+    lines += [
+        "",
+        "Model + kernel from (t, q, qd): q̈ (engine: one `Forward` call; Python: `evaluate` + "
+        "`core.forward_dynamics`; MuJoCo: `mj_forward`).",
+        "",
+        "| mechanism | Python (µs) | engine (µs) | MuJoCo mj_forward (µs) | engine / MuJoCo "
+        "| engine vs Python max rel. diff |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
+    for r in res["engine"]:
+        mj = r.get("mujoco_forward_us")
+        lines.append(
+            f"| {r['case']} | {f(r['python_forward_us'], 1)} | {f(r['engine_forward_us'])} | {f(mj)} "
+            f"| {f(None if mj is None else r['engine_forward_us'] / mj)} "
+            f"| {r['engine_forward_max_rel_diff']:.1e} |"
+        )
+    lines += [
+        "",
+        f"Batched model + kernel over up to {res['batch']} distinct states (fewer where one "
+        f"call is slow: column 'states'; each peer's states are the steps of its own trajectory "
+        "from the initial state), µs per state (engine: `Forward.batch`; MuJoCo: "
+        "`rollout(nstep=1)`, one mj_step per state), medians of 3.",
+        "",
+        "| mechanism | states | engine 1 thread | engine 2 threads | MuJoCo 1 thread "
+        "| MuJoCo 2 threads | engine / MuJoCo (2 threads) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in res["engine"]:
+        mj2 = r.get("mujoco_batch2_us_per_state")
+        lines.append(
+            f"| {r['case']} | {r['batch_states']} | {f(r['engine_batch1_us_per_state'])} "
+            f"| {f(r['engine_batch2_us_per_state'])} "
+            f"| {f(r.get('mujoco_batch1_us_per_state'))} | {f(mj2)} "
+            f"| {f(None if mj2 is None else r['engine_batch2_us_per_state'] / mj2)} |"
+        )
+    return "\n".join(lines)
+
+
+ESTART, EEND = "<!-- engine:start -->", "<!-- engine:end -->"
+
+
+def engine_report(path: Path) -> None:
+    """Rewrite the engine section of ``benchmarks/MODEL.md`` from a result JSON file."""
+    res = json.loads(path.read_text())
+    text = MODEL_MD.read_text()
+    i0, i1 = text.index(ESTART) + len(ESTART), text.index(EEND)
+    MODEL_MD.write_text(text[:i0] + "\n" + engine_markdown(res) + "\n" + text[i1:])
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeat", type=int, default=2000)
@@ -359,7 +609,25 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--json", type=Path, default=None, help="write the results to this JSON file")
     ap.add_argument("--report", type=Path, nargs="+", default=None, metavar="JSON",
                     help="only rewrite the results section of MODEL.md from these result files")
+    ap.add_argument("--engine", action="store_true",
+                    help="time the engine's programs (evaluation, model + kernel, batch) and MuJoCo")
+    ap.add_argument("--batch", type=int, default=10_000, help="states of the batched timing (--engine)")
+    ap.add_argument("--engine-report", type=Path, default=None, metavar="JSON",
+                    help="only rewrite the engine section of MODEL.md from this result file")
     args = ap.parse_args(argv)
+    if args.engine_report:
+        engine_report(args.engine_report)
+        return
+    if args.engine:
+        repeat = 200 if args.quick else args.repeat
+        batch = 1000 if args.quick else args.batch
+        res = run_engine(repeat, batch)
+        res["label"] = args.label
+        if args.json is not None:
+            args.json.parent.mkdir(parents=True, exist_ok=True)
+            args.json.write_text(json.dumps(res, indent=2))
+        print(engine_markdown(res))
+        return
     if args.report:
         report(args.report)
         return
