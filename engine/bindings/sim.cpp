@@ -4,6 +4,7 @@
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/string.h>
+#include <nanobind/stl/array.h>
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
 
@@ -13,6 +14,7 @@
 #include <vector>
 
 #include "nonmin/program.hpp"
+#include "nonmin/sim/control.hpp"
 #include "nonmin/sim/loop.hpp"
 #include "register.hpp"
 
@@ -212,7 +214,7 @@ class PyWatch final : public sim::Watch {
 
 // The loop with what it borrows kept alive.
 struct SimLoop {
-    nb::object program_ref;
+    nb::object program_ref, compiled_ref;
     const Program* program = nullptr;
     std::unique_ptr<PyController> controller;
     std::unique_ptr<PyWatch> watch;
@@ -284,6 +286,40 @@ void bind_sim(nb::module_& m) {
         .def_rw("t1", &sim::Options::t1)
         .def_rw("max_steps", &sim::Options::max_steps);
 
+    nb::class_<sim::Regulator>(m, "SimRegulator",
+                               "nonmin.control.Regulator (σ = 0) compiled for one active set of the loop.")
+        .def(
+            "__init__",
+            [](sim::Regulator* self, const Program& prog, CArr1 q_star,
+               nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu> Kp,
+               nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu> Kd,
+               const std::vector<std::array<int, 4>>& qblocks, CArr1 u_min, CArr1 u_max, double rtol,
+               bool raise_infeasible) {
+                auto vec = [](CArr1 a) { return Vec(CVecMap(a.data(), static_cast<Eigen::Index>(a.shape(0)))); };
+                auto mat = [](const auto& a) {
+                    return Mat(CMatMap(a.data(), static_cast<Eigen::Index>(a.shape(0)),
+                                       static_cast<Eigen::Index>(a.shape(1))));
+                };
+                try {
+                    new (self) sim::Regulator(prog, vec(q_star), mat(Kp), mat(Kd), qblocks, vec(u_min), vec(u_max),
+                                              rtol, raise_infeasible);
+                } catch (const EngineError& e) {
+                    raise_typed("InputError", e.what());
+                }
+            },
+            nb::arg("program"), nb::arg("q_star"), nb::arg("Kp"), nb::arg("Kd"), nb::arg("quaternion_blocks"),
+            nb::arg("u_min"), nb::arg("u_max"), nb::arg("rtol"), nb::arg("raise_infeasible"))
+        .def_prop_ro("stats", [](const sim::Regulator& r) {
+            nb::dict d;
+            d["steps"] = r.steps;
+            d["infeasible_steps"] = r.infeasible_steps;
+            d["saturated_steps"] = r.saturated_steps;
+            d["saturated"] = std::vector<bool>(r.saturated.begin(), r.saturated.end());
+            d["min_sigma_pb"] = r.min_sigma_pb;
+            d["max_abs_u"] = r.max_abs_u;
+            return d;
+        });
+
     m.attr("SIM_DONE") = static_cast<int>(sim::Outcome::done);
     m.attr("SIM_HANDOVER") = static_cast<int>(sim::Outcome::handover);
     m.attr("SIM_EVENT") = static_cast<int>(sim::Outcome::event);
@@ -293,7 +329,7 @@ void bind_sim(nb::module_& m) {
             "__init__",
             [](SimLoop* self, nb::handle program, CMask active, const sim::Options& opt, CArr1 t_out, bool every,
                nb::object control, nb::object update, nb::object watch,
-               const std::vector<std::tuple<bool, int, int, double>>& guards) {
+               const std::vector<std::tuple<bool, int, int, double>>& guards, nb::object compiled) {
                 new (self) SimLoop();
                 const Program& prog = nb::cast<const Program&>(program);
                 if (active.shape(0) != prog.constraints().size())
@@ -307,8 +343,14 @@ void bind_sim(nb::module_& m) {
                     self->controller->n = prog.n();
                     self->controller->c = static_cast<int>(prog.constraints().size());
                 }
+                sim::Controller* ctrl = self->controller.get();
+                if (!compiled.is_none()) {
+                    if (ctrl) raise_typed("InputError", "SimLoop: a Python and a compiled controller");
+                    self->compiled_ref = compiled;
+                    ctrl = nb::cast<sim::Regulator*>(compiled);
+                }
                 std::vector<double> tv(t_out.data(), t_out.data() + t_out.shape(0));
-                self->loop = sim::make_loop(prog, active.data(), opt, tv, every, self->controller.get());
+                self->loop = sim::make_loop(prog, active.data(), opt, tv, every, ctrl);
                 if (!guards.empty()) {
                     std::vector<sim::ContactGuard> gs;
                     for (const auto& [release, con, row, g] : guards) {
@@ -328,7 +370,8 @@ void bind_sim(nb::module_& m) {
             nb::arg("program"), nb::arg("active"), nb::arg("options"), nb::arg("t_out"), nb::arg("every"),
             nb::arg("control").none() = nb::none(), nb::arg("update").none() = nb::none(),
             nb::arg("watch").none() = nb::none(),
-            nb::arg("guards") = std::vector<std::tuple<bool, int, int, double>>{})
+            nb::arg("guards") = std::vector<std::tuple<bool, int, int, double>>{},
+            nb::arg("compiled").none() = nb::none())
         .def(
             "resume",
             [](SimLoop& s, double t, CArr1 y, double h, long long n_steps, std::size_t out_i) {

@@ -128,6 +128,7 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
     L.rec.n = n;
     L.rec.k = L.k;
     L.rec.c = L.c;
+    if (ctrl) ctrl->attach(L.T, L.Ac, L.m, L.rows);
     return Lp;
 }
 
@@ -889,7 +890,7 @@ Outcome run(Loop& L, long long max_steps) {
         if (!changed && fsal) {
             L.f = L.K.row(6).transpose();
             L.have_f = true;
-        } else if (have_p1 && !L.ctrl) {
+        } else if (have_p1 && (!L.ctrl || L.ctrl->stateless())) {
             for (int i = 0; i < n; ++i) {
                 L.f[i] = L.yq1[n + i];
                 L.f[n + i] = L.p1.qdd[i];

@@ -759,12 +759,18 @@ def simulate(
             )  # fmt: skip
         er = None
         if use_engine and not (events or unilateral):  # the whole run, start included
+            creg = _engine.compiled_controller(controller, model, eng_prog, act)
             ccb = _engine.ControllerCallback(controller, system.cstate, k, None, model) \
-                if controller is not None else None  # fmt: skip
-            er = _engine.run(eng_prog, opts=opts, active_mask=model_mask(model, act), t_out=t_out,
-                             sink=rec.extend, progress=bar, start=(t0, q, qd), controller=ccb)  # fmt: skip
-            if ccb is not None:
-                system.cstate = ccb.state
+                if controller is not None and creg is None else None  # fmt: skip
+            try:
+                er = _engine.run(eng_prog, opts=opts, active_mask=model_mask(model, act), t_out=t_out,
+                                 sink=rec.extend, progress=bar, start=(t0, q, qd), controller=ccb,
+                                 compiled=creg)  # fmt: skip
+            finally:
+                if ccb is not None:
+                    system.cstate = ccb.state
+                if creg is not None:
+                    system.cstate = _engine.merge_state(system.cstate, creg, k)
             if not er.started:  # the first evaluation failed: the general driver raises
                 er = None
                 meta["engine"] = "python"
@@ -819,19 +825,24 @@ def simulate(
             meta["engine"] = "compiled" if not fr.failed else f"compiled, then python from t = {t:.12g}"
         while t < t1:
             if engine_on:  # the engine's steps up to t1, a failure, or a guard crossing
+                creg = _engine.compiled_controller(controller, model, eng_prog, system.active)
                 ccb = _engine.ControllerCallback(controller, system.cstate, k, None, model) \
-                    if controller is not None else None  # fmt: skip
+                    if controller is not None and creg is None else None  # fmt: skip
                 g_idx, guards = _engine_guards(system, watches, gvals)
-                er = _engine.run(
-                    eng_prog, opts=opts, active_mask=model_mask(model, system.active), t_out=t_out,
-                    sink=rec.extend, progress=bar, controller=ccb,
-                    resume=(t, state.y, state.h if integ.adaptive else h_init, n_steps, out_i),
-                    watch=_engine_watch(system, watches, gvals, disarmed, rearm_tol), guards=guards,
-                )  # fmt: skip
+                try:
+                    er = _engine.run(
+                        eng_prog, opts=opts, active_mask=model_mask(model, system.active), t_out=t_out,
+                        sink=rec.extend, progress=bar, controller=ccb, compiled=creg,
+                        resume=(t, state.y, state.h if integ.adaptive else h_init, n_steps, out_i),
+                        watch=_engine_watch(system, watches, gvals, disarmed, rearm_tol), guards=guards,
+                    )  # fmt: skip
+                finally:
+                    if ccb is not None:
+                        system.cstate = ccb.state
+                    if creg is not None:
+                        system.cstate = _engine.merge_state(system.cstate, creg, k)
                 for i, g in zip(g_idx, er.guards):
                     gvals[i] = g
-                if ccb is not None:
-                    system.cstate = ccb.state
                 n_rejected += er.n_rejected
                 system.n_rhs += er.n_rhs
                 n_steps = er.steps

@@ -87,8 +87,16 @@ struct Options {
 class Controller {
   public:
     virtual ~Controller() = default;
+    // The loop's evaluation that control() may read (the terms at (t, q, qd) of the call, the
+    // active rows of A gathered in `A`'s first m rows, `rows` their stacked indices).
+    virtual void attach(const Terms& T, const Mat& A, int m, const std::vector<int>& rows) {
+        (void)T, (void)A, (void)m, (void)rows;
+    }
     virtual Status control(double t, const double* q, const double* qd, const std::uint8_t* active,
                            double* u) = 0;
+    // Whether u depends on (t, q, qd) only (not on what update() records): then F at the
+    // projected step end, evaluated for the sample, is also the next step's first stage.
+    virtual bool stateless() const { return false; }
     virtual Status update(double t, const double* q, const double* qd, const std::uint8_t* active) {
         (void)t, (void)q, (void)qd, (void)active;
         return Status::ok;

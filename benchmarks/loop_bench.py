@@ -1,0 +1,164 @@
+"""The engine's simulation loop against the general (Python) driver and the numba loop.
+
+Wall time per simulated second of ``nonmin.simulate`` with ``engine="engine"`` (the C++ loop,
+nonmin/sim/_engine.py), ``"python"`` (the general driver) and, where it applies, ``"compiled"``
+(the numba loop: planar RK4 + projection without controller or events), on the same model and
+settings; the results of the engines are compared (max |q_engine − q_other|).
+
+Cases: the crossed four-bar and A02 N = 2 (planar programs), the UR5 with its tool point pinned
+and the dual-arm grasp (robots: TreeProgram), the UR5 with a regulator (controller called back),
+the arm2r_wall contact run (impact and release), a pendulum FunctionModel (PyProgram: the model
+called back). Medians of ``--repeat`` runs after one warm-up (which includes any compilation).
+
+    python benchmarks/loop_bench.py [--repeat 3] [--engines engine,python,compiled] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import nonmin
+from nonmin import library
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+
+def _robot(name: str) -> tuple[Any, np.ndarray]:
+    import robot_bench as rb  # (needs Pinocchio and example-robot-data)
+
+    case = rb.CASES[name](1.0)
+    return case.model, case.q0
+
+
+def _cases() -> dict[str, Callable[[], tuple[Any, dict[str, Any], float]]]:
+    def cfb() -> tuple[Any, dict[str, Any], float]:
+        return library.get("crossed_four_bar"), {"dt": 1e-3}, 1.0
+
+    def a02() -> tuple[Any, dict[str, Any], float]:
+        return library.get("A02_n_four_bar", N=2), {"dt": 1e-3}, 1.0
+
+    def ur5() -> tuple[Any, dict[str, Any], float]:
+        model, q0 = _robot("ur5_point")
+        return model, {"q0": q0, "dt": 1e-3}, 1.0
+
+    def ur5_reg() -> tuple[Any, dict[str, Any], float]:
+        from nonmin.control import Regulator
+
+        model, q0 = _robot("ur5_point")
+        target = nonmin.simulate(model, (0.0, 0.3), q0, dt=1e-3, engine="engine", progress=False).q[-1]
+        reg = Regulator(model, target=target, Kp=50.0, Kd=10.0, on_infeasible="least_squares")
+        return model, {"q0": q0, "dt": 1e-3, "controller": reg}, 1.0
+
+    def dual() -> tuple[Any, dict[str, Any], float]:
+        model, q0 = _robot("dual_arm_grasp")
+        return model, {"q0": q0, "dt": 1e-3}, 1.0
+
+    def wall() -> tuple[Any, dict[str, Any], float]:
+        u_amp = np.array([10.0, -6.0])
+
+        def ctrl(t: float, q: Any, qd: Any, state: Any = None, *, active: Any = None) -> Any:
+            return u_amp * np.cos(2.0 * t)
+
+        return library.get("arm2r_wall"), {"dt": 1e-3, "controller": ctrl}, 0.45
+
+    def pend() -> tuple[Any, dict[str, Any], float]:
+        from nonmin.model import FunctionConstraint, FunctionModel
+
+        rod = FunctionConstraint.holonomic(
+            "rod", phi=lambda q: [0.5 * (q @ q - 1.0)], jacobian=lambda q: q[None, :],
+            adot_qd=lambda q, qd: [qd @ qd],
+        )  # fmt: skip
+        model = FunctionModel(
+            name="pendulum", coordinate_names=("x", "y"), mass=lambda q: np.eye(2),
+            coriolis=lambda q, qd: np.zeros((2, 2)), conservative=lambda q: [0.0, -9.81],
+            potential=lambda q: 9.81 * q[1], constraints=(rod,),
+        )  # fmt: skip
+        return model, {"q0": [1.0, 0.0], "dt": 1e-3}, 1.0
+
+    return {"crossed_four_bar": cfb, "A02_N2": a02, "ur5_point": ur5, "ur5_point_regulator": ur5_reg,
+            "dual_arm_grasp": dual, "arm2r_wall_contact": wall, "pendulum_function_model": pend}  # fmt: skip
+
+
+def run(names: list[str], engines: list[str], repeat: int) -> list[dict[str, Any]]:
+    rows = []
+    for name, make in _cases().items():
+        if names and name not in names:
+            continue
+        try:
+            model, kw, T = make()
+        except ImportError as exc:
+            print(f"{name}: skipped ({exc})", file=sys.stderr)
+            continue
+        kw = dict(kw)
+        q0 = kw.pop("q0", None)
+        res: dict[str, Any] = {"case": name, "T": T}
+        trajs = {}
+        for eng in engines:
+            def once(eng: str = eng, model: Any = model, T: float = T, q0: Any = q0,
+                     kw: dict[str, Any] = kw) -> Any:  # fmt: skip
+                return nonmin.simulate(model, (0.0, T), q0, engine=eng, progress=False, **kw)
+
+            try:
+                tr = once()  # warm-up (and numba compilation)
+            except nonmin.errors.InputError as exc:
+                res[eng] = None
+                print(f"{name} {eng}: {exc}", file=sys.stderr)
+                continue
+            times = []
+            for _ in range(repeat):
+                w = time.perf_counter()
+                tr = once()
+                times.append(time.perf_counter() - w)
+            trajs[eng] = tr
+            res[eng] = {"ms_per_s": 1e3 * statistics.median(times) / T, "ran": tr.metadata["engine"],
+                        "steps": tr.n_steps, "n_rhs": tr.n_rhs, "events": len(tr.events)}  # fmt: skip
+        if "engine" in trajs:
+            for eng, tr in trajs.items():
+                if eng != "engine" and len(tr) == len(trajs["engine"]):
+                    res[eng]["max_q_diff_to_engine"] = float(np.max(np.abs(tr.q - trajs["engine"].q)))
+        rows.append(res)
+        print(json.dumps(res), file=sys.stderr)
+    return rows
+
+
+def markdown(rows: list[dict[str, Any]], engines: list[str]) -> str:
+    head = "| case | " + " | ".join(f"{e} (ms per simulated s)" for e in engines) + " | engine speed-up vs python |"
+    lines = [head, "|" + "---|" * (len(engines) + 2)]
+    for r in rows:
+        cells = []
+        for e in engines:
+            v = r.get(e)
+            cells.append("—" if v is None else f"{v['ms_per_s']:.1f}")
+        sp = "—"
+        if r.get("engine") and r.get("python"):
+            sp = f"{r['python']['ms_per_s'] / r['engine']['ms_per_s']:.1f}×"
+        lines.append(f"| {r['case']} | " + " | ".join(cells) + f" | {sp} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--engines", default="engine,python,compiled")
+    ap.add_argument("--cases", default="")
+    ap.add_argument("--json", default="")
+    a = ap.parse_args()
+    engines = [e for e in a.engines.split(",") if e]
+    rows = run([c for c in a.cases.split(",") if c], engines, a.repeat)
+    print(markdown(rows, engines))
+    if a.json:
+        Path(a.json).write_text(json.dumps({"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+                                            "rows": rows}, indent=1))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
