@@ -220,6 +220,35 @@ void bind_rbd(nb::module_& m) {
             "terms into the given C-contiguous float64 arrays (all m_all rows; inactive rows "
             "unspecified). Returns (status, kinetic, potential); status 0 is ok. Holds the GIL.")
         .def(
+            "coriolis_matrix",
+            [](const TreeProgram& prog, CArr q, CArr qd) {
+                const auto n = static_cast<std::size_t>(prog.n());
+                expect(q, n, "q");
+                expect(qd, n, "qd");
+                TreeWorkspace ws(prog.description());
+                auto C = new_array({n, n});
+                if (prog.coriolis_matrix(q.data(), qd.data(), ws, C.data()) != Status::ok)
+                    raise_error("NonFiniteError", "q and qd must be finite (and quaternions non-zero)");
+                return C;
+            },
+            nb::arg("q"), nb::arg("qd"),
+            "Christoffel Coriolis matrix C = TᵀC_vT + TᵀM_vṪ (n, n) in the coordinates q.")
+        .def(
+            "jacobian_dot",
+            [](const TreeProgram& prog, CArr q, CArr qd, U8Arr active) {
+                const auto n = static_cast<std::size_t>(prog.n());
+                expect(q, n, "q");
+                expect(qd, n, "qd");
+                expect(active, prog.constraints().size(), "active");
+                TreeWorkspace ws(prog.description());
+                auto Ad = new_array({static_cast<std::size_t>(prog.m_all()), n});
+                if (prog.jacobian_dot(q.data(), qd.data(), active.data(), ws, Ad.data()) != Status::ok)
+                    raise_error("NonFiniteError", "q and qd must be finite (and quaternions non-zero)");
+                return Ad;
+            },
+            nb::arg("q"), nb::arg("qd"), nb::arg("active"),
+            "Ȧ = dA/dt along qd, (m_all, n); rows of inactive constraints are zero.")
+        .def(
             "placements",
             [](const TreeProgram& prog, CArr q) {
                 Query Q(prog, q);

@@ -423,4 +423,153 @@ Status TreeProgram::evaluate(double /*t*/, const double* q, const double* qd,
     return Status::ok;
 }
 
+void TreeProgram::add_Tdot_row(const TreeWorkspace& ws, const double* q, const double* qd,
+                               const double* av, double* aq) const {
+    for (const QuatBlock& b : qblocks_) {
+        const Eigen::Map<const Vec4> e(q + b.qs), ed(qd + b.qs);
+        const double s2 = e.squaredNorm();
+        // d/dt (2 G(ε)/|ε|²) = 2 G(ε̇)/|ε|² − 2 (εᵀε̇)/|ε|² · 2 G(ε)/|ε|²
+        const Mat34 Td = (2.0 / s2) * quaternion_G(ed.data()) - (2.0 * e.dot(ed) / s2) * ws.Tq[b.joint];
+        Eigen::Map<Vec4>(aq + b.qs) += Td.transpose() * Eigen::Map<const Vec3>(av + b.a);
+        if (b.free) {  // d/dt Rᵀ = −[ω]× Rᵀ on the position columns
+            const Vec3 w = ws.Tq[b.joint] * ed;
+            const Mat3 Rd = -skew(w) * ws.R[b.joint].transpose();
+            Eigen::Map<Vec3>(aq + b.iq) += Rd.transpose() * Eigen::Map<const Vec3>(av + b.iv);
+        }
+    }
+}
+
+Status TreeProgram::coriolis_matrix(const double* q, const double* qd, TreeWorkspace& ws,
+                                    double* C) const {
+    const TreeModel& model = d_.model;
+    const int nq = model.nq, nv = model.nv;
+    Status st = normalize(q, ws);
+    if (st != Status::ok) return st;
+    for (int i = 0; i < nq; ++i)
+        if (!std::isfinite(qd[i])) return Status::not_finite;
+    velocity_map(q, qd, ws);
+    forward_kinematics(model, ws.data, ws.qn.data(), true);
+    forward_motion(model, ws.data, ws.v.data(), nullptr);
+    crba(model, ws.data, ws.Mv.data(), nv);
+    Mat Cv = Mat::Zero(nv, nv);
+    coriolis(model, ws.data, Cv.data(), nv);
+    Mat X = Mat::Zero(nv, nq);  // C_v T + M_v Ṫ
+    for (int r = 0; r < nv; ++r) {
+        apply_Tt(ws, Cv.row(r).data(), X.row(r).data());
+        add_Tdot_row(ws, q, qd, ws.Mv.row(r).data(), X.row(r).data());
+    }
+    Eigen::Map<Mat> out(C, nq, nq);
+    Vec col(nv), res(nq);
+    for (int c = 0; c < nq; ++c) {  // column c of Tᵀ X
+        col = X.col(c);
+        apply_Tt(ws, col.data(), res.data());
+        out.col(c) = res;
+    }
+    return Status::ok;
+}
+
+Status TreeProgram::jacobian_dot(const double* q, const double* qd, const std::uint8_t* active,
+                                 TreeWorkspace& ws, double* Adot) const {
+    const TreeModel& model = d_.model;
+    const int nq = model.nq, nv = model.nv;
+    Status st = normalize(q, ws);
+    if (st != Status::ok) return st;
+    for (int i = 0; i < nq; ++i)
+        if (!std::isfinite(qd[i])) return Status::not_finite;
+    velocity_map(q, qd, ws);
+    forward_kinematics(model, ws.data, ws.qn.data(), false);
+    forward_motion(model, ws.data, ws.v.data(), nullptr);
+    Eigen::Map<Mat> out(Adot, m_all_, nq);
+    Vec av(nv), adv(nv);
+    const Vec3 zero = Vec3::Zero();
+    for (std::size_t ci = 0; ci < d_.constraints.size(); ++ci) {
+        if (active != nullptr && !active[ci]) continue;
+        const TreeConstraint& c = d_.constraints[ci];
+        const int r0 = constraints_[ci].row;
+        if (c.type == RowType::unit_quaternion) {
+            out.row(r0).setZero();
+            for (int k = 0; k < 4; ++k) out(r0, c.iq + k) = qd[c.iq + k];
+            continue;
+        }
+        if (c.type == RowType::joint_coupling) {
+            out.row(r0).setZero();
+            if (c.iq2 >= 0) {
+                const auto& a = c.coef;
+                const double x = q[c.iq2] - c.ref2;
+                const double d2 = 2 * a[2] + 6 * a[3] * x + 12 * a[4] * x * x;
+                out(r0, c.iq2) = -d2 * qd[c.iq2];
+            }
+            continue;
+        }
+        const Frame& fa = d_.frames[c.frame_a];
+        const Frame& fb = d_.frames[c.frame_b];
+        FrameKinematics& ka = ws.ka;
+        FrameKinematics& kb = ws.kb;
+        frame_kinematics(model, ws.data, fa, true, ka);
+        frame_kinematics(model, ws.data, fb, true, kb);
+        // one row: coefficients (c, ċ) on frame a and frame b
+        auto row = [&](int r, const Vec3& la, const Vec3& aa, const Vec3& lb, const Vec3& ab,
+                       const Vec3& dla, const Vec3& daa, const Vec3& dlb, const Vec3& dab) {
+            av.setZero();
+            adv.setZero();
+            if (fa.joint >= 0) {
+                add_jacobian_row(model, ws.data, fa.joint, ka.oMf.p, la, aa, av.data());
+                add_jacobian_dot_row(model, ws.data, fa.joint, ka.oMf.p, ka.v, la, aa, dla, daa, adv.data());
+            }
+            if (fb.joint >= 0) {
+                add_jacobian_row(model, ws.data, fb.joint, kb.oMf.p, lb, ab, av.data());
+                add_jacobian_dot_row(model, ws.data, fb.joint, kb.oMf.p, kb.v, lb, ab, dlb, dab, adv.data());
+            }
+            double* dst = out.row(r0 + r).data();
+            apply_Tt(ws, adv.data(), dst);
+            if (quat_) add_Tdot_row(ws, q, qd, av.data(), dst);
+        };
+        const Mat3& Ra = ka.oMf.R;
+        const Mat3& Rb = kb.oMf.R;
+        switch (c.type) {
+            case RowType::point:
+            case RowType::weld:
+            case RowType::hinge:
+                for (int i = 0; i < 3; ++i) {
+                    const Vec3 e = Vec3::Unit(i);
+                    row(i, e, zero, -e, zero, zero, zero, zero, zero);
+                }
+                if (c.type == RowType::weld)
+                    for (int i = 0; i < 3; ++i) {
+                        const Vec3 e = Vec3::Unit(i);
+                        row(3 + i, zero, e, zero, -e, zero, zero, zero, zero);
+                    }
+                if (c.type == RowType::hinge) {
+                    const Vec3 Kb = Rb * c.axis;
+                    for (int i = 0; i < 2; ++i) {
+                        const Vec3 U = Ra * (i == 0 ? c.u1 : c.u2);
+                        const Vec3 r = U.cross(Kb);
+                        const Vec3 rd = ka.w.cross(U).cross(Kb) + U.cross(kb.w.cross(Kb));
+                        row(3 + i, zero, r, zero, -r, zero, rd, zero, -rd);
+                    }
+                }
+                break;
+            case RowType::planar_point:
+            case RowType::planar_weld:
+                for (int i = 0; i < 2; ++i) {
+                    const Vec3& e = i == 0 ? c.u1 : c.u2;
+                    row(i, e, zero, -e, zero, zero, zero, zero, zero);
+                }
+                if (c.type == RowType::planar_weld) row(2, zero, c.axis, zero, -c.axis, zero, zero, zero, zero);
+                break;
+            case RowType::point_on_plane:
+            case RowType::contact: {
+                const Vec3 N = Ra * c.axis;
+                const Vec3 d = kb.oMf.p - ka.oMf.p;
+                const Vec3 Nd = ka.w.cross(N);
+                const Vec3 dd = kb.v - ka.v;
+                row(0, -N, N.cross(d), N, zero, -Nd, Nd.cross(d) + N.cross(dd), Nd, zero);
+                break;
+            }
+            default: break;
+        }
+    }
+    return Status::ok;
+}
+
 }  // namespace nonmin::rbd

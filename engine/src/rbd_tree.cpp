@@ -53,7 +53,8 @@ TreeData::TreeData(const TreeModel& model)
       Ic(model.joints.size()),
       ov(model.joints.size()),
       oa(model.joints.size()),
-      of(model.joints.size()) {}
+      of(model.joints.size()),
+      Bc(model.joints.size()) {}
 
 void forward_kinematics(const TreeModel& model, TreeData& data, const double* q, bool inertias) {
     const int nj = static_cast<int>(model.joints.size());
@@ -225,6 +226,109 @@ void add_jacobian_row(const TreeModel& model, const TreeData& data, int joint, c
         for (int k = 0; k < nvj; ++k) {
             const auto col = data.J.col(jt.iv + k);
             row[jt.iv + k] += col.head<3>().dot(c_lin) + col.tail<3>().dot(wa);
+        }
+    }
+}
+
+namespace {
+
+using Mat6 = Eigen::Matrix<double, 6, 6>;
+
+Mat6 inertia_matrix(const Inertia& I) {  // (lin, ang) ordering
+    Mat6 X;
+    X.topLeftCorner<3, 3>() = I.m * Mat3::Identity();
+    X.topRightCorner<3, 3>() = -skew(I.h);
+    X.bottomLeftCorner<3, 3>() = skew(I.h);
+    X.bottomRightCorner<3, 3>() = I.I;
+    return X;
+}
+
+Mat6 motion_cross(const Motion& v) {  // μ ↦ ν × μ
+    Mat6 X = Mat6::Zero();
+    X.topLeftCorner<3, 3>() = skew(v.ang);
+    X.topRightCorner<3, 3>() = skew(v.lin);
+    X.bottomRightCorner<3, 3>() = skew(v.ang);
+    return X;
+}
+
+Mat6 force_cross_bar(const Force& f) {  // ν ↦ ν ×* f (skew-symmetric)
+    Mat6 X = Mat6::Zero();
+    X.topRightCorner<3, 3>() = -skew(f.lin);
+    X.bottomLeftCorner<3, 3>() = -skew(f.lin);
+    X.bottomRightCorner<3, 3>() = -skew(f.ang);
+    return X;
+}
+
+Eigen::Matrix<double, 6, 1> col6(const TreeData& data, int k) { return data.J.col(k); }
+
+Eigen::Matrix<double, 6, 1> col6_dot(const TreeData& data, int j, int k) {  // ν_j × J_k
+    Motion S;
+    S.lin = data.J.col(k).head<3>();
+    S.ang = data.J.col(k).tail<3>();
+    const Motion d = cross(data.ov[j], S);
+    Eigen::Matrix<double, 6, 1> out;
+    out << d.lin, d.ang;
+    return out;
+}
+
+}  // namespace
+
+void coriolis(const TreeModel& model, TreeData& data, double* C, int ld) {
+    const int nj = static_cast<int>(model.joints.size());
+    for (int r = 0; r < model.nv; ++r)  // entries of unrelated joints stay zero
+        for (int c = 0; c < model.nv; ++c) C[r * ld + c] = 0.0;
+    for (int i = 0; i < nj; ++i) {
+        const Inertia& I = data.oI[i];
+        const Motion& v = data.ov[i];
+        const Mat6 Im = inertia_matrix(I);
+        const Mat6 X = motion_cross(v);
+        // ν×* = −(ν×)ᵀ
+        data.Bc[i] = 0.5 * (-X.transpose() * Im - Im * X + force_cross_bar(I * v));
+        data.Ic[i] = I;
+    }
+    for (int i = nj - 1; i >= 0; --i)
+        if (model.joints[i].parent >= 0) {
+            data.Ic[model.joints[i].parent] += data.Ic[i];
+            data.Bc[model.joints[i].parent] += data.Bc[i];
+        }
+    for (int j = 0; j < nj; ++j) {
+        const Joint& jt = model.joints[j];
+        const Mat6 Icm = inertia_matrix(data.Ic[j]);
+        const Mat6& B = data.Bc[j];
+        for (int c = 0; c < joint_nv(jt.type); ++c) {
+            const int b = jt.iv + c;
+            // columns a of j and its ancestors: C(a, b) = J_aᵀ (Ic_j J̇_b + Bc_j J_b)
+            const Eigen::Matrix<double, 6, 1> F = Icm * col6_dot(data, j, b) + B * col6(data, b);
+            for (int a_j = j; a_j >= 0; a_j = model.joints[a_j].parent) {
+                const Joint& ja = model.joints[a_j];
+                for (int d = 0; d < joint_nv(ja.type); ++d) C[(ja.iv + d) * ld + b] = col6(data, ja.iv + d).dot(F);
+            }
+            // strict ancestors' columns b' (as the right index) with a = b: C(b, b') =
+            // J_bᵀ (Ic_j J̇_b' + Bc_j J_b')
+            const Eigen::Matrix<double, 6, 1> G1 = Icm * col6(data, b);
+            const Eigen::Matrix<double, 6, 1> G2 = B.transpose() * col6(data, b);
+            for (int p = jt.parent; p >= 0; p = model.joints[p].parent) {
+                const Joint& jp = model.joints[p];
+                for (int d = 0; d < joint_nv(jp.type); ++d) {
+                    const int bp = jp.iv + d;
+                    C[b * ld + bp] = G1.dot(col6_dot(data, p, bp)) + G2.dot(col6(data, bp));
+                }
+            }
+        }
+    }
+}
+
+void add_jacobian_dot_row(const TreeModel& model, const TreeData& data, int joint, const Vec3& p,
+                          const Vec3& pdot, const Vec3& c_lin, const Vec3& c_ang,
+                          const Vec3& cdot_lin, const Vec3& cdot_ang, double* row) {
+    Eigen::Matrix<double, 6, 1> w, wd;
+    w << c_lin, c_ang + p.cross(c_lin);
+    wd << cdot_lin, cdot_ang + pdot.cross(c_lin) + p.cross(cdot_lin);
+    for (int j = joint; j >= 0; j = model.joints[j].parent) {
+        const Joint& jt = model.joints[j];
+        for (int k = 0; k < joint_nv(jt.type); ++k) {
+            const int col = jt.iv + k;
+            row[col] += col6_dot(data, j, col).dot(w) + col6(data, col).dot(wd);
         }
     }
 }

@@ -133,6 +133,9 @@ def _check_algorithms(robot: RobotModel, rng: np.random.Generator, states: int =
             ref = np.array([vel.linear, vel.angular, acc.linear, acc.angular])
             assert _rel(mot, ref) < REL, (robot.name, pm.frames[f].name)
         assert _rel(prog.crba(q), pin.crba(pm, pm.createData(), q)) < REL, robot.name
+        if not robot._structural:  # q = Pinocchio's q, qd = v: C is Pinocchio's C_v
+            Cv = pin.computeCoriolisMatrix(pm, pm.createData(), q, v)
+            assert _rel(prog.coriolis_matrix(q, v), Cv) < REL, robot.name
         assert _rel(prog.rnea(q, v, a), pin.rnea(pm, pm.createData(), q, v, a)) < REL, robot.name
         nle = prog.rnea(q, v, np.zeros(pm.nv))
         assert _rel(nle, pin.nonLinearEffects(pm, pm.createData(), q, v)) < REL, robot.name
@@ -190,6 +193,15 @@ def _check_evaluate(robot: RobotModel, rng: np.random.Generator, states: int = 2
                 assert _rel(x, y) < REL, (robot.name, name)
             assert mt.constraints.holonomic.all()
             np.testing.assert_array_equal(mt.M, mt.M.T)
+        # the Christoffel Coriolis matrix and Ȧ (controllers) against Pinocchio's
+        every_act = robot.resolve_active(every)
+        assert _rel(robot.coriolis_matrix(q, qd), robot._coriolis_matrix_pinocchio(q, qd)) < REL
+        assert _rel(robot.constraint_jacobian_dot(0.0, q, qd, every),
+                    robot._constraint_jacobian_dot_pinocchio(0.0, q, qd, every_act)) < REL
+        part = robot.default_active
+        assert _rel(robot.constraint_jacobian_dot(0.0, q, qd, part),
+                    robot._constraint_jacobian_dot_pinocchio(0.0, q, qd,
+                                                            robot.resolve_active(part))) < REL
         # the single-term methods agree with evaluate
         mt = robot.evaluate(0.0, q, qd, every)
         ct = robot.constraint_terms(0.0, q, qd, every)

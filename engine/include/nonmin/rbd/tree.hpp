@@ -77,6 +77,7 @@ struct TreeData {
     std::vector<Motion> ov;     // body spatial velocities
     std::vector<Motion> oa;     // body spatial accelerations (without gravity)
     std::vector<Force> of;      // subtree forces (rnea scratch)
+    std::vector<Eigen::Matrix<double, 6, 6>> Bc;  // composite Coriolis operators (coriolis)
 };
 
 // Placements oMi, world motion subspaces J and (when `inertias`) world body inertias oI at q
@@ -116,6 +117,21 @@ void frame_kinematics(const TreeModel& model, const TreeData& data, const Frame&
 // contributed by one frame. Touches only the columns of the joint's support.
 void add_jacobian_row(const TreeModel& model, const TreeData& data, int joint, const Vec3& p,
                       const Vec3& c_lin, const Vec3& c_ang, double* row);
+
+// Christoffel-consistent Coriolis matrix C_v (nv × nv, row-major, leading dimension ld) at the
+// velocities of forward_motion: C_v v are rnea's velocity terms and Ṁ_v − 2 C_v is skew. With
+// body inertias I_i and velocities ν_i in world axes (J_i the body Jacobian),
+//   C_v = Σ_i J_iᵀ (I_i J̇_i + B_i J_i),  B_i = ½ (ν_i×* I_i − I_i ν_i× + (I_i ν_i)×̄*),
+// where (f)×̄* ν = ν ×* f; gathered over composite subtrees like crba (J̇_k = ν_j × J_k for a
+// column k of joint j). Needs forward_kinematics (with inertias) and forward_motion.
+void coriolis(const TreeModel& model, TreeData& data, double* C, int ld);
+
+// row[0:nv] += d/dt (c_linᵀ Jp + c_angᵀ Jω) (the time derivative of add_jacobian_row's row) for
+// the point p moving with velocity pdot and coefficient rates cdot_lin, cdot_ang. Needs
+// forward_motion (the body velocities).
+void add_jacobian_dot_row(const TreeModel& model, const TreeData& data, int joint, const Vec3& p,
+                          const Vec3& pdot, const Vec3& c_lin, const Vec3& c_ang,
+                          const Vec3& cdot_lin, const Vec3& cdot_ang, double* row);
 
 // The full 6 × nv LOCAL_WORLD_ALIGNED Jacobian of a frame (rows: linear, angular; row-major
 // with leading dimension ld). Needs forward_kinematics.

@@ -96,7 +96,18 @@ class TreeProgram : public Program {
     Status normalize(const double* q, TreeWorkspace& ws) const;
     void velocity_map(const double* q, const double* qd, TreeWorkspace& ws) const;
 
+    // The Christoffel Coriolis matrix in q: C = Tᵀ C_v T + Tᵀ M_v Ṫ (n × n, row-major) at
+    // (q, qd), and Ȧ = dA/dt along qd (m_all × n; rows of inactive constraints untouched):
+    // Ȧ = Ȧ_v T + A_v Ṫ. Not used by the dynamics (h, γ); for controllers that need them
+    // (nonmin.control's tracking law). Allocate their temporaries.
+    Status coriolis_matrix(const double* q, const double* qd, TreeWorkspace& ws, double* C) const;
+    Status jacobian_dot(const double* q, const double* qd, const std::uint8_t* active,
+                        TreeWorkspace& ws, double* Adot) const;
+
   private:
+    // aq += av Ṫ(q, qd) (a row nv -> nq).
+    void add_Tdot_row(const TreeWorkspace& ws, const double* q, const double* qd, const double* av,
+                      double* aq) const;
     // fq = Tᵀ fv (nv -> nq); also a row a_v of A_v to the row a_v T of A.
     void apply_Tt(const TreeWorkspace& ws, const double* fv, double* fq) const;
     void congruence(TreeWorkspace& ws, double* M) const;  // M = Tᵀ M_v T (symmetrized)

@@ -35,9 +35,9 @@ Evaluation
 The tree is compiled once (:mod:`nonmin.model.robots._tree`) into the engine's
 ``TreeProgram`` (:meth:`RobotModel.engine_program`), which evaluates these terms in C++ with
 its own CRBA and RNEA (``h = −Tᵀ rnea(q, v, Ṫ qd)``, no Coriolis matrix) and frame
-kinematics; Pinocchio is the parser and the oracle (``_evaluate_pinocchio``), and evaluates
-only trees with joint types the engine does not have, ``coriolis_matrix``,
-``constraint_jacobian_dot`` and ``geometry``.
+kinematics, and on request the Christoffel Coriolis matrix and Ȧ; Pinocchio is the parser and
+the oracle (``_evaluate_pinocchio`` and the other ``_*_pinocchio`` methods), and evaluates only
+trees with joint types the engine does not have, and ``geometry``.
 
 Constraints
 -----------
@@ -752,10 +752,25 @@ class RobotModel(Model):
         return M
 
     def coriolis_matrix(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
-        """``C = Tᵀ C_v T + Tᵀ M_v Ṫ`` (Pinocchio's ``computeCoriolisMatrix``), shape (n, n).
+        """``C = Tᵀ C_v T + Tᵀ M_v Ṫ`` with the Christoffel-consistent ``C_v``, shape (n, n).
 
-        Not needed by the dynamics (which use ``h``); evaluated by Pinocchio.
+        Not needed by the dynamics (which use ``h``); for controllers (the tracking law). The
+        engine computes ``C_v = Σ_i J_iᵀ (I_i J̇_i + B_i J_i)`` over composite subtrees (equal
+        to Pinocchio's ``computeCoriolisMatrix``).
         """
+        if self._program is None:
+            return self._coriolis_matrix_pinocchio(q, qd)
+        qv = np.ascontiguousarray(self._q(q))
+        v = np.ascontiguousarray(self._q(qd, "qd"))
+        try:
+            C: FloatArray = self._program.coriolis_matrix(qv, v)
+        except NonFiniteError:
+            self.pinocchio_configuration(qv)  # names the joint of a zero quaternion
+            raise
+        return C
+
+    def _coriolis_matrix_pinocchio(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
+        """:meth:`coriolis_matrix` from Pinocchio's ``computeCoriolisMatrix`` (oracle)."""
         k = _Kin(self, self._q(q), self._q(qd, "qd"), dynamics=True)
         return k.T.T @ k.Cv @ k.T + k.T.T @ k.Mv @ k.Tdot
 
@@ -989,12 +1004,29 @@ class RobotModel(Model):
     def constraint_jacobian_dot(
         self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
     ) -> FloatArray:
-        """Exact ``Ȧ = dA/dt`` along ``qd`` (Pinocchio Jacobian time variations), shape (m, n).
+        """Exact ``Ȧ = dA/dt`` along ``qd``, shape (m, n).
 
-        ``Ȧ = Ȧ_v T + A_v Ṫ`` with ``Ȧ_v`` from ``getFrameJacobianTimeVariation``; satisfies
+        ``Ȧ = Ȧ_v T + A_v Ṫ`` with the frame Jacobians' time derivatives (``J̇_k = ν_j × J_k``
+        in world axes; equal to Pinocchio's ``getFrameJacobianTimeVariation``); satisfies
         ``Ȧ qd = γ``.
         """
         act = self.resolve_active(active)
+        if self._program is None:
+            return self._constraint_jacobian_dot_pinocchio(t, q, qd, act)
+        qv = np.ascontiguousarray(self._q(q))
+        v = np.ascontiguousarray(self._q(qd, "qd"))
+        mask, rows = self._active_rows(act)
+        try:
+            Ad: FloatArray = self._program.jacobian_dot(qv, v, mask)
+        except NonFiniteError:
+            self.pinocchio_configuration(qv)  # names the joint of a zero quaternion
+            raise
+        return Ad if rows is None else Ad[rows]
+
+    def _constraint_jacobian_dot_pinocchio(
+        self, t: float, q: ArrayLike, qd: ArrayLike, act: frozenset[str]
+    ) -> FloatArray:
+        """:meth:`constraint_jacobian_dot` from Pinocchio's Jacobian time variations (oracle)."""
         qv, v = self._q(q), self._q(qd, "qd")
         kin = _Kin(self, qv, v, dynamics=False, jdot=True)
         Ad = self._constraint_rows(kin, qv, v, act)[1]
