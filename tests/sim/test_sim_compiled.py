@@ -74,16 +74,18 @@ def test_compiled_keeps_the_crossed_four_bar_on_its_branch() -> None:
 
 
 def test_auto_engine_choice() -> None:
+    """"auto" runs the engine wherever it covers the run; the numba loop only when asked."""
     mech = library.get("crossed_four_bar")
-    assert simulate(mech, 0.01, progress=False).metadata["engine"] == "compiled"
+    assert simulate(mech, 0.01, progress=False).metadata["engine"] == "engine"
+    assert simulate(mech, 0.01, engine="compiled", progress=False).metadata["engine"] == "compiled"
     assert simulate(mech, 0.01, method="dopri5", progress=False).metadata["engine"] == "engine"
     assert simulate(mech, 0.01, stabilization="baumgarte", progress=False).metadata["engine"] == "engine"
     with use_backend("numpy"):
         assert simulate(mech, 0.01, progress=False).metadata["engine"] == "python"
-    # n = 243 coordinates, one degree of freedom: the compiled null-space form (sparse LQ)
     big = library.get("A02_n_four_bar", N=40)
-    assert simulate(big, 0.002, progress=False).metadata["engine"] == "compiled"
-    # n = 75 and 73 degrees of freedom (> AUTO_NUMBA_MAX_N): not the numba loop, the engine
+    assert simulate(big, 0.002, progress=False).metadata["engine"] == "engine"
+    assert simulate(big, 0.002, engine="compiled", progress=False).metadata["engine"] == "compiled"
+    # n = 75 and 73 degrees of freedom (> AUTO_NUMBA_MAX_N): the numba loop declines on 'auto'
     b = PlanarBuilder("loose")
     for i in range(25):
         b.body(f"bar{i}", mass=1.0, inertia=0.1)
@@ -92,11 +94,13 @@ def test_auto_engine_choice() -> None:
     q0 = np.zeros(loose.n)
     q0[0] = 0.5
     assert simulate(loose, 0.002, q0, progress=False).metadata["engine"] == "engine"
+    with pytest.raises(InputError, match="degrees of freedom"):
+        simulate(loose, 0.002, q0, engine="compiled", progress=False)
     with use_backend("numba"):  # forced
-        assert simulate(loose, 0.002, q0, progress=False).metadata["engine"] == "compiled"
+        assert simulate(loose, 0.002, q0, engine="compiled", progress=False).metadata["engine"] == "compiled"
     wall = library.get("arm2r_wall")  # unilateral contact: the engine (events located in Python)
     assert simulate(wall, 0.01, progress=False).metadata["engine"] == "engine"
-    assert simulate(wall, 0.01, contact=False, progress=False).metadata["engine"] == "compiled"
+    assert simulate(wall, 0.01, contact=False, engine="compiled", progress=False).metadata["engine"] == "compiled"
 
 
 def _spring_model() -> object:

@@ -557,8 +557,9 @@ def simulate(
         numba, and a model with a compiled program (:meth:`nonmin.model.Model.fast_program`:
         planar models without springs, dampers, drivers or user-defined joints), and raises
         :class:`~nonmin.errors.InputError` naming what is missing otherwise. ``"auto"``:
-        the numba loop when possible, else the engine when it covers the run (not with the
-        core's backend set to ``"numpy"``), else the general driver.
+        the engine when it covers the run (not with the core's backend set to ``"numpy"``),
+        else the general driver; the numba loop only with ``"compiled"`` (no first-use JIT
+        on any default path).
         ``trajectory.metadata["engine"]`` tells which ran. If a kernel fails in the compiled loop, the general driver takes over
         at the last accepted step (and raises the typed error).
     checkpoint : path, optional
@@ -696,13 +697,15 @@ def simulate(
               if hasattr(controller, "initial_state") else None)
     unilateral = tuple(c.name for c in model.constraints if c.kind == "unilateral") if contact else ()
     system = _System(model, controller, stab, rank_rtol, n, k, act, cstate, unilateral=unilateral)
-    prog = _fastpath.program_for(engine, model, integ, stab, controller, events, unilateral, act)
     use_engine = False
-    if prog is None and engine in ("auto", "engine"):
+    if engine in ("auto", "engine"):
         why = _engine.ineligible(integ, stab, events, unilateral, engine)
         if why is not None and engine == "engine":
             raise InputError(f"engine='engine' cannot run this simulation: {why}")
         use_engine = why is None
+    # the numba loop only when asked for (engine="compiled"): "auto" takes the engine
+    prog = _fastpath.program_for(engine, model, integ, stab, controller, events, unilateral, act) \
+        if engine == "compiled" else None  # fmt: skip
     meta = {
         "model": _describe(model),
         "options": {
