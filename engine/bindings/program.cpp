@@ -216,7 +216,7 @@ void bind_program(nb::module_& m) {
             "Evaluate into new Terms (convenience; evaluate_into reuses its buffers).")
         .def(
             "evaluate_batch",
-            [](const Program& p, CArr1 t, CArr2 q, CArr2 qd, CMask active, unsigned need) {
+            [](const Program& p, CArr1 t, CArr2 q, CArr2 qd, CMask active, unsigned need, int nthreads) {
                 const std::size_t N = t.shape(0);
                 const auto n = static_cast<std::size_t>(p.n());
                 const auto m = static_cast<std::size_t>(p.m_all());
@@ -240,16 +240,15 @@ void bind_program(nb::module_& m) {
                     T = new_array({N});
                     V = new_array({N});
                 }
-                Status s = Status::ok;
-                std::size_t failed = 0;
-                auto run = [&]() {
+                std::vector<int> status(N, 0);
+                auto run = [&](std::size_t lo, std::size_t hi) {
                     Terms out = p.make_terms();
                     auto ws = p.make_workspace();
-                    for (std::size_t i = 0; i < N; ++i) {
-                        s = p.evaluate(t.data()[i], q.data() + i * n, qd.data() + i * n, active.data(), need,
-                                       out, *ws);
-                        if (s != Status::ok) {
-                            failed = i;
+                    for (std::size_t i = lo; i < hi; ++i) {
+                        const Status st = p.evaluate(t.data()[i], q.data() + i * n, qd.data() + i * n,
+                                                     active.data(), need, out, *ws);
+                        if (st != Status::ok) {
+                            status[i] = static_cast<int>(st);
                             return;
                         }
                         auto put = [](NpArr& dst, const double* src, std::size_t len, std::size_t i_) {
@@ -272,12 +271,20 @@ void bind_program(nb::module_& m) {
                     }
                 };
                 if (p.thread_safe()) {
+                    const std::size_t T =
+                        std::max<std::size_t>(1, std::min<std::size_t>(static_cast<std::size_t>(std::max(nthreads, 1)), N));
                     nb::gil_scoped_release release;
-                    run();
+                    std::vector<std::thread> pool;
+                    for (std::size_t c = 1; c < T; ++c) pool.emplace_back(run, (c * N) / T, ((c + 1) * N) / T);
+                    run(0, N / T);
+                    for (auto& th : pool) th.join();
                 } else {
-                    run();
+                    run(0, N);
                 }
-                if (s != Status::ok) raise_status(s, "Program.evaluate_batch (state " + std::to_string(failed) + ")");
+                for (std::size_t i = 0; i < N; ++i)
+                    if (status[i] != 0)
+                        raise_status(static_cast<Status>(status[i]),
+                                     "Program.evaluate_batch (state " + std::to_string(i) + ")");
                 if (need & NEED_M) res["M"] = M;
                 if (need & NEED_H) {
                     res["h"] = h;
@@ -295,10 +302,10 @@ void bind_program(nb::module_& m) {
                 return res;
             },
             nb::arg("t"), nb::arg("q"), nb::arg("qd"), nb::arg("active"),
-            nb::arg("need") = static_cast<unsigned>(NEED_ALL),
+            nb::arg("need") = static_cast<unsigned>(NEED_ALL), nb::arg("nthreads") = 1,
             "Evaluate N states (t: (N,), q, qd: (N, n)) under one active set; a dict of stacked "
-            "arrays (rows of inactive constraints are zero). The GIL is released when the program "
-            "is thread safe.");
+            "arrays (rows of inactive constraints are zero). On nthreads threads with the GIL "
+            "released when the program is thread safe (one thread otherwise).");
 }
 
 }  // namespace nonmin::bindings

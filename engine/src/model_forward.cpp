@@ -71,13 +71,11 @@ SolveInfo forward_dynamics(const Program& p, ForwardScratch& s, double t, const 
     const double* A = s.terms.A.data();
     const double* gamma = s.terms.gamma.data();
     if (!s.contiguous) {
-        const int n = p.n();
         for (int r = 0; r < s.m; ++r) {
             const int src = s.rows[static_cast<std::size_t>(r)];
             s.A.row(r) = s.terms.A.row(src);
             s.gamma[r] = s.terms.gamma[src];
         }
-        (void)n;
         A = s.A.data();
         gamma = s.gamma.data();
     }

@@ -290,7 +290,6 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                 addB(p.iy, col, a.uy);
                 addB(p.ith, col, -a.ux * p.ry + a.uy * p.rx);
             } else {
-                const PointKin pa = point_kin(d_, w, q, qd, a.a);
                 const PointKin pb = point_kin(d_, w, q, qd, a.b);
                 double ca = 1.0, sa = 0.0, rax = 0.0, ray = 0.0;
                 int iax = -1, iay = -1, iath = -1;
@@ -304,7 +303,6 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                     iay = Ba.iy;
                     iath = Ba.ith;
                 }
-                (void)pa;
                 const double ux = ca * a.ux - sa * a.uy, uy = sa * a.ux + ca * a.uy;
                 addB(pb.ix, col, ux);
                 addB(pb.iy, col, uy);

@@ -183,6 +183,9 @@ def test_batch_equals_single_evaluations() -> None:
     qd = rng.standard_normal((N, model.n))
     mask = model.active_mask(None)
     out = prog.evaluate_batch(t, q, qd, mask)
+    threaded = prog.evaluate_batch(t, q, qd, mask, _engine.NEED_ALL, 3)
+    for key, val in out.items():
+        np.testing.assert_array_equal(threaded[key], val)
     for i in range(N):
         T = prog.evaluate(t[i], q[i], qd[i], mask)
         for key in ("M", "h", "f_passive", "A", "gamma", "phi", "velocity"):
