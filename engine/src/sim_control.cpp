@@ -29,6 +29,8 @@ Regulator::Regulator(const Program& prog, Vec q_star, Mat Kp, Mat Kd, std::vecto
     us_ = Vec::Zero(k_);
     P_ = Mat::Zero(n_, n_);
     PB_ = Mat::Zero(n_, std::max(k_, 1));
+    last_q_ = Vec::Zero(n_);
+    last_qd_ = Vec::Zero(n_);
     saturated_steps.assign(static_cast<std::size_t>(k_), 0);
     saturated.assign(static_cast<std::size_t>(k_), 0);
     max_abs_u.assign(static_cast<std::size_t>(k_), 0.0);
@@ -47,19 +49,41 @@ void Regulator::attach(const Terms& T, const Mat& A, int m, const std::vector<in
 
 Status Regulator::control(double t, const double* q, const double* qd, const std::uint8_t* active, double* u) {
     if (!T_) return Status::bad_shape;
-    return law(t, q, qd, active, *T_, *A_, m_, false, u);
+    return law(t, q, qd, active, *T_, *A_, m_, u);
 }
 
 Status Regulator::update(double t, const double* q, const double* qd, const std::uint8_t* active) {
-    const Status s = prog_->evaluate(t, q, qd, active, NEED_H | NEED_B | NEED_A, Tu_, *ws_);
-    if (s != Status::ok) return s;
-    for (int i = 0; i < m_; ++i) Au_.row(i) = Tu_.A.row(rows_[static_cast<std::size_t>(i)]);
-    return law(t, q, qd, active, Tu_, Au_, m_, true, us_.data());
+    // the loop's last evaluation of the law is usually at this very state (the sample at the
+    // projected step end): record it; else evaluate the law here
+    bool same = t == last_t_;
+    for (int i = 0; same && i < n_; ++i) same = q[i] == last_q_[i] && qd[i] == last_qd_[i];
+    if (!same) {
+        Status s = prog_->evaluate(t, q, qd, active, NEED_H | NEED_B | NEED_A, Tu_, *ws_);
+        if (s != Status::ok) return s;
+        for (int i = 0; i < m_; ++i) Au_.row(i) = Tu_.A.row(rows_[static_cast<std::size_t>(i)]);
+        if ((s = law(t, q, qd, active, Tu_, Au_, m_, us_.data())) != Status::ok) return s;
+    }
+    record();
+    return Status::ok;
+}
+
+void Regulator::record() {  // ControlState.record of the last law evaluation
+    for (int j = 0; j < k_; ++j) {
+        const double lo = lo_[j], hi = hi_[j], v = uraw_[j];
+        const bool sat = (v <= lo || v >= hi) && (std::isfinite(lo) || std::isfinite(hi));
+        saturated[static_cast<std::size_t>(j)] = sat;
+        saturated_steps[static_cast<std::size_t>(j)] += sat;
+        max_abs_u[static_cast<std::size_t>(j)] = std::max(max_abs_u[static_cast<std::size_t>(j)], std::abs(v));
+    }
+    ++steps;
+    infeasible_steps += last_feasible_ ? 0 : 1;
+    min_sigma_pb = std::min(min_sigma_pb, last_smin_);
 }
 
 Status Regulator::law(double t, const double* q, const double* qd, const std::uint8_t* active, const Terms& T,
-                      const Mat& A, int m, bool record, double* u) {
+                      const Mat& A, int m, double* u) {
     const int n = n_, k = k_;
+    last_t_ = std::numeric_limits<double>::quiet_NaN();  // (set again when the law succeeds)
     // f_g = h(q, 0)
     Status s = prog_->evaluate(t, q, zero_.data(), active, NEED_H, Tg_, *ws_);
     if (s != Status::ok) return s;
@@ -148,21 +172,14 @@ Status Regulator::law(double t, const double* q, const double* qd, const std::ui
     }
     for (int j = 0; j < k; ++j)
         if (!std::isfinite(uraw_[j])) return Status::not_finite;
-    for (int j = 0; j < k; ++j) {
-        const double lo = lo_[j], hi = hi_[j], v = uraw_[j];
-        u[j] = std::min(std::max(v, lo), hi);
-        if (record) {
-            const bool sat = (v <= lo || v >= hi) && (std::isfinite(lo) || std::isfinite(hi));
-            saturated[static_cast<std::size_t>(j)] = sat;
-            saturated_steps[static_cast<std::size_t>(j)] += sat;
-            max_abs_u[static_cast<std::size_t>(j)] = std::max(max_abs_u[static_cast<std::size_t>(j)], std::abs(v));
-        }
+    for (int j = 0; j < k; ++j) u[j] = std::min(std::max(uraw_[j], lo_[j]), hi_[j]);
+    last_t_ = t;
+    for (int i = 0; i < n; ++i) {
+        last_q_[i] = q[i];
+        last_qd_[i] = qd[i];
     }
-    if (record) {
-        ++steps;
-        infeasible_steps += feasible ? 0 : 1;
-        min_sigma_pb = std::min(min_sigma_pb, s_min);
-    }
+    last_feasible_ = feasible;
+    last_smin_ = s_min;
     return Status::ok;
 }
 

@@ -38,7 +38,8 @@ class Regulator final : public Controller {
 
   private:
     Status law(double t, const double* q, const double* qd, const std::uint8_t* active, const Terms& T,
-               const Mat& A, int m, bool record, double* u);
+               const Mat& A, int m, double* u);
+    void record();
 
     const Program* prog_;
     int n_, k_;
@@ -57,6 +58,11 @@ class Regulator final : public Controller {
     Terms Tg_, Tu_;
     Mat Au_, DA_, P_, PB_;
     Vec zero_, fpar_, w_, c_, uraw_, us_;
+    // the state of the last law evaluation and what record() needs from it
+    double last_t_ = std::numeric_limits<double>::quiet_NaN();
+    Vec last_q_, last_qd_;
+    bool last_feasible_ = true;
+    double last_smin_ = 0.0;
     Eigen::JacobiSVD<Mat> svd_a_, svd_pb_;
 };
 
