@@ -127,6 +127,82 @@ TapeProgram::TapeProgram(TapeDescription desc, std::vector<double> params)
         if (binary(static_cast<TapeOp>(d_.op[i])) && d_.b[i] >= base)
             need_[static_cast<std::size_t>(d_.b[i] - base)] |= f;
     }
+    schedule();
+}
+
+void TapeProgram::schedule() {
+    // Reorder the instructions (a topological order of their dependencies) so that runs of one
+    // op follow each other: the evaluation loop's dispatch then predicts well. Every
+    // instruction computes the same op on the same operands, so the results are bitwise
+    // unchanged.
+    const std::size_t N = d_.op.size();
+    if (N < 2) return;
+    const int base = n_inputs();
+    const int nops = static_cast<int>(TapeOp::num_ops);
+    std::vector<int> indeg(N, 0);
+    std::vector<std::vector<int>> children(N);
+    for (std::size_t i = 0; i < N; ++i) {
+        const auto op = static_cast<TapeOp>(d_.op[i]);
+        if (op == TapeOp::constant) continue;
+        const int a = d_.a[i] - base;
+        if (a >= 0) {
+            children[static_cast<std::size_t>(a)].push_back(static_cast<int>(i));
+            ++indeg[i];
+        }
+        if (binary(op)) {
+            const int b = d_.b[i] - base;
+            if (b >= 0 && b != a) {
+                children[static_cast<std::size_t>(b)].push_back(static_cast<int>(i));
+                ++indeg[i];
+            }
+        }
+    }
+    std::vector<std::vector<int>> ready(static_cast<std::size_t>(nops));
+    for (std::size_t i = N; i-- > 0;)
+        if (indeg[i] == 0) ready[static_cast<std::size_t>(d_.op[i])].push_back(static_cast<int>(i));
+    std::vector<int> order;
+    order.reserve(N);
+    int cur = -1;
+    while (order.size() < N) {
+        if (cur < 0 || ready[static_cast<std::size_t>(cur)].empty()) {
+            cur = -1;
+            std::size_t best = 0;
+            for (int o = 0; o < nops; ++o)
+                if (ready[static_cast<std::size_t>(o)].size() > best) {
+                    best = ready[static_cast<std::size_t>(o)].size();
+                    cur = o;
+                }
+            if (cur < 0) throw EngineError("tape: dependency cycle");
+        }
+        auto& bucket = ready[static_cast<std::size_t>(cur)];
+        const int i = bucket.back();
+        bucket.pop_back();
+        order.push_back(i);
+        for (int ch : children[static_cast<std::size_t>(i)])
+            if (--indeg[static_cast<std::size_t>(ch)] == 0)
+                ready[static_cast<std::size_t>(d_.op[static_cast<std::size_t>(ch)])].push_back(ch);
+    }
+    std::vector<int> pos(N);
+    for (std::size_t k = 0; k < N; ++k) pos[static_cast<std::size_t>(order[k])] = static_cast<int>(k);
+    auto remap = [&](int reg) { return reg < base ? reg : base + pos[static_cast<std::size_t>(reg - base)]; };
+    std::vector<int> op(N), a(N), b(N);
+    std::vector<double> c(N);
+    std::vector<std::uint8_t> nd(N);
+    for (std::size_t k = 0; k < N; ++k) {
+        const auto i = static_cast<std::size_t>(order[k]);
+        op[k] = d_.op[i];
+        const bool uses = static_cast<TapeOp>(op[k]) != TapeOp::constant;
+        a[k] = uses ? remap(d_.a[i]) : d_.a[i];
+        b[k] = uses && binary(static_cast<TapeOp>(op[k])) ? remap(d_.b[i]) : d_.b[i];
+        c[k] = d_.c[i];
+        nd[k] = need_[i];
+    }
+    d_.op.swap(op);
+    d_.a.swap(a);
+    d_.b.swap(b);
+    d_.c.swap(c);
+    need_.swap(nd);
+    for (int& r : d_.out_reg) r = remap(r);
 }
 
 std::unique_ptr<Workspace> TapeProgram::make_workspace() const {

@@ -78,6 +78,8 @@ class TapeProgram final : public Program {
     int n_inputs() const { return 1 + 2 * n_ + d_.n_params; }
 
   private:
+    void schedule();  // reorder into runs of one op (dependencies kept)
+
     TapeDescription d_;
     std::vector<double> params_;
     std::vector<std::uint8_t> need_;  // NEED_* flags of each instruction
