@@ -145,7 +145,9 @@ class PlanarModel(Model):
     in use (extra ``fast``; ``nonmin.core.set_backend("numpy")`` switches it off). Constant
     parts (M, gravity, constant columns of B) are computed once; every call returns new arrays.
     The per-joint formulas of :meth:`Joint.terms` remain the reference (``_reference_*``
-    methods; tests demand agreement to 1e-13).
+    methods; tests demand agreement to 1e-13). The compiled engine evaluates the same model
+    from a plain-data description in C++ (:meth:`engine_program`, ``planar/_program.py``),
+    agreeing with :meth:`evaluate` to round-off.
 
     Attributes
     ----------
