@@ -11,6 +11,10 @@ namespace nb = nanobind;
 
 NB_MODULE(_engine, m) {
     m.doc() = "nonmin's ahead-of-time compiled engine (C++17). Private: use the public API.";
+    // Model sources cache their compiled Program in module-level dicts (one per model), which
+    // are still alive when the interpreter tears the extension down; nanobind would report
+    // them as leaks at every exit.
+    nb::set_leak_warnings(false);
     m.def(
         "build_info",
         []() {

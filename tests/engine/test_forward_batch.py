@@ -8,6 +8,8 @@ robots (Pinocchio tree with loop closures).
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -30,9 +32,9 @@ def _mechanisms():
     robots = pytest.importorskip("nonmin.model.robots")
     try:
         m, s = robots.two_arm_grasp()
-        out.append(("two_arm_grasp", type("Mech", (), {"model": m, "state": s})))
+        out.append(("two_arm_grasp", SimpleNamespace(model=m, state=s)))
         m, s = robots.fourbar("point")
-        out.append(("fourbar_point", type("Mech", (), {"model": m, "state": s})))
+        out.append(("fourbar_point", SimpleNamespace(model=m, state=s)))
     except nonmin.errors.MissingDependencyError:
         pass
     return out
