@@ -112,7 +112,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     sc = load_scenario(args.scenario, allow_code=args.allow_code)
     t0 = time.perf_counter()
-    res = run_scenario(sc, args.out, progress=args.progress, t_final=args.t_final)
+    res = run_scenario(sc, args.out, progress=args.progress, t_final=args.t_final,
+                       checkpoint_every=args.checkpoint_every, resume=args.resume)
     wall = time.perf_counter() - t0
     traj = res.trajectory
     if len(traj):
@@ -331,6 +332,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", default=None, help="output folder (default: [output] dir or SCENARIO-out)"
     )
     sp.add_argument("--t-final", type=_TIME, default=None, help="override the scenario's end time [s]")
+    sp.add_argument(
+        "--checkpoint-every", type=_TIME, default=None, metavar="SECONDS",
+        help="write the samples so far to the trajectory file every SECONDS of simulated time",
+    )
+    sp.add_argument(
+        "--resume", action="store_true",
+        help="continue the (interrupted) run held by the output folder's trajectory file",
+    )
     allow_code_flag(sp)
     progress_flags(sp)
     sp.set_defaults(func=cmd_run)

@@ -1239,6 +1239,41 @@ def _api_numbers() -> None:
     ):  # fmt: skip
         case(f"PlanarBuilder body {label}", cat, planar(**kw), err, needle)
 
+    from nonmin.model.spatial import SpatialBuilder
+
+    def spatial(mass: Any = 1.0, inertia: Any = (1.0, 1.0, 1.0)) -> Callable[[Path], Any]:
+        def act(tmp: Path) -> Any:
+            b = SpatialBuilder("s")
+            b.add_body("b", mass=mass, inertia=np.diag(inertia) if len(inertia) == 3 else inertia)
+            return b.build()
+
+        return act
+
+    for label, kw, err, needle in (
+        ("mass 0", {"mass": 0.0}, E.ModelError, "mass"), ("mass -2", {"mass": -2.0}, E.ModelError, "mass"),
+        ("inertia negative", {"inertia": (-1.0, 1.0, 1.0)}, E.ModelError, "inertia"),
+        ("inertia zero", {"inertia": (0.0, 0.0, 0.0)}, E.ModelError, "inertia"),
+        ("inertia not physical", {"inertia": (1.0, 1.0, 5.0)}, E.ModelError, "triangle"),
+    ):  # fmt: skip
+        case(f"SpatialBuilder body {label}", cat, spatial(**kw), err, needle)
+
+    def check(**kw: Any) -> Callable[[Path], Any]:
+        def act(tmp: Path) -> Any:
+            from nonmin.model import check_model
+
+            mech = library.get("crossed_four_bar")
+            return check_model(mech.model, mech.state, **kw)
+
+        return act
+
+    for label, kw, needle in (
+        ("duration -1", {"duration": -1.0}, "duration"), ("duration nan", {"duration": float("nan")}, "duration"),
+        ("duration string", {"duration": "long"}, "duration"), ("samples 0", {"samples": 0}, "samples"),
+        ("samples string", {"samples": "x"}, "samples"), ("samples 2.5", {"samples": 2.5}, "samples"),
+        ("duration 1e12", {"duration": 1e12}, "max_steps"),
+    ):  # fmt: skip
+        case(f"check_model {label}", cat, check(**kw), E.InputError, needle)
+
     def mass_batch(tmp: Path) -> Any:
         m = library.get("crossed_four_bar").model
         return m.mass_matrix(np.zeros((3, m.n)))
@@ -1555,6 +1590,61 @@ def _cli() -> None:
     case("run a malformed scenario", cat, run_cli(*run, text="[model"), None, "TOML", exit_code=2)
     case("unknown verb", cat, run_cli("fly"), None, "fly", exit_code=2)
     case("demo --only unknown", cat, run_cli("demo", "--only", "nope"), None, "nope", exit_code=2)
+
+    for v in ("0", "-1", "nan", "x"):
+        case(f"run --checkpoint-every {v}", cat, run_cli(*run, "--checkpoint-every", v, text=BASE_SCENARIO), None,
+             "--checkpoint-every", exit_code=2)
+    case("run --resume without a trajectory", cat, run_cli(*run, "--resume", text=BASE_SCENARIO), None, "resume",
+         exit_code=2)
+
+    def resume_cli(tmp: Path) -> Any:
+        from nonmin.sim import _simulate
+
+        scenario(tmp, with_key("simulate", "t_final = 0.3"))
+        real = _simulate._System.rhs
+        calls = {"n": 0}
+
+        def rhs(self: Any, t: float, y: Any) -> Any:
+            calls["n"] += 1
+            if calls["n"] > 60:
+                raise KeyboardInterrupt
+            return real(self, t, y)
+
+        with mock.patch.object(_simulate._System, "rhs", rhs):
+            first = cli(["run", str(tmp / "s.toml"), "--out", str(tmp / "o"), "--checkpoint-every", "0.05"])
+        assert first[0] == 130, first
+        code = cli(["run", str(tmp / "s.toml"), "--out", str(tmp / "o"), "--resume"])
+        full = cli(["run", str(tmp / "s.toml"), "--out", str(tmp / "full")])
+        return code if full[0] == 0 else full
+
+    def same_as_full(tmp: Path, _: Any) -> None:
+        from nonmin.sim import load_trajectory
+
+        a, b = load_trajectory(tmp / "o" / "trajectory.npz"), load_trajectory(tmp / "full" / "trajectory.npz")
+        assert a.success and len(a) == len(b) and np.allclose(a.q, b.q, atol=1e-10), (len(a), len(b))
+
+    case("nonmin run: Ctrl-C, then --resume = one run", cat, resume_cli, None, exit_code=0, check=same_as_full)
+
+    def two_processes(tmp: Path) -> Any:
+        import subprocess
+        import sys
+
+        scenario(tmp, with_key("simulate", "t_final = 0.2"))
+        cmd = [sys.executable, "-m", "nonmin.cli", "run", str(tmp / "s.toml"), "--out", str(tmp / "o")]
+        procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(3)]
+        outs = [p.communicate(timeout=600) for p in procs]
+        codes = [p.returncode for p in procs]
+        err = "".join(o[1] for o in outs)
+        return (max(codes), "", err)
+
+    def complete(tmp: Path, _: Any) -> None:
+        from nonmin.sim import load_trajectory
+
+        tr = load_trajectory(tmp / "o" / "trajectory.npz")
+        assert tr.success and len(tr) == 21
+        assert not [f.name for f in (tmp / "o").iterdir() if f.name.endswith(".tmp")]
+
+    case("3 processes run into one --out", cat, two_processes, None, exit_code=0, check=complete, slow=True)
 
     def run_into_file(tmp: Path) -> Any:
         scenario(tmp)

@@ -186,12 +186,18 @@ def run_scenario(
     progress: bool | None = None,
     write: bool = True,
     t_final: float | None = None,
+    checkpoint_every: float | None = None,
+    resume: bool = False,
 ) -> ScenarioResult:
     """Build the model, state, controller and events of a scenario, simulate, write outputs.
 
     Code named by the scenario (``entry_point``, ``guard``) runs only if it was loaded with
     ``allow_code=True``. A simulation stopped by ``KeyboardInterrupt`` returns (and writes) the
     samples computed so far with status ``interrupted``.
+
+    ``checkpoint_every`` (simulated seconds) makes the run write its samples so far to the
+    trajectory file of the output folder as it goes (durably, status ``interrupted`` until it
+    ends); ``resume=True`` continues the run that file holds (see :func:`nonmin.sim.simulate`).
     """
     from ..sim import simulate
 
@@ -214,6 +220,16 @@ def run_scenario(
         kw["t_eval"] = t_eval
     controller = build_controller(sc, model)
     events = build_events(sc, model)
+    if (checkpoint_every is not None or resume) and not write:
+        raise InputError("checkpoint_every and resume need write=True (they use the output folder)")
+    if out is not None:
+        target = _output_names(sc, out)["trajectory"]
+        if checkpoint_every is not None:
+            kw["checkpoint"], kw["checkpoint_every"] = target, checkpoint_every
+        if resume:
+            if target is None or not target.is_file():
+                raise InputError(f"resume: there is no trajectory file {str(target)!r} to resume")
+            kw["resume"] = target
     try:
         traj = simulate(
             model,

@@ -3,12 +3,13 @@ initial state, and the rank of A, cond(M̄) and μ along a short trajectory."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from ..errors import NonminError
+from ..errors import InputError, NonminError
 from ._protocol import Model, State
 
 __all__ = ["CheckItem", "ModelReport", "check_model"]
@@ -226,7 +227,21 @@ def check_model(
     Returns
     -------
     ModelReport
+
+    Raises
+    ------
+    InputError
+        ``duration`` is not a finite number ≥ 0, or ``samples`` not an integer in [2, 10⁶].
     """
+    try:
+        dur = float(duration)
+    except (TypeError, ValueError):
+        raise InputError(f"check_model: duration must be a number of seconds, got {duration!r}") from None
+    if not (math.isfinite(dur) and dur >= 0.0):
+        raise InputError(f"check_model: duration must be a finite number ≥ 0 [s], got {duration!r}")
+    if isinstance(samples, bool) or not isinstance(samples, int | np.integer) or not 2 <= samples <= 1_000_000:
+        raise InputError(f"check_model: samples must be an integer in [2, 1000000], got {samples!r}")
+    duration = dur
     if state is None:
         state = model.state(np.zeros(model.n))
     t, q, qd, active = state.t, state.q, state.qd, state.active
