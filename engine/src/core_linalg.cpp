@@ -1,6 +1,7 @@
 // The rank tolerance policy and the SPD factorization (see linalg.hpp, docs/theory.md).
 #include "nonmin/linalg.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -21,7 +22,22 @@ double row_norm(const double* x, int n) {
         s3 += x[k + 3] * x[k + 3];
     }
     for (int k = n4; k < n; ++k) s0 += x[k] * x[k];
-    return std::sqrt((s0 + s1) + (s2 + s3));
+    const double s = (s0 + s1) + (s2 + s3);
+    // squares that overflowed (a row above ~1e154) or underflowed (below ~1e-154): recompute on
+    // the row divided by its largest entry (nonmin.core.linalg.row_norms, ROW_NORM_BIG/SMALL);
+    // inside the range the plain sum is kept, bitwise. NaN stays NaN (not > and not <).
+    if (s > 1e300 || s < 1e-290) {
+        double scale = 0.0;
+        for (int k = 0; k < n; ++k) scale = std::max(scale, std::fabs(x[k]));
+        if (!(scale > 0.0)) return scale == 0.0 ? std::sqrt(s) : scale;
+        double r = 0.0;
+        for (int k = 0; k < n; ++k) {
+            const double y = x[k] / scale;
+            r += y * y;
+        }
+        return scale * std::sqrt(r);
+    }
+    return std::sqrt(s);
 }
 
 int equilibrate(const double* A, int m, int n, const double* b, double rtol, double* B, double* d,

@@ -22,9 +22,9 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-from .errors import OutputError, ScenarioError
+from .errors import InputError, OutputError, ScenarioError
 
-__all__ = ["atomic_path", "atomic_write", "confined", "write_text"]
+__all__ = ["as_path", "atomic_path", "atomic_write", "confined", "write_text"]
 
 
 def _fsync_dir(folder: Path) -> None:
@@ -39,6 +39,17 @@ def _fsync_dir(folder: Path) -> None:
         pass
     finally:
         os.close(fd)
+
+
+def as_path(path: Any, what: str = "path") -> Path:
+    """``Path(path)``, or an :class:`~nonmin.errors.InputError` naming ``what``."""
+    try:
+        p = Path(os.fspath(path))
+    except TypeError:
+        raise InputError(f"{what} must be a file path (str or os.PathLike), got {type(path).__name__}") from None
+    if not str(p) or "\x00" in str(p):
+        raise InputError(f"{what} must be a non-empty file path without NUL characters, got {str(p)!r}")
+    return p
 
 
 def _temp_in(target: Path, suffix: str) -> tuple[int, Path]:
@@ -86,8 +97,8 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "wb", **open_kw: Any)
         the message names the target; the previous file at ``path`` is unchanged.
     """
     if mode not in ("wb", "w"):
-        raise ValueError(f"mode must be 'wb' or 'w', got {mode!r}")
-    target = Path(path)
+        raise InputError(f"mode must be 'wb' or 'w', got {mode!r}")
+    target = as_path(path)
     fd, tmp = _temp_in(target, ".tmp")
     ok = False
     try:
@@ -119,7 +130,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     OutputError
         As :func:`atomic_write`.
     """
-    target = Path(path)
+    target = as_path(path)
     fd, tmp = _temp_in(target, ".tmp" + target.suffix)
     os.close(fd)
     ok = False

@@ -96,10 +96,16 @@ def cmd_demo(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         res = run_scenario(sc, out / name, progress=args.progress, t_final=args.t_final)
         wall = time.perf_counter() - t0
-        rows.append(_summary_row(name, res.trajectory, wall))
+        if len(res.trajectory):
+            rows.append(_summary_row(name, res.trajectory, wall))
         failed |= _status_name(res.trajectory) == "failed"
         for kind, f in res.files.items():
             print(f"    {kind:11s} {f}")
+        if _status_name(res.trajectory) == "interrupted":
+            if rows:
+                write_text(out / "summary.txt", _format_rows(rows) + "\n")
+            print(f"nonmin: interrupted: {res.trajectory.message}", file=sys.stderr)
+            return EXIT_INTERRUPTED
     print()
     print(_format_rows(rows))
     write_text(out / "summary.txt", _format_rows(rows) + "\n")

@@ -115,15 +115,12 @@ def classify(c: Case, tmp: Path) -> Outcome:
     """Run case ``c`` in the empty folder ``tmp`` and classify what happened."""
     import time
 
-    from nonmin.core import use_backend
-
     t0 = time.perf_counter()
     result: Any = None
     exc: BaseException | None = None
     caught: list[warnings.WarningMessage] = []
     try:
-        with _time_limit(HANG_SECONDS * (10 if c.slow else 1)), use_backend("numpy"), \
-                warnings.catch_warnings(record=True) as caught:  # fmt: skip
+        with _time_limit(HANG_SECONDS * (10 if c.slow else 1)), warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             result = c.action(tmp)
     except _Hang:
@@ -705,6 +702,16 @@ def _durability() -> None:
     case("a file where the output folder goes", cat, file_as_folder, E.OutputError, "t.npz",
          check=text_intact("f", "a file"))
 
+    for label, fn, needle in (
+        ("Trajectory.save(None)", lambda tmp: good_trajectory().save(None), "path"),
+        ("Trajectory.save(5)", lambda tmp: good_trajectory().save(5), "path"),
+        ("Trajectory.to_csv(b'')", lambda tmp: good_trajectory().to_csv(b""), "path"),
+        ("load_trajectory(None)", lambda tmp: __import__("nonmin.sim").sim.load_trajectory(None), "path"),
+        ("save_figure(fig, 3.5)", lambda tmp: __import__("nonmin.viz").viz.save_figure(
+            __import__("nonmin.viz").viz.plot_trajectory(good_trajectory()), 3.5), "path"),
+    ):  # fmt: skip
+        case(f"{label}: not a path", cat, fn, E.InputError, needle)
+
     def concurrent(tmp: Path) -> Any:
         import dataclasses
 
@@ -852,6 +859,42 @@ def _durability() -> None:
         assert len(tr) == len(full) and np.allclose(tr.q, full.q, atol=1e-12), np.abs(tr.q - full.q).max()
 
     case("checkpoint, interrupt, resume = uninterrupted run", cat, resume, None, check=resumed)
+
+    def interrupted_twice(tmp: Path) -> Any:
+        from nonmin.sim import _simulate
+
+        real = _simulate._System.rhs
+        for limit in (25, 30):
+            calls = {"n": 0}
+
+            def rhs(self: Any, t: float, y: Any, _c: dict[str, int] = calls, _l: int = limit) -> Any:
+                _c["n"] += 1
+                if _c["n"] > _l:
+                    raise KeyboardInterrupt
+                return real(self, t, y)
+
+            with mock.patch.object(_simulate._System, "rhs", rhs):
+                kw: dict[str, Any] = {"resume": tmp / "ck.npz"} if limit == 30 else {}
+                sim(t_span=(0.0, 0.3), checkpoint=tmp / "ck.npz", checkpoint_every=0.02, **kw)
+        return sim(t_span=(0.0, 0.3), resume=tmp / "ck.npz")
+
+    def whole(tmp: Path, tr: Any) -> None:
+        full = sim(t_span=(0.0, 0.3))
+        assert len(tr) == len(full) and np.allclose(tr.q, full.q, atol=1e-12), (len(tr), len(full))
+
+    case("interrupted twice, resumed twice = one run", cat, interrupted_twice, None, check=whole)
+
+    def checkpoint_disk_full(tmp: Path) -> Any:
+        good_file(tmp, "ck.npz")
+        with mock.patch("numpy.savez_compressed", _fail_after_partial(np.savez_compressed, OSError(28, "No space"))):
+            return sim(t_span=(0.0, 0.2), checkpoint=tmp / "ck.npz", checkpoint_every=0.05)
+
+    def run_went_on(tmp: Path, tr: Any) -> None:
+        assert tr.success and abs(tr.t[-1] - 0.2) < 1e-12, tr
+        intact(Path("ck.npz"))(tmp, tr)
+
+    case("checkpoint write fails (disk full): warns, the run goes on", cat, checkpoint_disk_full, None, "ck.npz",
+         warns=RuntimeWarning, check=run_went_on)
 
     # slow: real faults in subprocesses
     def subprocess_fault(kind: str) -> Callable[[Path], Any]:
@@ -1210,13 +1253,24 @@ def _api_numbers() -> None:
         assert int(sol.rank) == 2, f"rank {sol.rank}: rows of A above 1e154 were dropped"
         assert abs(sol.qdd[0]) < 1e-12 and abs(sol.qdd[1]) < 1e-12 and abs(sol.qdd[2] - 1.0) < 1e-12, sol.qdd
 
-    case("A rows of 1e200 (norm overflow) keep their constraints", cat, huge_row, None, check=huge_ok)
-
     def tiny_row(tmp: Path) -> Any:
         A = np.array([[1e-170, 0.0, 0.0], [0.0, 1e-170, 0.0]])
         return solve_dynamics(np.eye(3), np.ones(3), A, np.zeros(2))
 
-    case("A rows of 1e-170 (norm underflow) keep their constraints", cat, tiny_row, None, check=huge_ok)
+    from nonmin.core import use_backend
+
+    def on(backend: str, fn: Callable[[Path], Any]) -> Callable[[Path], Any]:
+        def act(tmp: Path) -> Any:
+            with use_backend(backend):
+                return fn(tmp)
+
+        return act
+
+    for backend in ("auto", "numpy", "engine", "numba"):
+        case(f"A rows of 1e200 (norm overflow) keep their constraints [{backend}]", cat, on(backend, huge_row), None,
+             check=huge_ok, slow=backend == "numba")
+        case(f"A rows of 1e-170 (norm underflow) keep their constraints [{backend}]", cat, on(backend, tiny_row),
+             None, check=huge_ok, slow=backend == "numba")
 
     from nonmin.model.planar import PlanarBuilder
 

@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from ..errors import InputError, NonminError, SimulationError
+from ..errors import InputError, NonminError, OutputError, SimulationError
 from ._trajectory import Status, Trajectory, load_trajectory
 
 __all__ = ["MAX_RECORD_BYTES", "Checkpointer", "check_budget", "join", "resume_point", "user_call"]
@@ -104,6 +105,7 @@ class Checkpointer:
         self.next = t0 + every if every else math.inf
         self.snapshot = snapshot
         self.written = 0
+        self.failed = 0
 
     def update(self, t: float) -> None:
         self.bar.update(t)
@@ -113,9 +115,20 @@ class Checkpointer:
             self.next = t + self.every
 
     def save(self, t: float) -> None:
+        """Write a checkpoint of the samples so far (status ``interrupted``)."""
+        self.write(self.snapshot(Status.INTERRUPTED, f"checkpoint at t = {t:.12g}"))
+
+    def write(self, traj: Trajectory) -> None:
+        """Write ``traj`` to the checkpoint file; a write failure (full disk, ...) warns and the
+        run goes on (the previous checkpoint is intact, and the samples are still in memory)."""
         assert self.path is not None
-        traj = self.snapshot(Status.INTERRUPTED, f"checkpoint at t = {t:.12g}")
-        traj.save(self.path)
+        try:
+            traj.save(self.path)
+        except OutputError as exc:
+            self.failed += 1
+            t_end = float(traj.t[-1]) if len(traj) else float("nan")
+            warnings.warn(f"checkpoint at t = {t_end:.12g} not written: {exc}", RuntimeWarning, stacklevel=3)
+            return
         self.written += 1
 
     def close(self) -> None:

@@ -734,8 +734,9 @@ def simulate(
     n_rejected = 0
 
     def snapshot(st: Status, msg: str) -> Trajectory:
-        """The samples so far as a Trajectory (checkpoints, interruption, the final result)."""
-        return Trajectory(
+        """The samples so far as a Trajectory (checkpoints, interruption, the final result),
+        behind those of the run it resumes."""
+        new = Trajectory(
             **rec.arrays(),
             constraint_names=model.constraint_names,
             coordinate_names=model.coordinate_names,
@@ -748,6 +749,10 @@ def simulate(
             n_rejected=n_rejected,
             metadata=meta,
         )
+        if prev is None:
+            return new
+        # the resumed run's first sample is the earlier run's last one, recomputed
+        return _durable.join(prev, new, drop_last=t_out is None and len(new) > 0)
 
     bar = _durable.Checkpointer(Progress(t0, t1, progress), ck_path, ck_every, t0, snapshot)
     t = t0
@@ -1043,10 +1048,8 @@ def simulate(
     finally:
         bar.close()
     result = snapshot(status, message)
-    if status is Status.INTERRUPTED and ck_path is not None:
-        result.save(ck_path)
-    if prev is not None:
-        result = _durable.join(prev, result, drop_last=t_out is None)
+    if ck_path is not None:  # the checkpoint ends as the whole run, whatever its status
+        bar.write(result)
     return result
 
 

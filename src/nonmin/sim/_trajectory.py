@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .._files import atomic_write
+from .._files import as_path, atomic_write
 from ..errors import FileFormatError
 from ._events import EventRecord
 
@@ -343,7 +343,7 @@ def load_trajectory(path: str | os.PathLike[str], *, max_bytes: int = MAX_LOAD_B
     import zipfile
     import zlib
 
-    p = os.fspath(path)
+    p = str(as_path(path, "load_trajectory: path"))
     if not os.path.isfile(p):
         raise FileFormatError(f"load_trajectory: {p!r}: no such file")
     try:

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from .._files import atomic_path
+from .._files import as_path, atomic_path
 from ..errors import InputError, missing_dependency
 from ..model._protocol import Geometry, Model
 from ._mpl import pyplot
@@ -107,7 +107,7 @@ def animate(
     plt = pyplot()
     from matplotlib import animation
 
-    out = Path(path)
+    out = as_path(path, "animate: path")
     for name_, val, top in (("fps", fps, 1000.0), ("speed", speed, 1e6), ("dpi", dpi, 2000.0)):
         try:
             val_f = float(val)

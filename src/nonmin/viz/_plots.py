@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .._files import atomic_path
+from .._files import as_path, atomic_path
 from ..errors import InputError
 from ..model._protocol import Geometry, Model
 from ._mpl import pyplot
@@ -250,7 +250,11 @@ def save_figure(fig: Any, path: str | Path, dpi: int = 110) -> Path:
         The file cannot be written (the previous file there is unchanged).
     """
     plt = pyplot()
-    p = Path(path)
+    try:
+        p = as_path(path, "save_figure: path")
+    except InputError:
+        plt.close(fig)
+        raise
     try:
         dpi_v = float(dpi)
     except (TypeError, ValueError):
