@@ -30,6 +30,7 @@ Usage::
     python benchmarks/core_bench.py            # full run, rewrites the table in README.md
     python benchmarks/core_bench.py --quick    # small sizes, few repeats (smoke test)
     python benchmarks/core_bench.py --batch-n12   # only nonmin's batched path, n = 12, N = 10⁴
+    python benchmarks/core_bench.py --engine      # the C++ engine like for like (see engine_bench)
 
 Results: ``benchmarks/results/core_bench.json`` and ``core_bench.csv``; Markdown table between
 the markers in ``benchmarks/README.md``.
@@ -626,6 +627,254 @@ def large() -> None:
     print("load average", os.getloadavg())
 
 
+ENGINE_BEGIN = "<!-- core_bench_engine:begin -->"
+ENGINE_END = "<!-- core_bench_engine:end -->"
+
+
+def _a02_state(theta: float) -> tuple[np.ndarray, ...]:
+    """M, h, A, γ of the A02 N = 40 four-bar (243 coordinates, 242 rows) with every crank at θ."""
+    import math
+
+    from nonmin.library import a02_n_four_bar
+
+    mech = a02_n_four_bar(N=40)
+    model = mech.model
+    c, s = math.cos(theta), math.sin(theta)
+    q, qd = [], []
+    for i in range(41):
+        q += [i + 0.5 * c, 0.5 * s, theta]
+        qd += [0.5 * s, -0.5 * c, -1.0]
+    for i in range(1, 41):
+        q += [i - 0.5 + c, s, 0.0]
+        qd += [s, -c, 0.0]
+    qa, qda = np.array(q), np.array(qd)
+    ct = model.constraint_terms(0.0, qa, qda, mech.state.active)
+    h = model.conservative_force(qa) - model.coriolis_force(qa, qda)
+    return (np.ascontiguousarray(model.mass_matrix(qa)), np.asarray(h, dtype=float),
+            np.ascontiguousarray(ct.A), np.asarray(ct.gamma, dtype=float))  # fmt: skip
+
+
+def engine_bench(quick: bool = False) -> dict[str, Any]:
+    """The C++ engine (``nonmin.core`` backend ``"engine"``) like for like.
+
+    * Chains with n ≤ 6 (``build_chain``): ``forward_dynamics(M, h, J, γ, τ)`` from Python against
+      Pinocchio's KKT solve given the same terms, ``pinocchio.forwardDynamics(model, data, τ, J,
+      γ, 0)`` on the M and nle that ``computeAllTerms`` left in ``data`` (outside the timing),
+      also from Python; planar chains pass the two rows of J that do not vanish to both (the
+      KKT solve fails on the zero row). Beside them: the numba backend, and both kernels alone
+      in a C++ loop (the engine's Solver; Pinocchio's KKT algorithm written with Eigen:
+      LLT(M), LLT(J M⁻¹ Jᵀ)). Batched: one engine call on 10⁴ states (1 thread and the default)
+      against a Python loop of ``pinocchio.forwardDynamics`` over the 10⁴ states (Pinocchio has
+      no batched API; the loop reuses one ``data``, whose M and nle are those of state 0 — the
+      dense solve's cost does not depend on the values).
+    * A02 N = 40 (n = 243, A 242 × 243): there is no Pinocchio model of it, so the peer is the
+      same dense KKT algorithm in C++ (Eigen, as above) and NumPy's dense solve of the KKT
+      matrix from Python; certified state (crank 1.3 rad) and the horizontal singular state
+      (SVD; the KKT matrix is singular there). Batched: 200 states (10⁴ states of 243 × 243 M
+      and 242 × 243 A do not fit in memory).
+
+    Times are medians over interleaved repeats (wall and process CPU time); the machine is
+    shared, so wall times are noisy and CPU times are given beside them.
+    """
+    import nonmin.core as core
+    from nonmin import _engine
+    from nonmin.core import _fast
+
+    pin = _pin()
+    try:
+        import numba  # noqa: F401
+
+        have_numba = True
+    except ImportError:
+        have_numba = False
+    n_batch = 1000 if quick else 10_000
+    target_s, repeats = (0.01, 3) if quick else (0.05, 9)
+    out: dict[str, Any] = {"machine": machine_info(), "quick": quick, "chains": [], "large": []}
+    core.set_backend("engine")
+    for kind, n in (("planar", 3), ("planar", 6), ("spatial", 3), ("spatial", 6)):
+        mech = build_chain(kind, n, n_batch)
+        T = terms(mech)
+        rows = [0, 1] if kind == "planar" else [0, 1, 2]
+        M, h, tau = T["M"], T["h"], T["tau"]
+        J = np.ascontiguousarray(T["A"][:, rows])
+        gam = np.ascontiguousarray(T["gamma"][:, rows])
+        model = mech.model
+        data_kkt = model.createData()
+        pin.computeAllTerms(model, data_kkt, mech.q[0], mech.v[0])
+        M0, h0, J0, g0, t0 = M[0], h[0], J[0], gam[0], tau[0]
+        ref = np.array(pin.forwardDynamics(model, data_kkt, t0, J0, g0, 0.0))
+        got = core.forward_dynamics(M0, h0, J0, g0, t0)
+        rel = float(np.max(np.abs(got - ref)) / max(np.max(np.abs(ref)), 1.0))
+        fns: dict[str, Callable[[], Any]] = {
+            "engine_forward_dynamics": lambda: core.forward_dynamics(M0, h0, J0, g0, t0),  # noqa: B023
+            "pin_kkt_forwardDynamics": lambda: pin.forwardDynamics(model, data_kkt, t0, J0, g0, 0.0),  # noqa: B023
+        }
+        group = time_group(fns, target_s=target_s, repeats=repeats)
+        rec: dict[str, Any] = {"mechanism": f"{kind}-{n}", "n": n, "m": len(rows),
+                               "max_rel_diff_vs_pin_kkt": rel,
+                               "single": {k: _us(v) for k, v in group.items()}}  # fmt: skip
+        if have_numba:
+            core.set_backend("numba")
+            g2 = time_group({"numba_forward_dynamics": lambda: core.forward_dynamics(M0, h0, J0, g0, t0)},  # noqa: B023
+                            target_s=target_s, repeats=repeats)  # fmt: skip
+            core.set_backend("engine")
+            rec["single"].update({k: _us(v) for k, v in g2.items()})
+        g0v = h0 + t0
+        kern = [_engine.core_time_solve(M0, g0v, J0, g0, 20000 if not quick else 2000) for _ in range(repeats)]
+        kkt = [_engine.core_time_kkt(M0, g0v, J0, g0, 20000 if not quick else 2000) for _ in range(repeats)]
+        rec["kernel_cxx_loop_us"] = {"engine_solver": 1e6 * statistics.median(kern),
+                                     "eigen_kkt": 1e6 * statistics.median(kkt)}  # fmt: skip
+        # batched: one engine call on N states vs a Python loop of Pinocchio's KKT solve
+        def eng_default(a: Any = (M, h, J, gam, tau)) -> Any:
+            return core.forward_dynamics(*a)
+
+        def eng_serial(a: Any = (M, h, J, gam, tau)) -> Any:
+            old = _fast.ENGINE_PARALLEL_MIN_BATCH
+            _fast.ENGINE_PARALLEL_MIN_BATCH = 1 << 62
+            try:
+                return core.forward_dynamics(*a)
+            finally:
+                _fast.ENGINE_PARALLEL_MIN_BATCH = old
+
+        def pin_loop() -> None:
+            for k in range(n_batch):
+                pin.forwardDynamics(model, data_kkt, tau[k], J[k], gam[k], 0.0)  # noqa: B023
+
+        qb = eng_default()
+        single = np.array([core.forward_dynamics(M[k], h[k], J[k], gam[k], tau[k]) for k in range(0, n_batch, 97)])
+        rec["batch_equals_single_bitwise"] = bool(np.array_equal(qb[::97], single))
+        gb = time_group({"engine_forward_dynamics_default": eng_default,
+                         "engine_forward_dynamics_1_thread": eng_serial,
+                         "pin_kkt_forwardDynamics_loop": pin_loop},
+                        target_s=target_s * 4, repeats=max(3, repeats // 2))  # fmt: skip
+        rec["batched"] = {"N": n_batch, "threads_default": _fast.engine_threads(n_batch),
+                          **{k: _us(v, n_batch) for k, v in gb.items()}}  # fmt: skip
+        out["chains"].append(rec)
+        s1 = rec["single"]
+        print(f"{rec['mechanism']}: engine fd {s1['engine_forward_dynamics']['median_us']:.2f} us, "
+              f"pin KKT {s1['pin_kkt_forwardDynamics']['median_us']:.2f} us, rel diff {rel:.1e}",
+              flush=True)  # fmt: skip
+    # ---- A02 N = 40
+    for label, theta in (("A02 N=40 crank 1.3 rad (certified LQ)", 1.3),
+                         ("A02 N=40 horizontal (singular: SVD)", 0.0)):  # fmt: skip
+        M, h, A, g = _a02_state(theta)
+        n, m = A.shape[1], A.shape[0]
+        K = np.block([[M, -A.T], [A, np.zeros((m, m))]])
+        rhs = np.concatenate([h, -g])
+        info = _engine.core_solve_info(M, h, A, g, 1e-10)
+
+        def np_kkt(K: Any = K, rhs: Any = rhs) -> Any:
+            return np.linalg.solve(K, rhs)
+
+        def eng(a: Any = (M, h, A, g)) -> Any:
+            return core.forward_dynamics(*a)
+
+        fns = {"engine_forward_dynamics": eng}
+        if info["rank"] == m:
+            fns["numpy_dense_kkt_solve"] = np_kkt
+        group = time_group(fns, target_s=target_s * 4, repeats=max(3, repeats // 2))
+        rec = {"case": label, "n": n, "m": m, "rank": info["rank"], "method": info["method"],
+               "single": {k: _us(v) for k, v in group.items()}}  # fmt: skip
+        kern = [_engine.core_time_solve(M, h, A, g, 20 if info["method"] else 3) for _ in range(3)]
+        rec["kernel_cxx_loop_us"] = {"engine_solver": 1e6 * statistics.median(kern)}
+        if info["rank"] == m:
+            kkt = [_engine.core_time_kkt(M, h, A, g, 3) for _ in range(3)]
+            rec["kernel_cxx_loop_us"]["eigen_kkt"] = 1e6 * statistics.median(kkt)
+            qn = np.linalg.solve(K, rhs)[:n]
+            qe = eng()
+            rec["max_rel_diff_vs_numpy_kkt"] = float(np.max(np.abs(qe - qn)) / np.max(np.abs(qn)))
+        if have_numba:
+            core.set_backend("numba")
+            g2 = time_group({"numba_forward_dynamics": eng}, target_s=target_s * 4,
+                            repeats=max(3, repeats // 2))  # fmt: skip
+            core.set_backend("engine")
+            rec["single"].update({k: _us(v) for k, v in g2.items()})
+        out["large"].append(rec)
+        print(f"{label}: engine {rec['single']['engine_forward_dynamics']['median_us']:.1f} us",
+              flush=True)  # fmt: skip
+    Ms, hs, As, gs = zip(*(_a02_state(th) for th in np.linspace(0.2, 1.4, 200)))
+    Mb, hb, Ab, gb_ = np.array(Ms), np.array(hs), np.array(As), np.array(gs)
+    gt = time_group({"engine_forward_dynamics_batch_200": lambda: core.forward_dynamics(Mb, hb, Ab, gb_),
+                     "engine_forward_dynamics_loop_200": lambda: [core.forward_dynamics(Mb[k], hb[k], Ab[k], gb_[k]) for k in range(200)]},
+                    target_s=target_s * 4, repeats=max(3, repeats // 2))  # fmt: skip
+    out["large_batched"] = {"N": 200, **{k: _us(v, 200) for k, v in gt.items()}}
+    out["machine"]["loadavg_end"] = list(os.getloadavg())
+    return out
+
+
+def _opt(t: dict[str, float] | None, spec: str = ".2f", cpu: bool = False) -> str:
+    """A timing's median (and CPU median) as text, or '' when it was not measured."""
+    if t is None:
+        return ""
+    med = format(t["median_us"], spec)
+    return f"{med} / {format(t['cpu_median_us'], spec)}" if cpu else med
+
+
+def engine_markdown(res: dict[str, Any]) -> str:
+    """Tables of :func:`engine_bench`."""
+    info = res["machine"]
+    L = [
+        f"Run {info['date_utc']} UTC, nonmin {info['nonmin_commit']}, Pinocchio "
+        f"{info['pinocchio']}, {info['cpu']} ({info['logical_cpus']} logical CPUs). Load average "
+        f"at start {', '.join(f'{x:.2f}' for x in info['loadavg_start'])}, at end "
+        f"{', '.join(f'{x:.2f}' for x in info['loadavg_end'])}: the machine is shared, wall "
+        "times are noisy (CPU times beside them); ratios come from the same run, interleaved.",
+        "",
+        "**Single call, given M, h, J, γ** (µs, median wall / median CPU). `ratio` = engine "
+        "forward_dynamics / Pinocchio forwardDynamics (KKT), both called from Python; `C++ "
+        "loop`: the kernels alone (engine Solver; Pinocchio's KKT algorithm in Eigen).",
+        "",
+        "| mechanism | n | rows of J | engine fd | numba fd | pin KKT | ratio wall | ratio CPU "
+        "| C++ loop engine | C++ loop Eigen KKT | max rel. Δq̈ |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in res["chains"]:
+        s = r["single"]
+        e, p = s["engine_forward_dynamics"], s["pin_kkt_forwardDynamics"]
+        nb = s.get("numba_forward_dynamics")
+        L.append(
+            f"| {r['mechanism']} | {r['n']} | {r['m']} | {e['median_us']:.2f} / {e['cpu_median_us']:.2f} | "
+            f"{_opt(nb)} | "
+            f"{p['median_us']:.2f} / {p['cpu_median_us']:.2f} | {e['median_us'] / p['median_us']:.2f} | "
+            f"{e['cpu_median_us'] / p['cpu_median_us']:.2f} | "
+            f"{r['kernel_cxx_loop_us']['engine_solver']:.2f} | {r['kernel_cxx_loop_us']['eigen_kkt']:.2f} | "
+            f"{r['max_rel_diff_vs_pin_kkt']:.1e} |"
+        )
+    L += ["", "**Batched, 10⁴ states** (µs per state, median wall / CPU): one engine call "
+          "(default threads and 1 thread) against a Python loop of Pinocchio's KKT solve.", "",
+          "| mechanism | engine (threads) | engine 1 thread | pin KKT loop | ratio (default) | "
+          "bitwise = single |", "|---|---:|---:|---:|---:|---|"]  # fmt: skip
+    for r in res["chains"]:
+        b = r["batched"]
+        e, e1, p = (b["engine_forward_dynamics_default"], b["engine_forward_dynamics_1_thread"],
+                    b["pin_kkt_forwardDynamics_loop"])  # fmt: skip
+        L.append(f"| {r['mechanism']} | {e['median_us']:.3f} / {e['cpu_median_us']:.3f} "
+                 f"({b['threads_default']}) | {e1['median_us']:.3f} / {e1['cpu_median_us']:.3f} | "
+                 f"{p['median_us']:.3f} / {p['cpu_median_us']:.3f} | "
+                 f"{e['median_us'] / p['median_us']:.2f} | {r['batch_equals_single_bitwise']} |")  # fmt: skip
+    L += ["", "**A02 N = 40** (n = 243, 242 rows; µs, median wall / CPU). No Pinocchio model: "
+          "the peer is the dense KKT solve (NumPy from Python; Eigen in a C++ loop).", "",
+          "| state | rank (method) | engine fd | numba fd | NumPy dense KKT | C++ loop engine "
+          "| C++ loop Eigen KKT | ratio engine / NumPy KKT |", "|---|---:|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
+    meth = {0: "SVD", 1: "LQ", 2: "LQ profile"}
+    for r in res["large"]:
+        s, k = r["single"], r["kernel_cxx_loop_us"]
+        e = s["engine_forward_dynamics"]
+        npk = s.get("numpy_dense_kkt_solve")
+        nb = s.get("numba_forward_dynamics")
+        ratio = "" if npk is None else f"{e['median_us'] / npk['median_us']:.3f}"
+        L.append(f"| {r['case']} | {r['rank']} ({meth[r['method']]}) | {_opt(e, '.0f', True)} | "
+                 f"{_opt(nb, '.0f')} | {_opt(npk, '.0f', True) if npk else 'singular'} | "
+                 f"{k['engine_solver']:.0f} | {k.get('eigen_kkt', float('nan')):.0f} | "
+                 f"{ratio} |")  # fmt: skip
+    lb = res["large_batched"]
+    L += ["", f"A02 N = 40, 200 states (crank 0.2…1.4 rad): one batched engine call "
+          f"{lb['engine_forward_dynamics_batch_200']['median_us']:.0f} µs/state (CPU "
+          f"{lb['engine_forward_dynamics_batch_200']['cpu_median_us']:.0f}), a loop of single "
+          f"calls {lb['engine_forward_dynamics_loop_200']['median_us']:.0f} µs/state."]  # fmt: skip
+    return "\n".join(L)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--quick", action="store_true", help="small sizes, few repeats")
@@ -638,7 +887,29 @@ def main(argv: list[str] | None = None) -> int:
         "--large", action="store_true",
         help="only single calls at n = 243 (A02 N = 40 and random sparse), compiled vs NumPy",
     )  # fmt: skip
+    parser.add_argument(
+        "--engine", action="store_true",
+        help="the C++ engine like for like (chains n ≤ 6 and A02 N = 40; see engine_bench)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
+    if args.engine:
+        res = engine_bench(args.quick)
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        stem = "core_bench_engine_quick" if args.quick else "core_bench_engine"
+        (RESULTS / f"{stem}.json").write_text(json.dumps(res, indent=1))
+        table = engine_markdown(res)
+        print(table)
+        if not args.quick and not args.no_readme:
+            block = (f"{ENGINE_BEGIN}\n<!-- generated by: python benchmarks/core_bench.py "
+                     f"--engine -->\n\n{table}\n\n{ENGINE_END}")  # fmt: skip
+            text = README.read_text() if README.exists() else "# Benchmarks\n"
+            if ENGINE_BEGIN in text and ENGINE_END in text:
+                head, rest = text.split(ENGINE_BEGIN, 1)
+                text = head + block + rest.split(ENGINE_END, 1)[1]
+            else:
+                text = text.rstrip("\n") + "\n\n" + block + "\n"
+            README.write_text(text)
+        return 0
     if args.large:
         large()
         return 0

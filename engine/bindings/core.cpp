@@ -7,6 +7,8 @@
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/optional.h>
 
+#include <Eigen/Cholesky>
+
 #include <Python.h>
 
 #include <algorithm>
@@ -17,6 +19,7 @@
 #include <thread>
 #include <vector>
 
+#include "nonmin/dynamics.hpp"
 #include "nonmin/solver.hpp"
 #include "register.hpp"
 
@@ -265,9 +268,136 @@ void solve_batch(In M, In h, std::optional<In> f, In A, In gamma, std::optional<
     for (auto& t : pool) t.join();
 }
 
+// Split [0, N) into contiguous chunks over up to `nthreads` threads (GIL released by the
+// caller); f(lo, hi) evaluates one chunk with its own scratch.
+template <class F>
+void parallel_chunks(long N, int nthreads, const F& f) {
+    const long T = std::max(1L, std::min<long>(nthreads, N));
+    if (T == 1) {
+        f(0L, N);
+        return;
+    }
+    std::vector<std::thread> pool;
+    pool.reserve(T - 1);
+    for (long c = 1; c < T; ++c) pool.emplace_back(f, (c * N) / T, ((c + 1) * N) / T);
+    f(0L, N / T);
+    for (auto& t : pool) t.join();
+}
+
+using I64 = nb::ndarray<int64_t, nb::c_contig, nb::device::cpu>;
+
+// The batched kernels of dynamics.hpp: inputs are flat buffers with batch strides (0 =
+// broadcast), outputs (N, …) buffers.
+void mbar_batch(In M, In P, In mu, long sM, long sP, long smu, long N, int n, Out out,
+                int nthreads) {
+    const double *Mp = M.data(), *Pp = P.data(), *mp = mu.data();
+    double* o = out.data();
+    const long nn = static_cast<long>(n) * n;
+    nb::gil_scoped_release release;
+    parallel_chunks(N, nthreads, [=](long lo, long hi) {
+        for (long b = lo; b < hi; ++b)
+            constraint_inertia(Mp + b * sM, Pp + b * sP, mp[b * smu], n, o + b * nn);
+    });
+}
+
+void optimal_mu_batch(In M, In P, long sM, long sP, long N, int n, Out out, int nthreads) {
+    const double *Mp = M.data(), *Pp = P.data();
+    double* o = out.data();
+    nb::gil_scoped_release release;
+    parallel_chunks(N, nthreads, [=](long lo, long hi) {
+        for (long b = lo; b < hi; ++b) o[b] = optimal_virtual_mass(Mp + b * sM, Pp + b * sP, n);
+    });
+}
+
+void force_projector_batch(In M, In P, In mu, long sM, long sP, long smu, long N, int n, Out out,
+                           I64 status, int nthreads) {
+    const double *Mp = M.data(), *Pp = P.data(), *mp = mu.data();
+    double* o = out.data();
+    int64_t* st = status.data();
+    const long nn = static_cast<long>(n) * n;
+    nb::gil_scoped_release release;
+    parallel_chunks(N, nthreads, [=](long lo, long hi) {
+        std::vector<double> work(2 * nn + 3 * n + 1);
+        for (long b = lo; b < hi; ++b)
+            st[b] = static_cast<int64_t>(constraint_force_projector(
+                Mp + b * sM, Pp + b * sP, mp[b * smu], n, o + b * nn, work.data()));
+    });
+}
+
+void actuation_batch(In B, In P, long sB, long sP, long N, int n, int k, double rtol, Out R,
+                     Out Gamma, I64 rank_pb, I64 dof, int nthreads) {
+    const double *Bp = B.data(), *Pp = P.data();
+    double *Rp = R.data(), *Gp = Gamma.data();
+    int64_t *rp = rank_pb.data(), *dp = dof.data();
+    const long nn = static_cast<long>(n) * n, kn = static_cast<long>(k) * n;
+    nb::gil_scoped_release release;
+    parallel_chunks(N, nthreads, [=](long lo, long hi) {
+        for (long b = lo; b < hi; ++b) {
+            int r = 0, d = 0;
+            actuation_projectors(Bp + b * sB, Pp + b * sP, n, k, rtol, Rp + b * nn, Gp + b * kn,
+                                 &r, &d);
+            rp[b] = r;
+            dp[b] = d;
+        }
+    });
+}
+
+void cbar_batch(In M, In C, In A, In Adot, In mu, long sM, long sC, long sA, long sAd, long smu,
+                long N, int n, int m, double rtol, Out out, int nthreads) {
+    const double *Mp = M.data(), *Cp = C.data(), *Ap = A.data(), *Dp = Adot.data(),
+                 *mp = mu.data();
+    double* o = out.data();
+    const long nn = static_cast<long>(n) * n;
+    nb::gil_scoped_release release;
+    parallel_chunks(N, nthreads, [=](long lo, long hi) {
+        Solver s(std::max(m, 1), n);
+        for (long b = lo; b < hi; ++b)
+            coriolis_bar(s, Mp + b * sM, Cp + b * sC, Ap + b * sA, Dp + b * sAd, m, mp[b * smu],
+                         rtol, o + b * nn);
+    });
+}
+
+// kind 0: impact map (x = q̇⁻, e = restitution); 1: position correction (x = φ).
+void solver_kernel_batch(int kind, In M, In A, In x, std::optional<In> mu, long sM, long sA,
+                         long sx, long smu, long N, int n, int m, double e, double rtol, Out out,
+                         I64 status, I64 rank, int nthreads) {
+    const double *Mp = M.data(), *Ap = A.data(), *xp = x.data();
+    const double* mp = mu ? mu->data() : nullptr;
+    double* o = out.data();
+    int64_t *st = status.data(), *rk = rank.data();
+    nb::gil_scoped_release release;
+    parallel_chunks(N, nthreads, [=](long lo, long hi) {
+        Solver s(std::max(m, 1), n);
+        std::vector<double> work(2 * static_cast<size_t>(n));
+        for (long b = lo; b < hi; ++b) {
+            const double mu_b = mp ? mp[b * smu] : 0.0;
+            const SolveInfo info =
+                kind == 0 ? impact_map(s, Mp + b * sM, Ap + b * sA, m, xp + b * sx, e, mu_b,
+                                       rtol, o + b * n, work.data())
+                          : position_correction(s, Mp + b * sM, Ap + b * sA, m, xp + b * sx,
+                                                mu_b, rtol, o + b * n, work.data());
+            st[b] = static_cast<int64_t>(info.status);
+            rk[b] = info.rank;
+        }
+    });
+}
+
 }  // namespace
 
 void bind_core(nb::module_& m) {
+    m.def("core_mbar", &mbar_batch, "M̄ = PMP + μ(I − P) over a batch (strided inputs).");
+    m.def("core_optimal_mu", &optimal_mu_batch, "μ = tr(PMP)/(n − r) over a batch.");
+    m.def("core_force_projector", &force_projector_batch,
+          "S = I − M M̄⁻¹ P over a batch; status per state.");
+    m.def("core_actuation", &actuation_batch,
+          "Γ = (PB)⁺ and R = BΓ over a batch; rank(PB) and n − rank(A) per state.");
+    m.def("core_cbar", &cbar_batch, "C̄ = PCP + PM(ΛP + PΛᵀ) − μΛP over a batch.");
+    m.def("core_solver_kernel", &solver_kernel_batch, nb::arg("kind"), nb::arg("M"),
+          nb::arg("A"), nb::arg("x"), nb::arg("mu").none(), nb::arg("sM"), nb::arg("sA"),
+          nb::arg("sx"), nb::arg("smu"), nb::arg("N"), nb::arg("n"), nb::arg("m"), nb::arg("e"),
+          nb::arg("rtol"), nb::arg("out"), nb::arg("status"), nb::arg("rank"),
+          nb::arg("nthreads"),
+          "Impact map (kind 0) or mass-metric position correction (kind 1) over a batch.");
     m.def("core_fast", &fast_solve, nb::arg("M"), nb::arg("h"), nb::arg("A"), nb::arg("gamma"),
           nb::arg("f").none(), nb::arg("mu").none(), nb::arg("rtol").none(), nb::arg("what"),
           "The public kernels' fast entry (what 0: q̈, 1: f_c, 3: (q̈, rank)) for one regular "
@@ -332,6 +462,40 @@ void bind_core(nb::module_& m) {
         nb::arg("what") = 0,
         "Benchmark helper: seconds per Solver call (one preallocated Solver, no Python in the "
         "loop); what 0: q̈, 1: q̈ and f_c, 2: also P and L.");
+    m.def(
+        "core_time_kkt",
+        [](In M, In g, In A, In gamma, long reps) -> double {
+            // The like-for-like reference where no peer takes these terms: the dense KKT solve
+            // of Pinocchio's forwardDynamics(model, data, τ, J, γ) written with Eigen —
+            // LLT(M), LLT(J M⁻¹ Jᵀ), λ, q̈ = M⁻¹(g + Jᵀλ) — for a full-row-rank J.
+            const int n = static_cast<int>(g.shape(0)), m = static_cast<int>(A.shape(0));
+            if (M.size() != static_cast<size_t>(n) * n || A.ndim() != 2 ||
+                A.shape(1) != static_cast<size_t>(n) || gamma.size() != static_cast<size_t>(m))
+                throw nb::value_error("core_time_kkt: shapes");
+            Eigen::Map<const Mat> Mm(M.data(), n, n), Am(A.data(), m, n);
+            Eigen::Map<const Vec> gv(g.data(), n), gam(gamma.data(), m);
+            Eigen::LLT<Eigen::MatrixXd> llt_m(n), llt_s(m);
+            Eigen::MatrixXd U(n, m), S(m, m);
+            Vec a(n), lam(m), qdd(n);
+            nb::gil_scoped_release release;
+            const auto t0 = std::chrono::steady_clock::now();
+            for (long r = 0; r < reps; ++r) {
+                llt_m.compute(Mm);
+                U = Am.transpose();
+                llt_m.matrixL().solveInPlace(U);  // U = L⁻¹ Jᵀ
+                S.noalias() = U.transpose() * U;  // J M⁻¹ Jᵀ
+                llt_s.compute(S);
+                a = llt_m.solve(gv);  // unconstrained acceleration
+                lam = llt_s.solve(-gam - Am * a);
+                qdd = llt_m.solve(gv + Am.transpose() * lam);
+            }
+            const auto t1 = std::chrono::steady_clock::now();
+            if (!qdd.allFinite()) throw nb::value_error("core_time_kkt: singular");
+            return std::chrono::duration<double>(t1 - t0).count() / static_cast<double>(reps);
+        },
+        nb::arg("M"), nb::arg("g"), nb::arg("A"), nb::arg("gamma"), nb::arg("reps"),
+        "Benchmark helper: seconds per dense KKT solve (Pinocchio's forwardDynamics algorithm "
+        "given M, g, J, γ, in Eigen; full-row-rank J only).");
     m.def(
         "core_min_norm",
         [](In A, In b, double rtol, Out x) -> int {

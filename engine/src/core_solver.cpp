@@ -535,6 +535,19 @@ SolveInfo Solver::solve(const double* M, const double* g, const double* A, int m
     return impl_->solve(M, g, A, m, gamma, opt, qdd, f_c, P, L, nullptr);
 }
 
+int Solver::range_basis(const double* A, int m, double rtol, double* Vout) {
+    Impl& s = *impl_;
+    if (m < 0 || m > s.m_max) throw EngineError("Solver::range_basis: m > m_max");
+    const int n = s.n;
+    const int live = linalg::equilibrate(A, m, n, nullptr, rtol, s.B.data(), s.d.data(),
+                                         s.sig.data());
+    const int r = s.rank_decision(m, live, rtol);
+    if (s.zmode && s.lqmode != linalg::LQ_NONE)  // the decision kept Z: form Q
+        linalg::lq_rows(s.lq, s.m_live, n, 0, s.m_live, s.V.data());
+    for (long k = 0; k < static_cast<long>(r) * n; ++k) Vout[k] = s.V[k];
+    return r;
+}
+
 SolveInfo Solver::min_norm(const double* A, int m, const double* b, double rtol, double* x) {
     SolveOptions opt;
     opt.rtol = rtol;

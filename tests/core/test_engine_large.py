@@ -150,3 +150,23 @@ def test_small_systems_certified_or_svd(seed):
     if Ad.shape[0] <= n:
         info = _info(M, h, Ad, Ad @ h, 1e-10)
         assert info["method"] == SVD and info["rank"] == A.shape[0]
+
+
+def test_large_nonfinite_and_huge_entries():
+    """A NaN or an infinity in a large A: the typed error (the engine reports it, NumPy raises);
+    a finite row whose squares overflow keeps a finite norm (row_norm scaled, as NumPy's
+    row_norms): that row is kept and the rows 1e160 times smaller vanish (rank 1)."""
+    from nonmin.errors import InputError
+
+    M, h, A, g = _terms(12, 1.3)
+    m = A.shape[0]
+    for bad in (np.nan, np.inf):
+        Ab = A.copy()
+        Ab[m // 2, np.flatnonzero(Ab[m // 2])[0]] = bad
+        assert _info(M, h, Ab, g, 1e-10)["status"] == 1  # not_finite
+        with use_backend("engine"), pytest.raises(InputError, match="A"):
+            solve_dynamics(M, h, Ab, g)
+    Ah = A.copy()
+    Ah[3] *= 1e160
+    assert _info(M, h, Ah, g, 1e-10)["rank"] == 1
+    assert _agree(M, h, Ah, g, 1e-10) == 1

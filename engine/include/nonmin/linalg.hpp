@@ -16,14 +16,21 @@ inline constexpr double SYMMETRY_RTOL = 1e-9;
 // Outcome of cholesky_spd (rule 6).
 enum CholStatus : int { CHOL_OK = 0, CHOL_FAIL = 1, CHOL_SMALL_PIVOT = 2 };
 
-// ‖X[i, :n]‖₂ with four interleaved partial sums in a fixed order.
+// Sums of squares outside [ROW_NORM_SMALL, ROW_NORM_BIG] are recomputed scaled by row_norm
+// (nonmin.core.linalg.row_norms: the plain formula over- or underflows near 1e±308).
+inline constexpr double ROW_NORM_BIG = 1e300;
+inline constexpr double ROW_NORM_SMALL = 1e-290;
+
+// ‖x[:n]‖₂: four interleaved partial sums in a fixed order; a sum of squares outside
+// [ROW_NORM_SMALL, ROW_NORM_BIG] is recomputed as s‖x/s‖ with s = max|x_k| (so a row above
+// ~1e154 keeps a finite norm; NaN stays NaN, an infinite entry gives a non-finite norm).
 double row_norm(const double* x, int n);
 
 // Rules 1–2 (row equilibration). For A (m × n, row-major, leading dimension lda): rows with
 // ‖a_i‖ ≤ rtol · max_i ‖a_i‖ vanished (d_i = 0, row of B zero), the others are scaled to unit
 // length (d_i = 1/‖a_i‖). Writes B (m × (n + 1), leading dimension n + 1) = [D A | D b] (b may be
 // null: last column zero), d (m) and the row norms (m). Returns the number of live rows. A is
-// finite (the caller checks); a row norm that overflows makes every row vanish, as in NumPy.
+// finite (the caller checks); norms by row_norm (no overflow), as nonmin.core.linalg.row_norms.
 int equilibrate(const double* A, int m, int n, const double* b, double rtol, double* B, double* d,
                 double* norms);
 

@@ -56,6 +56,10 @@ class Solver {
     SolveInfo solve(const double* M, const double* g, const double* A, int m, const double* gamma,
                     const SolveOptions& opt, double* qdd, double* f_c, double* P, double* L);
 
+    // The rank policy alone: r and an orthonormal basis of R(Aᵀ) in the rows of V (r × n,
+    // V has room for min(m, n) rows), so that P = I − VᵀV (nonmin.core.range_basis).
+    int range_basis(const double* A, int m, double rtol, double* V);
+
     // Minimum-norm solution x = (DA)⁺ D b of A x = b under the same rank policy (n-vector x).
     SolveInfo min_norm(const double* A, int m, const double* b, double rtol, double* x);
 

@@ -467,33 +467,13 @@ def _engine_batch(Mm: FloatArray, hv: FloatArray, Am: FloatArray, gv: FloatArray
         parts.append((fv, (n,)))
     if mu_v is not None:
         parts.append((mu_v, ()))
-    shapes = [x.shape[: x.ndim - len(core)] for x, core in parts]
-    try:
-        bshape = tuple(np.broadcast_shapes(*shapes))
-    except ValueError:
+    st = strided(parts)
+    if st is None:
         return None
-    N = 1
-    for s in bshape:
-        N *= s
-
-    def flat(x: FloatArray, core: tuple[int, ...]) -> tuple[FloatArray, int]:
-        """x as a contiguous buffer with its batch stride (0: one array for every state)."""
-        size = 1
-        for c in core:
-            size *= c
-        lead = x.shape[: x.ndim - len(core)]
-        if lead == bshape:
-            return np.ascontiguousarray(x, dtype=np.float64), size
-        if all(d == 1 for d in lead):
-            return np.ascontiguousarray(x, dtype=np.float64), 0
-        return np.ascontiguousarray(np.broadcast_to(x, bshape + core)), size
-
-    Mb, sM = flat(Mm, (n, n))
-    hb, sh = flat(hv, (n,))
-    Ab, sA = flat(Am, (m, n))
-    gb, sg = flat(gv, (m,))
-    fb, sf = flat(fv, (n,)) if fv is not None else (None, 0)
-    mub, smu = flat(mu_v, ()) if mu_v is not None else (None, 0)
+    bshape, N, bufs = st
+    (Mb, sM), (hb, sh), (Ab, sA), (gb, sg) = bufs[:4]
+    fb, sf = bufs[4] if fv is not None else (None, 0)
+    mub, smu = bufs[-1] if mu_v is not None else (None, 0)
     want_pl = what == ALL
     qdd = np.empty((N, n))
     fc = np.empty((0 if what == QDD else N, n))
@@ -519,3 +499,66 @@ def _engine_batch(Mm: FloatArray, hv: FloatArray, Am: FloatArray, gv: FloatArray
         rank.astype(np.intp, copy=False).reshape(bshape),
         np.asarray(mu_v) if mu_v is not None else mu_out.reshape(bshape),
     )
+
+
+def engine_on() -> bool:
+    """Whether the backend in use is the C++ engine."""
+    return ENGINE_FAST[0] is not None
+
+
+def strided(parts: list[tuple[Any, tuple[int, ...]]]
+            ) -> tuple[tuple[int, ...], int, list[tuple[FloatArray, int]]] | None:  # fmt: skip
+    """Batch layout for the engine's batched kernels.
+
+    ``parts``: (array, core shape) pairs whose leading dimensions broadcast together. Returns
+    the broadcast batch shape, its size N and, per array, a float64 C-contiguous buffer with its
+    batch stride in entries (0 when one array serves every state: no copy); None if the batch
+    shapes do not broadcast.
+    """
+    shapes = [np.shape(x)[: np.ndim(x) - len(core)] for x, core in parts]
+    try:
+        bshape = tuple(np.broadcast_shapes(*shapes))
+    except ValueError:
+        return None
+    N = 1
+    for d in bshape:
+        N *= d
+    out = []
+    for (x, core), lead in zip(parts, shapes):
+        size = 1
+        for c in core:
+            size *= c
+        if lead == bshape:
+            out.append((np.ascontiguousarray(x, dtype=np.float64), size))
+        elif all(d == 1 for d in lead):
+            out.append((np.ascontiguousarray(x, dtype=np.float64), 0))
+        else:
+            out.append((np.ascontiguousarray(np.broadcast_to(x, bshape + core), dtype=np.float64),
+                        size))  # fmt: skip
+    return bshape, N, out
+
+
+def engine_solver_kernel(kind: int, Mm: FloatArray, Am: FloatArray, x: FloatArray,
+                         mu_v: FloatArray | None, e: float, tol: float) -> FloatArray | None:  # fmt: skip
+    """The impact map (``kind`` 0, ``x`` = q̇⁻, ``e`` the restitution) or the mass-metric
+    position correction (1, ``x`` = φ) on the engine (validated inputs); None when a state is
+    not regular (M̄ not positive definite): the NumPy path raises the typed error."""
+    n = Mm.shape[-1]
+    m = Am.shape[-2]
+    parts: list[tuple[Any, tuple[int, ...]]] = [(Mm, (n, n)), (Am, (m, n)), (x, (m,) if kind else (n,))]
+    if mu_v is not None:
+        parts.append((mu_v, ()))
+    st = strided(parts)
+    if st is None:
+        return None
+    bshape, N, bufs = st
+    (Mb, sM), (Ab, sA), (xb, sx) = bufs[:3]
+    mub, smu = bufs[3] if mu_v is not None else (None, 0)
+    out = np.empty((N, n))
+    status = np.empty(N, dtype=np.int64)
+    rank = np.empty(N, dtype=np.int64)
+    _engine.core_solver_kernel(kind, Mb, Ab, xb, mub, sM, sA, sx, smu, N, n, m, e, tol, out,
+                               status, rank, engine_threads(N))  # fmt: skip
+    if status.any():
+        return None
+    return out.reshape((*bshape, n))

@@ -26,9 +26,19 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .. import _engine  # type: ignore[attr-defined]  # the compiled extension (no stubs)
 from .. import _validation as V
 from . import _fast
-from .linalg import FloatArray, RangeBasis, cho_solve, cholesky, matvec, pseudo_inverse, range_basis
+from .linalg import (
+    FloatArray,
+    RangeBasis,
+    cho_solve,
+    cholesky,
+    matvec,
+    pseudo_inverse,
+    range_basis,
+    resolve_rtol,
+)
 
 _ENGINE_FAST = _fast.ENGINE_FAST
 
@@ -50,6 +60,13 @@ __all__ = [
 
 def _mbar(M: FloatArray, P: FloatArray, mu: FloatArray) -> FloatArray:
     n = M.shape[-1]
+    if n and _fast.engine_on():  # engine/src/core_dynamics.cpp: constraint_inertia
+        st = _fast.strided([(M, (n, n)), (P, (n, n)), (mu, ())])
+        if st is not None:
+            bshape, N, ((Mb, sM), (Pb, sP), (mub, smu)) = st
+            out = np.empty((N, n, n))
+            _engine.core_mbar(Mb, Pb, mub, sM, sP, smu, N, n, out, _fast.engine_threads(N))
+            return out.reshape((*bshape, n, n))
     Q = np.eye(n) - P
     return P @ M @ P + np.asarray(mu)[..., None, None] * Q
 
@@ -175,6 +192,13 @@ def optimal_virtual_mass(M: ArrayLike, P: ArrayLike) -> FloatArray:
     Mm = V.symmetric(M, "M")
     n = Mm.shape[-1]
     Pm = V.symmetric(P, "P", n)
+    if n and _fast.engine_on():  # engine/src/core_dynamics.cpp: optimal_virtual_mass
+        st = _fast.strided([(Mm, (n, n)), (Pm, (n, n))])
+        if st is not None:
+            bshape, N, ((Mb, sM), (Pb, sP)) = st
+            out = np.empty(N)
+            _engine.core_optimal_mu(Mb, Pb, sM, sP, N, n, out, _fast.engine_threads(N))
+            return out.reshape(bshape)
     rank = n - np.rint(np.trace(Pm, axis1=-2, axis2=-1))
     return _optimal_mu(Pm @ Mm @ Pm, Mm, rank)
 
@@ -212,6 +236,15 @@ def coriolis_bar(
     Am = V.matrix(A, "A", None, n)
     Ad = V.matrix(Adot, "Adot", Am.shape[-2], n)
     mu_a = V.positive_scalar_or_batch(mu, "mu")
+    if n and _fast.engine_on():  # engine/src/core_dynamics.cpp: coriolis_bar
+        m = Am.shape[-2]
+        st = _fast.strided([(Mm, (n, n)), (Cm, (n, n)), (Am, (m, n)), (Ad, (m, n)), (mu_a, ())])
+        if st is not None:
+            bshape, N, ((Mb, sM), (Cb, sC), (Ab, sA), (Db, sD), (mub, smu)) = st
+            out = np.empty((N, n, n))
+            _engine.core_cbar(Mb, Cb, Ab, Db, mub, sM, sC, sA, sD, smu, N, n, m,
+                              resolve_rtol(rtol), out, _fast.engine_threads(N))  # fmt: skip
+            return out.reshape((*bshape, n, n))
     P = range_basis(Am, rtol).nullspace_projector()
     Lam = -(pseudo_inverse(Am, rtol) @ Ad)
     LP = Lam @ P
@@ -427,12 +460,17 @@ def position_correction(
     n = Mm.shape[-1]
     Am = V.matrix(A, "A", None, n)
     ph = V.vector(phi, "phi", Am.shape[-2])
+    mu_v = None if mu is None else V.positive_scalar_or_batch(mu, "mu")
+    if n and _fast.engine_on():  # engine/src/core_dynamics.cpp: position_correction
+        dq = _fast.engine_solver_kernel(1, Mm, Am, ph, mu_v, 0.0, resolve_rtol(rtol))
+        if dq is not None:
+            return dq
     basis = range_basis(Am, rtol)
     x = -basis.solve(ph)
     # Sᵀ x = x − P M̄⁻¹ M x
     Q = basis.range_projector()
     P = np.eye(n) - Q
     PMP = P @ Mm @ P
-    mu_a = _optimal_mu(PMP, Mm, basis.rank) if mu is None else V.positive_scalar_or_batch(mu, "mu")
+    mu_a = _optimal_mu(PMP, Mm, basis.rank) if mu_v is None else mu_v
     L = cholesky(PMP + np.asarray(mu_a)[..., None, None] * Q)
     return x - matvec(P, cho_solve(L, matvec(Mm, x)))

@@ -14,8 +14,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .. import _validation as V
+from . import _fast
 from .dynamics import _optimal_mu
-from .linalg import FloatArray, cho_solve, cholesky, matvec, range_basis
+from .linalg import FloatArray, cho_solve, cholesky, matvec, range_basis, resolve_rtol
 
 __all__ = ["impact_map"]
 
@@ -66,12 +67,17 @@ def impact_map(
     Am = V.matrix(A, "A", None, n)
     v = V.vector(qd_minus, "qd_minus", n)
     e = V.nonnegative_float(restitution, "restitution", 1.0)
+    mu_v = None if mu is None else V.positive_scalar_or_batch(mu, "mu")
+    if n and _fast.engine_on():  # engine/src/core_dynamics.cpp: impact_map
+        out = _fast.engine_solver_kernel(0, Mm, Am, v, mu_v, e, resolve_rtol(rtol))
+        if out is not None:
+            return out
     basis = range_basis(Am, rtol)
     Q = basis.range_projector()
     P = np.eye(n) - Q
     PM = P @ Mm
     PMP = PM @ P
-    mu_a = _optimal_mu(PMP, Mm, basis.rank) if mu is None else V.positive_scalar_or_batch(mu, "mu")
+    mu_a = _optimal_mu(PMP, Mm, basis.rank) if mu_v is None else mu_v
     L = cholesky(PMP + np.asarray(mu_a)[..., None, None] * Q)
     plastic = cho_solve(L, matvec(PM, v))
     return v + (1.0 + e) * (plastic - v)

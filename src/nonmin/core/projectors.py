@@ -10,8 +10,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .. import _engine  # type: ignore[attr-defined]  # the compiled extension (no stubs)
 from .. import _validation as V
 from ..errors import InfeasibleActuationError
+from . import _fast
 from .linalg import FloatArray, cholesky, range_basis, resolve_rtol
 
 __all__ = [
@@ -146,6 +148,19 @@ def actuation_projectors(
     n = Pm.shape[-1]
     Bm = V.matrix(B, "B", n, None)
     tol = resolve_rtol(rtol)
+    k = Bm.shape[-1]
+    if n and _fast.engine_on():  # engine/src/core_dynamics.cpp: actuation_projectors
+        st = _fast.strided([(Bm, (n, k)), (Pm, (n, n))])
+        if st is not None:
+            bshape, N, ((Bb, sB), (Pb, sP)) = st
+            R = np.empty((N, n, n))
+            G = np.empty((N, k, n))
+            rank_pb = np.empty(N, dtype=np.int64)
+            dofs = np.empty(N, dtype=np.int64)
+            _engine.core_actuation(Bb, Pb, sB, sP, N, n, k, tol, R, G, rank_pb, dofs,
+                                   _fast.engine_threads(N))  # fmt: skip
+            _check_actuation(rank_pb, dofs)
+            return R.reshape((*bshape, n, n)), G.reshape((*bshape, k, n))
     PB = Pm @ Bm
     U, s, Vh = np.linalg.svd(PB, full_matrices=False)
     if s.shape[-1] == 0:
@@ -158,6 +173,15 @@ def actuation_projectors(
         keep = s > tol * ref[..., None]
     rank_pb = np.count_nonzero(keep, axis=-1)
     dof = np.rint(np.trace(Pm, axis1=-2, axis2=-1)).astype(int)
+    _check_actuation(rank_pb, dof)
+    inv_s = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
+    Gamma = (np.swapaxes(Vh, -1, -2) * inv_s[..., None, :]) @ np.swapaxes(U, -1, -2)
+    R = Bm @ Gamma
+    return R, Gamma
+
+
+def _check_actuation(rank_pb: NDArray[np.integer], dof: NDArray[np.integer]) -> None:
+    """Raise :class:`InfeasibleActuationError` for the first state with rank(PB) < n − rank(A)."""
     if np.any(rank_pb < dof):
         idx = np.argwhere(np.atleast_1d(rank_pb < dof))[0]
         rp = int(np.atleast_1d(rank_pb)[tuple(idx)])
@@ -166,10 +190,6 @@ def actuation_projectors(
             f"actuation is infeasible: rank(PB) = {rp} < n − rank(A) = {dd}; the actuators "
             "cannot produce every admissible generalized force (need N(A) ⊆ R(PB))"
         )
-    inv_s = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
-    Gamma = (np.swapaxes(Vh, -1, -2) * inv_s[..., None, :]) @ np.swapaxes(U, -1, -2)
-    R = Bm @ Gamma
-    return R, Gamma
 
 
 def constraint_force_projector(M: ArrayLike, P: ArrayLike, mu: ArrayLike) -> FloatArray:
@@ -193,6 +213,17 @@ def constraint_force_projector(M: ArrayLike, P: ArrayLike, mu: ArrayLike) -> Flo
     n = Mm.shape[-1]
     Pm = V.symmetric(P, "P", n)
     mu_a = V.positive_scalar_or_batch(mu, "mu")
+    if n and _fast.engine_on():  # engine/src/core_dynamics.cpp: constraint_force_projector
+        st = _fast.strided([(Mm, (n, n)), (Pm, (n, n)), (mu_a, ())])
+        if st is not None:
+            bshape, N, ((Mb, sM), (Pb, sP), (mub, smu)) = st
+            S = np.empty((N, n, n))
+            status = np.empty(N, dtype=np.int64)
+            _engine.core_force_projector(Mb, Pb, mub, sM, sP, smu, N, n, S, status,
+                                         _fast.engine_threads(N))  # fmt: skip
+            if not status.any():
+                return S.reshape((*bshape, n, n))
+            # M̄ not positive definite: the NumPy path below raises the typed error
     from .dynamics import _mbar
 
     Mbar = _mbar(Mm, Pm, mu_a)
