@@ -224,6 +224,10 @@ struct SimLoop {
         if (auto* pp = dynamic_cast<const PyProgram*>(program)) pp->errors.rethrow_if_any();
         if (controller) controller->errors.rethrow_if_any();
         if (watch) watch->errors.rethrow_if_any();
+        // a program's own callback (a planar drive profile, bindings/planar.cpp) leaves its
+        // exception set on the thread: raise it (raise_typed would call Python with it pending,
+        // which CPython reports as a SystemError)
+        if (PyErr_Occurred()) throw nb::python_error();
         raise_typed("SimulationError", "a callback of the engine failed without a Python exception");
     }
     int finish(sim::Outcome o) {

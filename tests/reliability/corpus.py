@@ -65,6 +65,8 @@ class Case:
     #: a case that may also succeed if its result passes ``check`` (e.g. a bit flip that lands
     #: in a field no checksum covers and leaves the data intact)
     success_ok: bool = False
+    #: a known open defect (counted as it comes out in the totals; xfail in the test suite)
+    known_issue: str = ""
 
 
 @dataclass
@@ -1468,6 +1470,25 @@ def _callbacks() -> None:
         m = function_model(conservative=lambda q: np.array([1e305 * q[0], 0.0]), constraints=())
         return sim(m, (0.0, 1.0), stabilization="none", dt=1e-2)
 
+    def profile_model(prof: Callable[[float], Any]) -> Any:
+        from nonmin.model.planar import PlanarBuilder
+
+        b = PlanarBuilder("crank")
+        b.body("c", mass=1.0, inertia=0.1, points={"o": (-0.5, 0.0)})
+        b.revolute("o", ("ground", (0.0, 0.0)), ("c", (-0.5, 0.0)))
+        b.drive_angle("d", "c", profile=prof)
+        return b.build()
+
+    for label, prof, needles in (
+        ("raises", lambda t: 1 / 0 if t > 0.01 else (0.0, 0.0, 0.0), ("'d'", "ZeroDivisionError", "t =")),
+        ("returns NaN", lambda t: (np.nan if t > 0.01 else 0.0, 0.0, 0.0), ("'d'", "t =")),
+        ("returns a string", lambda t: "x", ("'d'", "t =")),
+    ):  # fmt: skip
+        for engine in ("python", "auto"):
+            case(f"drive profile {label} [{engine}]", cat,
+                 lambda tmp, _p=prof, _e=engine: sim(profile_model(_p), (0.0, 0.05), [0.5, 0.0, 0.0], engine=_e),
+                 E.SimulationError, *needles)
+
     case("numerical blow-up", cat, blowup, E.SimulationError, "t =")
 
     def blowup_nofail(tmp: Path) -> Any:
@@ -1853,6 +1874,15 @@ for _section in (_security, _durability, _trajectory_files, _api_numbers, _callb
 
 def fast_cases() -> list[Case]:
     return [c for c in CASES if not c.slow]
+
+
+def _check_known(c: Case, out: Outcome) -> None:
+    """In the test suite: a known open defect xfails; once fixed, the mark must go."""
+    import pytest
+
+    if c.known_issue and out.kind != "typed and clear":
+        pytest.xfail(f"known issue: {c.known_issue} ({out.kind}: {out.detail[:200]})")
+    assert not c.known_issue, f"known issue fixed, remove its mark: {c.known_issue}"
 
 
 def _unique() -> None:

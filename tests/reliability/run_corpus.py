@@ -51,7 +51,8 @@ def main(argv: list[str] | None = None) -> int:
     for cat, cnt in sorted(by_cat.items()):
         print(f"  {cat:48s} {sum(cnt.values()):4d} / {cnt['typed and clear']}")
     for c, out in bad:
-        print(f"\nNOT CLEAR [{out.kind}] {c.category} :: {c.id}\n    {out.detail}")
+        known = f"  (known issue: {c.known_issue})" if c.known_issue else ""
+        print(f"\nNOT CLEAR [{out.kind}] {c.category} :: {c.id}{known}\n    {out.detail}")
     return 0 if not bad else 1
 
 

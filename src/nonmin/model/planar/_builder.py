@@ -10,6 +10,7 @@ from ._elements import (
     GROUND,
     AngleDriver,
     Body,
+    CheckedProfile,
     ConstantSpeed,
     Gear,
     Joint,
@@ -264,6 +265,8 @@ class PlanarBuilder:
         )
         if not callable(prof):
             raise InputError(f"drive_angle {name!r}: profile must be callable t -> (f, fd, fdd)")
+        if not isinstance(prof, ConstantSpeed | CheckedProfile):
+            prof = CheckedProfile(prof, name)  # its failures name the driver and the time
         return self._add_joint(AngleDriver(name, body_a, body_b, prof), active)
 
     # ------------------------------------------------------------------ forces and actuators

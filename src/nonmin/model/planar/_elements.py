@@ -13,11 +13,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from ...errors import InputError, ModelError
+from ...errors import InputError, ModelError, NonminError
 from .._protocol import FloatArray
 
 if TYPE_CHECKING:
@@ -50,7 +50,10 @@ Vec2 = tuple[float, float]
 
 
 def _vec2(v: object, what: str) -> Vec2:
-    arr = np.asarray(v, dtype=float)
+    try:
+        arr = np.asarray(v, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be a 2-vector of numbers (x, y), got {v!r}") from None
     if arr.shape != (2,):
         raise InputError(f"{what} must be a 2-vector (x, y), got shape {arr.shape}")
     if not np.isfinite(arr).all():
@@ -428,6 +431,36 @@ class ConstantSpeed:
 
     def __call__(self, t: float) -> tuple[float, float, float]:
         return self.start + self.speed * t, self.speed, 0.0
+
+
+@dataclass(frozen=True)
+class CheckedProfile:
+    """A user profile whose failures are typed: an exception, a result that is not three
+    finite numbers ``(f, ḟ, f̈)`` becomes a :class:`~nonmin.errors.ModelError` naming the
+    driver and the time (a simulation reports it as a SimulationError at that time)."""
+
+    fn: Callable[[float], Any]
+    driver: str
+
+    def __call__(self, t: float) -> tuple[float, float, float]:
+        try:
+            out = self.fn(t)
+        except NonminError:
+            raise
+        except Exception as exc:
+            raise ModelError(
+                f"driver {self.driver!r}: profile raised {type(exc).__name__}: {exc} (at t = {t:.12g})"
+            ) from exc
+        try:
+            vals = tuple(float(v) for v in out)
+        except (TypeError, ValueError):
+            vals = ()
+        if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
+            raise ModelError(
+                f"driver {self.driver!r}: profile must return three finite numbers (f, ḟ, f̈), got "
+                f"{out!r} at t = {t:.12g}"
+            )
+        return vals  # type: ignore[return-value]
 
 
 @dataclass(frozen=True)
