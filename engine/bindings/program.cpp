@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "nonmin/forward.hpp"
+#include "nonmin/batch.hpp"
 #include "nonmin/program.hpp"
 #include "program_common.hpp"
 #include "register.hpp"
@@ -115,9 +116,9 @@ void bind_program(nb::module_& m) {
                 SolveInfo info;
                 if (p.thread_safe()) {
                     nb::gil_scoped_release release;
-                    info = forward_dynamics(p, *f.scratch, t, q.data(), qd.data(), f.opt, qdd.data(), nullptr);
+                    info = forward_dynamics(p, *f.scratch, t, q.data(), qd.data(), nullptr, f.opt, qdd.data(), nullptr);
                 } else {
-                    info = forward_dynamics(p, *f.scratch, t, q.data(), qd.data(), f.opt, qdd.data(), nullptr);
+                    info = forward_dynamics(p, *f.scratch, t, q.data(), qd.data(), nullptr, f.opt, qdd.data(), nullptr);
                 }
                 if (info.status != Status::ok) raise_status(info.status, "Forward");
                 return info.rank;
@@ -135,29 +136,23 @@ void bind_program(nb::module_& m) {
                 check_state(p, q.shape(1), qd.shape(1), f.active.size());
                 NpArr qdd = new_array({N, n});
                 std::vector<int> status(N, 0);
-                auto run = [&](std::size_t lo, std::size_t hi) {
-                    ForwardScratch s(p, f.active.data());
-                    for (std::size_t i = lo; i < hi; ++i) {
-                        const SolveInfo info = forward_dynamics(p, s, t.data()[i], q.data() + i * n,
-                                                                qd.data() + i * n, f.opt, qdd.data() + i * n, nullptr);
-                        status[i] = static_cast<int>(info.status);
-                    }
-                };
-                const std::size_t T = p.thread_safe() ? std::max<std::size_t>(1, std::min<std::size_t>(
-                                                             static_cast<std::size_t>(std::max(nthreads, 1)), N))
-                                                       : 1;
+                BatchOutputs out;
+                out.qdd = qdd.data();
+                out.status = status.data();
+                int bad;
                 if (p.thread_safe()) {
                     nb::gil_scoped_release release;
-                    std::vector<std::thread> pool;
-                    for (std::size_t c = 1; c < T; ++c) pool.emplace_back(run, (c * N) / T, ((c + 1) * N) / T);
-                    run(0, N / T);
-                    for (auto& th : pool) th.join();
+                    bad = forward_batch(p, static_cast<int>(N), t.data(), q.data(), qd.data(), f.active.data(),
+                                        nullptr, 0, f.opt, std::max(nthreads, 1), out);
                 } else {
-                    run(0, N);
+                    bad = forward_batch(p, static_cast<int>(N), t.data(), q.data(), qd.data(), f.active.data(),
+                                        nullptr, 0, f.opt, 1, out);
                 }
-                for (std::size_t i = 0; i < N; ++i)
-                    if (status[i] != 0)
-                        raise_status(static_cast<Status>(status[i]), "Forward.batch (state " + std::to_string(i) + ")");
+                if (bad)
+                    for (std::size_t i = 0; i < N; ++i)
+                        if (status[i] != 0)
+                            raise_status(static_cast<Status>(status[i]),
+                                         "Forward.batch (state " + std::to_string(i) + ")");
                 return qdd;
             },
             nb::arg("t"), nb::arg("q"), nb::arg("qd"), nb::arg("nthreads") = 1,

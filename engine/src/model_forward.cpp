@@ -37,7 +37,8 @@ ForwardScratch::ForwardScratch(const Program& p, const std::uint8_t* act)
 }
 
 SolveInfo forward_dynamics(const Program& p, ForwardScratch& s, double t, const double* q,
-                           const double* qd, const SolveOptions& opt, double* qdd, double* f_c) {
+                           const double* qd, const double* f, const SolveOptions& opt, double* qdd,
+                           double* f_c) {
     SolveInfo info;
     unsigned need = NEED_H | NEED_A | NEED_GAMMA;
     const bool constant = p.constant_mass();
@@ -68,6 +69,7 @@ SolveInfo forward_dynamics(const Program& p, ForwardScratch& s, double t, const 
         o.known |= s.known;
     }
     s.g = s.terms.h + s.terms.f_passive;
+    if (f != nullptr) s.g += CVecMap(f, p.n());
     const double* A = s.terms.A.data();
     const double* gamma = s.terms.gamma.data();
     if (!s.contiguous) {

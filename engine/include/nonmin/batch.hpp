@@ -1,7 +1,7 @@
 // Model + kernel over a batch of states: for each state i, evaluate the Program at
-// (t_i, q_i, qd_i) under one active set, then solve the projection dynamics (Solver::forward)
-// for q̈_i and f_c,i. Threads over contiguous chunks of the batch, each with its own Workspace,
-// Terms and Solver (preallocated once per call); a single state and the same state inside a
+// (t_i, q_i, qd_i) under one active set, then solve the projection dynamics (forward_dynamics of
+// forward.hpp) for q̈_i and f_c,i. Threads over contiguous chunks of the batch, each with its own
+// ForwardScratch (preallocated once per call); a single state and the same state inside a
 // batch give bitwise identical results (same code, same order of operations).
 #pragma once
 #include <cstdint>

@@ -30,7 +30,9 @@ struct ForwardScratch {
 };
 
 // q̈ at (t, q, q̇) (and f_c if not null); `opt.known` is completed for a constant M.
+// f: applied generalized forces added to h + f_passive (n-vector, or null for none).
 SolveInfo forward_dynamics(const Program& p, ForwardScratch& s, double t, const double* q,
-                           const double* qd, const SolveOptions& opt, double* qdd, double* f_c);
+                           const double* qd, const double* f, const SolveOptions& opt, double* qdd,
+                           double* f_c);
 
 }  // namespace nonmin
