@@ -141,7 +141,7 @@ void make_tree(
         rbd::TreeConstraint tc;
         tc.name = c_names[c];
         const auto t = c_types.data()[c];
-        if (t < 0 || t > 8) model_error("constraint '" + tc.name + "': unknown type " + std::to_string(t));
+        if (t < 0 || t > 9) model_error("constraint '" + tc.name + "': unknown type " + std::to_string(t));
         tc.type = static_cast<rbd::RowType>(t);
         tc.frame_a = static_cast<int>(c_frames.data()[2 * c]);
         tc.frame_b = static_cast<int>(c_frames.data()[2 * c + 1]);

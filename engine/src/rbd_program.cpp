@@ -17,7 +17,8 @@ int row_count(RowType t) {
         case RowType::planar_weld: return 3;
         case RowType::point_on_plane:
         case RowType::contact:
-        case RowType::joint_coupling: return 1;
+        case RowType::joint_coupling:
+        case RowType::joint_limit: return 1;
     }
     throw EngineError("unknown constraint row type");
 }
@@ -78,12 +79,18 @@ TreeProgram::TreeProgram(TreeDescription description) : d_(std::move(description
                 if (c.iq < 0 || c.iq >= n_ || c.iq2 < -1 || c.iq2 >= n_)
                     throw EngineError(where + "joint coordinate index out of range");
                 break;
+            case RowType::joint_limit:
+                if (c.iq < 0 || c.iq >= n_) throw EngineError(where + "joint coordinate index out of range");
+                if (!(c.coef[0] == 1.0 || c.coef[0] == -1.0) || !std::isfinite(c.ref1))
+                    throw EngineError(where + "joint limit needs a sign of ±1 and a finite bound");
+                break;
             default:
                 if (c.frame_a < 0 || c.frame_a >= nf || c.frame_b < 0 || c.frame_b >= nf)
                     throw EngineError(where + "frame index out of range");
         }
         const ConstraintKind kind =
-            c.type == RowType::contact ? ConstraintKind::unilateral : ConstraintKind::holonomic;
+            (c.type == RowType::contact || c.type == RowType::joint_limit) ? ConstraintKind::unilateral
+                                                                            : ConstraintKind::holonomic;
         constraints_.push_back(ConstraintInfo{c.name, kind, row, dim});
         row += dim;
     }
@@ -333,7 +340,8 @@ Status TreeProgram::evaluate(double /*t*/, const double* q, const double* qd,
     if (want_rows || want_gamma || want_phi)
         for (std::size_t c = 0; c < d_.constraints.size(); ++c)
             if ((active == nullptr || active[c]) && d_.constraints[c].type != RowType::unit_quaternion &&
-                d_.constraints[c].type != RowType::joint_coupling)
+                d_.constraints[c].type != RowType::joint_coupling &&
+                d_.constraints[c].type != RowType::joint_limit)
                 any_frame = true;
     const bool motion = want_h || (want_gamma && any_frame);
     const bool dynamics = want_M || want_h || want_energy;
@@ -412,6 +420,14 @@ Status TreeProgram::evaluate(double /*t*/, const double* q, const double* qd,
             }
             if (want_gamma) g[0] = -d2 * qd2 * qd2;
             if (want_phi) p[0] = val;
+        } else if (c.type == RowType::joint_limit) {
+            const double s = c.coef[0];
+            if (want_rows) {
+                out.A.row(r0).setZero();
+                out.A(r0, c.iq) = s;
+            }
+            if (want_gamma) g[0] = 0.0;
+            if (want_phi) p[0] = s * (q[c.iq] - c.ref1);
         } else {
             frame_rows(c, ws, want_rows, want_gamma, want_phi, target.row(r0).data(), g, p);
             if (want_rows && quat_)
@@ -489,6 +505,10 @@ Status TreeProgram::jacobian_dot(const double* q, const double* qd, const std::u
         if (c.type == RowType::unit_quaternion) {
             out.row(r0).setZero();
             for (int k = 0; k < 4; ++k) out(r0, c.iq + k) = qd[c.iq + k];
+            continue;
+        }
+        if (c.type == RowType::joint_limit) {
+            out.row(r0).setZero();
             continue;
         }
         if (c.type == RowType::joint_coupling) {

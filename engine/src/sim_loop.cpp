@@ -3,6 +3,7 @@
 // its diagnostics, the mass-metric projection, the three integrators and the stepping driver.
 // Each function names the Python function it mirrors; the order of the decisions is theirs.
 #include "nonmin/sim/loop.hpp"
+#include "nonmin/linalg.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -669,9 +670,7 @@ void release_forces(Loop& L, const double* f_c) {
     const double tol = base_rtol(L.opt);
     double big = 0.0;
     for (int i = 0; i < m; ++i) {
-        double s = 0.0;
-        for (int j = 0; j < n; ++j) s += L.Ac(i, j) * L.Ac(i, j);
-        L.rnorm[i] = std::sqrt(s);
+        L.rnorm[i] = linalg::row_norm(&L.Ac(i, 0), n);  // scaled: no overflow above ~1e154
         big = std::max(big, L.rnorm[i]);
     }
     for (int i = 0; i < m; ++i) {

@@ -1812,8 +1812,29 @@ def _robots() -> None:
          E.FileFormatError, "d.urdf")
     case("URDF root_joint bad", cat, lambda tmp: load_urdf(urdf())(tmp) and RobotModel.from_urdf(
         tmp / "r.urdf", root_joint="wheel"), E.InputError, "root_joint")
-    case("URDF joint limits are named (not enforced)", cat, load_urdf(urdf()), None, "shoulder", "-0.5",
-         warns=E.JointLimitWarning)
+    def load_urdf_unlimited(text: str) -> Callable[[Path], Any]:
+        def act(tmp: Path) -> Any:
+            p = tmp / "r.urdf"
+            p.write_text(text)
+            return RobotModel.from_urdf(p, joint_limits=False)
+
+        return act
+
+    case("URDF joint_limits=False: limits are named (not enforced)", cat, load_urdf_unlimited(urdf()), None,
+         "shoulder", "-0.5", warns=E.JointLimitWarning)
+
+    def limits_enforced(tmp: Path) -> Any:
+        p = tmp / "r.urdf"
+        p.write_text(urdf())
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", E.JointLimitWarning)
+            model = RobotModel.from_urdf(p)
+        names = [c.name for c in model.constraints]
+        if names != ["shoulder.lower", "shoulder.upper"]:
+            raise AssertionError(f"joint limits not enforced: constraints {names}")
+        return model
+
+    case("URDF joint limits become unilateral constraints", cat, limits_enforced, None)
 
     def limits_silenced(tmp: Path) -> Any:
         p = tmp / "r.urdf"
@@ -1862,9 +1883,13 @@ def _robots() -> None:
     ):  # fmt: skip
         case(f"MJCF {label}", cat, load_mjcf(text), err, needle)
     case("MJCF missing file", cat, lambda tmp: RobotModel.from_mjcf(tmp / "none.xml"), E.FileFormatError, "none.xml")
-    case("MJCF joint limits are named (not enforced)", cat,
-         load_mjcf(MJCF.replace("<mujoco>", '<mujoco><compiler angle="radian"/>').format(
-             lim='limited="true" range="-0.5 0.5"', mass="")), None, "h", "-0.5",
+    def mjcf_unlimited(tmp: Path) -> Any:
+        p = tmp / "m.xml"
+        p.write_text(MJCF.replace("<mujoco>", '<mujoco><compiler angle="radian"/>').format(
+            lim='limited="true" range="-0.5 0.5"', mass=""))
+        return RobotModel.from_mjcf(p, joint_limits=False)
+
+    case("MJCF joint_limits=False: limits are named (not enforced)", cat, mjcf_unlimited, None, "h", "-0.5",
          warns=E.JointLimitWarning)
 
 

@@ -337,10 +337,12 @@ def test_tree_program_through_the_program_interface() -> None:
     N = 3
     qs = np.array([robot.random_configuration(rng) for _ in range(N)])
     qds = rng.normal(size=(N, robot.n))
-    mask = np.array([1, 0, 1], dtype=np.uint8)  # grasp_left off
-    act = robot.resolve_active({"grasp_right"})
+    act = robot.resolve_active({"grasp_right"})  # grasp_left and the joint limits off
+    mask = np.array([c.name in act for c in robot.constraints], dtype=np.uint8)
+    starts = np.cumsum([0] + [c.dim for c in robot.constraints])
+    rows = np.concatenate([np.arange(starts[i], starts[i + 1]) for i, c in enumerate(robot.constraints)
+                           if c.name in act])
     batch = prog.evaluate_batch(np.zeros(N), qs, qds, mask, _engine.NEED_ALL)
-    rows = np.r_[0, 7:10]
     for i in range(N):
         mt = robot.evaluate(0.0, qs[i], qds[i], act)
         one = prog.evaluate(0.0, qs[i], qds[i], mask, _engine.NEED_ALL)
@@ -370,7 +372,10 @@ def test_engine_forward_is_model_plus_kernel() -> None:
     N = 6
     qs = np.array([robot.random_configuration(rng) for _ in range(N)])
     qds = rng.normal(size=(N, robot.n))
-    for names, mask in ((robot.constraint_names, [1, 1, 1]), (("grasp_right",), [1, 0, 1])):
+    base = tuple(c.name for c in robot.constraints if c.kind != "unilateral")  # not the joint limits
+    for names in (base, ("grasp_right",)):
+        act = robot.resolve_active(names)
+        mask = [c.name in act for c in robot.constraints]
         fwd = _engine.Forward(prog, np.array(mask, dtype=np.uint8))
         qdd = np.empty(robot.n)
         single = np.empty((N, robot.n))

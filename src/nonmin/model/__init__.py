@@ -49,7 +49,7 @@ __all__ = [
 
 # Robots (URDF/MJCF via Pinocchio/MuJoCo) are re-exported lazily, so that importing
 # nonmin.model never imports pinocchio: nonmin.model.RobotModel imports it on first access.
-_LAZY_ROBOTS = ("RobotModel", "FrameConstraint", "JointCoupling")
+_LAZY_ROBOTS = ("RobotModel", "FrameConstraint", "JointCoupling", "JointLimit")
 
 
 def __getattr__(name: str) -> object:

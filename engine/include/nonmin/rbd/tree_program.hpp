@@ -21,6 +21,7 @@
 //   planar_weld      3  [E (p_a − p_b), n·log3(R_a R_bᵀ)]
 //   point_on_plane   1  (R_a k)·(p_b − p_a)     (contact: the same, unilateral)
 //   joint_coupling   1  q₁ − r₁ − c₀ − Σ c_k (q₂ − r₂)^k
+//   joint_limit      1  gap s (q₁ − r₁) ≥ 0, s = c₀ = ±1 (unilateral): A = s e₁ᵀ, γ = 0
 #pragma once
 #include <array>
 #include <memory>
@@ -42,6 +43,7 @@ enum class RowType : int {
     point_on_plane = 6,
     contact = 7,
     joint_coupling = 8,
+    joint_limit = 9,
 };
 
 int row_count(RowType t);
@@ -53,7 +55,7 @@ struct TreeConstraint {
     Vec3 axis = Vec3::UnitZ();  // hinge axis / plane normal in frame a; planar: world normal n
     Vec3 u1 = Vec3::UnitX();    // hinge: (u₁, u₂, k) orthonormal in frame a; planar: world E rows
     Vec3 u2 = Vec3::UnitY();
-    int iq = -1;   // unit_quaternion: first of its 4 components; joint_coupling: joint 1's index
+    int iq = -1;   // unit_quaternion: first of its 4 components; joint_coupling/limit: joint 1's index
     int iq2 = -1;  // joint_coupling: joint 2's index (−1: none)
     std::array<double, 5> coef{{0.0, 1.0, 0.0, 0.0, 0.0}};
     double ref1 = 0.0, ref2 = 0.0;

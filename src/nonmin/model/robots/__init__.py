@@ -6,7 +6,8 @@
 * :class:`FrameConstraint` — named, switchable constraints between frames: ``point`` (3D loop
   closure), ``weld`` (6D), ``hinge`` (5D), ``planar_point``, ``planar_weld``,
   ``point_on_plane`` and unilateral ``contact``; :class:`JointCoupling` — polynomial joint
-  coupling.
+  coupling; :class:`JointLimit` — one side of a joint's position limit (unilateral; made from
+  the file's limits by the constructors unless ``joint_limits=False``).
 * :func:`data_path` — path of a robot file shipped with nonmin (``nonmin/data/robots``);
   example robots built from them, each returning ``(model, state)``: :func:`serial_arm`
   (4-dof arm, unilateral end-effector contact), :func:`fourbar` (URDF four-bar + loop-closure
@@ -26,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 from ._constraints import FRAME_CONSTRAINT_TYPES as FRAME_CONSTRAINT_TYPES
 from ._constraints import FrameConstraint as FrameConstraint
 from ._constraints import JointCoupling as JointCoupling
+from ._constraints import JointLimit as JointLimit
 from ._data import data_path as data_path
 
 if TYPE_CHECKING:
@@ -39,6 +41,7 @@ __all__ = [
     "FRAME_CONSTRAINT_TYPES",
     "FrameConstraint",
     "JointCoupling",
+    "JointLimit",
     "RobotModel",
     "data_path",
     "fourbar",

@@ -23,6 +23,8 @@ type               rows  residual φ                                          ho
                          default plane = world ``z = 0``)
 ``joint``          1     ``q₁ − r₁ − c₀ − Σₖ cₖ (q₂ − r₂)ᵏ`` (MJCF           yes
                          ``<equality joint>``; q₂ term absent if no joint2)
+``joint_limit``    1     gap ``q − lower ≥ 0`` or ``upper − q ≥ 0``          yes
+                         (unilateral; URDF/MJCF position limits)
 =================  ====  ==================================================  =================
 
 ``k`` is the hinge axis / plane normal *in frame a*; ``u₁, u₂`` complete it to an orthonormal
@@ -43,7 +45,7 @@ from numpy.typing import ArrayLike
 from ...errors import InputError, ShapeError
 from .._protocol import ConstraintKind, FloatArray
 
-__all__ = ["FRAME_CONSTRAINT_TYPES", "FrameConstraint", "JointCoupling", "RobotConstraint"]
+__all__ = ["FRAME_CONSTRAINT_TYPES", "FrameConstraint", "JointCoupling", "JointLimit", "RobotConstraint"]
 
 FrameConstraintType = Literal[
     "point", "weld", "hinge", "planar_point", "planar_weld", "point_on_plane", "contact"
@@ -302,4 +304,55 @@ class JointCoupling:
         return f"joint coupling {self.joint1!r} = poly({self.joint2!r})"
 
 
-RobotConstraint = FrameConstraint | JointCoupling
+@dataclass(frozen=True, eq=False)
+class JointLimit:
+    """One side of a scalar joint's position limit, as a unilateral constraint.
+
+    Gap ``φ = s (q − bound) ≥ 0`` with ``s = +1`` for ``side="lower"`` and ``s = −1`` for
+    ``side="upper"``; ``A = s eᵢᵀ`` (i the joint's coordinate), ``γ = 0``. Like a contact it is
+    inactive until the gap closes; ``simulate`` then applies the impact law (eq. (impact),
+    restitution from its ``restitution=`` dict) and keeps it active while the joint pushes
+    into the stop. :meth:`RobotModel.from_urdf` (and ``from_mjcf``, ``from_pinocchio``) make
+    two per limited revolute/prismatic joint, named ``"<joint>.lower"`` and ``"<joint>.upper"``.
+    """
+
+    name: str
+    joint: str
+    bound: float
+    side: Literal["lower", "upper"]
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise InputError(f"constraint name must be a non-empty string, got {self.name!r}")
+        if not isinstance(self.joint, str) or not self.joint:
+            raise InputError(f"constraint {self.name!r}: joint must be a joint name (str), got {self.joint!r}")
+        if self.side not in ("lower", "upper"):
+            raise InputError(f"constraint {self.name!r}: side must be 'lower' or 'upper', got {self.side!r}")
+        try:
+            b = float(self.bound)
+        except (TypeError, ValueError):
+            raise InputError(f"constraint {self.name!r}: bound must be a finite number, got {self.bound!r}") from None
+        if not np.isfinite(b):
+            raise InputError(f"constraint {self.name!r}: bound must be a finite number, got {self.bound!r}")
+        object.__setattr__(self, "bound", b)
+
+    @property
+    def sign(self) -> float:
+        """``+1`` for a lower limit, ``−1`` for an upper limit."""
+        return 1.0 if self.side == "lower" else -1.0
+
+    @property
+    def dim(self) -> int:
+        return 1
+
+    @property
+    def kind(self) -> ConstraintKind:
+        return "unilateral"
+
+    @property
+    def description(self) -> str:
+        rel = ">=" if self.side == "lower" else "<="
+        return f"joint limit {self.joint!r} {rel} {self.bound:g}"
+
+
+RobotConstraint = FrameConstraint | JointCoupling | JointLimit

@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ...errors import FileFormatError, InputError, JointLimitWarning, ModelError, missing_dependency
+from ...errors import FileFormatError, JointLimitWarning, ModelError, missing_dependency
 from ._constraints import FrameConstraint, JointCoupling, RobotConstraint
 from ._pinocchio import pin
 
@@ -222,20 +222,24 @@ def load_mjcf(
     actuated: Any = None,
     default_active: Any = None,
     name: str | None = None,
-    joint_limits: str = "warn",
+    joint_limits: bool | str = True,
 ) -> RobotModel:
     """Build a :class:`RobotModel` from an MJCF file (see the module docstring).
 
-    Joint position limits (``limited``/``range``) are not enforced by the dynamics; with
-    ``joint_limits="warn"`` a :class:`~nonmin.errors.JointLimitWarning` names them.
+    Joint position limits (``limited``/``range``): with ``joint_limits=True`` those of hinge
+    and slide joints become unilateral :class:`JointLimit` constraints ``"<joint>.lower"`` /
+    ``"<joint>.upper"`` (inactive by default; ball-joint limits are not enforced and a
+    :class:`~nonmin.errors.JointLimitWarning` names them); with False (or ``"warn"``) none is
+    enforced and the warning names them all; ``"ignore"`` is silent.
     MuJoCo's parse and compile errors become :class:`~nonmin.errors.FileFormatError`; moving
     bodies with non-positive mass or inertia become :class:`~nonmin.errors.ModelError`.
     """
     p = Path(path)
     if not p.is_file():
         raise FileFormatError(f"path: MJCF file {str(p)!r} does not exist")
-    if joint_limits not in ("warn", "ignore"):
-        raise InputError(f"joint_limits must be 'warn' or 'ignore', got {joint_limits!r}")
+    from ._pinocchio import _joint_limits_option
+
+    enforce = _joint_limits_option(joint_limits)
     try:
         size = p.stat().st_size
         if size > MAX_MJCF_BYTES:
@@ -261,16 +265,31 @@ def load_mjcf(
         for j in range(mj.njnt)
         if bool(mj.jnt_limited[j])
     }
-    if limited and joint_limits == "warn":
-        shown = ", ".join(f"{j} [{lo:g}, {hi:g}]" for j, (lo, hi) in list(limited.items())[:8])
+    scalar_types = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+    scalar = {_name(mj, mujoco.mjtObj.mjOBJ_JOINT, j, "joint") for j in range(mj.njnt)
+              if int(mj.jnt_type[j]) in scalar_types}
+    unenforced = limited if enforce is False else {j: r for j, r in limited.items() if j not in scalar}
+    if unenforced and enforce != "ignore":
+        shown = ", ".join(f"{j} [{lo:g}, {hi:g}]" for j, (lo, hi) in list(unenforced.items())[:8])
         warnings.warn(
             f"{p}: joint position limits are not enforced by the dynamics: {shown}"
-            f"{' and more' if len(limited) > 8 else ''}; a joint can move past them. Pass "
+            f"{' and more' if len(unenforced) > 8 else ''}; a joint can move past them. Pass "
+            "joint_limits=True to enforce hinge and slide limits as unilateral constraints, or "
             "joint_limits='ignore' to silence this warning",
             JointLimitWarning,
             stacklevel=3,
         )
     pm, info = build_pinocchio_model(mj)
+    # the file's limits are the only ones (Pinocchio's addJoint defaults are "no limit")
+    lo = np.full(pm.nq, -np.inf)
+    hi = np.full(pm.nq, np.inf)
+    if enforce is True:
+        for jid in range(1, pm.njoints):
+            jn = str(pm.names[jid])
+            if jn in limited and jn in scalar:
+                lo[pm.joints[jid].idx_q], hi[pm.joints[jid].idx_q] = limited[jn]
+    pm.lowerPositionLimit = lo
+    pm.upperPositionLimit = hi
     eqs, eq_active = equality_constraints(mj, info)
     user = tuple(constraints)
     if default_active is None:
@@ -287,4 +306,5 @@ def load_mjcf(
         damping=np.array(mj.dof_damping, dtype=float),
         name=model_name,
         metadata={"source": str(p), "mujoco_joint_names": dict(info["joint_names"])},
+        joint_limits=True if enforce is True else "ignore",
     )

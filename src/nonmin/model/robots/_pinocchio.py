@@ -72,7 +72,13 @@ from ...errors import (
     missing_dependency,
 )
 from .._protocol import ConstraintSpec, ConstraintTerms, FloatArray, Geometry, Model, ModelTerms
-from ._constraints import FrameConstraint, JointCoupling, RobotConstraint, complete_basis
+from ._constraints import (
+    FrameConstraint,
+    JointCoupling,
+    JointLimit,
+    RobotConstraint,
+    complete_basis,
+)
 from ._tree import compile_tree
 
 try:
@@ -90,6 +96,67 @@ _NEED_ENERGY = _engine.NEED_ENERGY
 _NEED_CONSTRAINTS = _NEED_A | _NEED_GAMMA | _NEED_PHI | _NEED_VELOCITY
 _NEED_EVALUATE = _NEED_M | _NEED_H | _NEED_B | _NEED_CONSTRAINTS
 _NONE = np.empty(0)  # placeholder output array of a term not asked for
+#: Position limits at or beyond this magnitude mean "unlimited" (Pinocchio's default is ±max double).
+_NO_LIMIT = 1e300
+
+
+def scalar_joint_limits(pm: Any) -> dict[str, tuple[float, float]]:
+    """Finite position limits ``lower < upper`` of the 1-dof joints of a Pinocchio model.
+
+    Read from ``lowerPositionLimit`` / ``upperPositionLimit`` for every joint with one
+    coordinate and one velocity (revolute, prismatic; not continuous joints, whose nq is 2);
+    bounds that are infinite or of magnitude ≥ 1e300 mean "no limit on that side".
+    Returns joint name -> (lower, upper) with both sides finite; a one-sided limit is kept
+    with the open side as ±inf.
+    """
+    lo = np.asarray(pm.lowerPositionLimit, dtype=float)
+    hi = np.asarray(pm.upperPositionLimit, dtype=float)
+    out: dict[str, tuple[float, float]] = {}
+    for jid in range(1, pm.njoints):
+        jm = pm.joints[jid]
+        if jm.nq != 1 or jm.nv != 1:
+            continue
+        a, b = float(lo[jm.idx_q]), float(hi[jm.idx_q])
+        a = a if np.isfinite(a) and abs(a) < _NO_LIMIT else -np.inf
+        b = b if np.isfinite(b) and abs(b) < _NO_LIMIT else np.inf
+        if (np.isfinite(a) or np.isfinite(b)) and a < b:
+            out[str(pm.names[jid])] = (a, b)
+    return out
+
+
+def joint_limit_constraints(limits: dict[str, tuple[float, float]]) -> list[JointLimit]:
+    """The unilateral constraints ``<joint>.lower`` / ``<joint>.upper`` of the given limits."""
+    out: list[JointLimit] = []
+    for joint, (a, b) in limits.items():
+        if np.isfinite(a):
+            out.append(JointLimit(f"{joint}.lower", joint, a, "lower"))
+        if np.isfinite(b):
+            out.append(JointLimit(f"{joint}.upper", joint, b, "upper"))
+    return out
+
+
+def _joint_limits_option(joint_limits: Any) -> bool | str:
+    """Validate ``joint_limits``: True (enforce), False / "warn" (warn, not enforced), "ignore"."""
+    if joint_limits is True or joint_limits is False:
+        return bool(joint_limits)
+    if joint_limits == "warn":
+        return False
+    if joint_limits == "ignore":
+        return "ignore"
+    raise InputError(
+        f"joint_limits must be True (enforce as unilateral constraints), False or 'warn' "
+        f"(not enforced, a JointLimitWarning names them) or 'ignore', got {joint_limits!r}"
+    )
+
+
+def _limits_text(limits: dict[str, tuple[float, float]], where: str) -> str:
+    shown = ", ".join(f"{j} [{lo:g}, {hi:g}]" for j, (lo, hi) in list(limits.items())[:8])
+    more = f" and {len(limits) - 8} more" if len(limits) > 8 else ""
+    return (
+        f"{where}: joint position limits are not enforced by the dynamics (joint_limits=False): "
+        f"{shown}{more}; a joint can move past them. Pass joint_limits=True to enforce them as "
+        "unilateral constraints, or joint_limits='ignore' to silence this warning"
+    )
 
 
 # --------------------------------------------------------------------------- small math
@@ -293,9 +360,9 @@ class RobotModel(Model):
         blocks = _joint_blocks(pm)
         cons = tuple(self.robot_constraints)
         for c in cons:
-            if not isinstance(c, FrameConstraint | JointCoupling):
+            if not isinstance(c, FrameConstraint | JointCoupling | JointLimit):
                 raise InputError(
-                    f"robot_constraints must be FrameConstraint or JointCoupling values, "
+                    f"robot_constraints must be FrameConstraint, JointCoupling or JointLimit values, "
                     f"got {type(c).__name__}"
                 )
         structural = [
@@ -312,6 +379,14 @@ class RobotModel(Model):
         jq: dict[str, int] = {}
         scalar = {b.joint: b.iq for b in blocks if b.kind == "vector" and b.nq == 1}
         for c in cons:
+            if isinstance(c, JointLimit):
+                if c.joint not in scalar:
+                    raise UnknownNameError(
+                        f"constraint {c.name!r}: joint {c.joint!r} is not a scalar joint of the "
+                        f"robot; scalar joints: {sorted(scalar)}"
+                    )
+                jq[c.joint] = scalar[c.joint]
+                continue
             if isinstance(c, JointCoupling):
                 for jn in (c.joint1, c.joint2):
                     if jn is None:
@@ -394,6 +469,7 @@ class RobotModel(Model):
         damping: ArrayLike | None = None,
         name: str | None = None,
         metadata: dict[str, Any] | None = None,
+        joint_limits: bool | str = True,
     ) -> RobotModel:
         """A robot from an existing :class:`pinocchio.Model`.
 
@@ -411,10 +487,25 @@ class RobotModel(Model):
             Viscous damping per velocity component.
         name : str, optional
         metadata : dict, optional
+        joint_limits : bool or {"warn", "ignore"}, default True
+            True: every finite position limit of a 1-dof joint (``lowerPositionLimit``,
+            ``upperPositionLimit``; magnitudes ≥ 1e300 are "no limit") becomes a unilateral
+            :class:`JointLimit` constraint, ``"<joint>.lower"`` (gap ``q − lower``) and
+            ``"<joint>.upper"`` (gap ``upper − q``), inactive until ``simulate``'s automatic
+            contact closes it with an impact (restitution from ``restitution={name: e}``).
+            False (or ``"warn"``): not enforced, a :class:`~nonmin.errors.JointLimitWarning`
+            names the limited joints. ``"ignore"``: not enforced, no warning.
         """
         if not isinstance(pin_model, pin.Model):
             raise InputError(f"pin_model must be a pinocchio.Model, got {type(pin_model).__name__}")
+        enforce = _joint_limits_option(joint_limits)
         pm = pin_model.copy()
+        limits = scalar_joint_limits(pm)
+        if enforce is True:
+            constraints = (*tuple(constraints), *joint_limit_constraints(limits))
+        elif enforce is False and limits:
+            warnings.warn(_limits_text(limits, f"robot {name or pm.name or 'robot'!r}"),
+                          JointLimitWarning, stacklevel=2)
         if gravity is not None:
             g = np.asarray(gravity, dtype=float)
             if g.shape != (3,) or not np.isfinite(g).all():
@@ -442,7 +533,7 @@ class RobotModel(Model):
         default_active: Iterable[str] | None = None,
         damping: ArrayLike | None = None,
         name: str | None = None,
-        joint_limits: str = "warn",
+        joint_limits: bool | str = True,
     ) -> RobotModel:
         """A robot from a URDF file (checked by nonmin, then parsed by Pinocchio).
 
@@ -453,9 +544,11 @@ class RobotModel(Model):
             ``"freeflyer"`` adds a floating base (7 coordinates: position, quaternion).
         constraints, gravity, actuated, default_active, damping, name
             As in :meth:`from_pinocchio`.
-        joint_limits : {"warn", "ignore"}
-            The dynamics do not enforce the file's joint position limits; ``"warn"`` issues a
-            :class:`~nonmin.errors.JointLimitWarning` naming them, ``"ignore"`` does not.
+        joint_limits : bool or {"warn", "ignore"}, default True
+            True: the file's joint position limits become unilateral constraints
+            ``"<joint>.lower"`` / ``"<joint>.upper"`` (see :meth:`from_pinocchio`). False (or
+            ``"warn"``): not enforced, a :class:`~nonmin.errors.JointLimitWarning` names them;
+            ``"ignore"``: not enforced, silently.
 
         Raises
         ------
@@ -472,8 +565,7 @@ class RobotModel(Model):
             raise FileFormatError(f"path: URDF file {str(p)!r} does not exist")
         if root_joint not in (None, "freeflyer"):
             raise InputError(f"root_joint must be None or 'freeflyer', got {root_joint!r}")
-        if joint_limits not in ("warn", "ignore"):
-            raise InputError(f"joint_limits must be 'warn' or 'ignore', got {joint_limits!r}")
+        enforce = _joint_limits_option(joint_limits)
         limits = check_urdf(p)
         try:
             if root_joint is None:
@@ -484,7 +576,7 @@ class RobotModel(Model):
             raise FileFormatError(
                 f"path: Pinocchio could not build a model from {str(p)!r}: {type(exc).__name__}: {exc}"
             ) from exc
-        if limits and joint_limits == "warn":
+        if limits and enforce is False:
             warnings.warn(joint_limit_text(limits, p), JointLimitWarning, stacklevel=2)
         return cls.from_pinocchio(
             pm,
@@ -495,6 +587,7 @@ class RobotModel(Model):
             damping=damping,
             name=name or pm.name,
             metadata={"source": str(p)},
+            joint_limits=True if enforce is True else "ignore",
         )
 
     @classmethod
@@ -507,14 +600,15 @@ class RobotModel(Model):
         actuated: Iterable[str] | None = None,
         default_active: Iterable[str] | None = None,
         name: str | None = None,
-        joint_limits: str = "warn",
+        joint_limits: bool | str = True,
     ) -> RobotModel:
         """A robot from an MJCF file, parsed by MuJoCo (extra ``mujoco``).
 
         Bodies, joints, inertias, armature, damping and gravity come from MuJoCo's compiled
         model; every ``<equality>`` connect/weld/joint becomes a nonmin constraint (named as
-        in the file, or ``eq<i>``), active by default when active in the file. See
-        :func:`nonmin.model.robots._mujoco.load_mjcf`.
+        in the file, or ``eq<i>``), active by default when active in the file. Joint
+        ``range`` limits of hinge and slide joints are handled as in :meth:`from_urdf`
+        (``joint_limits``). See :func:`nonmin.model.robots._mujoco.load_mjcf`.
         """
         from ._mujoco import load_mjcf
 
@@ -841,7 +935,9 @@ class RobotModel(Model):
             if c.name not in act:
                 continue
             Ad: FloatArray | None
-            if isinstance(c, JointCoupling):
+            if isinstance(c, JointLimit):
+                A, g, p, Ad = self._limit_rows(c, q)
+            elif isinstance(c, JointCoupling):
                 A, g, p, Ad = self._coupling_rows(c, q, qd)
             else:
                 Av, gv, p, Adv = self._frame_rows(c, kin)
@@ -863,6 +959,15 @@ class RobotModel(Model):
             A, np.concatenate(gs), np.concatenate(ps), A @ qd, np.ones(A.shape[0], dtype=bool)
         )
         return terms, (np.vstack(Ads) if kin.jdot else None)
+
+    def _limit_rows(
+        self, c: JointLimit, q: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Gap ``s (q_i − bound)``, ``A = s eᵢᵀ``, ``γ = 0``, ``Ȧ = 0`` of a joint limit."""
+        A = np.zeros((1, self.n))
+        i = self._jq[c.joint]
+        A[0, i] = c.sign
+        return A, np.zeros(1), np.array([c.sign * (q[i] - c.bound)]), np.zeros((1, self.n))
 
     def _coupling_rows(
         self, c: JointCoupling, q: FloatArray, qd: FloatArray

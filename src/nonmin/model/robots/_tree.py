@@ -22,7 +22,13 @@ from typing import Any
 import numpy as np
 
 from .._protocol import FloatArray
-from ._constraints import FrameConstraint, JointCoupling, RobotConstraint, complete_basis
+from ._constraints import (
+    FrameConstraint,
+    JointCoupling,
+    JointLimit,
+    RobotConstraint,
+    complete_basis,
+)
 
 __all__ = ["ROW_TYPES", "compile_tree", "tree_arrays"]
 
@@ -52,6 +58,7 @@ ROW_TYPES: dict[str, int] = {
     "point_on_plane": 6,
     "contact": 7,
     "joint": 8,
+    "joint_limit": 9,
 }
 
 
@@ -72,12 +79,12 @@ def tree_arrays(
         The robot's tree, with the constraint frames already added.
     quaternion_starts : sequence of (name, int)
         The structural unit-quaternion constraints: name and first coordinate of the quaternion.
-    constraints : sequence of FrameConstraint or JointCoupling
+    constraints : sequence of FrameConstraint, JointCoupling or JointLimit
         The user constraints, in row order (after the structural ones).
     frame_ids : mapping
         Constraint name -> (frame a, frame b) ids in ``pm``.
     joint_q : mapping
-        Scalar joint name -> its coordinate index (joint couplings).
+        Scalar joint name -> its coordinate index (joint couplings and limits).
     actuated_v : sequence of int
         Velocity index of each actuator (columns of B).
     damping : ndarray, shape (nv,)
@@ -145,6 +152,15 @@ def tree_arrays(
             ciq.append((joint_q[c.joint1], -1 if c.joint2 is None else joint_q[c.joint2]))
             ccoef.append(tuple(c.polycoef))
             cref.append((c.reference1, c.reference2))
+            continue
+        if isinstance(c, JointLimit):  # gap s (q - bound): sign in coef[0], bound in ref1
+            ctypes.append(ROW_TYPES["joint_limit"])
+            cframes.append((-1, -1))
+            caxes.append(z)
+            cu.append(basis)
+            ciq.append((joint_q[c.joint], -1))
+            ccoef.append((c.sign, 0.0, 0.0, 0.0, 0.0))
+            cref.append((c.bound, 0.0))
             continue
         assert isinstance(c, FrameConstraint)
         ctypes.append(ROW_TYPES[c.type])

@@ -15,7 +15,8 @@ expansion beyond expat's limits), and raises, naming the file and the element:
   an unknown joint type, a zero joint axis, lower limit above upper.
 
 It also returns the position limits of revolute and prismatic joints (see
-:func:`joint_limit_text`): nonmin does not enforce them, and says so.
+:func:`joint_limit_text`): with ``joint_limits=True`` (the default) they become unilateral
+constraints; with ``joint_limits=False`` they are not enforced and the warning names them.
 """
 
 from __future__ import annotations
@@ -211,11 +212,11 @@ def check_urdf(path: str | Path) -> dict[str, tuple[str, float, float]]:
 
 
 def joint_limit_text(limits: dict[str, tuple[str, float, float]], file: str | Path) -> str:
-    """The warning that names the position limits nonmin does not enforce."""
+    """The warning that names the position limits not enforced (``joint_limits=False``)."""
     shown = ", ".join(f"{j} [{lo:g}, {hi:g}]" for j, (_, lo, hi) in list(limits.items())[:8])
     more = f" and {len(limits) - 8} more" if len(limits) > 8 else ""
     return (
-        f"{file}: joint position limits are not enforced by the dynamics: {shown}{more}; a "
-        "joint can move past them (add unilateral constraints or events to stop it). Pass "
-        "joint_limits='ignore' to silence this warning"
+        f"{file}: joint position limits are not enforced by the dynamics (joint_limits=False): "
+        f"{shown}{more}; a joint can move past them. Pass joint_limits=True to enforce them as "
+        "unilateral constraints, or joint_limits='ignore' to silence this warning"
     )
