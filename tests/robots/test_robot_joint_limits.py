@@ -183,3 +183,21 @@ def test_mjcf_limits(tmp_path: Path) -> None:
     with pytest.warns(JointLimitWarning, match=r"h \[-0\.5, 0\.5\]"):
         free = RobotModel.from_mjcf(p, joint_limits=False)
     assert free.constraints == ()
+
+
+def test_limit_on_a_floating_base_robot_keeps_the_loop_closed() -> None:
+    """The dual-arm grasp (free box: its unit-quaternion row is always active) reaches the left
+    wrist's upper stop (π) at t ≈ 0.719 s. The gap and the impact of a limit are read from the
+    limit's own row (located by name), not from row 0, which is the quaternion's: the bug made
+    every limit "impact" at the first step and the grasp come apart (closure 3.2 m, status
+    success)."""
+    from nonmin.model.robots import two_arm_grasp
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model, state = two_arm_grasp()
+    for engine, t1 in (("engine", 0.8), ("python", 0.01)):
+        tr = simulate(model, (0.0, t1), state, method="rk4", dt=1e-3, progress=False, engine=engine)
+        assert float(np.max(tr.phi_norm)) < 1e-9, engine
+        names = [e.name for e in tr.events]
+        assert names == (["impact:left_wrist.upper"] if t1 > 0.72 else []), (engine, names)

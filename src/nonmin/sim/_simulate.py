@@ -227,9 +227,9 @@ class _System:
             y = self.rhs(t, np.concatenate((q, qd)))
         finally:
             self.active = saved
-        ct = self.model.constraint_terms(t, q, qd, frozenset({name}))
-        terms = ct.A[0] * y[self.n :]
-        return float(terms.sum() + ct.gamma[0]), float(np.abs(terms).sum() + abs(ct.gamma[0]))
+        a_row, gam, _ = _own_row(self.model, t, q, qd, name)
+        terms = a_row * y[self.n :]
+        return float(terms.sum() + gam), float(np.abs(terms).sum() + abs(gam))
 
 
 # --------------------------------------------------------------------------- guards
@@ -240,6 +240,18 @@ class _Watch(NamedTuple):
     name: str
     direction: int
     event: Event | None
+
+
+def _own_row(model: Any, t: float, q: FloatArray, qd: FloatArray, name: str) -> tuple[FloatArray, float, float]:
+    """The (first) row of constraint ``name`` evaluated alone: A row, γ, φ.
+
+    A source may add rows that are always active (a robot's unit-quaternion rows), so the row is
+    located by name (:meth:`Model.row_slices`), never taken as row 0.
+    """
+    act = frozenset({name})
+    ct = model.constraint_terms(t, q, qd, act)
+    i = model.row_slices(act)[name].start
+    return ct.A[i], float(ct.gamma[i]), float(ct.phi[i])
 
 
 def _guard_value(sys: _System, w: _Watch, p: _Point) -> float:
@@ -256,8 +268,7 @@ def _guard_value(sys: _System, w: _Watch, p: _Point) -> float:
             raise SimulationError(f"event {w.name!r}: guard returned {val} at t = {p.t:.12g}")
         return val
     if w.kind == "impact":
-        ct = sys.model.constraint_terms(p.t, p.q, p.qd, frozenset({w.name}))
-        return float(ct.phi[0])
+        return _own_row(sys.model, p.t, p.q, p.qd, w.name)[2]
     # release: compressive normal force of the active unilateral constraint
     rows = sys.model.row_slices(sys.active)[w.name]
     return float(p.lam[rows][0])
@@ -1229,8 +1240,8 @@ def _apply(
         name = w.name
         e = _restitution_of(restitution, name)
         new = act | {name}
-        ct_c = model.constraint_terms(p.t, q, qd, frozenset({name}))
-        v_minus = float(ct_c.A[0] @ qd)
+        a_c = _own_row(model, p.t, q, qd, name)[0]
+        v_minus = float(a_c @ qd)
         M = model.mass_matrix(q)
         ct = model.constraint_terms(p.t, q, qd, new)
         persistent = e == 0.0 or e * abs(v_minus) <= v_thresh
@@ -1238,7 +1249,7 @@ def _apply(
         if not persistent:
             qd_b = impact_map(M, ct.A, qd, restitution=e, rtol=system.rank_rtol)
             a_gap = _gap_acc(system, p.t, q, qd_b, name)  # the contact stays inactive
-            v_plus = float(ct_c.A[0] @ qd_b)
+            v_plus = float(a_c @ qd_b)
             flight = math.inf if a_gap >= 0 else 2.0 * v_plus / (-a_gap)
             if flight <= 2.0 * dt_fixed:
                 persistent = True
@@ -1269,5 +1280,5 @@ def _apply(
 def _gap_acc(system: _System, t: float, q: FloatArray, qd: FloatArray, name: str) -> float:
     """Gap acceleration of ``name`` under the current active set (which excludes it)."""
     y = system.rhs(t, np.concatenate((q, qd)))
-    ct = system.model.constraint_terms(t, q, qd, frozenset({name}))
-    return float(ct.A[0] @ y[system.n :] + ct.gamma[0])
+    a_row, gam, _ = _own_row(system.model, t, q, qd, name)
+    return float(a_row @ y[system.n :] + gam)
