@@ -17,6 +17,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from program_check import active_rows as _rows
+from program_check import check_terms, close
 from test_planar_compiled import XFix, every_element_model
 
 from nonmin import _engine, library
@@ -31,35 +33,11 @@ NAMES = MODEL.constraint_names
 
 
 def _close(got: np.ndarray, ref: np.ndarray, what: str) -> None:
-    got = np.asarray(got, dtype=float)
-    ref = np.asarray(ref, dtype=float)
-    assert got.shape == ref.shape, f"{what}: shape {got.shape} != {ref.shape}"
-    if ref.size:
-        scale = max(1.0, float(np.max(np.abs(ref))))
-        err = float(np.max(np.abs(got - ref)))
-        assert err <= REL_TOL * scale, f"{what}: max |engine − python| = {err:.3g} (scale {scale:.3g})"
-
-
-def _rows(prog: _engine.Program, mask: np.ndarray) -> np.ndarray:
-    idx = [np.arange(r, r + d) for (_, _, r, d), on in zip(prog.constraints, mask, strict=True) if on]
-    return np.concatenate(idx) if idx else np.zeros(0, dtype=int)
+    close(got, ref, what, REL_TOL)
 
 
 def check(model: PlanarModel, t: float, q: np.ndarray, qd: np.ndarray, active: frozenset[str]) -> None:
-    prog = model.engine_program()
-    assert prog is not None
-    mask = model.active_mask(active)
-    T = prog.evaluate(t, q, qd, mask)
-    ref = model.evaluate(t, q, qd, active)
-    _close(T.M, ref.M, "M")
-    _close(T.h, ref.h, "h")
-    _close(T.f_passive, ref.f_passive, "f_passive")
-    _close(T.B, ref.B, "B")
-    rows = _rows(prog, mask)
-    for name in ("A", "gamma", "phi", "velocity"):
-        _close(getattr(T, name)[rows], getattr(ref.constraints, name), f"{name} {sorted(active)}")
-    _close(np.array(T.kinetic), np.array(model.kinetic_energy(q, qd)), "kinetic energy")
-    _close(np.array(T.potential), np.array(model.potential_energy(q)), "potential energy")
+    check_terms(model, t, q, qd, active, REL_TOL)
 
 
 def _state(model: PlanarModel, seed: int) -> tuple[float, np.ndarray, np.ndarray]:
