@@ -373,18 +373,7 @@ def _solve_batch(kern: ModuleType, Mm: FloatArray, hv: FloatArray, Am: FloatArra
         kern.solve_batch_serial(*args)
     if status.any():
         return None
-    if what == QDD:
-        return qdd.reshape((*bshape, n))
-    if what == FC:
-        return fc.reshape((*bshape, n))
-    return (
-        qdd.reshape((*bshape, n)),
-        fc.reshape((*bshape, n)),
-        P.reshape((*bshape, n, n)),
-        L.reshape((*bshape, n, n)),
-        rank.reshape(bshape),
-        np.asarray(mu_v) if has_mu else mu_out.reshape(bshape),
-    )
+    return _batch_result(what, bshape, n, qdd, fc, P, L, rank, mu_v if has_mu else None, mu_out)
 
 
 # --------------------------------------------------------------------------- the C++ engine
@@ -487,6 +476,12 @@ def _engine_batch(Mm: FloatArray, hv: FloatArray, Am: FloatArray, gv: FloatArray
                  qdd, fc, P, L, status, rank, mu_out, ratio, engine_threads(N))  # fmt: skip
     if status.any():
         return None
+    return _batch_result(what, bshape, n, qdd, fc, P, L, rank, mu_v, mu_out)
+
+
+def _batch_result(what: int, bshape: tuple[int, ...], n: int, qdd: FloatArray, fc: FloatArray,
+                  P: FloatArray, L: FloatArray, rank: Any, mu_v: Any, mu_out: FloatArray) -> Any:  # fmt: skip
+    """A batched kernel's flat outputs in the batch shape, as :func:`solve` returns them."""
     if what == QDD:
         return qdd.reshape((*bshape, n))
     if what == FC:
