@@ -24,7 +24,11 @@ from .dynamics import forward_dynamics as forward_dynamics
 from .dynamics import optimal_virtual_mass as optimal_virtual_mass
 from .dynamics import position_correction as position_correction
 from .dynamics import solve_dynamics as solve_dynamics
+from .impact import PolyhedralProjection as PolyhedralProjection
+from .impact import SimultaneousImpact as SimultaneousImpact
 from .impact import impact_map as impact_map
+from .impact import polyhedral_projection as polyhedral_projection
+from .impact import simultaneous_impact as simultaneous_impact
 from .linalg import DEFAULT_RTOL as DEFAULT_RTOL
 from .linalg import SPD_RTOL as SPD_RTOL
 from .linalg import RangeBasis as RangeBasis
@@ -40,7 +44,9 @@ __all__ = [
     "DEFAULT_RTOL",
     "SPD_RTOL",
     "DynamicsSolution",
+    "PolyhedralProjection",
     "RangeBasis",
+    "SimultaneousImpact",
     "actuation_projectors",
     "baumgarte_bias",
     "constraint_force",
@@ -53,11 +59,13 @@ __all__ = [
     "lambda_matrix",
     "nullspace_projector",
     "optimal_virtual_mass",
+    "polyhedral_projection",
     "position_correction",
     "projector_derivative",
     "pseudo_inverse",
     "range_basis",
     "set_backend",
+    "simultaneous_impact",
     "solve_dynamics",
     "use_backend",
 ]

@@ -975,18 +975,31 @@ def simulate(
                 h_cap = 0.0
                 label = ""
                 p = pe
-                for i in group:
-                    w = watches[i]
+                # user events one by one, then every contact closing now as one set impact
+                # (which also decides the contacts already closed); releases alone otherwise
+                impacts = [i for i in group if watches[i].kind == "impact"]
+                actions = [[i] for i in group if watches[i].kind == "user"]
+                if impacts:
+                    actions.append(impacts)
+                else:
+                    actions += [[i] for i in group if watches[i].kind == "release"]
+                for idx in actions:
+                    w = watches[idx[0]]
                     before_active = system.active
-                    forced = w.kind == "impact" and gvals[i] <= 0.0
-                    qn, qdn, new_active, label, term_i, cap_i = _apply(
-                        system, w, p, 0.0 if forced else restitution, v_thresh,
-                        h_init if not integ.adaptive else 0.0,
-                    )
+                    dt_fix = h_init if not integ.adaptive else 0.0
+                    if w.kind == "impact":
+                        fired_names = [watches[i].name for i in idx]
+                        plastic = frozenset(watches[i].name for i in idx if gvals[i] <= 0.0)
+                        qn, qdn, new_active, label, term_i, cap_i = _set_impact(
+                            system, fired_names, plastic, p, restitution, v_thresh, dt_fix)
+                        text = f"impact {'+'.join(fired_names)}"
+                    else:
+                        qn, qdn, new_active, label, term_i, cap_i = _apply(system, w, p)
+                        text = _transition_text(w)
                     if isinstance(stab, Projection) and new_active:
                         qn, qdn = stab.project(model, te, qn, qdn, new_active, rank_rtol)
                     system.active = new_active
-                    records.append(EventRecord(te, label, _transition_text(w), p.q.copy(), p.qd.copy(),
+                    records.append(EventRecord(te, label, text, p.q.copy(), p.qd.copy(),
                                                qn.copy(), qdn.copy(), before_active, new_active))
                     if w.kind == "user":
                         disarmed.add(id(w.event))
@@ -1194,15 +1207,9 @@ def _sample_t_eval(
         i += 1
 
 
-def _apply(
-    system: _System,
-    w: _Watch,
-    p: _Point,
-    restitution: float | dict[str, float],
-    v_thresh: float,
-    dt_fixed: float,
-) -> tuple[FloatArray, FloatArray, frozenset[str], str, bool, float]:
-    """Apply the transition of watch ``w`` at point ``p``.
+def _apply(system: _System, w: _Watch, p: _Point) -> tuple[FloatArray, FloatArray, frozenset[str], str, bool, float]:
+    """Apply the transition of a user or release watch ``w`` at point ``p`` (contact impacts:
+    :func:`_set_impact`).
 
     Returns (q, qd, active, label, terminal, h_cap) — h_cap > 0 caps the next adaptive step.
     """
@@ -1236,38 +1243,6 @@ def _apply(
                                         system.model.coordinate_names)
             act = model.resolve_active(out[2])
         return q, qd, act, ev.name, ev.terminal, 0.0
-    if w.kind == "impact":
-        name = w.name
-        e = _restitution_of(restitution, name)
-        new = act | {name}
-        a_c = _own_row(model, p.t, q, qd, name)[0]
-        v_minus = float(a_c @ qd)
-        M = model.mass_matrix(q)
-        ct = model.constraint_terms(p.t, q, qd, new)
-        persistent = e == 0.0 or e * abs(v_minus) <= v_thresh
-        h_cap = 0.0
-        if not persistent:
-            qd_b = impact_map(M, ct.A, qd, restitution=e, rtol=system.rank_rtol)
-            a_gap = _gap_acc(system, p.t, q, qd_b, name)  # the contact stays inactive
-            v_plus = float(a_c @ qd_b)
-            flight = math.inf if a_gap >= 0 else 2.0 * v_plus / (-a_gap)
-            if flight <= 2.0 * dt_fixed:
-                persistent = True
-            else:
-                h_cap = flight / 4.0 if math.isfinite(flight) else 0.0
-                return q, qd_b, act, f"impact:{name}", False, h_cap
-        qd = impact_map(M, ct.A, qd, restitution=0.0, rtol=system.rank_rtol)
-        # persistent contact — unless the contact force would pull right away
-        saved = system.active
-        system.active = new
-        try:
-            pn = system.point(p.t, q, qd)
-            lam = float(pn.lam[model.row_slices(new)[name]][0])
-            if lam < 0 and system.free_gap_acceleration(p.t, q, qd, name) > 0:
-                new = act
-        finally:
-            system.active = saved
-        return q, qd, new, f"impact:{name}", False, 0.0
     # release: located just past the zero of the normal force, where the free gap acceleration
     # is zero up to round-off; refuse only if the free motion would clearly penetrate
     name = w.name
@@ -1277,8 +1252,88 @@ def _apply(
     return q, qd, act, f"release-refused:{name}", False, 0.0
 
 
-def _gap_acc(system: _System, t: float, q: FloatArray, qd: FloatArray, name: str) -> float:
-    """Gap acceleration of ``name`` under the current active set (which excludes it)."""
-    y = system.rhs(t, np.concatenate((q, qd)))
-    a_row, gam, _ = _own_row(system.model, t, q, qd, name)
-    return float(a_row @ y[system.n :] + gam)
+def _set_impact(
+    system: _System,
+    fired: list[str],
+    plastic: frozenset[str],
+    p: _Point,
+    restitution: float | dict[str, float],
+    v_thresh: float,
+    dt_fixed: float,
+) -> tuple[FloatArray, FloatArray, frozenset[str], str, bool, float]:
+    """One impact over every unilateral contact closed at ``p`` (docs/theory.md,
+    "Simultaneous impacts").
+
+    The set: the contacts whose gap crossed (``fired``; ``plastic`` ones started inside the
+    obstacle and get e = 0), the active (resting) ones, and inactive ones touching and not
+    separating (gap ≤ 0, ``a qd ≤ 0``). Velocity: :func:`nonmin.core.simultaneous_impact`
+    (Newton's law per contact in inequality form; resting contacts may reopen). A bounce too
+    small to resolve (normal speed ≤ ``v_thresh`` or flight time ≤ ``2·dt_fixed``) is made
+    plastic and the set solved again (the contacts so closed only grow). Contacts left at zero
+    normal velocity stay active unless Gauss's principle with the contact inequalities
+    (:func:`nonmin.core.polyhedral_projection` of the free acceleration) separates them.
+    Returns (q, qd, active, label, terminal, h_cap) as :func:`_apply`.
+    """
+    from ..core import polyhedral_projection
+    from ..core.impact import FEASIBILITY_RTOL
+
+    model = system.model
+    t, q, qd, act = p.t, p.q.copy(), p.qd.copy(), system.active
+    own = {nm: _own_row(model, t, q, qd, nm) for nm in system.unilateral}
+    contacts = [
+        nm for nm in system.unilateral
+        if nm in fired or nm in act or (own[nm][2] <= 0.0 and float(own[nm][0] @ qd) <= 0.0)
+    ]  # fmt: skip
+    bil = act - frozenset(contacts)
+    ct_b = model.constraint_terms(t, q, qd, bil)
+    Ab = ct_b.A
+    Ac = np.array([own[nm][0] for nm in contacts])
+    u = Ac @ qd
+    e = np.array([0.0 if (nm in plastic or nm in act) else _restitution_of(restitution, nm) for nm in contacts])
+    target = e * np.maximum(-u, 0.0)
+    M = model.mass_matrix(q)
+    mc = len(contacts)
+    forced = np.zeros(mc, dtype=bool)  # small bounces made plastic (equality a_i v = 0)
+    while True:
+        free = ~forced
+        res = polyhedral_projection(M, qd, np.vstack((Ab, Ac[forced])), np.zeros(Ab.shape[0] + int(forced.sum())),
+                                    Ac[free], -target[free], rtol=system.rank_rtol)  # fmt: skip
+        v = res.x
+        un = Ac @ v
+        scale = np.abs(Ac).sum(axis=1) * max(float(np.max(np.abs(v))), float(np.max(np.abs(qd))))
+        closed = forced | (np.abs(un) <= FEASIBILITY_RTOL * scale)
+        new_act = bil | frozenset(nm for nm, c in zip(contacts, closed) if c)
+        saved = system.active
+        system.active = new_act
+        try:
+            qdd = system.rhs(t, np.concatenate((q, v)))[system.n :]
+        finally:
+            system.active = saved
+        gam_c = np.array([_own_row(model, t, q, v, nm)[1] for nm in contacts])  # Ȧ v at the new v
+        a_gap = Ac @ qdd + gam_c
+        flight = np.where(a_gap < 0.0, 2.0 * un / np.where(a_gap < 0.0, -a_gap, 1.0), np.inf)
+        weak = ~closed & ((un <= v_thresh) | (flight <= 2.0 * dt_fixed))
+        if not weak.any():
+            break
+        forced |= weak
+    h_cap = 0.0
+    bouncing = ~closed & np.isfinite(flight)
+    if bouncing.any():
+        h_cap = float(np.min(flight[bouncing])) / 4.0
+    if closed.any():  # Gauss's principle with the closed contacts as inequalities
+        saved = system.active
+        system.active = bil
+        try:
+            qdd_free = system.rhs(t, np.concatenate((q, v)))[system.n :]
+        finally:
+            system.active = saved
+        ct_b = model.constraint_terms(t, q, v, bil)
+        acc = polyhedral_projection(M, qdd_free, ct_b.A, ct_b.gamma, Ac[closed], gam_c[closed],
+                                    rtol=system.rank_rtol)  # fmt: skip
+        keep = np.zeros(mc, dtype=bool)
+        keep[np.flatnonzero(closed)] = acc.at_bound
+        new_act = bil | frozenset(nm for nm, c in zip(contacts, keep) if c)
+    else:
+        new_act = bil
+    label = "impact:" + "+".join(nm for nm in system.unilateral if nm in fired)
+    return q, v, new_act, label, False, h_cap
