@@ -11,6 +11,7 @@ core        pure NumPy kernels (P, M̄, C̄, forward dynamics, constraint forces
 model       the model protocol and its sources (functions, planar, spatial, SymPy, robots)
 library     named mechanisms with consistent initial states (IFToMM benchmarks and more)
 sim         simulation through singular configurations and switching topology
+analysis    inverse dynamics and reactions by name
 control     controllers in dependent coordinates (regulation, tracking, hybrid force)
 viz         plots and animations (extra ``plot``)
 io          scenario files
@@ -19,15 +20,19 @@ errors      the exception tree
 The most used names are re-exported here: :func:`simulate`, :class:`Trajectory`,
 :func:`load_trajectory`, :class:`Event`, :class:`Activate`, :class:`Deactivate`,
 :class:`Reset`, :class:`Model`, :class:`State`, :func:`assemble`, :func:`check_model`,
-:func:`forward_dynamics`, :func:`constraint_force`, :func:`impact_map`.
+:func:`forward_dynamics`, :func:`constraint_force`, :func:`impact_map`,
+:func:`inverse_dynamics`, :func:`reactions`.
 """
 
+from . import analysis as analysis
 from . import control as control
 from . import core as core
 from . import errors as errors
 from . import library as library
 from . import model as model
 from . import sim as sim
+from .analysis import inverse_dynamics as inverse_dynamics
+from .analysis import reactions as reactions
 from .core import constraint_force as constraint_force
 from .core import forward_dynamics as forward_dynamics
 from .core import impact_map as impact_map
@@ -55,6 +60,7 @@ __all__ = [
     "State",
     "Trajectory",
     "__version__",
+    "analysis",
     "assemble",
     "check_model",
     "constraint_force",
@@ -63,9 +69,11 @@ __all__ = [
     "errors",
     "forward_dynamics",
     "impact_map",
+    "inverse_dynamics",
     "library",
     "load_trajectory",
     "model",
+    "reactions",
     "sim",
     "simulate",
 ]

@@ -91,6 +91,9 @@ class Trajectory:
         Accepted steps, right-hand-side evaluations, rejected attempts.
     metadata : dict
         Model description, options, nonmin version, date (JSON-serializable).
+    reactions : dict of str to Reaction
+        Per-sample wrenches of the named constraints (:meth:`with_reactions`; empty until
+        asked for). Saved with the trajectory.
     """
 
     t: FloatArray
@@ -116,6 +119,7 @@ class Trajectory:
     n_rhs: int = 0
     n_rejected: int = 0
     metadata: dict[str, Any] = field(default_factory=dict)
+    reactions: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         for name in _ARRAYS:
@@ -168,6 +172,21 @@ class Trajectory:
             return {}
         return {k: np.stack([np.asarray(r[k], dtype=float) for r in rows]) for k in rows[0]}
 
+    def with_reactions(self, model: Any, names: Any = None, *, rtol: float | None = None) -> Trajectory:
+        """A copy holding the reactions of the named constraints (default all) at every sample.
+
+        Read from the stored ``f_c`` (eq. (fc_R), no multipliers) with
+        :func:`nonmin.analysis.reactions`: each constraint's force and torque on the two
+        bodies it joins, in their frames, with ``determined`` masks for redundant sets.
+        ``traj.with_reactions(model).reactions["loop"].force_b`` has shape (N, d).
+        """
+        import dataclasses
+
+        from ..analysis import reactions
+
+        got = reactions(model, self.q, self.f_c, t=self.t, active=list(self.active), names=names, rtol=rtol)
+        return dataclasses.replace(self, reactions={**self.reactions, **got})
+
     def plot(self, **kwargs: Any) -> Any:
         """Delegate to :func:`nonmin.viz.plot_trajectory` (needs the ``plot`` extra)."""
         from ..viz import plot_trajectory  # type: ignore[attr-defined]
@@ -196,6 +215,8 @@ class Trajectory:
                 "n_rejected": self.n_rejected,
             }
         )
+        if self.reactions:
+            meta["reactions"] = [r.metadata() for r in self.reactions.values()]
         return json.dumps(meta, default=_json_default)
 
     def save(self, path: str | os.PathLike[str]) -> None:
@@ -211,6 +232,8 @@ class Trajectory:
             The file cannot be written (the message names it).
         """
         arrays = {name: np.asarray(getattr(self, name)) for name in _ARRAYS}
+        for i, r in enumerate(self.reactions.values()):
+            arrays.update(r.to_arrays(f"reaction{i}."))
         arrays["__metadata__"] = np.array(self._metadata_json())
         with atomic_write(path, "wb") as fh:
             np.savez_compressed(fh, **arrays)  # type: ignore[arg-type]
@@ -319,6 +342,26 @@ def _check_arrays(arrays: dict[str, Any], n: int, k: int, c: int, p: str) -> Non
         raise _bad(p, "t", f"sample times must be non-decreasing, t[{i + 1}] = {t[i + 1]!r} < t[{i}] = {t[i]!r}")
 
 
+def _load_reactions(raw: Any, arrays: dict[str, Any], p: str) -> dict[str, Any]:
+    """The :class:`~nonmin.analysis.Reaction` series saved by :meth:`Trajectory.save`."""
+    if not raw:
+        return {}
+    from ..analysis import Reaction
+    from ..analysis._reactions import _SERIES
+
+    if not isinstance(raw, list):
+        raise _bad(p, "__metadata__.reactions", f"expected a list, got {type(raw).__name__}")
+    out: dict[str, Any] = {}
+    for i, meta in enumerate(raw):
+        try:
+            got = {f: arrays[f"reaction{i}.{f}"] for f in _SERIES}
+            r = Reaction.from_arrays(meta, got)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise _bad(p, f"__metadata__.reactions[{i}]", f"malformed reaction ({type(exc).__name__}: {exc})") from None
+        out[r.name] = r
+    return out
+
+
 def load_trajectory(path: str | os.PathLike[str], *, max_bytes: int = MAX_LOAD_BYTES) -> Trajectory:
     """Load a :class:`Trajectory` saved with :meth:`Trajectory.save`.
 
@@ -392,6 +435,7 @@ def load_trajectory(path: str | os.PathLike[str], *, max_bytes: int = MAX_LOAD_B
             for a in _ARRAYS:
                 entry = a
                 arrays[a] = np.array(data[a])
+            reaction_arrays = {f: np.array(data[f]) for f in data.files if f.startswith("reaction")}
     except FileFormatError:
         raise
     except (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, KeyError, MemoryError) as exc:
@@ -424,9 +468,10 @@ def load_trajectory(path: str | os.PathLike[str], *, max_bytes: int = MAX_LOAD_B
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise _bad(p, f"__metadata__.events[{i}]", f"malformed event record ({type(exc).__name__}: {exc})") from None
         events.append(rec)
+    reacts = _load_reactions(meta.pop("reactions", []), reaction_arrays, p)
     for key in ("constraint_names", "coordinate_names", "actuator_names", "status", "message",
                 "n_steps", "n_rhs", "n_rejected", "events"):
         meta.pop(key, None)
-    return Trajectory(**arrays, constraint_names=cons, coordinate_names=coords, actuator_names=acts,
+    return Trajectory(**arrays, reactions=reacts, constraint_names=cons, coordinate_names=coords, actuator_names=acts,
                       events=tuple(events), status=status, message=message, metadata=meta,
                       n_steps=counters["n_steps"], n_rhs=counters["n_rhs"], n_rejected=counters["n_rejected"])
