@@ -9,6 +9,7 @@
 #include <tuple>
 
 #include "nonmin/planar.hpp"
+#include "nonmin/timefn.hpp"
 #include "program_common.hpp"
 #include "register.hpp"
 
@@ -127,8 +128,7 @@ void bind_planar(nb::module_& m) {
             "add_driver",
             [](PlanarDescription& d, double start, double speed) {
                 PlanarDriver dr;
-                dr.start = start;
-                dr.speed = speed;
+                dr.fn = TimeFunction::constant_speed(start, speed);
                 d.drivers.push_back(dr);
                 return static_cast<int>(d.drivers.size()) - 1;
             },
@@ -137,11 +137,43 @@ void bind_planar(nb::module_& m) {
             "add_driver_callback",
             [](PlanarDescription& d, nb::callable fn) {
                 PlanarDriver dr;
-                dr.profile = wrap_profile(std::move(fn));
+                dr.fn.kind = TimeFunction::callback;
+                dr.fn.fn = wrap_profile(std::move(fn));
                 d.drivers.push_back(dr);
                 return static_cast<int>(d.drivers.size()) - 1;
             },
             nb::arg("profile"), "A Python profile t -> (f, fd, fdd) (the program is then not thread safe).")
+        .def(
+            "add_driver_function",
+            [](PlanarDescription& d, const TimeFunction& fn) {
+                d.drivers.push_back(PlanarDriver{fn});
+                return static_cast<int>(d.drivers.size()) - 1;
+            },
+            nb::arg("fn"), "A TimeFunction (pieces, expression tape or callback).")
+        .def(
+            "set_drivers",
+            [](PlanarDescription& d, int prim_index, int driver, int driver2) {
+                if (prim_index < 0) prim_index += static_cast<int>(d.prims.size());
+                if (prim_index < 0 || prim_index >= static_cast<int>(d.prims.size()))
+                    throw EngineError("set_drivers: primitive index out of range");
+                d.prims[static_cast<std::size_t>(prim_index)].driver = driver;
+                d.prims[static_cast<std::size_t>(prim_index)].driver2 = driver2;
+            },
+            nb::arg("prim"), nb::arg("driver"), nb::arg("driver2") = -1,
+            "Attach drivers to a primitive (−1: the last added): it then subtracts f(t).")
+        .def(
+            "add_coord",
+            [](PlanarDescription& d, int c, int off, std::vector<int> coords, std::vector<double> coefs,
+               double c0, int driver) {
+                PlanarPrim p = prim(PlanarPrimKind::coord, c, off);
+                p.coords = std::move(coords);
+                p.angle_coefs = std::move(coefs);
+                p.angle_const = c0;
+                p.driver = driver;
+                d.prims.push_back(p);
+            },
+            nb::arg("constraint"), nb::arg("offset"), nb::arg("coords"), nb::arg("coefs"), nb::arg("const"),
+            nb::arg("driver") = -1)
         .def(
             "add_spring",
             [](PlanarDescription& d, PointT a, PointT b, double k, double L0, double c) {

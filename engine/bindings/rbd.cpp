@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "nonmin/rbd/tree_program.hpp"
+#include "nonmin/timefn.hpp"
 #include "program_common.hpp"
 #include "register.hpp"
 
@@ -88,7 +89,7 @@ void make_tree(
     CArr placements, CArr masses, CArr coms, CArr inertias, CArr gravity, CArr armature,
     IArr frame_joints, CArr frame_placements, std::vector<std::string> c_names, IArr c_types,
     IArr c_frames, CArr c_axes, CArr c_u, IArr c_iq, CArr c_coef, CArr c_ref, IArr actuated,
-    CArr damping) {
+    CArr damping, std::vector<TimeFunction> drivers) {
     const std::size_t nj = types.shape(0);
     expect(parents, nj, "parents");
     expect(axis_index, nj, "axis_index");
@@ -141,7 +142,7 @@ void make_tree(
         rbd::TreeConstraint tc;
         tc.name = c_names[c];
         const auto t = c_types.data()[c];
-        if (t < 0 || t > 9) model_error("constraint '" + tc.name + "': unknown type " + std::to_string(t));
+        if (t < 0 || t > 10) model_error("constraint '" + tc.name + "': unknown type " + std::to_string(t));
         tc.type = static_cast<rbd::RowType>(t);
         tc.frame_a = static_cast<int>(c_frames.data()[2 * c]);
         tc.frame_b = static_cast<int>(c_frames.data()[2 * c + 1]);
@@ -157,6 +158,7 @@ void make_tree(
     }
     for (std::size_t k = 0; k < actuated.shape(0); ++k) d.actuated.push_back(static_cast<int>(actuated.data()[k]));
     d.damping = Eigen::Map<const Vec>(damping.data(), nv);
+    d.drivers = std::move(drivers);
     try {
         new (self) TreeProgram(std::move(d));
     } catch (const EngineError& e) {
@@ -183,7 +185,7 @@ void bind_rbd(nb::module_& m) {
              nb::arg("frame_joints"), nb::arg("frame_placements"), nb::arg("c_names"),
              nb::arg("c_types"), nb::arg("c_frames"), nb::arg("c_axes"), nb::arg("c_u"),
              nb::arg("c_iq"), nb::arg("c_coef"), nb::arg("c_ref"), nb::arg("actuated"),
-             nb::arg("damping"))
+             nb::arg("damping"), nb::arg("drivers") = std::vector<TimeFunction>{})
         .def_prop_ro("nv", [](const TreeProgram& p) { return p.description().model.nv; })
         .def_prop_ro("has_quaternions", &TreeProgram::has_quaternions)
         .def(

@@ -5,6 +5,7 @@ namespace nonmin::bindings {
 
 void register_all(nanobind::module_& m) {
     bind_program(m);
+    bind_timefn(m);
     bind_planar(m);
     bind_core(m);
     bind_batch(m);

@@ -8,6 +8,7 @@ namespace nonmin::bindings {
 void register_all(nanobind::module_& m);
 
 void bind_program(nanobind::module_& m);  // program.cpp: Program, Terms, Workspace
+void bind_timefn(nanobind::module_& m);   // timefn.cpp: TimeFunction (drivers' prescribed motions)
 void bind_planar(nanobind::module_& m);   // planar.cpp: PlanarDescription, PlanarProgram
 void bind_core(nanobind::module_& m);     // core.cpp: Solver (single, batched), min_norm
 void bind_tape(nanobind::module_& m);     // tape.cpp: TapeProgram (SymPy models)

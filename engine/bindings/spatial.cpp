@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "nonmin/spatial.hpp"
+#include "nonmin/timefn.hpp"
 #include "program_common.hpp"
 #include "register.hpp"
 
@@ -86,6 +87,22 @@ void bind_spatial(nb::module_& m) {
             },
             nb::arg("constraint"), nb::arg("offset"), nb::arg("x"), nb::arg("y"),
             "A row φ = X·Y with X = Σ coef·x_k over (attachment, coef) pairs, Y likewise.")
+        .def(
+            "add_driver",
+            [](SpatialDescription& d, const TimeFunction& fn) {
+                d.drivers.push_back(fn);
+                return static_cast<int>(d.drivers.size()) - 1;
+            },
+            nb::arg("fn"), "A prescribed motion (TimeFunction); returns its index.")
+        .def(
+            "set_row_driver",
+            [](SpatialDescription& d, int driver, double square) {
+                if (d.rows.empty()) throw EngineError("set_row_driver: no row yet");
+                d.rows.back().driver = driver;
+                d.rows.back().square = square;
+            },
+            nb::arg("driver"), nb::arg("square") = 0.0,
+            "The last added row subtracts g(t) = f(t) (square = 0) or square·f(t)².")
         .def(
             "add_spring",
             [](SpatialDescription& d, int a, int b, double k, double L0, double c) {

@@ -2,6 +2,7 @@
 // Formulas: src/nonmin/model/planar/_elements.py (the per-joint reference) and _compiled.py.
 #include "nonmin/planar.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -151,12 +152,20 @@ PlanarProgram::PlanarProgram(PlanarDescription desc) : d_(std::move(desc)) {
                 if (p.angle_bodies.size() != p.angle_coefs.size())
                     throw EngineError(w + ": angle bodies and coefficients differ in length");
                 for (int b : p.angle_bodies) check_body(b, w, true);
-                if (p.driver < -1 || p.driver >= static_cast<int>(d_.drivers.size()))
-                    throw EngineError(w + ": driver index out of range");
+                break;
+            case PlanarPrimKind::coord:
+                if (p.coords.size() != p.angle_coefs.size())
+                    throw EngineError(w + ": coordinates and coefficients differ in length");
+                for (int j : p.coords)
+                    if (j < 0 || j >= n_) throw EngineError(w + ": coordinate index out of range");
                 break;
             default:
                 throw EngineError(w + ": unknown primitive kind");
         }
+        for (int dv : {p.driver, p.driver2})
+            if (dv < -1 || dv >= static_cast<int>(d_.drivers.size()))
+                throw EngineError(w + ": driver index out of range");
+        if (p.driver2 >= 0 && p.kind != PlanarPrimKind::pin) throw EngineError(w + ": a second driver needs a pin");
         prims_of_[static_cast<std::size_t>(p.constraint)].push_back(static_cast<int>(i));
     }
     for (const ConstraintInfo& c : d_.constraints)
@@ -182,14 +191,19 @@ PlanarProgram::PlanarProgram(PlanarDescription desc) : d_(std::move(desc)) {
             if (a.kind == PlanarActuatorKind::prismatic) check_point(a.b, "actuator");
         }
     }
-    for (const PlanarDriver& dr : d_.drivers)
-        if (dr.profile) thread_safe_ = false;  // a Python callable holds the GIL
+    for (std::size_t i = 0; i < d_.drivers.size(); ++i) {
+        const TimeFunction& f = d_.drivers[i].fn;
+        f.validate("driver " + std::to_string(i));
+        if (!f.thread_safe()) thread_safe_ = false;  // a Python callable holds the GIL
+        tape_size_ = std::max(tape_size_, f.scratch_size());
+    }
 }
 
 std::unique_ptr<Workspace> PlanarProgram::make_workspace() const {
     auto w = std::make_unique<PlanarWorkspace>();
     w->c.assign(d_.bodies.size(), 1.0);
     w->s.assign(d_.bodies.size(), 0.0);
+    w->treg.assign(static_cast<std::size_t>(tape_size_) + 1, 0.0);
     return w;
 }
 
@@ -316,6 +330,14 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
         }
     }
     const unsigned cneed = need & (NEED_A | NEED_GAMMA | NEED_PHI | NEED_VELOCITY);
+    // f, ḟ, f̈ of driver `idx` at t (zeros for −1)
+    auto drive = [&](int idx, double* f) -> Status {
+        f[0] = f[1] = f[2] = 0.0;
+        if (idx < 0) return Status::ok;
+        const int st = d_.drivers[static_cast<std::size_t>(idx)].fn.eval(t, f, w.treg.data());
+        if (st == TimeFunction::EVAL_FAILED) return Status::callback_error;
+        return st == TimeFunction::EVAL_OK ? Status::ok : Status::not_finite;
+    };
     if (cneed && m_all_ > 0) {
         const bool wantA = (need & NEED_A) != 0;
         double* A = out.A.data();
@@ -336,13 +358,16 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                     case PlanarPrimKind::pin: {
                         const PointKin a = point_kin(d_, w, q, qd, p.a);
                         const PointKin b = point_kin(d_, w, q, qd, p.b);
-                        phi[row] = a.px - b.px;
-                        phi[row + 1] = a.py - b.py;
-                        // γ = −θ̇_a² R_a s_a + θ̇_b² R_b s_b
-                        gamma[row] = -(a.om * a.om) * a.rx + (b.om * b.om) * b.rx;
-                        gamma[row + 1] = -(a.om * a.om) * a.ry + (b.om * b.om) * b.ry;
-                        vel[row] = a.vx - b.vx;
-                        vel[row + 1] = a.vy - b.vy;
+                        double fx[3], fy[3];
+                        if (Status st = drive(p.driver, fx); st != Status::ok) return st;
+                        if (Status st = drive(p.driver2, fy); st != Status::ok) return st;
+                        phi[row] = a.px - b.px - fx[0];
+                        phi[row + 1] = a.py - b.py - fy[0];
+                        // γ = −θ̇_a² R_a s_a + θ̇_b² R_b s_b − f̈
+                        gamma[row] = -(a.om * a.om) * a.rx + (b.om * b.om) * b.rx - fx[2];
+                        gamma[row + 1] = -(a.om * a.om) * a.ry + (b.om * b.om) * b.ry - fy[2];
+                        vel[row] = a.vx - b.vx - fx[1];
+                        vel[row + 1] = a.vy - b.vy - fy[1];
                         if (wantA) {
                             double* Ar1 = Ar + n;
                             add(Ar, a.ix, 1.0);
@@ -375,10 +400,12 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                         // −θ̇² R s at each end
                         const double abx = -(b.om * b.om) * b.rx + (a.om * a.om) * a.rx;
                         const double aby = -(b.om * b.om) * b.ry + (a.om * a.om) * a.ry;
-                        phi[row] = dn;
+                        double f[3];
+                        if (Status st = drive(p.driver, f); st != Status::ok) return st;
+                        phi[row] = dn - f[0];
                         gamma[row] = 2.0 * a.om * (npx * ddx + npy * ddy) + (nx * abx + ny * aby) -
-                                     a.om * a.om * dn;
-                        vel[row] = nx * ddx + ny * ddy + dnp * a.om;
+                                     a.om * a.om * dn - f[2];
+                        vel[row] = nx * ddx + ny * ddy + dnp * a.om - f[1];
                         if (wantA) {
                             add_DT(Ar, a, b, nx, ny);
                             add(Ar, a.ith, dnp);
@@ -394,9 +421,12 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                         const double ddx = b.vx - a.vx, ddy = b.vy - a.vy;
                         const double abx = -(b.om * b.om) * b.rx + (a.om * a.om) * a.rx;
                         const double aby = -(b.om * b.om) * b.ry + (a.om * a.om) * a.ry;
-                        phi[row] = p.sign * ((dx * dx + dy * dy) - L * L) / (2.0 * L);
-                        gamma[row] = k * ((ddx * ddx + ddy * ddy) + (dx * abx + dy * aby));
-                        vel[row] = k * (dx * ddx + dy * ddy);
+                        double f[3] = {L, 0.0, 0.0};  // the length: constant, or driven (L: reference)
+                        if (p.driver >= 0)
+                            if (Status st = drive(p.driver, f); st != Status::ok) return st;
+                        phi[row] = p.sign * ((dx * dx + dy * dy) - f[0] * f[0]) / (2.0 * L);
+                        gamma[row] = k * ((ddx * ddx + ddy * ddy) + (dx * abx + dy * aby) - (f[1] * f[1] + f[0] * f[2]));
+                        vel[row] = k * (dx * ddx + dy * ddy - f[0] * f[1]);
                         if (wantA) add_DT(Ar, a, b, k * dx, k * dy);
                         break;
                     }
@@ -413,17 +443,8 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                             if (wantA) Ar[ith] += cf;
                         }
                         if (p.driver >= 0) {
-                            const PlanarDriver& dr = d_.drivers[static_cast<std::size_t>(p.driver)];
                             double f[3];
-                            if (dr.profile) {
-                                if (!dr.profile(t, f)) return Status::callback_error;
-                                if (!(std::isfinite(f[0]) && std::isfinite(f[1]) && std::isfinite(f[2])))
-                                    return Status::not_finite;
-                            } else {
-                                f[0] = dr.start + dr.speed * t;
-                                f[1] = dr.speed;
-                                f[2] = 0.0;
-                            }
+                            if (Status st = drive(p.driver, f); st != Status::ok) return st;
                             ph -= f[0];
                             v -= f[1];
                             g = -f[2];
@@ -431,6 +452,23 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                         phi[row] = ph;
                         gamma[row] = g;
                         vel[row] = v;
+                        break;
+                    }
+                    case PlanarPrimKind::coord: {
+                        double ph = -p.angle_const, v = 0.0;
+                        const std::size_t nq = p.coords.size();
+                        for (std::size_t j = 0; j < nq; ++j) {
+                            const int i = p.coords[j];
+                            const double cf = p.angle_coefs[j];
+                            ph += cf * q[i];
+                            v += cf * qd[i];
+                            if (wantA) Ar[i] += cf;
+                        }
+                        double f[3];
+                        if (Status st = drive(p.driver, f); st != Status::ok) return st;
+                        phi[row] = ph - f[0];
+                        gamma[row] = -f[2];
+                        vel[row] = v - f[1];
                         break;
                     }
                 }

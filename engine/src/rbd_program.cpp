@@ -5,6 +5,8 @@
 
 #include "nonmin/rbd/tree_program.hpp"
 
+#include <algorithm>
+
 namespace nonmin::rbd {
 
 int row_count(RowType t) {
@@ -18,7 +20,8 @@ int row_count(RowType t) {
         case RowType::point_on_plane:
         case RowType::contact:
         case RowType::joint_coupling:
-        case RowType::joint_limit: return 1;
+        case RowType::joint_limit:
+        case RowType::joint_driver: return 1;
     }
     throw EngineError("unknown constraint row type");
 }
@@ -47,6 +50,9 @@ TreeWorkspace::TreeWorkspace(const TreeDescription& d)
     int m = 0;
     for (const TreeConstraint& c : d.constraints) m += row_count(c.type);
     Av = Mat::Zero(m, d.model.nv);
+    int regs = 0;
+    for (const TimeFunction& f : d.drivers) regs = std::max(regs, f.scratch_size());
+    treg.assign(static_cast<std::size_t>(regs) + 1, 0.0);
 }
 
 TreeProgram::TreeProgram(TreeDescription description) : d_(std::move(description)) {
@@ -79,6 +85,11 @@ TreeProgram::TreeProgram(TreeDescription description) : d_(std::move(description
                 if (c.iq < 0 || c.iq >= n_ || c.iq2 < -1 || c.iq2 >= n_)
                     throw EngineError(where + "joint coordinate index out of range");
                 break;
+            case RowType::joint_driver:
+                if (c.iq < 0 || c.iq >= n_) throw EngineError(where + "joint coordinate index out of range");
+                if (c.iq2 < 0 || c.iq2 >= static_cast<int>(d_.drivers.size()))
+                    throw EngineError(where + "driver index out of range");
+                break;
             case RowType::joint_limit:
                 if (c.iq < 0 || c.iq >= n_) throw EngineError(where + "joint coordinate index out of range");
                 if (!(c.coef[0] == 1.0 || c.coef[0] == -1.0) || !std::isfinite(c.ref1))
@@ -90,11 +101,16 @@ TreeProgram::TreeProgram(TreeDescription description) : d_(std::move(description
         }
         const ConstraintKind kind =
             (c.type == RowType::contact || c.type == RowType::joint_limit) ? ConstraintKind::unilateral
-                                                                            : ConstraintKind::holonomic;
+            : c.type == RowType::joint_driver                             ? ConstraintKind::rheonomic
+                                                                          : ConstraintKind::holonomic;
         constraints_.push_back(ConstraintInfo{c.name, kind, row, dim});
         row += dim;
     }
     m_all_ = row;
+    for (std::size_t i = 0; i < d_.drivers.size(); ++i) {
+        d_.drivers[i].validate("tree program: driver " + std::to_string(i));
+        if (!d_.drivers[i].thread_safe()) thread_safe_ = false;
+    }
     for (std::size_t i = 0; i < model.joints.size(); ++i) {
         const Joint& j = model.joints[i];
         if (is_quat(j.type)) {
@@ -318,7 +334,7 @@ void TreeProgram::frame_rows(const TreeConstraint& c, TreeWorkspace& ws, bool ro
     }
 }
 
-Status TreeProgram::evaluate(double /*t*/, const double* q, const double* qd,
+Status TreeProgram::evaluate(double t, const double* q, const double* qd,
                              const std::uint8_t* active, unsigned need, Terms& out,
                              Workspace& wsb) const {
     TreeWorkspace& ws = static_cast<TreeWorkspace&>(wsb);
@@ -341,7 +357,8 @@ Status TreeProgram::evaluate(double /*t*/, const double* q, const double* qd,
         for (std::size_t c = 0; c < d_.constraints.size(); ++c)
             if ((active == nullptr || active[c]) && d_.constraints[c].type != RowType::unit_quaternion &&
                 d_.constraints[c].type != RowType::joint_coupling &&
-                d_.constraints[c].type != RowType::joint_limit)
+                d_.constraints[c].type != RowType::joint_limit &&
+                d_.constraints[c].type != RowType::joint_driver)
                 any_frame = true;
     const bool motion = want_h || (want_gamma && any_frame);
     const bool dynamics = want_M || want_h || want_energy;
@@ -428,6 +445,19 @@ Status TreeProgram::evaluate(double /*t*/, const double* q, const double* qd,
             }
             if (want_gamma) g[0] = 0.0;
             if (want_phi) p[0] = s * (q[c.iq] - c.ref1);
+        } else if (c.type == RowType::joint_driver) {
+            double f[3];
+            const int st = d_.drivers[static_cast<std::size_t>(c.iq2)].eval(t, f, ws.treg.data());
+            if (st == TimeFunction::EVAL_FAILED) return Status::callback_error;
+            if (st != TimeFunction::EVAL_OK) return Status::not_finite;
+            if (want_rows) {
+                out.A.row(r0).setZero();
+                out.A(r0, c.iq) = 1.0;
+            }
+            if (want_gamma) g[0] = -f[2];
+            if (want_phi) p[0] = q[c.iq] - f[0];
+            if (need & NEED_VELOCITY) out.velocity[r0] = qd[c.iq] - f[1];
+            continue;
         } else {
             frame_rows(c, ws, want_rows, want_gamma, want_phi, target.row(r0).data(), g, p);
             if (want_rows && quat_)
@@ -507,7 +537,7 @@ Status TreeProgram::jacobian_dot(const double* q, const double* qd, const std::u
             for (int k = 0; k < 4; ++k) out(r0, c.iq + k) = qd[c.iq + k];
             continue;
         }
-        if (c.type == RowType::joint_limit) {
+        if (c.type == RowType::joint_limit || c.type == RowType::joint_driver) {
             out.row(r0).setZero();
             continue;
         }

@@ -1,6 +1,7 @@
 // SpatialProgram: evaluation of a spatial multibody description (see nonmin/spatial.hpp).
 #include "nonmin/spatial.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
@@ -65,6 +66,8 @@ SpatialProgram::SpatialProgram(SpatialDescription desc) : d_(std::move(desc)) {
         if (r.norm_body >= nb) throw EngineError(w + ": norm body out of range");
         for (const SpatialTerm& t : r.x) check_att(t.attachment, w);
         for (const SpatialTerm& t : r.y) check_att(t.attachment, w);
+        if (r.driver < -1 || r.driver >= static_cast<int>(d_.drivers.size()))
+            throw EngineError(w + ": driver index out of range");
         cover[static_cast<std::size_t>(c.row + r.offset)] += 1;
         rows_of_[static_cast<std::size_t>(r.constraint)].push_back(static_cast<int>(i));
     }
@@ -74,6 +77,11 @@ SpatialProgram::SpatialProgram(SpatialDescription desc) : d_(std::move(desc)) {
                 throw EngineError("constraint '" + c.name + "': row " + std::to_string(r) + " is defined " +
                                   std::to_string(cover[static_cast<std::size_t>(c.row + r)]) +
                                   " times (expected once)");
+    for (std::size_t i = 0; i < d_.drivers.size(); ++i) {
+        d_.drivers[i].validate("driver " + std::to_string(i));
+        if (!d_.drivers[i].thread_safe()) thread_safe_ = false;
+        tape_size_ = std::max(tape_size_, d_.drivers[i].scratch_size());
+    }
     for (const SpatialSpring& s : d_.springs) {
         check_att(s.a, "spring");
         check_att(s.b, "spring");
@@ -97,6 +105,7 @@ std::unique_ptr<Workspace> SpatialProgram::make_workspace() const {
     w->acc.assign(3 * K, 0.0);
     w->Qe.assign(12 * K, 0.0);
     w->col.assign(static_cast<std::size_t>(n_), 0.0);
+    w->treg.assign(static_cast<std::size_t>(tape_size_) + 1, 0.0);
     return w;
 }
 
@@ -328,6 +337,22 @@ Status SpatialProgram::evaluate(double t, const double* q, const double* qd, con
                 if (wantA) {
                     for (const SpatialTerm& tm : r.x) add_JT(Ar, tm.attachment, Y, tm.coef);
                     for (const SpatialTerm& tm : r.y) add_JT(Ar, tm.attachment, X, tm.coef);
+                }
+                if (r.driver >= 0) {
+                    double f[3];
+                    const int st = d_.drivers[static_cast<std::size_t>(r.driver)].eval(t, f, w.treg.data());
+                    if (st == TimeFunction::EVAL_FAILED) return Status::callback_error;
+                    if (st != TimeFunction::EVAL_OK) return Status::not_finite;
+                    if (r.square != 0.0) {  // g = s f², ġ = 2 s f ḟ, g̈ = 2 s (ḟ² + f f̈)
+                        const double s = r.square;
+                        const double g0 = s * f[0] * f[0], g1 = 2.0 * s * f[0] * f[1];
+                        f[2] = 2.0 * s * (f[1] * f[1] + f[0] * f[2]);
+                        f[0] = g0;
+                        f[1] = g1;
+                    }
+                    out.phi[row] -= f[0];
+                    out.velocity[row] -= f[1];
+                    out.gamma[row] -= f[2];
                 }
             }
         }

@@ -12,6 +12,12 @@
 //   line   1 row   φ = n·(p_b − p_a), n = R_a u^⊥          (point-on-line; prismatic's 2nd row)
 //   rod    1 row   φ = σ (dᵀd − L²)/(2L), d = p_b − p_a     (σ = −1: rope, gap = −φ)
 //   angle  1 row   φ = Σ c_j θ_j − c0 − f(t)               (weld, prismatic, gear, angle driver)
+//   coord  1 row   φ = Σ c_j q_j − c0 − f(t)               (coordinate driver: any coordinate)
+//
+// Drivers (rheonomic rows) subtract a prescribed f(t) (a TimeFunction): a pin with drivers is
+// φ = p_a − p_b − (f_x(t), f_y(t)) (a point on a path), a line row φ = n·(p_b − p_a) − f(t) (a
+// prescribed slide or offset), a rod with a driver φ = (dᵀd − f(t)²)/(2 L) with the constant
+// reference length L (a prescribed distance).
 //
 // plus translational and rotational spring-dampers and the input matrix B (torques, prismatic
 // joint forces, point forces). The description is plain data, built once; the Program
@@ -22,6 +28,7 @@
 #include <vector>
 
 #include "program.hpp"
+#include "timefn.hpp"
 
 namespace nonmin {
 
@@ -38,7 +45,7 @@ struct PlanarBody {
     int ix = 0, iy = 0, ith = -1;  // its coordinates (set by PlanarDescription::add_body)
 };
 
-enum class PlanarPrimKind : int { pin = 0, line = 1, rod = 2, angle = 3 };
+enum class PlanarPrimKind : int { pin = 0, line = 1, rod = 2, angle = 3, coord = 4 };
 
 struct PlanarPrim {
     PlanarPrimKind kind = PlanarPrimKind::pin;
@@ -48,16 +55,16 @@ struct PlanarPrim {
     double ux = 0.0, uy = 0.0;          // line: unit axis on body a
     double length = 1.0, sign = 1.0;    // rod
     std::vector<int> angle_bodies;      // angle: bodies (−1 ground) with their coefficients
-    std::vector<double> angle_coefs;
-    double angle_const = 0.0;           // angle: c0
-    int driver = -1;                    // angle: index into drivers, −1 none
+    std::vector<double> angle_coefs;    // angle and coord: coefficients
+    std::vector<int> coords;            // coord: coordinate indices
+    double angle_const = 0.0;           // angle, coord: c0
+    int driver = -1;                    // index into drivers, −1 none (pin: the x row)
+    int driver2 = -1;                   // pin: the y row's driver
 };
 
-// A prescribed motion t -> (f, ḟ, f̈): constant speed f = start + speed·t, or a callback
-// (a Python callable wrapped by the bindings; returns false when it failed).
+// A prescribed motion t -> (f, ḟ, f̈) (nonmin/timefn.hpp).
 struct PlanarDriver {
-    double start = 0.0, speed = 0.0;
-    std::function<bool(double, double*)> profile;  // empty: constant speed
+    TimeFunction fn;
 };
 
 struct PlanarSpring {
@@ -100,6 +107,7 @@ struct PlanarDescription {
 
 struct PlanarWorkspace : Workspace {
     std::vector<double> c, s;  // cos θ, sin θ per body
+    std::vector<double> treg;  // registers of the drivers' expression tapes
 };
 
 class PlanarProgram final : public Program {
@@ -123,6 +131,7 @@ class PlanarProgram final : public Program {
     Vec fg_;     // gravity force (constant)
     std::vector<std::vector<int>> prims_of_;  // primitives of each constraint
     bool thread_safe_ = true;
+    int tape_size_ = 0;  // largest expression-tape scratch of the drivers
 };
 
 }  // namespace nonmin

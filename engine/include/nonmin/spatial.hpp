@@ -17,12 +17,17 @@
 // A = Σ_k (cx_k Y + cy_k X)ᵀ ∂x_k/∂q, A q̇ = Ẋ·Y + X·Ẏ and γ = Ȧ q̇ = 2 Ẋ·Ẏ + X·Ÿ₀ + Y·Ẍ₀
 // (Ẍ₀ = Σ cx_k 2[ε̇ᵀ Q_a ε̇]_a). Point-to-point spring-dampers and joint actuators (torque about
 // / force along a joint axis) complete it.
+//
+// Drivers (rheonomic rows): a row with a driver subtracts g(t) = f(t) (square = 0) or
+// g = square·f(t)² (a prescribed distance: φ = |d|²/(2L) − f²/(2L)), f a TimeFunction:
+// φ −= g, A q̇ + φ_t −= ġ, γ −= g̈ (A unchanged).
 #pragma once
 #include <array>
 #include <string>
 #include <vector>
 
 #include "program.hpp"
+#include "timefn.hpp"
 
 namespace nonmin {
 
@@ -50,6 +55,8 @@ struct SpatialRow {
     int constraint = 0, offset = 0;
     int norm_body = -1;
     std::vector<SpatialTerm> x, y;
+    int driver = -1;      // index into SpatialDescription::drivers, −1: none
+    double square = 0.0;  // 0: g = f; else g = square·f²
 };
 
 struct SpatialSpring {
@@ -76,6 +83,7 @@ struct SpatialDescription {
     std::vector<SpatialRow> rows;
     std::vector<SpatialSpring> springs;
     std::vector<SpatialActuator> actuators;
+    std::vector<TimeFunction> drivers;
     int m_all = 0;
 
     int add_constraint(const std::string& name, ConstraintKind kind, int dim);
@@ -85,6 +93,7 @@ struct SpatialWorkspace : Workspace {
     // per attachment: value, velocity, acceleration bias (3 each) and Q ε (3 × 4)
     std::vector<double> val, vel, acc, Qe;
     std::vector<double> col;  // one column of B
+    std::vector<double> treg;  // registers of the drivers' expression tapes
 };
 
 class SpatialProgram final : public Program {
@@ -95,9 +104,13 @@ class SpatialProgram final : public Program {
                     unsigned need, Terms& out, Workspace& ws) const override;
     std::unique_ptr<Workspace> make_workspace() const override;
 
+    bool thread_safe() const override { return thread_safe_; }
+
   private:
     SpatialDescription d_;
     std::vector<std::vector<int>> rows_of_;  // rows of each constraint
+    bool thread_safe_ = true;
+    int tape_size_ = 0;
 };
 
 }  // namespace nonmin

@@ -20,6 +20,12 @@ from ._protocol import Geometry as Geometry
 from ._protocol import Model as Model
 from ._protocol import ModelTerms as ModelTerms
 from ._protocol import State as State
+from ._timefn import Expression as Expression
+from ._timefn import PiecewisePolynomial as PiecewisePolynomial
+from ._timefn import Polynomial as Polynomial
+from ._timefn import Sampled as Sampled
+from ._timefn import Spline as Spline
+from ._timefn import TimeFunction as TimeFunction
 from .spatial import SpatialBuilder as SpatialBuilder
 from .spatial import SpatialModel as SpatialModel
 from .symbolic import SymbolicConstraint as SymbolicConstraint
@@ -30,17 +36,23 @@ __all__ = [
     "AssemblyResidual",
     "ConstraintSpec",
     "ConstraintTerms",
+    "Expression",
     "FunctionConstraint",
     "FunctionModel",
     "Geometry",
     "Model",
     "ModelReport",
     "ModelTerms",
+    "PiecewisePolynomial",
+    "Polynomial",
+    "Sampled",
     "SpatialBuilder",
     "SpatialModel",
+    "Spline",
     "State",
     "SymbolicConstraint",
     "SymbolicModel",
+    "TimeFunction",
     "assemble",
     "assembly_residual",
     "check_model",

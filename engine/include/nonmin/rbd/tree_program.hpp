@@ -22,6 +22,8 @@
 //   point_on_plane   1  (R_a k)·(p_b − p_a)     (contact: the same, unilateral)
 //   joint_coupling   1  q₁ − r₁ − c₀ − Σ c_k (q₂ − r₂)^k
 //   joint_limit      1  gap s (q₁ − r₁) ≥ 0, s = c₀ = ±1 (unilateral): A = s e₁ᵀ, γ = 0
+//   joint_driver     1  q₁ − f(t) (rheonomic; f = drivers[iq2], a TimeFunction): A = e₁ᵀ,
+//                       A q̇ + φ_t = q̇₁ − ḟ, γ = −f̈
 #pragma once
 #include <array>
 #include <memory>
@@ -29,6 +31,7 @@
 #include <vector>
 
 #include "../program.hpp"
+#include "../timefn.hpp"
 #include "tree.hpp"
 
 namespace nonmin::rbd {
@@ -44,6 +47,7 @@ enum class RowType : int {
     contact = 7,
     joint_coupling = 8,
     joint_limit = 9,
+    joint_driver = 10,
 };
 
 int row_count(RowType t);
@@ -56,7 +60,7 @@ struct TreeConstraint {
     Vec3 u1 = Vec3::UnitX();    // hinge: (u₁, u₂, k) orthonormal in frame a; planar: world E rows
     Vec3 u2 = Vec3::UnitY();
     int iq = -1;   // unit_quaternion: first of its 4 components; joint_coupling/limit: joint 1's index
-    int iq2 = -1;  // joint_coupling: joint 2's index (−1: none)
+    int iq2 = -1;  // joint_coupling: joint 2's index (−1: none); joint_driver: index into drivers
     std::array<double, 5> coef{{0.0, 1.0, 0.0, 0.0, 0.0}};
     double ref1 = 0.0, ref2 = 0.0;
 };
@@ -67,6 +71,7 @@ struct TreeDescription {
     std::vector<TreeConstraint> constraints;  // row order
     std::vector<int> actuated;                // velocity indices: one column of B each
     Vec damping;                              // nv viscous damping coefficients
+    std::vector<TimeFunction> drivers;        // prescribed motions of joint_driver rows
 };
 
 struct TreeWorkspace : Workspace {
@@ -79,6 +84,7 @@ struct TreeWorkspace : Workspace {
     std::vector<Mat34> Tq;   // per joint: 2 G(ε) / |ε|²
     Mat Y;                   // 7 × nv scratch of the congruence (T_bᵀ M_v rows of one block)
     FrameKinematics ka, kb;
+    std::vector<double> treg;  // registers of the drivers' expression tapes
 };
 
 class TreeProgram : public Program {
@@ -90,6 +96,7 @@ class TreeProgram : public Program {
     std::unique_ptr<Workspace> make_workspace() const override;
 
     const TreeDescription& description() const { return d_; }
+    bool thread_safe() const override { return thread_safe_; }
     bool has_quaternions() const { return quat_; }
 
     // ws.qn = q with every quaternion divided by its norm (Status::not_finite if one is zero or
@@ -139,6 +146,7 @@ class TreeProgram : public Program {
 
     TreeDescription d_;
     bool quat_ = false;
+    bool thread_safe_ = true;
 };
 
 }  // namespace nonmin::rbd

@@ -6,15 +6,19 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from ...errors import InputError, ModelError, UnknownNameError
+from .._timefn import TimeFunction, as_time_function
 from ._elements import (
     GROUND,
     AngleDriver,
     Body,
     CheckedProfile,
     ConstantSpeed,
+    CoordinateDriver,
+    DistanceDriver,
     Gear,
     Joint,
     JointActuator,
+    PathDriver,
     Point,
     PointForce,
     PointOnLine,
@@ -258,16 +262,55 @@ class PlanarBuilder:
     ) -> str:
         """Rheonomic driver ``θ_b − θ_a = f(t)``; default ``f(t) = start + speed·t``.
 
-        ``profile`` is a callable ``t -> (f, ḟ, f̈)`` for other prescribed motions.
+        ``profile`` is a time function (:class:`~nonmin.model.Polynomial`,
+        :class:`~nonmin.model.Spline`, :class:`~nonmin.model.Sampled`,
+        :class:`~nonmin.model.Expression`: evaluated by the engine) or a callable
+        ``t -> (f, ḟ, f̈)`` (called back) for other prescribed motions.
         """
         prof: Profile = (
             ConstantSpeed(_finite(start, "start"), _finite(speed, "speed")) if profile is None else profile
         )
         if not callable(prof):
             raise InputError(f"drive_angle {name!r}: profile must be callable t -> (f, fd, fdd)")
-        if not isinstance(prof, ConstantSpeed | CheckedProfile):
+        if not isinstance(prof, ConstantSpeed | CheckedProfile | TimeFunction):
             prof = CheckedProfile(prof, name)  # its failures name the driver and the time
         return self._add_joint(AngleDriver(name, body_a, body_b, prof), active)
+
+    def drive_coordinate(self, name: str, coordinate: str, motion: Any, *, active: bool = True) -> str:
+        """Rheonomic driver of one coordinate, ``q_i = f(t)``: ``coordinate`` is
+        ``"<body>.x"``, ``"<body>.y"`` or ``"<body>.theta"``.
+
+        ``motion`` is a number, a time function (:class:`~nonmin.model.Polynomial`,
+        :class:`~nonmin.model.Spline`, :class:`~nonmin.model.Sampled`,
+        :class:`~nonmin.model.Expression`) or a callable ``t -> (f, ḟ, f̈)``.
+        """
+        w = f"drive_coordinate {name!r}"
+        body, _, coord = str(coordinate).rpartition(".")
+        if coord not in ("x", "y", "theta") or not body:
+            raise InputError(f"{w}: coordinate must be '<body>.x', '<body>.y' or '<body>.theta', got {coordinate!r}")
+        self._body_known(body, w)
+        if body == GROUND:
+            raise ModelError(f"{w}: the ground has no coordinates")
+        prof = as_time_function(motion, f"driver {name!r}")
+        return self._add_joint(CoordinateDriver(name, body, coord, prof), active)  # type: ignore[arg-type]
+
+    def drive_distance(self, name: str, a: PointRef, b: PointRef, motion: Any, *, active: bool = True) -> str:
+        """Rheonomic driver of the distance between two points, ``|p_b − p_a| = f(t)`` (a
+        linear actuator prescribing its length; ``motion`` as in :meth:`drive_coordinate`)."""
+        w = f"drive_distance {name!r}"
+        prof = as_time_function(motion, f"driver {name!r}")
+        f0 = abs(float(prof(0.0)[0]))
+        if not f0 > 0.0:
+            raise ModelError(f"{w}: the prescribed distance at t = 0 must be > 0, got {f0}")
+        return self._add_joint(DistanceDriver(name, self._ref(a, w), self._ref(b, w), prof, f0), active)
+
+    def drive_path(self, name: str, point: PointRef, x: Any, y: Any, *, active: bool = True) -> str:
+        """Rheonomic driver of a point along a path, ``p = (x(t), y(t))`` in world coordinates
+        (two motions as in :meth:`drive_coordinate`)."""
+        w = f"drive_path {name!r}"
+        px = as_time_function(x, f"driver {name!r} (x)")
+        py = as_time_function(y, f"driver {name!r} (y)")
+        return self._add_joint(PathDriver(name, self._ref(point, w), px, py), active)
 
     # ------------------------------------------------------------------ forces and actuators
     def _unique_force_name(self, name: str) -> None:

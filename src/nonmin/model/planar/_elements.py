@@ -28,9 +28,12 @@ __all__ = [
     "AngleDriver",
     "Body",
     "ConstantSpeed",
+    "CoordinateDriver",
+    "DistanceDriver",
     "Gear",
     "Joint",
     "JointActuator",
+    "PathDriver",
     "Point",
     "PointForce",
     "PointOnLine",
@@ -494,6 +497,122 @@ class AngleDriver(Joint):
         rel, _ = _angle_rows(kin, self.body_a, self.body_b, A, 0)
         f, fd, fdd = (float(v) for v in self.profile(float(t)))
         return np.array([rel - f]), A, np.zeros((1, kin.n)), np.array([-fdd]), np.array([-fd])
+
+
+@dataclass(frozen=True)
+class CoordinateDriver(Joint):
+    """Prescribed coordinate ``q_i − f(t) = 0`` of one body (``x``, ``y`` or ``theta``), 1 row.
+
+    ``A = e_iᵀ`` (constant, ``Ȧ = 0``), ``φ_t = −ḟ``, ``γ = −f̈``.
+    """
+
+    body: str
+    coordinate: Literal["x", "y", "theta"]
+    profile: Profile
+
+    @property
+    def kind(self) -> Literal["holonomic", "rheonomic", "nonholonomic", "unilateral"]:
+        return "rheonomic"
+
+    @property
+    def dim(self) -> int:
+        return 1
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.body,)
+
+    def needs_angle(self) -> tuple[str, ...]:
+        return (self.body,) if self.coordinate == "theta" else ()
+
+    def describe(self) -> str:
+        return f"coordinate driver {self.body}.{self.coordinate}"
+
+    def terms(self, kin: _Kin, t: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        i = kin.model._index[self.body][("x", "y", "theta").index(self.coordinate)]
+        A = np.zeros((1, kin.n))
+        A[0, i] = 1.0
+        f, fd, fdd = (float(v) for v in self.profile(float(t)))
+        return np.array([kin.q[i] - f]), A, np.zeros((1, kin.n)), np.array([-fdd]), np.array([-fd])
+
+
+@dataclass(frozen=True)
+class DistanceDriver(Joint):
+    """Prescribed distance ``|p_b − p_a| = f(t)``, 1 row: ``φ = (dᵀd − f²)/(2 L)`` with the
+    constant reference length ``L`` (``A = dᵀD/L`` as a rod of length L), ``φ_t = −f ḟ/L``,
+    ``γ = (ḋᵀḋ + dᵀḊ q̇ − ḟ² − f f̈)/L``."""
+
+    a: Point
+    b: Point
+    profile: Profile
+    reference: float = 1.0
+
+    @property
+    def kind(self) -> Literal["holonomic", "rheonomic", "nonholonomic", "unilateral"]:
+        return "rheonomic"
+
+    @property
+    def dim(self) -> int:
+        return 1
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.a.body, self.b.body)
+
+    def terms(self, kin: _Kin, t: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        pa, rsa, va, oma = kin.point(self.a)
+        pb, rsb, vb, omb = kin.point(self.b)
+        L = self.reference
+        d = pb - pa
+        dd = vb - va
+        D = np.zeros((2, kin.n))
+        kin.add_jac(D, self.b.body, rsb, 1.0)
+        kin.add_jac(D, self.a.body, rsa, -1.0)
+        Dd = np.zeros((2, kin.n))
+        kin.add_jacdot(Dd, self.b.body, rsb, omb, 1.0)
+        kin.add_jacdot(Dd, self.a.body, rsa, oma, -1.0)
+        f, fd, fdd = (float(v) for v in self.profile(float(t)))
+        A = (d @ D)[None, :] / L
+        Ad = (dd @ D + d @ Dd)[None, :] / L
+        gamma = (dd @ dd + d @ (Dd @ kin.qd) - fd * fd - f * fdd) / L
+        phi = (d @ d - f * f) / (2.0 * L)
+        return np.array([phi]), A, Ad, np.array([gamma]), np.array([-f * fd / L])
+
+
+@dataclass(frozen=True)
+class PathDriver(Joint):
+    """A body point on a prescribed path: ``p_a − c(t) = 0`` (2 rows, world coordinates),
+    ``A = J_a``, ``Ȧ = J̇_a``, ``γ = −θ̇_a² R_a s_a − c̈``, ``φ_t = −ċ``."""
+
+    a: Point
+    x: Profile
+    y: Profile
+
+    @property
+    def kind(self) -> Literal["holonomic", "rheonomic", "nonholonomic", "unilateral"]:
+        return "rheonomic"
+
+    @property
+    def dim(self) -> int:
+        return 2
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.a.body, GROUND)
+
+    def describe(self) -> str:
+        return f"path driver of a point of {self.a.body}"
+
+    def terms(self, kin: _Kin, t: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        A = np.zeros((2, kin.n))
+        Ad = np.zeros((2, kin.n))
+        pa, rsa, _, oma = kin.point(self.a)
+        kin.add_jac(A, self.a.body, rsa, 1.0)
+        kin.add_jacdot(Ad, self.a.body, rsa, oma, 1.0)
+        fx = tuple(float(v) for v in self.x(float(t)))
+        fy = tuple(float(v) for v in self.y(float(t)))
+        gamma = -(oma * oma) * rsa - np.array([fx[2], fy[2]])
+        return pa - np.array([fx[0], fy[0]]), A, Ad, gamma, -np.array([fx[1], fy[1]])
 
 
 # ----------------------------------------------------------------------------- forces

@@ -5,9 +5,10 @@ gravity, every constraint as row primitives (pin, line, rod, angle: the decompos
 :mod:`._compiled`), springs, dampers and actuators into a ``nonmin._engine.PlanarDescription``;
 :func:`engine_program` builds the C++ ``PlanarProgram`` from it. The engine then evaluates M,
 h, f_passive, B, A, γ, φ, the velocity residual and the energies for any active set (a mask
-over the constraints) with no Python per evaluation, except the profile of an angle driver
-given as a Python callable (called back once per driver and evaluation; constant-speed
-drivers are data).
+over the constraints) with no Python per evaluation, except a driver's motion given as a
+plain Python callable (called back once per driver and evaluation; constant speed and the
+time functions of :mod:`nonmin.model._timefn` — polynomials, splines, sampled arrays,
+expressions — are data).
 
 Formulas: those of :mod:`._elements` (the per-joint reference); ``tests/model/
 test_planar_program.py`` demands agreement with :meth:`PlanarModel.evaluate` to round-off.
@@ -18,12 +19,16 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from ... import _engine  # type: ignore[attr-defined]  # the compiled extension (no stubs)
+from .._timefn import Callback, TimeFunction
 from ._elements import (
     GROUND,
     AngleDriver,
     ConstantSpeed,
+    CoordinateDriver,
+    DistanceDriver,
     Gear,
     JointActuator,
+    PathDriver,
     Point,
     PointOnLine,
     Prismatic,
@@ -62,6 +67,15 @@ def description(model: PlanarModel) -> Any | None:
     def pt(p: Point) -> tuple[int, float, float]:
         return (body(p.body), p.local[0], p.local[1])
 
+    def driver(prof: Any) -> int:
+        """Engine index of a prescribed motion: constant speed and time functions as data,
+        other callables as a Python callback."""
+        if type(prof) is ConstantSpeed:
+            return int(d.add_driver(prof.start, prof.speed))
+        if isinstance(prof, TimeFunction) and not isinstance(prof, Callback):
+            return int(d.add_driver_function(prof.engine()))
+        return int(d.add_driver_callback(prof))
+
     for j in model.joints:
         c = d.add_constraint(j.name, KIND_CODES[j.kind], j.dim)
         tj = type(j)
@@ -90,12 +104,19 @@ def description(model: PlanarModel) -> Any | None:
             )  # fmt: skip
         elif tj is AngleDriver:
             assert isinstance(j, AngleDriver)
-            prof = j.profile
-            if type(prof) is ConstantSpeed:
-                drv = d.add_driver(prof.start, prof.speed)
-            else:
-                drv = d.add_driver_callback(prof)
-            d.add_angle(c, 0, [body(j.body_b), body(j.body_a)], [1.0, -1.0], 0.0, drv)
+            d.add_angle(c, 0, [body(j.body_b), body(j.body_a)], [1.0, -1.0], 0.0, driver(j.profile))
+        elif tj is CoordinateDriver:
+            assert isinstance(j, CoordinateDriver)
+            i = model._index[j.body][("x", "y", "theta").index(j.coordinate)]
+            d.add_coord(c, 0, [i], [1.0], 0.0, driver(j.profile))
+        elif tj is DistanceDriver:
+            assert isinstance(j, DistanceDriver)
+            d.add_rod(c, 0, pt(j.a), pt(j.b), j.reference, 1.0)
+            d.set_drivers(-1, driver(j.profile))
+        elif tj is PathDriver:
+            assert isinstance(j, PathDriver)
+            d.add_pin(c, 0, pt(j.a), (-1, 0.0, 0.0))
+            d.set_drivers(-1, driver(j.x), driver(j.y))
         else:
             return None
     for fe in model.forces:

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 from ._constraints import FRAME_CONSTRAINT_TYPES as FRAME_CONSTRAINT_TYPES
 from ._constraints import FrameConstraint as FrameConstraint
 from ._constraints import JointCoupling as JointCoupling
+from ._constraints import JointDriver as JointDriver
 from ._constraints import JointLimit as JointLimit
 from ._data import data_path as data_path
 
@@ -41,6 +42,7 @@ __all__ = [
     "FRAME_CONSTRAINT_TYPES",
     "FrameConstraint",
     "JointCoupling",
+    "JointDriver",
     "JointLimit",
     "RobotModel",
     "data_path",

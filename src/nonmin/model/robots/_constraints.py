@@ -25,6 +25,8 @@ type               rows  residual φ                                          ho
                          ``<equality joint>``; q₂ term absent if no joint2)
 ``joint_limit``    1     gap ``q − lower ≥ 0`` or ``upper − q ≥ 0``          yes
                          (unilateral; URDF/MJCF position limits)
+``joint_driver``   1     ``q − f(t)`` (rheonomic: a driven joint; f a time   yes
+                         function, see :class:`JointDriver`)
 =================  ====  ==================================================  =================
 
 ``k`` is the hinge axis / plane normal *in frame a*; ``u₁, u₂`` complete it to an orthonormal
@@ -37,7 +39,7 @@ basis. The rotation rows of ``weld`` and ``planar_weld`` use the relative angula
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -45,7 +47,9 @@ from numpy.typing import ArrayLike
 from ...errors import InputError, ShapeError
 from .._protocol import ConstraintKind, FloatArray
 
-__all__ = ["FRAME_CONSTRAINT_TYPES", "FrameConstraint", "JointCoupling", "JointLimit", "RobotConstraint"]
+__all__ = [
+    "FRAME_CONSTRAINT_TYPES", "FrameConstraint", "JointCoupling", "JointDriver", "JointLimit", "RobotConstraint",
+]
 
 FrameConstraintType = Literal[
     "point", "weld", "hinge", "planar_point", "planar_weld", "point_on_plane", "contact"
@@ -355,4 +359,41 @@ class JointLimit:
         return f"joint limit {self.joint!r} {rel} {self.bound:g}"
 
 
-RobotConstraint = FrameConstraint | JointCoupling | JointLimit
+@dataclass(frozen=True, eq=False)
+class JointDriver:
+    """A driven scalar joint: rheonomic ``φ = q − f(t)`` (``A = eᵢᵀ``, ``φ_t = −ḟ``,
+    ``γ = −f̈``); the driver's reaction is the joint torque (force) that imposes the motion.
+
+    ``motion`` is a number, a time function (:class:`~nonmin.model.Polynomial`,
+    :class:`~nonmin.model.Spline`, :class:`~nonmin.model.Sampled`,
+    :class:`~nonmin.model.Expression`, evaluated by the engine) or a callable
+    ``t -> (f, ḟ, f̈)`` (called back).
+    """
+
+    name: str
+    joint: str
+    motion: Any
+
+    def __post_init__(self) -> None:
+        from .._timefn import as_time_function
+
+        if not isinstance(self.name, str) or not self.name:
+            raise InputError(f"constraint name must be a non-empty string, got {self.name!r}")
+        if not isinstance(self.joint, str) or not self.joint:
+            raise InputError(f"constraint {self.name!r}: joint must be a joint name (str), got {self.joint!r}")
+        object.__setattr__(self, "motion", as_time_function(self.motion, f"driver {self.name!r}"))
+
+    @property
+    def dim(self) -> int:
+        return 1
+
+    @property
+    def kind(self) -> ConstraintKind:
+        return "rheonomic"
+
+    @property
+    def description(self) -> str:
+        return f"driver of joint {self.joint!r}"
+
+
+RobotConstraint = FrameConstraint | JointCoupling | JointLimit | JointDriver

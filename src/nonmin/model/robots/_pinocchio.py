@@ -75,6 +75,7 @@ from .._protocol import ConstraintSpec, ConstraintTerms, FloatArray, Geometry, M
 from ._constraints import (
     FrameConstraint,
     JointCoupling,
+    JointDriver,
     JointLimit,
     RobotConstraint,
     complete_basis,
@@ -360,9 +361,9 @@ class RobotModel(Model):
         blocks = _joint_blocks(pm)
         cons = tuple(self.robot_constraints)
         for c in cons:
-            if not isinstance(c, FrameConstraint | JointCoupling | JointLimit):
+            if not isinstance(c, FrameConstraint | JointCoupling | JointLimit | JointDriver):
                 raise InputError(
-                    f"robot_constraints must be FrameConstraint, JointCoupling or JointLimit values, "
+                    f"robot_constraints must be FrameConstraint, JointCoupling, JointLimit or JointDriver values, "
                     f"got {type(c).__name__}"
                 )
         structural = [
@@ -379,7 +380,7 @@ class RobotModel(Model):
         jq: dict[str, int] = {}
         scalar = {b.joint: b.iq for b in blocks if b.kind == "vector" and b.nq == 1}
         for c in cons:
-            if isinstance(c, JointLimit):
+            if isinstance(c, JointLimit | JointDriver):
                 if c.joint not in scalar:
                     raise UnknownNameError(
                         f"constraint {c.name!r}: joint {c.joint!r} is not a scalar joint of the "
@@ -910,10 +911,11 @@ class RobotModel(Model):
 
     # ------------------------------------------------------------------ constraints
     def _constraint_rows(
-        self, kin: _Kin, q: FloatArray, qd: FloatArray, act: frozenset[str]
+        self, kin: _Kin, q: FloatArray, qd: FloatArray, act: frozenset[str], t: float = 0.0
     ) -> tuple[ConstraintTerms, FloatArray | None]:
         """Stacked constraint terms and, when ``kin`` has Jacobian derivatives, the matrix Ȧ."""
         n = self.n
+        phit: list[float] = []
         As: list[FloatArray] = []
         gs: list[FloatArray] = []
         ps: list[FloatArray] = []
@@ -926,6 +928,7 @@ class RobotModel(Model):
             row = np.zeros((1, n))
             row[0, sl] = q[sl]
             As.append(row)
+            phit.append(0.0)
             gs.append(np.array([qd[sl] @ qd[sl]]))
             ps.append(np.array([0.5 * (q[sl] @ q[sl] - 1.0)]))
             rowd = np.zeros((1, n))
@@ -935,8 +938,15 @@ class RobotModel(Model):
             if c.name not in act:
                 continue
             Ad: FloatArray | None
+            pt = [0.0] * c.dim
             if isinstance(c, JointLimit):
                 A, g, p, Ad = self._limit_rows(c, q)
+            elif isinstance(c, JointDriver):
+                A = np.zeros((1, n))
+                i = self._jq[c.joint]
+                A[0, i] = 1.0
+                f, fd, fdd = (float(x) for x in c.motion(float(t)))
+                g, p, Ad, pt = np.array([-fdd]), np.array([q[i] - f]), np.zeros((1, n)), [-fd]
             elif isinstance(c, JointCoupling):
                 A, g, p, Ad = self._coupling_rows(c, q, qd)
             else:
@@ -947,6 +957,7 @@ class RobotModel(Model):
             As.append(A)
             gs.append(g)
             ps.append(p)
+            phit += pt
             if Ad is not None:
                 Ads.append(Ad)
         if not As:
@@ -956,7 +967,7 @@ class RobotModel(Model):
             return empty, np.zeros((0, n))
         A = np.vstack(As)
         terms = ConstraintTerms(
-            A, np.concatenate(gs), np.concatenate(ps), A @ qd, np.ones(A.shape[0], dtype=bool)
+            A, np.concatenate(gs), np.concatenate(ps), A @ qd + np.array(phit), np.ones(A.shape[0], dtype=bool)
         )
         return terms, (np.vstack(Ads) if kin.jdot else None)
 
@@ -1104,7 +1115,7 @@ class RobotModel(Model):
         """:meth:`constraint_terms` from Pinocchio's frame kinematics (fallback and oracle)."""
         qv, v = self._q(q), self._q(qd, "qd")
         kin = _Kin(self, qv, v, dynamics=False)
-        return self._constraint_rows(kin, qv, v, act)[0]
+        return self._constraint_rows(kin, qv, v, act, t)[0]
 
     def constraint_jacobian_dot(
         self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
@@ -1134,7 +1145,7 @@ class RobotModel(Model):
         """:meth:`constraint_jacobian_dot` from Pinocchio's Jacobian time variations (oracle)."""
         qv, v = self._q(q), self._q(qd, "qd")
         kin = _Kin(self, qv, v, dynamics=False, jdot=True)
-        Ad = self._constraint_rows(kin, qv, v, act)[1]
+        Ad = self._constraint_rows(kin, qv, v, act, t)[1]
         assert Ad is not None
         return Ad
 
@@ -1169,7 +1180,7 @@ class RobotModel(Model):
         h = -T.T @ kin.gv - Cqd
         fp = -T.T @ (self._damp * kin.v) if self._damp.any() else np.zeros(self.n)
         B = T[list(self._act_v), :].T.copy()
-        cons = self._constraint_rows(kin, qv, v, act)[0]
+        cons = self._constraint_rows(kin, qv, v, act, t)[0]
         return ModelTerms(M=M, h=h, f_passive=fp, B=B, constraints=cons)
 
     # ------------------------------------------------------------------ kinematics / geometry

@@ -25,6 +25,7 @@ from .._protocol import FloatArray
 from ._constraints import (
     FrameConstraint,
     JointCoupling,
+    JointDriver,
     JointLimit,
     RobotConstraint,
     complete_basis,
@@ -59,6 +60,7 @@ ROW_TYPES: dict[str, int] = {
     "contact": 7,
     "joint": 8,
     "joint_limit": 9,
+    "joint_driver": 10,
 }
 
 
@@ -142,6 +144,7 @@ def tree_arrays(
         ciq.append((start, -1))
         ccoef.append((0.0,) * 5)
         cref.append((0.0, 0.0))
+    drivers: list[Any] = []
     for c in constraints:
         names.append(c.name)
         if isinstance(c, JointCoupling):
@@ -152,6 +155,16 @@ def tree_arrays(
             ciq.append((joint_q[c.joint1], -1 if c.joint2 is None else joint_q[c.joint2]))
             ccoef.append(tuple(c.polycoef))
             cref.append((c.reference1, c.reference2))
+            continue
+        if isinstance(c, JointDriver):  # q - f(t): the time function's index in iq2
+            ctypes.append(ROW_TYPES["joint_driver"])
+            cframes.append((-1, -1))
+            caxes.append(z)
+            cu.append(basis)
+            ciq.append((joint_q[c.joint], len(drivers)))
+            drivers.append(c.motion.engine())
+            ccoef.append((0.0,) * 5)
+            cref.append((0.0, 0.0))
             continue
         if isinstance(c, JointLimit):  # gap s (q - bound): sign in coef[0], bound in ref1
             ctypes.append(ROW_TYPES["joint_limit"])
@@ -199,6 +212,7 @@ def tree_arrays(
         "c_ref": np.array(cref, dtype=float).reshape(nc, 2),
         "actuated": np.array(actuated_v, dtype=np.int64),
         "damping": np.ascontiguousarray(damping, dtype=float),
+        "drivers": drivers,
     }
 
 

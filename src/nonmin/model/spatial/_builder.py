@@ -365,6 +365,62 @@ class SpatialBuilder:
             "point_on_plane", name, body_a, body_b, point, [nvec], [], nvec, active
         )
 
+    # ------------------------------------------------------------------ drivers
+    # Drivers are rheonomic constraints that prescribe a motion: ``motion`` is a number, a time
+    # function (nonmin.model.Polynomial, Spline, Sampled, Expression: evaluated by the engine)
+    # or a callable t -> (f, ḟ, f̈) (called back). Positions are world coordinates.
+    def _add_driver(
+        self, kind: JointKind, name: str, body_a: str, body_b: str, pa: FloatArray, pb: FloatArray,
+        vecs_a: list[FloatArray], motions: tuple[object, ...], reference: float, active: bool,
+    ) -> SpatialBuilder:
+        from dataclasses import replace
+
+        from .._timefn import as_time_function
+
+        fns = tuple(as_time_function(m, f"driver {name!r}") for m in motions)
+        self._add_joint(kind, name, body_a, body_b, pa, vecs_a, [], np.zeros(3), active)
+        j = self._joints[-1]
+        self._joints[-1] = replace(
+            j, point_a=self._local_point(body_a, pa), point_b=self._local_point(body_b, pb),
+            motions=fns, reference=float(reference),
+        )
+        return self
+
+    def add_coordinate_driver(
+        self, name: str, body: str, coordinate: str, motion: object, *, active: bool = True
+    ) -> SpatialBuilder:
+        """Prescribed world coordinate ``"x"``, ``"y"`` or ``"z"`` of a body's centre of mass:
+        ``e·r − f(t) = 0`` (1 row)."""
+        axes = {"x": 0, "y": 1, "z": 2}
+        if coordinate not in axes:
+            raise InputError(f"driver {name!r}: coordinate must be 'x', 'y' or 'z', got {coordinate!r}")
+        r, _ = self._ref(body)
+        e = np.eye(3)[axes[coordinate]]
+        return self._add_driver("coordinate_driver", name, GROUND, body, np.zeros(3), r, [e], (motion,), 1.0, active)
+
+    def add_path_driver(
+        self, name: str, body: str, *, point: ArrayLike, x: object, y: object, z: object, active: bool = True
+    ) -> SpatialBuilder:
+        """A body point (``point``: world coordinates at the reference configuration) on a
+        prescribed path ``p = (x(t), y(t), z(t))`` in the world frame (3 rows)."""
+        p = _vec3(point, f"driver {name!r}: point")
+        self._ref(body)
+        return self._add_driver("path_driver", name, GROUND, body, np.zeros(3), p, [], (x, y, z), 1.0, active)
+
+    def add_distance_driver(
+        self, name: str, body_a: str, body_b: str, *, point_a: ArrayLike, point_b: ArrayLike, motion: object,
+        active: bool = True,
+    ) -> SpatialBuilder:
+        """Prescribed distance between two body points (world coordinates at the reference
+        configuration): ``|p_b − p_a| = f(t)`` (1 row, ``φ = (|d|² − f²)/(2L)`` with L the
+        reference distance)."""
+        pa = _vec3(point_a, f"driver {name!r}: point_a")
+        pb = _vec3(point_b, f"driver {name!r}: point_b")
+        L = float(np.linalg.norm(pb - pa))
+        if not L > 0.0:
+            raise ModelError(f"driver {name!r}: the two points coincide at the reference configuration")
+        return self._add_driver("distance_driver", name, body_a, body_b, pa, pb, [], (motion,), L, active)
+
     # ------------------------------------------------------------------ forces, outputs
     def add_spring(
         self,

@@ -59,12 +59,15 @@ __all__ = [
 GROUND = "ground"
 
 JointKind = Literal[
-    "spherical", "revolute", "prismatic", "cylindrical", "universal", "weld", "point_on_plane"
+    "spherical", "revolute", "prismatic", "cylindrical", "universal", "weld", "point_on_plane",
+    "coordinate_driver", "path_driver", "distance_driver",
 ]
 #: The joint kinds of the spatial builder.
 JOINT_KINDS: tuple[str, ...] = (
     "spherical", "revolute", "prismatic", "cylindrical", "universal", "weld", "point_on_plane"
 )
+#: Driver kinds (rheonomic): a prescribed COM coordinate, point path, distance.
+DRIVER_KINDS: tuple[str, ...] = ("coordinate_driver", "path_driver", "distance_driver")
 _JOINT_ROWS = {
     "spherical": 3,
     "revolute": 5,
@@ -73,6 +76,9 @@ _JOINT_ROWS = {
     "universal": 4,
     "weld": 6,
     "point_on_plane": 1,
+    "coordinate_driver": 1,
+    "path_driver": 3,
+    "distance_driver": 1,
 }
 
 
@@ -124,6 +130,11 @@ class Joint:
         on a.
     point, axis : ndarray, shape (3,)
         World-frame point and (unit) axis at the reference configuration (for descriptions).
+    motions : tuple of TimeFunction
+        Drivers only: the prescribed motions of the rows (coordinate: 1, path: 3 (x, y, z),
+        distance: 1). A coordinate driver has ``vectors_a[0]`` the world axis of the coordinate.
+    reference : float
+        Distance driver: the constant reference length L of ``φ = (|d|² − f²)/(2L)``.
     """
 
     name: str
@@ -136,6 +147,8 @@ class Joint:
     vectors_b: FloatArray
     point: FloatArray
     axis: FloatArray
+    motions: tuple[Any, ...] = ()
+    reference: float = 1.0
 
     @property
     def dim(self) -> int:
@@ -229,6 +242,19 @@ class _RowPlan:
     term_sign: FloatArray  # (T,) its coefficient
     term_side_x: NDArray[np.bool_]  # (T,) True when the attachment is in X (partner Y)
     term_index: NDArray[np.intp]  # (T * 7,) flat indices into a (Rj, 7 (nb + 1)) array
+    row_driver: NDArray[np.intp]  # (Rj,) index into motions, −1: none
+    row_square: FloatArray  # (Rj,) 0: g = f, else g = square·f²
+    motions: tuple[Any, ...]  # prescribed motions (TimeFunction) of the driver rows
+
+    def driver_terms(self, t: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``(g, ġ, g̈)`` subtracted from (φ, A q̇ + φ_t, γ) of every joint row, shape (Rj,)."""
+        rj = self.row_driver.shape[0]
+        g = np.zeros((3, rj))
+        for r in np.flatnonzero(self.row_driver >= 0):
+            f, fd, fdd = (float(x) for x in self.motions[int(self.row_driver[r])](float(t)))
+            sq = float(self.row_square[r])
+            g[:, r] = (f, fd, fdd) if sq == 0.0 else (sq * f * f, 2 * sq * f * fd, 2 * sq * (fd * fd + f * fdd))
+        return g[0], g[1], g[2]
 
     @classmethod
     def build(cls, model: SpatialModel) -> _RowPlan:
@@ -248,6 +274,8 @@ class _RowPlan:
             return len(bodies) - 1
 
         rows: list[tuple[list[tuple[int, float]], list[tuple[int, float]]]] = []
+        drivers: list[tuple[int, float]] = []  # per row: (motion index or −1, square)
+        motions: list[Any] = []
         for j in model.joints:
             pa = att(j.body_a, j.point_a, True)
             pb = att(j.body_b, j.point_b, True)
@@ -285,6 +313,19 @@ class _RowPlan:
                 rows.append((A_(2), B_(0)))
             if kind == "point_on_plane":
                 rows.append((A_(0), d))
+            if kind in ("path_driver", "coordinate_driver"):
+                axes = np.eye(3) if kind == "path_driver" else j.vectors_a[:1]
+                for c, ax in enumerate(axes):
+                    rows.append(([(att(GROUND, ax, False), 1.0)], d))
+                    drivers.append((len(motions), 0.0))
+                    motions.append(j.motions[c])
+            if kind == "distance_driver":
+                half = 0.5 / j.reference
+                rows.append(([(pb, half), (pa, -half)], d))
+                drivers.append((len(motions), half))
+                motions.append(j.motions[0])
+            while len(drivers) < len(rows):
+                drivers.append((-1, 0.0))
         K = len(bodies)
         SX = np.zeros((len(rows), K))
         SY = np.zeros((len(rows), K))
@@ -320,6 +361,9 @@ class _RowPlan:
             term_sign=np.array(t_sign, dtype=float),
             term_side_x=np.array(t_x, dtype=bool),
             term_index=(base[:, None] + np.arange(7)).ravel(),
+            row_driver=np.array([dv for dv, _ in drivers], dtype=np.intp).reshape(len(rows)),
+            row_square=np.array([sq for _, sq in drivers], dtype=float).reshape(len(rows)),
+            motions=tuple(motions),
         )
 
     @staticmethod
@@ -403,7 +447,8 @@ class SpatialModel(Model):
             for b in self.bodies
         )
         joints = tuple(
-            ConstraintSpec(j.name, "holonomic", j.dim, f"{j.kind} {j.body_a}–{j.body_b}")
+            ConstraintSpec(j.name, "rheonomic" if j.kind in DRIVER_KINDS else "holonomic", j.dim,
+                           f"{j.kind} {j.body_a}–{j.body_b}")
             for j in self.joints
         )
         object.__setattr__(self, "_specs", norms + joints)
@@ -679,9 +724,10 @@ class SpatialModel(Model):
 
     # ------------------------------------------------------------------ constraints
     def _all_rows(
-        self, q: FloatArray, qd: FloatArray, act: frozenset[str]
+        self, q: FloatArray, qd: FloatArray, act: frozenset[str], t: float = 0.0
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """φ, A, Ȧ of the active rows (declaration order), shapes (m,), (m, n), (m, n)."""
+        """φ, A, Ȧ of the active rows (declaration order), shapes (m,), (m, n), (m, n).
+        Driver rows: φ already holds ``− g(t)``; see :meth:`_driver_rates` for ġ, g̈."""
         plan = self._plan
         nb = len(self.bodies)
         n = self.n
@@ -725,6 +771,8 @@ class SpatialModel(Model):
         A_j = np.bincount(plan.term_index, Aloc.ravel(), size).reshape(rj, width)[:, :n]
         Ad_j = np.bincount(plan.term_index, Adloc.ravel(), size).reshape(rj, width)[:, :n]
         phi_j = np.einsum("ra,ra->r", X, Y)
+        if plan.motions:
+            phi_j = phi_j - plan.driver_terms(t)[0]
         # norm rows
         A_n = np.zeros((nb, n))
         Ad_n = np.zeros((nb, n))
@@ -751,9 +799,21 @@ class SpatialModel(Model):
         act = self.resolve_active(active)
         qv = _as_vector(q, "q", self.n)
         v = _as_vector(qd, "qd", self.n)
-        phi, A, Ad = self._all_rows(qv, v, act)
+        phi, A, Ad = self._all_rows(qv, v, act, float(t))
+        gamma = Ad @ v
+        vel = A @ v
+        if self._plan.motions:  # rheonomic rows: φ_t = −ġ, γ −= g̈
+            _, gd, gdd = self._plan.driver_terms(float(t))
+            nb = len(self.bodies)
+            full_d = np.concatenate((np.zeros(nb), gd))
+            full_dd = np.concatenate((np.zeros(nb), gdd))
+            if len(act) != len(self._specs):
+                rows = self._plan.active_rows(self._specs, act)
+                full_d, full_dd = full_d[rows], full_dd[rows]
+            vel = vel - full_d
+            gamma = gamma - full_dd
         return ConstraintTerms(
-            A=A, gamma=Ad @ v, phi=phi, velocity=A @ v, holonomic=np.ones(phi.shape[0], dtype=bool)
+            A=A, gamma=gamma, phi=phi, velocity=vel, holonomic=np.ones(phi.shape[0], dtype=bool)
         )
 
     def constraint_jacobian_dot(
@@ -763,7 +823,7 @@ class SpatialModel(Model):
         act = self.resolve_active(active)
         qv = _as_vector(q, "q", self.n)
         v = _as_vector(qd, "qd", self.n)
-        return self._all_rows(qv, v, act)[2]
+        return self._all_rows(qv, v, act, float(t))[2]
 
     def engine_program(self) -> Any:
         """The compiled engine's ``SpatialProgram`` of this model (see

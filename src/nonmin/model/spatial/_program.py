@@ -26,6 +26,11 @@ __all__ = ["description", "engine_program"]
 _KIND_CODES = {"holonomic": 0, "rheonomic": 1, "nonholonomic": 2, "unilateral": 3}
 
 
+def _engine_fn(motion: Any) -> Any:
+    """The engine's TimeFunction of a driver's motion."""
+    return motion.engine()
+
+
 def description(model: SpatialModel) -> Any:
     """The engine description (``nonmin._engine.SpatialDescription``) of ``model``."""
     d = _engine.SpatialDescription()
@@ -63,6 +68,9 @@ def description(model: SpatialModel) -> Any:
             xs = [(att[k], float(plan.SX[r, k])) for k in np.flatnonzero(plan.SX[r])]
             ys = [(att[k], float(plan.SY[r, k])) for k in np.flatnonzero(plan.SY[r])]
             d.add_dot_row(c, off, xs, ys)
+            k = int(plan.row_driver[r])
+            if k >= 0:
+                d.set_row_driver(int(d.add_driver(_engine_fn(plan.motions[k]))), float(plan.row_square[r]))
             r += 1
     for s in model.springs:
         d.add_spring(attachment(s.body_a, s.point_a, True), attachment(s.body_b, s.point_b, True),
