@@ -104,6 +104,24 @@ void bind_spatial(nb::module_& m) {
             nb::arg("driver"), nb::arg("square") = 0.0,
             "The last added row subtracts g(t) = f(t) (square = 0) or square·f(t)².")
         .def(
+            "add_angle_row",
+            [](SpatialDescription& d, int c, int off, std::vector<std::pair<int, double>> x,
+               std::vector<std::pair<int, double>> y, std::vector<std::pair<int, double>> x2,
+               std::vector<std::pair<int, double>> y2, int driver) {
+                SpatialRow r;
+                r.constraint = c;
+                r.offset = off;
+                r.x = terms(x);
+                r.y = terms(y);
+                r.x2 = terms(x2);
+                r.y2 = terms(y2);
+                r.angle = true;
+                r.driver = driver;
+                d.rows.push_back(r);
+            },
+            nb::arg("constraint"), nb::arg("offset"), nb::arg("x"), nb::arg("y"), nb::arg("x2"), nb::arg("y2"),
+            nb::arg("driver"), "An angle-driver row φ = sin(θ − f): P1 = X·Y = cos θ, P2 = X2·Y2 = sin θ.")
+        .def(
             "add_spring",
             [](SpatialDescription& d, int a, int b, double k, double L0, double c) {
                 d.springs.push_back(SpatialSpring{a, b, k, L0, c});

@@ -68,6 +68,9 @@ SpatialProgram::SpatialProgram(SpatialDescription desc) : d_(std::move(desc)) {
         for (const SpatialTerm& t : r.y) check_att(t.attachment, w);
         if (r.driver < -1 || r.driver >= static_cast<int>(d_.drivers.size()))
             throw EngineError(w + ": driver index out of range");
+        if (r.angle && r.driver < 0) throw EngineError(w + ": an angle row needs a driver");
+        for (const SpatialTerm& t : r.x2) check_att(t.attachment, w);
+        for (const SpatialTerm& t : r.y2) check_att(t.attachment, w);
         cover[static_cast<std::size_t>(c.row + r.offset)] += 1;
         rows_of_[static_cast<std::size_t>(r.constraint)].push_back(static_cast<int>(i));
     }
@@ -310,34 +313,53 @@ Status SpatialProgram::evaluate(double t, const double* q, const double* qd, con
                         for (int j = 0; j < 4; ++j) Ar[o + j] = e[j];
                     continue;
                 }
-                double X[3] = {0, 0, 0}, Y[3] = {0, 0, 0}, Xd[3] = {0, 0, 0}, Yd[3] = {0, 0, 0};
-                double Xa[3] = {0, 0, 0}, Ya[3] = {0, 0, 0};
-                for (const SpatialTerm& tm : r.x) {
-                    const std::size_t k = static_cast<std::size_t>(tm.attachment);
-                    for (int a = 0; a < 3; ++a) {
-                        X[a] += tm.coef * w.val[3 * k + a];
-                        Xd[a] += tm.coef * w.vel[3 * k + a];
-                        Xa[a] += tm.coef * w.acc[3 * k + a];
+                // φ = X·Y of one (x, y) term pair: value, rate A q̇, bias Ȧ q̇; adds scale·A to the row
+                auto dot_row = [&](const std::vector<SpatialTerm>& xs, const std::vector<SpatialTerm>& ys,
+                                   double scale, double& P, double& Pd, double& G) {
+                    double X[3] = {0, 0, 0}, Y[3] = {0, 0, 0}, Xd[3] = {0, 0, 0}, Yd[3] = {0, 0, 0};
+                    double Xa[3] = {0, 0, 0}, Ya[3] = {0, 0, 0};
+                    for (const SpatialTerm& tm : xs) {
+                        const std::size_t k = static_cast<std::size_t>(tm.attachment);
+                        for (int a = 0; a < 3; ++a) {
+                            X[a] += tm.coef * w.val[3 * k + a];
+                            Xd[a] += tm.coef * w.vel[3 * k + a];
+                            Xa[a] += tm.coef * w.acc[3 * k + a];
+                        }
                     }
-                }
-                for (const SpatialTerm& tm : r.y) {
-                    const std::size_t k = static_cast<std::size_t>(tm.attachment);
-                    for (int a = 0; a < 3; ++a) {
-                        Y[a] += tm.coef * w.val[3 * k + a];
-                        Yd[a] += tm.coef * w.vel[3 * k + a];
-                        Ya[a] += tm.coef * w.acc[3 * k + a];
+                    for (const SpatialTerm& tm : ys) {
+                        const std::size_t k = static_cast<std::size_t>(tm.attachment);
+                        for (int a = 0; a < 3; ++a) {
+                            Y[a] += tm.coef * w.val[3 * k + a];
+                            Yd[a] += tm.coef * w.vel[3 * k + a];
+                            Ya[a] += tm.coef * w.acc[3 * k + a];
+                        }
                     }
+                    P = X[0] * Y[0] + X[1] * Y[1] + X[2] * Y[2];
+                    Pd = Xd[0] * Y[0] + Xd[1] * Y[1] + Xd[2] * Y[2] + X[0] * Yd[0] + X[1] * Yd[1] + X[2] * Yd[2];
+                    G = 2.0 * (Xd[0] * Yd[0] + Xd[1] * Yd[1] + Xd[2] * Yd[2]) +
+                        (X[0] * Ya[0] + X[1] * Ya[1] + X[2] * Ya[2]) + (Y[0] * Xa[0] + Y[1] * Xa[1] + Y[2] * Xa[2]);
+                    if (wantA && scale != 0.0) {
+                        for (const SpatialTerm& tm : xs) add_JT(Ar, tm.attachment, Y, scale * tm.coef);
+                        for (const SpatialTerm& tm : ys) add_JT(Ar, tm.attachment, X, scale * tm.coef);
+                    }
+                };
+                if (r.angle) {
+                    double f[3];
+                    const int st = d_.drivers[static_cast<std::size_t>(r.driver)].eval(t, f, w.treg.data());
+                    if (st == TimeFunction::EVAL_FAILED) return Status::callback_error;
+                    if (st != TimeFunction::EVAL_OK) return Status::not_finite;
+                    const double c = std::cos(f[0]), s = std::sin(f[0]);
+                    double P1, P1d, G1, P2, P2d, G2;
+                    dot_row(r.x, r.y, -s, P1, P1d, G1);
+                    dot_row(r.x2, r.y2, c, P2, P2d, G2);
+                    const double S = s * P2 + c * P1;
+                    out.phi[row] = c * P2 - s * P1;
+                    out.velocity[row] = c * P2d - s * P1d - f[1] * S;
+                    out.gamma[row] = c * G2 - s * G1 - 2.0 * f[1] * (s * P2d + c * P1d) - f[2] * S -
+                                     f[1] * f[1] * (c * P2 - s * P1);
+                    continue;
                 }
-                out.phi[row] = X[0] * Y[0] + X[1] * Y[1] + X[2] * Y[2];
-                out.velocity[row] = Xd[0] * Y[0] + Xd[1] * Y[1] + Xd[2] * Y[2] + X[0] * Yd[0] + X[1] * Yd[1] +
-                                    X[2] * Yd[2];
-                out.gamma[row] = 2.0 * (Xd[0] * Yd[0] + Xd[1] * Yd[1] + Xd[2] * Yd[2]) +
-                                 (X[0] * Ya[0] + X[1] * Ya[1] + X[2] * Ya[2]) +
-                                 (Y[0] * Xa[0] + Y[1] * Xa[1] + Y[2] * Xa[2]);
-                if (wantA) {
-                    for (const SpatialTerm& tm : r.x) add_JT(Ar, tm.attachment, Y, tm.coef);
-                    for (const SpatialTerm& tm : r.y) add_JT(Ar, tm.attachment, X, tm.coef);
-                }
+                dot_row(r.x, r.y, 1.0, out.phi[row], out.velocity[row], out.gamma[row]);
                 if (r.driver >= 0) {
                     double f[3];
                     const int st = d_.drivers[static_cast<std::size_t>(r.driver)].eval(t, f, w.treg.data());

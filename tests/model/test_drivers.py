@@ -239,13 +239,17 @@ def _spatial_driven():
         point_b=[0.0, -1.0, -1.0],
         motion=Expression("sqrt(1.25) - 0.1*t"),
     )
+    # an arm turned about the world z axis through (0, 3, 0) by its joint angle θ(t)
+    b.add_body("arm", mass=1.5, inertia=[0.01, 0.05, 0.05], position=[0.5, 3.0, 0.0])
+    b.add_revolute("shoulder", "ground", "arm", point=[0.0, 3.0, 0.0], axis=[0.0, 0.0, 1.0])
+    b.add_angle_driver("turn", "shoulder", Expression("0.8*t + 0.3*sin(2*t)"))
     return b.build()
 
 
 def test_spatial_drivers_engine_matches_python_and_follow_their_motions() -> None:
     m = _spatial_driven()
     kinds = {c.name: c.kind for c in m.constraints}
-    assert kinds["drive_x"] == kinds["path"] == kinds["rope"] == "rheonomic"
+    assert kinds["drive_x"] == kinds["path"] == kinds["rope"] == kinds["turn"] == "rheonomic"
     rng = np.random.default_rng(1)
     q0 = m.reference_configuration()
     for t in (0.0, 0.4, 1.3):
@@ -270,6 +274,10 @@ def test_spatial_drivers_engine_matches_python_and_follow_their_motions() -> Non
     d = traj.q[:, 7 * ball : 7 * ball + 3] - np.array([0.5, -1.0, 0.0])
     np.testing.assert_allclose(np.linalg.norm(d, axis=1), np.sqrt(1.25) - 0.1 * t, atol=1e-9)
     assert box >= 0 and traj.velocity_residual_norm.max() < 1e-8
+    arm = m.body_index("arm")
+    th = 0.8 * t + 0.3 * np.sin(2 * t)
+    want = np.stack([0.5 * np.cos(th), 3.0 + 0.5 * np.sin(th)], -1)
+    np.testing.assert_allclose(traj.q[:, 7 * arm : 7 * arm + 2], want, atol=1e-9)
 
 
 # --------------------------------------------------------------------------- robots
@@ -303,3 +311,17 @@ def test_driven_robot_joint_and_its_torque() -> None:
         res = nonmin.inverse_dynamics(free, traj.q[k], traj.qd[k], traj.qdd[k])
         assert res.ok, res.message
         assert abs(res.u[0] - lam[k]) < 1e-7 * max(1.0, abs(lam[k]))
+
+
+def test_time_functions_pickle() -> None:
+    import pickle
+
+    for fn in (
+        Polynomial([1.0, 2.0]),
+        Spline([0, 1, 2], [0.0, 1.0, 0.5]),
+        Expression("exp(-t)*cos(t)"),
+    ):
+        fn.engine()
+        back = pickle.loads(pickle.dumps(fn))
+        np.testing.assert_allclose(back(0.3), fn(0.3), rtol=1e-14)
+        np.testing.assert_allclose(back.engine()(0.3), fn(0.3), rtol=1e-14)

@@ -20,7 +20,10 @@
 //
 // Drivers (rheonomic rows): a row with a driver subtracts g(t) = f(t) (square = 0) or
 // g = square·f(t)² (a prescribed distance: φ = |d|²/(2L) − f²/(2L)), f a TimeFunction:
-// φ −= g, A q̇ + φ_t −= ġ, γ −= g̈ (A unchanged).
+// φ −= g, A q̇ + φ_t −= ġ, γ −= g̈ (A unchanged). An angle row (a driven revolute angle θ) has
+// two products P1 = X·Y = cos θ and P2 = X2·Y2 = sin θ and φ = sin(θ − f) = c P2 − s P1
+// (c, s = cos f, sin f): A = c A2 − s A1, A q̇ + φ_t = c Ṗ2 − s Ṗ1 − ḟ S with S = s P2 + c P1,
+// γ = c γ2 − s γ1 − 2ḟ (s Ṗ2 + c Ṗ1) − f̈ S − ḟ² (c P2 − s P1).
 #pragma once
 #include <array>
 #include <string>
@@ -57,6 +60,8 @@ struct SpatialRow {
     std::vector<SpatialTerm> x, y;
     int driver = -1;      // index into SpatialDescription::drivers, −1: none
     double square = 0.0;  // 0: g = f; else g = square·f²
+    bool angle = false;   // an angle row: P1 from (x, y), P2 from (x2, y2)
+    std::vector<SpatialTerm> x2, y2;
 };
 
 struct SpatialSpring {

@@ -104,6 +104,14 @@ class PiecewisePolynomial(TimeFunction):
         object.__setattr__(self, "breaks", br)
         object.__setattr__(self, "coefs", co)
 
+    def __getstate__(self) -> dict[str, Any]:  # the engine twin is rebuilt on demand
+        return {"breaks": self.breaks, "coefs": self.coefs, "hold": self.hold}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        for k, v in state.items():
+            object.__setattr__(self, k, v)
+        object.__setattr__(self, "_engine", None)
+
     def __call__(self, t: float) -> tuple[float, float, float]:
         br, co = self.breaks, self.coefs
         tt = float(t)
@@ -234,6 +242,14 @@ class Expression(TimeFunction):
         d1 = sp.diff(e, t)
         d2 = sp.diff(d1, t)
         object.__setattr__(self, "_fns", (sp, t, (e, d1, d2)))
+
+    def __getstate__(self) -> dict[str, Any]:  # SymPy objects and the engine twin are rebuilt
+        return {"expr": self.expr if isinstance(self.expr, str) else str(self.expr)}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        object.__setattr__(self, "expr", state["expr"])
+        object.__setattr__(self, "_engine", None)
+        self.__post_init__()
 
     def __call__(self, t: float) -> tuple[float, float, float]:
         _, ts, exprs = self._fns

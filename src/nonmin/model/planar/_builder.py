@@ -270,6 +270,8 @@ class PlanarBuilder:
         prof: Profile = (
             ConstantSpeed(_finite(start, "start"), _finite(speed, "speed")) if profile is None else profile
         )
+        if not callable(prof) and isinstance(prof, int | float | str | list | tuple):
+            prof = as_time_function(prof, f"driver {name!r}")  # a constant, polynomial or expression
         if not callable(prof):
             raise InputError(f"drive_angle {name!r}: profile must be callable t -> (f, fd, fdd)")
         if not isinstance(prof, ConstantSpeed | CheckedProfile | TimeFunction):

@@ -407,6 +407,27 @@ class SpatialBuilder:
         self._ref(body)
         return self._add_driver("path_driver", name, GROUND, body, np.zeros(3), p, [], (x, y, z), 1.0, active)
 
+    def add_angle_driver(self, name: str, joint: str, motion: object, *, active: bool = True) -> SpatialBuilder:
+        """Prescribed relative angle θ(t) of a revolute or cylindrical joint (1 row): the
+        rotation of ``body_b`` relative to ``body_a`` about the joint axis, right-handed, zero at
+        the reference configuration. ``φ = sin(θ − f(t))`` (two perpendicular-vector products,
+        exact γ with the time-dependent row)."""
+        from dataclasses import replace
+
+        from .._timefn import as_time_function
+
+        j = next((x for x in self._joints if x.name == joint), None)
+        if j is None:
+            raise UnknownNameError(f"driver {name!r}: unknown joint {joint!r}; known: {[x.name for x in self._joints]}")
+        if j.kind not in ("revolute", "cylindrical"):
+            raise ModelError(f"driver {name!r}: joint {joint!r} must be revolute or cylindrical, got {j.kind}")
+        fn = as_time_function(motion, f"driver {name!r}")
+        self._add_joint("angle_driver", name, j.body_a, j.body_b, j.point, [], [], j.axis, active)
+        self._joints[-1] = replace(
+            self._joints[-1], vectors_a=j.vectors_a[1:3].copy(), vectors_b=j.vectors_b[1:2].copy(), motions=(fn,)
+        )
+        return self
+
     def add_distance_driver(
         self, name: str, body_a: str, body_b: str, *, point_a: ArrayLike, point_b: ArrayLike, motion: object,
         active: bool = True,

@@ -60,14 +60,14 @@ GROUND = "ground"
 
 JointKind = Literal[
     "spherical", "revolute", "prismatic", "cylindrical", "universal", "weld", "point_on_plane",
-    "coordinate_driver", "path_driver", "distance_driver",
+    "coordinate_driver", "path_driver", "distance_driver", "angle_driver",
 ]
 #: The joint kinds of the spatial builder.
 JOINT_KINDS: tuple[str, ...] = (
     "spherical", "revolute", "prismatic", "cylindrical", "universal", "weld", "point_on_plane"
 )
-#: Driver kinds (rheonomic): a prescribed COM coordinate, point path, distance.
-DRIVER_KINDS: tuple[str, ...] = ("coordinate_driver", "path_driver", "distance_driver")
+#: Driver kinds (rheonomic): a prescribed COM coordinate, point path, distance, joint angle.
+DRIVER_KINDS: tuple[str, ...] = ("coordinate_driver", "path_driver", "distance_driver", "angle_driver")
 _JOINT_ROWS = {
     "spherical": 3,
     "revolute": 5,
@@ -79,6 +79,7 @@ _JOINT_ROWS = {
     "coordinate_driver": 1,
     "path_driver": 3,
     "distance_driver": 1,
+    "angle_driver": 1,
 }
 
 
@@ -245,10 +246,12 @@ class _RowPlan:
     row_driver: NDArray[np.intp]  # (Rj,) index into motions, −1: none
     row_square: FloatArray  # (Rj,) 0: g = f, else g = square·f²
     motions: tuple[Any, ...]  # prescribed motions (TimeFunction) of the driver rows
+    n_main: int  # rows of the joints; angle drivers' auxiliary rows follow
+    angle_rows: tuple[tuple[int, int, int, int], ...]  # (row, aux 1, aux 2, motion index)
 
     def driver_terms(self, t: float) -> tuple[FloatArray, FloatArray, FloatArray]:
         """``(g, ġ, g̈)`` subtracted from (φ, A q̇ + φ_t, γ) of every joint row, shape (Rj,)."""
-        rj = self.row_driver.shape[0]
+        rj = self.n_main
         g = np.zeros((3, rj))
         for r in np.flatnonzero(self.row_driver >= 0):
             f, fd, fdd = (float(x) for x in self.motions[int(self.row_driver[r])](float(t)))
@@ -276,6 +279,7 @@ class _RowPlan:
         rows: list[tuple[list[tuple[int, float]], list[tuple[int, float]]]] = []
         drivers: list[tuple[int, float]] = []  # per row: (motion index or −1, square)
         motions: list[Any] = []
+        angles: list[Any] = []  # (row, motion index, aux row 1 terms, aux row 2 terms)
         for j in model.joints:
             pa = att(j.body_a, j.point_a, True)
             pb = att(j.body_b, j.point_b, True)
@@ -319,6 +323,13 @@ class _RowPlan:
                     rows.append(([(att(GROUND, ax, False), 1.0)], d))
                     drivers.append((len(motions), 0.0))
                     motions.append(j.motions[c])
+            if kind == "angle_driver":
+                # φ = sin(θ − f) = cos f·P2 − sin f·P1 with P1 = (R_a f_a)·(R_b f_b) = cos θ and
+                # P2 = (R_a g_a)·(R_b f_b) = sin θ: two auxiliary rows evaluated after the others
+                rows.append(([], []))
+                drivers.append((-1, 0.0))
+                angles.append((len(rows) - 1, len(motions), (A_(0), B_(0)), (A_(1), B_(0))))
+                motions.append(j.motions[0])
             if kind == "distance_driver":
                 half = 0.5 / j.reference
                 rows.append(([(pb, half), (pa, -half)], d))
@@ -326,6 +337,13 @@ class _RowPlan:
                 motions.append(j.motions[0])
             while len(drivers) < len(rows):
                 drivers.append((-1, 0.0))
+        n_main = len(rows)
+        angle_rows: list[tuple[int, int, int, int]] = []
+        for r_main, k_mot, aux1, aux2 in angles:
+            rows.append(aux1)
+            rows.append(aux2)
+            drivers += [(-1, 0.0), (-1, 0.0)]
+            angle_rows.append((r_main, len(rows) - 2, len(rows) - 1, k_mot))
         K = len(bodies)
         SX = np.zeros((len(rows), K))
         SY = np.zeros((len(rows), K))
@@ -364,6 +382,8 @@ class _RowPlan:
             row_driver=np.array([dv for dv, _ in drivers], dtype=np.intp).reshape(len(rows)),
             row_square=np.array([sq for _, sq in drivers], dtype=float).reshape(len(rows)),
             motions=tuple(motions),
+            n_main=n_main,
+            angle_rows=tuple(angle_rows),
         )
 
     @staticmethod
@@ -725,9 +745,11 @@ class SpatialModel(Model):
     # ------------------------------------------------------------------ constraints
     def _all_rows(
         self, q: FloatArray, qd: FloatArray, act: frozenset[str], t: float = 0.0
-    ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """φ, A, Ȧ of the active rows (declaration order), shapes (m,), (m, n), (m, n).
-        Driver rows: φ already holds ``− g(t)``; see :meth:`_driver_rates` for ġ, g̈."""
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """φ, A, Ȧ of the active rows (declaration order), shapes (m,), (m, n), (m, n), and
+        the rheonomic additions to ``A q̇`` (φ_t) and to ``Ȧ q̇`` (the rest of γ), shape (2, m).
+        Driver rows: φ holds ``− g(t)``; angle drivers' A depends on t, their Ȧ is the total
+        derivative."""
         plan = self._plan
         nb = len(self.bodies)
         n = self.n
@@ -768,11 +790,16 @@ class SpatialModel(Model):
         rj = plan.SX.shape[0]
         width = 7 * (nb + 1)
         size = rj * width
-        A_j = np.bincount(plan.term_index, Aloc.ravel(), size).reshape(rj, width)[:, :n]
-        Ad_j = np.bincount(plan.term_index, Adloc.ravel(), size).reshape(rj, width)[:, :n]
+        A_j: FloatArray = np.bincount(plan.term_index, Aloc.ravel(), size).reshape(rj, width)[:, :n]  # type: ignore[assignment]
+        Ad_j: FloatArray = np.bincount(plan.term_index, Adloc.ravel(), size).reshape(rj, width)[:, :n]  # type: ignore[assignment]
         phi_j = np.einsum("ra,ra->r", X, Y)
+        extra_j = np.zeros((2, plan.n_main))
+        if plan.angle_rows:
+            phi_j, A_j, Ad_j, extra_j = self._angle_rows(phi_j, A_j, Ad_j, qd, t)
         if plan.motions:
-            phi_j = phi_j - plan.driver_terms(t)[0]
+            g, gd, gdd = plan.driver_terms(t)
+            phi_j = phi_j - g
+            extra_j = extra_j - np.stack((gd, gdd))
         # norm rows
         A_n = np.zeros((nb, n))
         Ad_n = np.zeros((nb, n))
@@ -784,10 +811,38 @@ class SpatialModel(Model):
         phi = np.concatenate((phi_n, phi_j))
         A: FloatArray = np.vstack((A_n, A_j))
         Ad: FloatArray = np.vstack((Ad_n, Ad_j))
+        extra = np.concatenate((np.zeros((2, nb)), extra_j), axis=1)
         if len(act) == len(self._specs):
-            return phi, A, Ad
+            return phi, A, Ad, extra
         rows = plan.active_rows(self._specs, act)
-        return phi[rows], A[rows], Ad[rows]
+        return phi[rows], A[rows], Ad[rows], extra[:, rows]
+
+    def _angle_rows(
+        self, phi_j: FloatArray, A_j: FloatArray, Ad_j: FloatArray, qd: FloatArray, t: float
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """Angle-driver rows from their auxiliary rows; drops the auxiliary rows.
+
+        ``φ = c P2 − s P1`` (c, s = cos f, sin f), ``A = c A2 − s A1``, total
+        ``Ȧ = c Ȧ2 − s Ȧ1 − ḟ (s A2 + c A1)``, ``φ_t = −ḟ S`` with ``S = s P2 + c P1`` and the
+        rest of γ: ``−f̈ S − ḟ² (c P2 − s P1) − ḟ (s Ṗ2 + c Ṗ1)``.
+        """
+        plan = self._plan
+        nm = plan.n_main
+        extra = np.zeros((2, nm))  # velocity, γ additions of the main rows
+        phi_j, A_j, Ad_j = phi_j.copy(), A_j.copy(), Ad_j.copy()
+        for r, r1, r2, k in plan.angle_rows:
+            f, fd, fdd = (float(x) for x in plan.motions[k](float(t)))
+            c, s = np.cos(f), np.sin(f)
+            P1, P2 = phi_j[r1], phi_j[r2]
+            A1, A2 = A_j[r1], A_j[r2]
+            v1, v2 = float(A1 @ qd), float(A2 @ qd)
+            S = s * P2 + c * P1
+            phi_j[r] = c * P2 - s * P1
+            A_j[r] = c * A2 - s * A1
+            Ad_j[r] = c * Ad_j[r2] - s * Ad_j[r1] - fd * (s * A2 + c * A1)
+            extra[0, r] = -fd * S
+            extra[1, r] = -fdd * S - fd * fd * (c * P2 - s * P1) - fd * (s * v2 + c * v1)
+        return phi_j[:nm], A_j[:nm], Ad_j[:nm], extra
 
     def constraint_terms(
         self,
@@ -799,19 +854,9 @@ class SpatialModel(Model):
         act = self.resolve_active(active)
         qv = _as_vector(q, "q", self.n)
         v = _as_vector(qd, "qd", self.n)
-        phi, A, Ad = self._all_rows(qv, v, act, float(t))
-        gamma = Ad @ v
-        vel = A @ v
-        if self._plan.motions:  # rheonomic rows: φ_t = −ġ, γ −= g̈
-            _, gd, gdd = self._plan.driver_terms(float(t))
-            nb = len(self.bodies)
-            full_d = np.concatenate((np.zeros(nb), gd))
-            full_dd = np.concatenate((np.zeros(nb), gdd))
-            if len(act) != len(self._specs):
-                rows = self._plan.active_rows(self._specs, act)
-                full_d, full_dd = full_d[rows], full_dd[rows]
-            vel = vel - full_d
-            gamma = gamma - full_dd
+        phi, A, Ad, extra = self._all_rows(qv, v, act, float(t))
+        gamma = Ad @ v + extra[1]  # rheonomic rows: + the rest of γ
+        vel = A @ v + extra[0]  # + φ_t
         return ConstraintTerms(
             A=A, gamma=gamma, phi=phi, velocity=vel, holonomic=np.ones(phi.shape[0], dtype=bool)
         )

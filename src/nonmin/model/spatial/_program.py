@@ -61,12 +61,22 @@ def description(model: SpatialModel) -> Any:
     for i in range(nb):
         c = d.add_constraint(specs[i].name, _KIND_CODES[specs[i].kind], 1)
         d.add_norm_row(c, 0, i)
+    def terms(r: int) -> tuple[list[tuple[int, float]], list[tuple[int, float]]]:
+        xs = [(att[k], float(plan.SX[r, k])) for k in np.flatnonzero(plan.SX[r])]
+        ys = [(att[k], float(plan.SY[r, k])) for k in np.flatnonzero(plan.SY[r])]
+        return xs, ys
+
+    angle_of = {row: (r1, r2, k) for row, r1, r2, k in plan.angle_rows}
     r = 0
     for spec in specs[nb:]:
         c = d.add_constraint(spec.name, _KIND_CODES[spec.kind], spec.dim)
         for off in range(spec.dim):
-            xs = [(att[k], float(plan.SX[r, k])) for k in np.flatnonzero(plan.SX[r])]
-            ys = [(att[k], float(plan.SY[r, k])) for k in np.flatnonzero(plan.SY[r])]
+            if r in angle_of:
+                r1, r2, k = angle_of[r]
+                d.add_angle_row(c, off, *terms(r1), *terms(r2), int(d.add_driver(_engine_fn(plan.motions[k]))))
+                r += 1
+                continue
+            xs, ys = terms(r)
             d.add_dot_row(c, off, xs, ys)
             k = int(plan.row_driver[r])
             if k >= 0:
