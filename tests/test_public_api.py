@@ -10,6 +10,7 @@ EXPECTED_TOP = {
     "assemble", "check_model", "constraint_force", "control", "core", "errors",
     "forward_dynamics", "impact_map", "library", "load_trajectory", "model", "sim", "simulate",
     "analysis", "inverse_dynamics", "reactions",
+    "simulate_batch", "sweep", "sweeps",
 }
 
 EXPECTED_CORE = {
@@ -41,7 +42,8 @@ def test_core_contract_names_present():
 def test_import_does_not_pull_optional_dependencies():
     code = (
         "import sys, nonmin, nonmin.model, nonmin.sim, nonmin.control, nonmin.library;"
-        "heavy = [m for m in ('pinocchio', 'mujoco', 'sympy', 'matplotlib', 'numba', 'tqdm') if m in sys.modules];"
+        "heavy = [m for m in ('pinocchio', 'mujoco', 'sympy', 'matplotlib', 'numba', 'tqdm', 'xarray', 'zarr',"
+        "'dask', 'distributed') if m in sys.modules];"
         "print(','.join(heavy))"
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)

@@ -13,6 +13,7 @@ void register_all(nanobind::module_& m) {
     bind_spatial(m);
     bind_rbd(m);
     bind_sim(m);
+    bind_sim_batch(m);
 }
 
 }  // namespace nonmin::bindings

@@ -15,6 +15,7 @@ void bind_tape(nanobind::module_& m);     // tape.cpp: TapeProgram (SymPy models
 void bind_spatial(nanobind::module_& m);  // spatial.cpp: SpatialDescription, SpatialProgram
 void bind_rbd(nanobind::module_& m);      // rbd.cpp: TreeProgram (robots)
 void bind_sim(nanobind::module_& m);      // sim.cpp: SimLoop, SimOptions, PyProgram (needs Program)
+void bind_sim_batch(nanobind::module_& m);  // sim_batch.cpp: simulate_batch (k runs of the loop)
 void bind_batch(nanobind::module_& m);    // batch.cpp: forward_batch (model + kernel over N states)
 
 }  // namespace nonmin::bindings

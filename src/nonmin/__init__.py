@@ -15,6 +15,7 @@ analysis    inverse dynamics and reactions by name
 control     controllers in dependent coordinates (regulation, tracking, hybrid force)
 viz         plots and animations (extra ``plot``)
 io          scenario files
+sweeps      parameter sweeps: batched runs, Zarr store, Dask (extra ``sweep``)
 errors      the exception tree
 
 The most used names are re-exported here: :func:`simulate`, :class:`Trajectory`,
@@ -31,6 +32,7 @@ from . import errors as errors
 from . import library as library
 from . import model as model
 from . import sim as sim
+from . import sweeps as sweeps
 from .analysis import inverse_dynamics as inverse_dynamics
 from .analysis import reactions as reactions
 from .core import constraint_force as constraint_force
@@ -47,6 +49,8 @@ from .sim import Reset as Reset
 from .sim import Trajectory as Trajectory
 from .sim import load_trajectory as load_trajectory
 from .sim import simulate as simulate
+from .sim import simulate_batch as simulate_batch
+from .sweeps import sweep as sweep
 
 #: Package version.
 __version__ = "0.1.0"
@@ -76,4 +80,7 @@ __all__ = [
     "reactions",
     "sim",
     "simulate",
+    "simulate_batch",
+    "sweep",
+    "sweeps",
 ]

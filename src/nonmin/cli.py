@@ -213,6 +213,11 @@ def _model_for_result(traj: Any, spec: str | None, allow_code: bool, verb: str) 
 def cmd_plot(args: argparse.Namespace) -> int:
     from .viz import plot_trajectory, save_figure
 
+    if (Path(args.result) / "zarr.json").is_file():  # a sweep store: a metric over its keys
+        from .sweeps._cli import cmd_plot_sweep
+
+        return cmd_plot_sweep(args)
+
     traj = _load_result(args.result)
     model = None if args.model is None else _model_for_result(traj, args.model, args.allow_code, "plot")
     out = Path(args.output or Path(args.result).with_suffix(".png"))
@@ -368,9 +373,11 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--report", default=None, help="also write a Markdown report to this file")
     sp.set_defaults(func=cmd_validate)
 
-    sp = sub.add_parser("plot", help="plot a saved trajectory")
-    sp.add_argument("result", help="trajectory file (.npz) written by run/demo")
+    sp = sub.add_parser("plot", help="plot a saved trajectory, or a metric of a sweep over its keys")
+    sp.add_argument("result", help="trajectory file (.npz) written by run/demo, or a sweep store (.zarr)")
     sp.add_argument("-o", "--output", default=None, help="image file (default RESULT.png)")
+    sp.add_argument("--metric", default=None, help="sweep: per-run metric (default energy_drift)")
+    sp.add_argument("--keys", default=None, help="sweep: one or two swept keys, comma-separated")
     model_flag(sp, required=False)
     sp.set_defaults(func=cmd_plot)
 
@@ -381,6 +388,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--speed", type=_SPEED, default=1.0, help="playback speed factor")
     model_flag(sp, required=True)
     sp.set_defaults(func=cmd_animate)
+
+    from .sweeps._cli import add_sweep_parser
+
+    add_sweep_parser(sub, allow_code_flag, progress_flags)
 
     sp = sub.add_parser("list", help="list models, integrators, stabilizers and controllers")
     sp.set_defaults(func=cmd_list)

@@ -14,6 +14,8 @@ passes them with the simulator's adaptive rank tolerance :data:`ADAPTIVE_RANK_RT
 change point.
 """
 
+from ._batch import BatchTrajectory as BatchTrajectory
+from ._batch import simulate_batch as simulate_batch
 from ._events import Activate as Activate
 from ._events import Deactivate as Deactivate
 from ._events import Event as Event
@@ -45,6 +47,7 @@ __all__ = [
     "RK4",
     "STABILIZATIONS",
     "Activate",
+    "BatchTrajectory",
     "Baumgarte",
     "Deactivate",
     "DormandPrince5",
@@ -62,4 +65,5 @@ __all__ = [
     "Trajectory",
     "load_trajectory",
     "simulate",
+    "simulate_batch",
 ]
