@@ -357,3 +357,61 @@ def test_reaction_plot() -> None:
     import matplotlib.pyplot as plt
 
     plt.close(fig)
+
+
+@pytest.mark.parametrize("closure", ["point", "planar_point", "hinge", "weld", "planar_weld"])
+def test_robot_frame_wrenches_rebuild_the_generalized_force(closure) -> None:
+    """For every frame-constraint type, the reported wrenches on frames a and b, mapped back
+    with Pinocchio's LOCAL frame Jacobians (J_aᵀ w_a + J_bᵀ w_b, then Tᵀ), give the
+    constraint's own part A_Iᵀλ_I of f_c."""
+    pin = pytest.importorskip("pinocchio")
+    from nonmin.model.robots._examples import fourbar
+
+    robot, state = fourbar(closure)
+    q = state.q
+    rng = np.random.default_rng(9)
+    A = robot.constraint_jacobian(0.0, q)
+    _, s, Vt = np.linalg.svd(A)
+    r = int(np.sum(s > 1e-10 * s[0]))
+    qd = Vt[r:].T @ rng.normal(size=robot.n - r)
+    sol = robot.forward_dynamics(q, qd, f=robot.input_matrix(q) @ [0.8])
+    rc = nonmin.reactions(robot, q, sol.f_c)["closure"]
+    pm = robot.pinocchio_model
+    data = pm.createData()
+    qn = robot.pinocchio_configuration(q)
+    pin.computeJointJacobians(pm, data, qn)
+    pin.framesForwardKinematics(pm, data, qn)
+    fv = np.zeros(pm.nv)
+    for side in "ab":
+        fid = robot.frame_id(f"closure:{side}")
+        J = pin.getFrameJacobian(pm, data, fid, pin.ReferenceFrame.LOCAL)
+        w = np.concatenate([getattr(rc, f"force_{side}"), getattr(rc, f"torque_{side}")])
+        fv += J.T @ w
+    T = robot.velocity_map(q)
+    np.testing.assert_allclose(
+        T.T @ fv, rc.generalized, atol=1e-9 * max(1.0, np.abs(rc.generalized).max())
+    )
+
+
+def test_robot_contact_wrench_rebuilds_the_generalized_force() -> None:
+    pin = pytest.importorskip("pinocchio")
+    from nonmin.model.robots._examples import serial_arm
+
+    robot, state = serial_arm()
+    q = state.q
+    act = {"ee_contact"}
+    sol = robot.forward_dynamics(q, np.zeros(robot.n), active=act)
+    rc = nonmin.reactions(robot, q, sol.f_c, active=act)["ee_contact"]
+    assert rc.kind == "frame" and rc.multipliers[0] > 0  # the ground pushes the arm up
+    pm = robot.pinocchio_model
+    data = pm.createData()
+    qn = robot.pinocchio_configuration(q)
+    pin.computeJointJacobians(pm, data, qn)
+    pin.framesForwardKinematics(pm, data, qn)
+    fv = np.zeros(pm.nv)
+    for side in "ab":
+        J = pin.getFrameJacobian(
+            pm, data, robot.frame_id(f"ee_contact:{side}"), pin.ReferenceFrame.LOCAL
+        )
+        fv += J.T @ np.concatenate([getattr(rc, f"force_{side}"), getattr(rc, f"torque_{side}")])
+    np.testing.assert_allclose(robot.velocity_map(q).T @ fv, rc.generalized, atol=1e-9)
