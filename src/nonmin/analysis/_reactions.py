@@ -28,8 +28,10 @@ wrench on a body is read from the constraint's own part ``A_Iᵀ λ_I`` of f_c:
   common rigid motion of the two bodies, so the two wrenches balance).
 
 Constraints of other models (functions, SymPy) and constraints that act on joint coordinates
-(robot couplings, joint limits, quaternion norms) are reported as multipliers and generalized
-forces only (``force_a`` etc. empty).
+(robot couplings, joint limits, joint drivers, quaternion norms) are reported as multipliers and
+generalized forces only (``force_a`` etc. empty): for a joint driver or limit (``A = ±eᵢᵀ``) the
+multiplier is the joint torque (force). A planar gear with a moving carrier reports the wrenches
+on its two gears (the carrier's share is in ``generalized``).
 """
 
 from __future__ import annotations
@@ -342,12 +344,12 @@ def _one(
     m = A.shape[0]
     rows = model.row_slices(act)
     if m:
+        # rank by the rank policy (equilibrated A); (Aᵀ)⁺ = U_r Σ_r⁻¹ V_rᵀ of A truncated to it,
+        # as nonmin.core.pseudo_inverse
         rank = int(range_basis(A, tol).rank)
-        U, _, _ = np.linalg.svd(A, full_matrices=True)
+        U, s, Vt = np.linalg.svd(A, full_matrices=True)
         U0 = U[:, rank:]  # orthonormal basis of N(Aᵀ): the undetermined directions of λ
-        from ..core.linalg import pseudo_inverse
-
-        lam = pseudo_inverse(A, tol).T @ f_c
+        lam = U[:, :rank] @ ((Vt[:rank] @ f_c) / s[:rank])
     else:
         U0 = np.zeros((0, 0))
         lam = np.zeros(0)
