@@ -159,3 +159,15 @@ def test_random_samples_cli_seed(scenario: Path, tmp_path: Path):
     np.testing.assert_array_equal(va, open_sweep(b)["model.params.omega0"].values)
     assert va.shape == (3,) and np.all((va >= 6.5) & (va < 8.0))
     assert math.isfinite(float(open_sweep(a)["energy_drift"].values[0]))
+
+
+@pytest.mark.slow  # a subprocess importing nonmin and matplotlib: 28 s under load 20
+def test_the_basins_script_runs(tmp_path: Path):
+    pytest.importorskip("matplotlib")
+    script = Path(__file__).resolve().parents[2] / "docs" / "make_basins.py"
+    out = tmp_path / "b.png"
+    res = subprocess.run([sys.executable, str(script), "--n", "3", "--t", "0.05", "--out", str(out)],
+                         capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    assert "9 runs" in res.stdout and " 0 failed" in res.stdout
+    assert out.stat().st_size > 1000
