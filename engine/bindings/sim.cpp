@@ -288,7 +288,8 @@ void bind_sim(nb::module_& m) {
         .def_rw("spd_rtol", &sim::Options::spd_rtol)
         .def_rw("sym_rtol", &sim::Options::sym_rtol)
         .def_rw("t1", &sim::Options::t1)
-        .def_rw("max_steps", &sim::Options::max_steps);
+        .def_rw("max_steps", &sim::Options::max_steps)
+        .def_rw("passages", &sim::Options::passages);
 
     nb::class_<sim::Regulator>(m, "SimRegulator",
                                "nonmin.control.Regulator (σ = 0) compiled for one active set of the loop.")

@@ -1,49 +1,31 @@
 // The engine's simulation loop (see nonmin/sim/loop.hpp): evaluation and gathering of the
 // active rows, the drift-aware rank tolerance, the right-hand side, the sample evaluation with
-// its diagnostics, the mass-metric projection, the three integrators and the stepping driver.
+// its diagnostics, the mass-metric projection and the stepping driver (the integrators are in
+// sim_integrators.cpp, declared in sim_detail.hpp).
 // Each function names the Python function it mirrors; the order of the decisions is theirs.
 #include "nonmin/sim/loop.hpp"
 #include "nonmin/linalg.hpp"
+#include "sim_detail.hpp"
 
 #include <algorithm>
 #include <cmath>
 
 namespace nonmin::sim {
 
+using detail::adaptive;
+using detail::clip;
+using detail::dp_dense;
+using detail::dp_step;
+using detail::fixed_advance;
+
 namespace {
 
 constexpr double inf = std::numeric_limits<double>::infinity();
-
-// Dormand–Prince 5(4) (Hairer, Nørsett & Wanner, Solving ODEs I, Table II.5.2), as
-// _integrators.py: _DP_C, _DP_A, _DP_B, _DP_E = _DP_B − _DP_BHAT, _DP_D (dense output).
-constexpr double DP_C[7] = {0.0, 1.0 / 5, 3.0 / 10, 4.0 / 5, 8.0 / 9, 1.0, 1.0};
-constexpr double DP_A[7][6] = {
-    {0, 0, 0, 0, 0, 0},
-    {1.0 / 5, 0, 0, 0, 0, 0},
-    {3.0 / 40, 9.0 / 40, 0, 0, 0, 0},
-    {44.0 / 45, -56.0 / 15, 32.0 / 9, 0, 0, 0},
-    {19372.0 / 6561, -25360.0 / 2187, 64448.0 / 6561, -212.0 / 729, 0, 0},
-    {9017.0 / 3168, -355.0 / 33, 46732.0 / 5247, 49.0 / 176, -5103.0 / 18656, 0},
-    {35.0 / 384, 0.0, 500.0 / 1113, 125.0 / 192, -2187.0 / 6784, 11.0 / 84},
-};
-constexpr double DP_B[7] = {35.0 / 384, 0.0, 500.0 / 1113, 125.0 / 192, -2187.0 / 6784, 11.0 / 84, 0.0};
-constexpr double DP_BHAT[7] = {5179.0 / 57600, 0.0,          7571.0 / 16695, 393.0 / 640,
-                               -92097.0 / 339200, 187.0 / 2100, 1.0 / 40};
-constexpr double DP_D[7] = {-12715105075.0 / 11282082432, 0.0, 87487479700.0 / 32700410799,
-                            -10690763975.0 / 1880347072, 701980252875.0 / 199316789632,
-                            -1453857185.0 / 822651844,  69997945.0 / 29380423};
 
 bool finite(const double* x, int len) {
     for (int i = 0; i < len; ++i)
         if (!std::isfinite(x[i])) return false;
     return true;
-}
-
-// _integrators._clip
-double clip(double t, double h, double t_bound) {
-    const double rem = t_bound - t;
-    if (h >= rem || rem - h <= 1e-9 * h) return rem;
-    return h;
 }
 
 double base_rtol(const Options& o) { return o.rank_rtol > 0.0 ? o.rank_rtol : DEFAULT_RTOL; }
@@ -129,6 +111,7 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
     L.rec.n = n;
     L.rec.k = L.k;
     L.rec.c = L.c;
+    passage_setup(L);
     if (ctrl) ctrl->attach(L.T, L.Ac, L.m, L.rows);
     return Lp;
 }
@@ -395,223 +378,13 @@ Status stab_project(Loop& L, double t, double* y) {
     return project(L, t, y, L.opt.projection);
 }
 
-// ------------------------------------------------------------------------------ integrators
-
-// RK4.advance: y(t + h) from (t, y) with k1 = f when given
-Status rk4_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out) {
-    const int n2 = 2 * L.n;
-    Status s;
-    if (f) {
-        L.k1 = *f;
-    } else if ((s = rhs(L, t, y.data(), L.k1.data())) != Status::ok) {
-        return s;
-    }
-    const double hh = 0.5 * h;
-    for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k1[i];
-    if ((s = rhs(L, t + 0.5 * h, L.ys.data(), L.k2.data())) != Status::ok) return s;
-    for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k2[i];
-    if ((s = rhs(L, t + 0.5 * h, L.ys.data(), L.k3.data())) != Status::ok) return s;
-    for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + h * L.k3[i];
-    if ((s = rhs(L, t + h, L.ys.data(), L.k4.data())) != Status::ok) return s;
-    const double h6 = h / 6.0;
-    for (int i = 0; i < n2; ++i) out[i] = y[i] + h6 * (((L.k1[i] + 2.0 * L.k2[i]) + 2.0 * L.k3[i]) + L.k4[i]);
-    return Status::ok;
-}
-
-// ImplicitMidpoint._solve: fixed-point iteration; returns false when it does not converge
-// (Python: None). Errors of the right-hand side inside the iteration count as divergence,
-// those of the first two evaluations are returned (they are outside the try in Python).
-Status midpoint_solve(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out, bool& ok) {
-    const int n2 = 2 * L.n;
-    ok = false;
-    Status s;
-    if (f) {
-        L.f0 = *f;
-    } else if ((s = rhs(L, t, y.data(), L.f0.data())) != Status::ok) {
-        return s;
-    }
-    const double tm = t + 0.5 * h;
-    const double hh = 0.5 * h;
-    for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.f0[i];
-    if ((s = rhs(L, tm, L.ys.data(), L.k1.data())) != Status::ok) return s;  // explicit predictor
-    double scale = 0.0;
-    for (int i = 0; i < n2; ++i) scale = std::max(scale, std::abs(y[i]));
-    scale += 1.0;
-    double prev = inf;
-    for (int it = 0; it < L.opt.max_iter; ++it) {
-        for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k1[i];
-        s = rhs(L, tm, L.ys.data(), L.kn.data());
-        if (s == Status::callback_error) return s;
-        if (s != Status::ok) return Status::ok;  // left the model's domain: not converged
-        double delta = 0.0;
-        for (int i = 0; i < n2; ++i) delta = std::max(delta, std::abs(L.kn[i] - L.k1[i]));
-        delta *= std::abs(h);
-        if (!std::isfinite(delta) || (it >= 3 && delta > prev)) return Status::ok;  // diverging
-        L.k1 = L.kn;
-        if (delta <= L.opt.xtol * scale) {
-            for (int i = 0; i < n2; ++i) out[i] = y[i] + h * L.k1[i];
-            ok = true;
-            return Status::ok;
-        }
-        prev = delta;
-    }
-    return Status::ok;
-}
-
-// ImplicitMidpoint._advance: halve the step recursively where the iteration fails
-Status midpoint_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, int depth, Vec& out) {
-    bool ok = false;
-    Status s = midpoint_solve(L, t, y, f, h, out, ok);
-    if (s != Status::ok) return s;
-    if (ok) return Status::ok;
-    if (depth <= 0) {
-        L.message = "implicit midpoint: fixed-point iteration did not converge";
-        return Status::not_finite;
-    }
-    Vec& ym = L.half[static_cast<std::size_t>(depth)];
-    if ((s = midpoint_advance(L, t, y, f, 0.5 * h, depth - 1, ym)) != Status::ok) return s;
-    return midpoint_advance(L, t + 0.5 * h, ym, nullptr, 0.5 * h, depth - 1, out);
-}
-
-// DormandPrince5._stages into L.K (K[0] = f0 given)
-Status dp_stages(Loop& L, double t, const Vec& y, double h) {
-    const int n2 = 2 * L.n;
-    for (int s = 1; s < 7; ++s) {
-        for (int i = 0; i < n2; ++i) {
-            double acc = 0.0;
-            for (int j = 0; j < s; ++j) acc += DP_A[s][j] * L.K(j, i);
-            L.ys[i] = y[i] + h * acc;
-        }
-        const Status st = rhs(L, t + DP_C[s] * h, L.ys.data(), L.tmp2n.data());
-        if (st != Status::ok) return st;
-        L.K.row(s) = L.tmp2n.transpose();
-    }
-    return Status::ok;
-}
-
-double rms(const Vec& x, const Vec& scale, int n2) {
-    double s = 0.0;
-    for (int i = 0; i < n2; ++i) {
-        const double r = x[i] / scale[i];
-        s += r * r;
-    }
-    return std::sqrt(s / n2);
-}
-
-// DormandPrince5.initial_step (Hairer's heuristic)
-Status dp_initial_step(Loop& L, double t0, const Vec& y0, const Vec& f0, double t_bound, double& h_out) {
-    const int n2 = 2 * L.n;
-    for (int i = 0; i < n2; ++i) L.ev[i] = L.opt.atol + L.opt.rtol * std::abs(y0[i]);
-    const double d0 = rms(y0, L.ev, n2);
-    const double d1 = rms(f0, L.ev, n2);
-    double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
-    h0 = std::min(h0, std::abs(t_bound - t0));
-    for (int i = 0; i < n2; ++i) L.ys[i] = y0[i] + h0 * f0[i];
-    const Status s = rhs(L, t0 + h0, L.ys.data(), L.tmp2n.data());
-    if (s != Status::ok) return s;
-    for (int i = 0; i < n2; ++i) L.kn[i] = L.tmp2n[i] - f0[i];
-    const double d2 = rms(L.kn, L.ev, n2) / h0;
-    const double dm = std::max(d1, d2);
-    const double h1 = dm <= 1e-15 ? std::max(1e-6, h0 * 1e-3) : std::pow(0.01 / dm, 1.0 / 5);
-    h_out = std::min(std::min(100 * h0, h1), L.opt.h_max);
-    return Status::ok;
-}
-
-// The continuous extension of the accepted DOPRI5 step (_dp_dense): y0 = L.y0, y1 raw = L.y1.
-void dp_dense_setup(Loop& L, double h) {
-    const int n2 = 2 * L.n;
-    for (int i = 0; i < n2; ++i) {
-        L.d_ydiff[i] = L.y1[i] - L.y0[i];
-        L.d_bspl[i] = h * L.K(0, i) - L.d_ydiff[i];
-        L.d_r3[i] = L.d_ydiff[i] - h * L.K(6, i) - L.d_bspl[i];
-        double acc = 0.0;
-        for (int j = 0; j < 7; ++j) acc += DP_D[j] * L.K(j, i);
-        L.d_r4[i] = h * acc;
-    }
-}
-
-void dp_dense(const Loop& L, double t0, double h, double tt, double* out) {
-    const int n2 = 2 * L.n;
-    const double s = (tt - t0) / h;
-    const double s1 = 1.0 - s;
-    for (int i = 0; i < n2; ++i)
-        out[i] = L.y0[i] + s * (L.d_ydiff[i] + s1 * (L.d_bspl[i] + s * (L.d_r3[i] + s1 * L.d_r4[i])));
-}
-
-// DormandPrince5.step with the error measured on projected solutions (the driver's project_y
-// when the stabilization is the projection): the accepted projected end is kept in L.yq1.
-// Returns the accepted step size in h_acc, the new time in t_new.
-Status dp_step(Loop& L, double& h_acc, double& t_new) {
-    const int n2 = 2 * L.n;
-    const double t = L.t;
-    const double t_bound = L.opt.t1;
-    Status s;
-    if (!L.have_f) {
-        if ((s = rhs(L, t, L.y.data(), L.f.data())) != Status::ok) return s;
-        L.have_f = true;
-    }
-    double h = L.h;
-    if (!std::isfinite(h) || h <= 0) {
-        if ((s = dp_initial_step(L, t, L.y, L.f, t_bound, h)) != Status::ok) return s;
-    }
-    h = std::min(h, L.opt.h_max);
-    long long rejected = 0;
-    const double h_min = L.opt.h_min_factor * std::max(1.0, std::abs(t));
-    const bool proj = L.opt.stab == Stabilization::projection;
-    while (true) {
-        h = clip(t, h, t_bound);
-        if (h < h_min) {
-            L.message = "dopri5: step size underflow";
-            return Status::not_finite;
-        }
-        L.K.row(0) = L.f.transpose();
-        if ((s = dp_stages(L, t, L.y, h)) != Status::ok) return s;
-        for (int i = 0; i < n2; ++i) {
-            double b = 0.0, e = 0.0;
-            for (int j = 0; j < 7; ++j) {
-                b += DP_B[j] * L.K(j, i);
-                e += (DP_B[j] - DP_BHAT[j]) * L.K(j, i);
-            }
-            L.y1[i] = L.y[i] + h * b;
-            L.ev[i] = h * e;
-        }
-        L.yq1 = L.y1;
-        if (proj) {  // err = project(t + h, y1) − project(t + h, y1 − err)
-            if ((s = project(L, t + h, L.yq1.data(), L.opt.projection)) != Status::ok) return s;
-            for (int i = 0; i < n2; ++i) L.yp[i] = L.y1[i] - L.ev[i];
-            if ((s = project(L, t + h, L.yp.data(), L.opt.projection)) != Status::ok) return s;
-            for (int i = 0; i < n2; ++i) L.ev[i] = L.yq1[i] - L.yp[i];
-        }
-        for (int i = 0; i < n2; ++i)
-            L.tmp2n[i] = L.opt.atol + L.opt.rtol * std::max(std::abs(L.y[i]), std::abs(L.y1[i]));
-        const double err = rms(L.ev, L.tmp2n, n2);
-        if (!std::isfinite(err)) {
-            ++rejected;
-            h *= 0.2;
-            continue;
-        }
-        if (err <= 1.0) {
-            double fac = err == 0.0 ? 5.0 : std::min(5.0, std::max(0.2, 0.9 * std::pow(err, -0.2)));
-            if (rejected) fac = std::min(fac, 1.0);
-            t_new = (h == t_bound - t) ? t_bound : t + h;
-            h_acc = h;
-            L.y0 = L.y;
-            dp_dense_setup(L, h);
-            L.h = std::min(h * fac, L.opt.h_max);
-            L.n_rejected += rejected;
-            return Status::ok;
-        }
-        ++rejected;
-        h *= std::max(0.2, 0.9 * std::pow(err, -0.2));
-    }
-}
-
-bool adaptive(const Loop& L) { return L.opt.method == Method::dopri5; }
-
-// A raw step of size h of the fixed-step method from (t, y) (f: F(t, y) when known)
-Status fixed_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out) {
-    if (L.opt.method == Method::rk4) return rk4_advance(L, t, y, f, h, out);
-    return midpoint_advance(L, t, y, f, h, L.opt.max_halvings, out);
+// Stabilization.project_sample: a sample from a continuous extension, the velocity step's rank
+// tolerance raised to SAMPLE_VELOCITY_RTOL (_stabilization.py)
+Status stab_project_sample(Loop& L, double t, double* y) {
+    if (L.opt.stab != Stabilization::projection) return Status::ok;
+    ProjectionOptions po = L.opt.projection;
+    po.velocity_rtol = std::max(velocity_rtol(L.opt, po), SAMPLE_VELOCITY_RTOL);
+    return project(L, t, y, po);
 }
 
 Outcome fail(Loop& L, Status s) {
@@ -621,29 +394,6 @@ Outcome fail(Loop& L, Status s) {
 }
 
 }  // namespace
-
-void hermite_quintic(int n, const double* y0, const double* f0, const double* y1, const double* f1,
-                     double h, double s, double* out) {
-    const double t = s / h;
-    const double t2 = t * t, t3 = t2 * t, t4 = t3 * t, t5 = t4 * t;
-    const double b1 = 10.0 * t3 - 15.0 * t4 + 6.0 * t5;
-    const double b2 = t - 6.0 * t3 + 8.0 * t4 - 3.0 * t5;
-    const double b3 = -4.0 * t3 + 7.0 * t4 - 3.0 * t5;
-    const double b4 = 0.5 * (t2 - 3.0 * t3 + 3.0 * t4 - t5);
-    const double b5 = 0.5 * (t3 - 2.0 * t4 + t5);
-    const double d1 = 30.0 * t2 - 60.0 * t3 + 30.0 * t4;
-    const double d2 = 1.0 - 18.0 * t2 + 32.0 * t3 - 15.0 * t4;
-    const double d3 = -12.0 * t2 + 28.0 * t3 - 15.0 * t4;
-    const double d4 = t - 4.5 * t2 + 6.0 * t3 - 2.5 * t4;
-    const double d5 = 1.5 * t2 - 4.0 * t3 + 2.5 * t4;
-    const double hh = h * h;
-    for (int i = 0; i < n; ++i) {
-        const double dq = y1[i] - y0[i];
-        const double v0 = f0[i], v1 = f1[i], a0 = f0[n + i], a1 = f1[n + i];
-        out[i] = y0[i] + dq * b1 + h * (v0 * b2 + v1 * b3) + hh * (a0 * b4 + a1 * b5);
-        out[n + i] = (dq / h) * d1 + (v0 * d2 + v1 * d3) + h * (a0 * d4 + a1 * d5);
-    }
-}
 
 // ------------------------------------------------------------------------------ guards
 
@@ -748,6 +498,8 @@ Outcome start(Loop& L, double t0, const double* q0, const double* qd0) {
     const bool rec0 = L.every || (!L.t_out.empty() && L.t_out[0] == t0);
     if ((s = point(L, t0, L.y.data(), L.y.data() + n, L.p1, rec0)) != Status::ok) return fail(L, s);
     if (rec0) record(L, L.p1, t0);
+    passage_reset(L);
+    if (L.opt.passages) passage_observe(L, t0, L.Ac, L.m);  // A at the first point
     L.out_i = static_cast<std::size_t>(std::upper_bound(L.t_out.begin(), L.t_out.end(), t0) - L.t_out.begin());
     L.have_f = false;
     L.h = adaptive(L) ? L.opt.h0 : L.opt.dt;
@@ -763,6 +515,7 @@ void resume(Loop& L, double t, const double* y, double h, long long n_steps, std
     L.n_steps = n_steps;
     L.out_i = out_i;
     L.message.clear();
+    passage_reset(L);  // a state reached elsewhere: the history starts afresh
 }
 
 Outcome run(Loop& L, long long max_steps) {
@@ -801,7 +554,7 @@ Outcome run(Loop& L, long long max_steps) {
                 if ((s = stab_project(L, t_new, L.yq1.data())) != Status::ok) return fail(L, s);
             }
         } else {
-            h = clip(L.t, L.opt.dt, t1);
+            h = clip(L.t, passage_place(L, L.t, L.opt.dt), t1);
             L.y0 = L.y;
             if ((s = fixed_advance(L, L.t, L.y, f_start ? &L.f : nullptr, h, L.y1)) != Status::ok)
                 return fail(L, s);
@@ -821,6 +574,11 @@ Outcome run(Loop& L, long long max_steps) {
                 return fail(L, s);
             have_p1 = true;
         }
+        if (L.opt.passages && L.any_active) {  // the indicator at the projected step end
+            if (!have_p1 && (adapt || L.opt.stab != Stabilization::projection) &&
+                (s = evaluate(L, t_new, L.yq1.data(), L.yq1.data() + n, NEED_A)) != Status::ok)
+                return fail(L, s);
+        }
         if (watching) {  // the guards at the step end, against their values at its start
             bool fired = false;
             if (!L.guards.empty() &&
@@ -836,6 +594,7 @@ Outcome run(Loop& L, long long max_steps) {
             }
             for (std::size_t i = 0; i < L.guards.size(); ++i) L.guards[i].g = L.guard_new[i];
         }
+        if (L.opt.passages && L.any_active) passage_observe(L, t_new, L.Ac, L.m);  // (L.Ac: A at yq1)
         if (inside) {  // the Hermite interpolant's end slope: F at the projected step end
             for (int i = 0; i < n; ++i) {
                 L.fp1[i] = L.yq1[n + i];
@@ -870,7 +629,9 @@ Outcome run(Loop& L, long long max_steps) {
                         return fail(L, s);
                     }
                 }
-                if ((s = stab_project(L, tt, L.yp.data())) != Status::ok) return fail(L, s);
+                if ((s = (adapt || (f_start && have_p1)) ? stab_project_sample(L, tt, L.yp.data())
+                                                          : stab_project(L, tt, L.yp.data())) != Status::ok)
+                    return fail(L, s);
                 if ((s = point(L, tt, L.yp.data(), L.yp.data() + n, L.ps, true)) != Status::ok) return fail(L, s);
                 record(L, L.ps, L.t_out[j]);
             }

@@ -303,6 +303,7 @@ def options(
     o.sym_rtol = float(SYMMETRY_RTOL)
     o.t1 = float(t1)
     o.max_steps = int(max_steps)
+    o.passages = bool(getattr(integ, "passages", True))
     return o
 
 

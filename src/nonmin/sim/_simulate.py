@@ -63,7 +63,7 @@ from ..errors import (
 from ..model import ConstraintTerms, Model, State
 from . import _durable, _engine, _fastpath
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
-from ._integrators import METHODS, Integrator, StepperState, hermite_quintic
+from ._integrators import METHODS, Integrator, SingularPassages, StepperState, hermite_quintic
 from ._progress import Progress
 from ._stabilization import Projection, Stabilization, resolve_stabilization
 from ._trajectory import Status, Trajectory
@@ -738,6 +738,7 @@ def simulate(
         "engine": "compiled" if prog is not None else ("engine" if use_engine else "python"),
     }
     rec = _Recorder(model)
+    passages = SingularPassages(integ.passage_fractions) if getattr(integ, "passages", False) else None
     records: list[EventRecord] = []
     status = Status.SUCCESS
     message = "reached the end of t_span"
@@ -816,6 +817,8 @@ def simulate(
             watches = _watches(events, system.active, unilateral)
             gvals = [_guard_value(system, w, p) for w in watches]
             state = integ.init(system.rhs, t, np.concatenate((q, qd)), h_init)
+            if passages is not None:
+                passages.observe(t, p.A)
             engine_on = use_engine
         project_y = None
         if isinstance(stab, Projection) and integ.adaptive:
@@ -876,6 +879,8 @@ def simulate(
                     meta["engine"] = f"engine, then python from t = {t:.12g}"
                 if t >= t1:
                     break
+                if passages is not None:  # the history is the engine's: start afresh here
+                    passages.reset()
                 # er.event: the general driver takes this step (locates, applies the transition)
             if n_steps >= max_steps:
                 raise SimulationError(f"max_steps = {max_steps} reached at t = {t:.12g}")
@@ -884,7 +889,8 @@ def simulate(
                 # step need it for the continuous extension
                 state = state._replace(f=system.rhs(state.t, state.y))
             y_start, f_start, t_start = state.y, state.f, state.t
-            res = integ.step(system.rhs, state, t1, project_y)
+            res = integ.step(system.rhs, state, t1, project_y, passages.place) if passages is not None \
+                else integ.step(system.rhs, state, t1, project_y)  # fmt: skip
             n_rejected += res.n_rejected
             n_steps += 1
             h = res.h
@@ -924,7 +930,7 @@ def simulate(
                 if _d is None:
                     return at(s)
                 yy = _d(_t + s)
-                qq, vv = stab.project(model, _t + s, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
+                qq, vv = stab.project_sample(model, _t + s, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
                 return system.point(_t + s, qq, vv)
 
             new_g = [_guard_value(system, w, p1) for w in watches] if p1 is not None else []
@@ -1023,6 +1029,9 @@ def simulate(
                                                        qdn, system.cstate, active=system.active)
                 watches = _watches(events, system.active, unilateral)
                 gvals = [_guard_value(system, w2, p) for w2 in watches]
+                if passages is not None:
+                    passages.reset()
+                    passages.observe(te, p.A)
                 h_next = state.h if not integ.adaptive else res.state.h
                 if h_cap > 0 and integ.adaptive:
                     h_next = min(h_next, h_cap)
@@ -1042,6 +1051,9 @@ def simulate(
                 rec.add(p1, system.active)
             t = t_new
             gvals = new_g
+            if passages is not None:
+                passages.observe(t, p1.A if p1 is not None else
+                                 model.constraint_terms(t, q1, qd1, system.active).A)  # fmt: skip
             changed = not (np.array_equal(q1, res.state.y[:n]) and np.array_equal(qd1, res.state.y[n:]))
             f_next = None if changed else res.state.f
             if f_next is None and p1 is not None and controller is None:

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include <Eigen/Core>
+#include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 
 #include "../program.hpp"
@@ -40,6 +41,7 @@ constexpr double POSITION_CUT_RTOL = 1e-2;
 constexpr double SINGULAR_CUT_RTOL = 1e-4;
 constexpr double ROUNDOFF_RESIDUAL_RATIO = 1e3;
 constexpr double CHORD_RATE = 0.1;
+constexpr double SAMPLE_VELOCITY_RTOL = SINGULAR_CUT_RTOL;
 constexpr double DRIFT_RTOL_CAP = 1e-2;                  // drift_rank_rtol's upper bound
 
 enum class Method : int { rk4 = 0, dopri5 = 1, midpoint = 2 };
@@ -80,6 +82,25 @@ struct Options {
     // run
     double t1 = 1.0;
     long long max_steps = 10000000;
+    bool passages = true;  // singularity-aware step placement (the integrator's `passages`)
+};
+
+// Singularity-aware step placement (nonmin.sim._integrators.SingularPassages): the indicator
+// σ_min(DA) at the last projected step ends, the predicted singular instant, and the scratch of
+// the indicator (sim_integrators.cpp: singular_indicator, passage_observe, passage_place).
+struct Passages {
+    double frac[3] = {0.25, 0.75, 0.0};  // the method's passage fractions (sorted)
+    int n_frac = 2;
+    double ts[3] = {0, 0, 0}, ss[3] = {0, 0, 0};  // history, oldest first
+    int count = 0;
+    bool have_star = false;
+    double t_star = 0.0;
+    // indicator scratch, sized from m_all and n at make_loop
+    Mat B, G, C;                 // equilibrated live rows (k × n), Gram (k × k), its Cholesky
+    Vec x, y, v, w;              // iteration vectors (k); v: the vector kept between calls
+    int v_len = -1;              // length of v (−1: none kept)
+    Eigen::SelfAdjointEigenSolver<Mat> eig;  // up to PASSAGE_DENSE_ROWS live rows
+    std::vector<int> live, order, first, col_ptr, col_rows;
 };
 
 // A controller evaluated by the loop: u(t, q, qd) at every evaluation of the dynamics, and
@@ -211,6 +232,7 @@ struct Loop {
     Eigen::JacobiSVD<Mat> svd_a;
 
     Samples rec;
+    Passages pas;
 
     explicit Loop(int m_max, int n_) : solver(m_max, n_) {}
 };
@@ -240,6 +262,19 @@ double drift_rank_rtol(Loop& L);
 Status rhs(Loop& L, double t, const double* y, double* out);
 Status point(Loop& L, double t, const double* q, const double* qd, Point& p, bool diagnostics);
 Status project(Loop& L, double t, double* y, const ProjectionOptions& po);
+
+// _integrators.singular_indicator over the first m rows of A (m × n, row stride n): the estimate
+// of σ_min(DA) (0 when the Gram matrix is not positive definite, +inf when m = 0); the warm-start
+// vector is kept in L.pas.
+double singular_indicator(Loop& L, const Mat& A, int m);
+
+// Size the scratch of the indicator and set the method's fractions (make_loop).
+void passage_setup(Loop& L);
+
+// SingularPassages.observe / reset / place.
+void passage_observe(Loop& L, double t, const Mat& A, int m);
+void passage_reset(Loop& L);
+double passage_place(const Loop& L, double t, double h);
 
 // hermite_quintic of _integrators.py into out (2n): y(t0 + s) from both ends of a step.
 void hermite_quintic(int n, const double* y0, const double* f0, const double* y1, const double* f1,

@@ -1,0 +1,24 @@
+// Private to the engine's simulation loop: what sim_loop.cpp (the driver) uses of
+// sim_integrators.cpp (the integrators). Not installed, not part of the engine's interface.
+#pragma once
+#include "nonmin/sim/loop.hpp"
+
+namespace nonmin::sim::detail {
+
+// _integrators._clip: the step h from t, ending exactly at t_bound when within 1e-9 h of it.
+double clip(double t, double h, double t_bound);
+
+// Whether the method chooses its steps (DOPRI5).
+bool adaptive(const Loop& L);
+
+// A raw step of size h of the fixed-step method from (t, y) (f: F(t, y) when known) into out.
+Status fixed_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out);
+
+// DormandPrince5.step from (L.t, L.y): the accepted step size in h_acc, the new time in t_new;
+// L.y1 the raw end, L.yq1 the projected one, L.K the stages, the continuous extension set up.
+Status dp_step(Loop& L, double& h_acc, double& t_new);
+
+// The continuous extension of the last accepted DOPRI5 step at tt into out (2n).
+void dp_dense(const Loop& L, double t0, double h, double tt, double* out);
+
+}  // namespace nonmin::sim::detail

@@ -1,0 +1,546 @@
+// The integrators of the engine's simulation loop (see nonmin/sim/loop.hpp and sim_detail.hpp):
+// RK4, the implicit midpoint rule, Dormand–Prince 5(4) with its error control on projected
+// solutions and continuous extension, the quintic Hermite interpolant of fixed steps. Each
+// function names the Python function it mirrors (nonmin/sim/_integrators.py).
+#include "nonmin/sim/loop.hpp"
+#include "nonmin/linalg.hpp"
+#include "sim_detail.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace nonmin::sim {
+
+namespace detail {
+
+namespace {
+
+constexpr double inf = std::numeric_limits<double>::infinity();
+
+// Dormand–Prince 5(4) (Hairer, Nørsett & Wanner, Solving ODEs I, Table II.5.2), as
+// _integrators.py: _DP_C, _DP_A, _DP_B, _DP_E = _DP_B − _DP_BHAT, _DP_D (dense output).
+constexpr double DP_C[7] = {0.0, 1.0 / 5, 3.0 / 10, 4.0 / 5, 8.0 / 9, 1.0, 1.0};
+constexpr double DP_A[7][6] = {
+    {0, 0, 0, 0, 0, 0},
+    {1.0 / 5, 0, 0, 0, 0, 0},
+    {3.0 / 40, 9.0 / 40, 0, 0, 0, 0},
+    {44.0 / 45, -56.0 / 15, 32.0 / 9, 0, 0, 0},
+    {19372.0 / 6561, -25360.0 / 2187, 64448.0 / 6561, -212.0 / 729, 0, 0},
+    {9017.0 / 3168, -355.0 / 33, 46732.0 / 5247, 49.0 / 176, -5103.0 / 18656, 0},
+    {35.0 / 384, 0.0, 500.0 / 1113, 125.0 / 192, -2187.0 / 6784, 11.0 / 84},
+};
+constexpr double DP_B[7] = {35.0 / 384, 0.0, 500.0 / 1113, 125.0 / 192, -2187.0 / 6784, 11.0 / 84, 0.0};
+constexpr double DP_BHAT[7] = {5179.0 / 57600, 0.0,          7571.0 / 16695, 393.0 / 640,
+                               -92097.0 / 339200, 187.0 / 2100, 1.0 / 40};
+constexpr double DP_D[7] = {-12715105075.0 / 11282082432, 0.0, 87487479700.0 / 32700410799,
+                            -10690763975.0 / 1880347072, 701980252875.0 / 199316789632,
+                            -1453857185.0 / 822651844,  69997945.0 / 29380423};
+
+}  // namespace
+
+// _integrators._clip
+double clip(double t, double h, double t_bound) {
+    const double rem = t_bound - t;
+    if (h >= rem || rem - h <= 1e-9 * h) return rem;
+    return h;
+}
+namespace {
+
+// RK4.advance: y(t + h) from (t, y) with k1 = f when given
+Status rk4_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out) {
+    const int n2 = 2 * L.n;
+    Status s;
+    if (f) {
+        L.k1 = *f;
+    } else if ((s = rhs(L, t, y.data(), L.k1.data())) != Status::ok) {
+        return s;
+    }
+    const double hh = 0.5 * h;
+    for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k1[i];
+    if ((s = rhs(L, t + 0.5 * h, L.ys.data(), L.k2.data())) != Status::ok) return s;
+    for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k2[i];
+    if ((s = rhs(L, t + 0.5 * h, L.ys.data(), L.k3.data())) != Status::ok) return s;
+    for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + h * L.k3[i];
+    if ((s = rhs(L, t + h, L.ys.data(), L.k4.data())) != Status::ok) return s;
+    const double h6 = h / 6.0;
+    for (int i = 0; i < n2; ++i) out[i] = y[i] + h6 * (((L.k1[i] + 2.0 * L.k2[i]) + 2.0 * L.k3[i]) + L.k4[i]);
+    return Status::ok;
+}
+
+// ImplicitMidpoint._solve: fixed-point iteration; returns false when it does not converge
+// (Python: None). Errors of the right-hand side inside the iteration count as divergence,
+// those of the first two evaluations are returned (they are outside the try in Python).
+Status midpoint_solve(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out, bool& ok) {
+    const int n2 = 2 * L.n;
+    ok = false;
+    Status s;
+    if (f) {
+        L.f0 = *f;
+    } else if ((s = rhs(L, t, y.data(), L.f0.data())) != Status::ok) {
+        return s;
+    }
+    const double tm = t + 0.5 * h;
+    const double hh = 0.5 * h;
+    for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.f0[i];
+    if ((s = rhs(L, tm, L.ys.data(), L.k1.data())) != Status::ok) return s;  // explicit predictor
+    double scale = 0.0;
+    for (int i = 0; i < n2; ++i) scale = std::max(scale, std::abs(y[i]));
+    scale += 1.0;
+    double prev = inf;
+    for (int it = 0; it < L.opt.max_iter; ++it) {
+        for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k1[i];
+        s = rhs(L, tm, L.ys.data(), L.kn.data());
+        if (s == Status::callback_error) return s;
+        if (s != Status::ok) return Status::ok;  // left the model's domain: not converged
+        double delta = 0.0;
+        for (int i = 0; i < n2; ++i) delta = std::max(delta, std::abs(L.kn[i] - L.k1[i]));
+        delta *= std::abs(h);
+        if (!std::isfinite(delta) || (it >= 3 && delta > prev)) return Status::ok;  // diverging
+        L.k1 = L.kn;
+        if (delta <= L.opt.xtol * scale) {
+            for (int i = 0; i < n2; ++i) out[i] = y[i] + h * L.k1[i];
+            ok = true;
+            return Status::ok;
+        }
+        prev = delta;
+    }
+    return Status::ok;
+}
+
+// ImplicitMidpoint._advance: halve the step recursively where the iteration fails
+Status midpoint_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, int depth, Vec& out) {
+    bool ok = false;
+    Status s = midpoint_solve(L, t, y, f, h, out, ok);
+    if (s != Status::ok) return s;
+    if (ok) return Status::ok;
+    if (depth <= 0) {
+        L.message = "implicit midpoint: fixed-point iteration did not converge";
+        return Status::not_finite;
+    }
+    Vec& ym = L.half[static_cast<std::size_t>(depth)];
+    if ((s = midpoint_advance(L, t, y, f, 0.5 * h, depth - 1, ym)) != Status::ok) return s;
+    return midpoint_advance(L, t + 0.5 * h, ym, nullptr, 0.5 * h, depth - 1, out);
+}
+
+// DormandPrince5._stages into L.K (K[0] = f0 given)
+Status dp_stages(Loop& L, double t, const Vec& y, double h) {
+    const int n2 = 2 * L.n;
+    for (int s = 1; s < 7; ++s) {
+        for (int i = 0; i < n2; ++i) {
+            double acc = 0.0;
+            for (int j = 0; j < s; ++j) acc += DP_A[s][j] * L.K(j, i);
+            L.ys[i] = y[i] + h * acc;
+        }
+        const Status st = rhs(L, t + DP_C[s] * h, L.ys.data(), L.tmp2n.data());
+        if (st != Status::ok) return st;
+        L.K.row(s) = L.tmp2n.transpose();
+    }
+    return Status::ok;
+}
+
+double rms(const Vec& x, const Vec& scale, int n2) {
+    double s = 0.0;
+    for (int i = 0; i < n2; ++i) {
+        const double r = x[i] / scale[i];
+        s += r * r;
+    }
+    return std::sqrt(s / n2);
+}
+
+// DormandPrince5.initial_step (Hairer's heuristic)
+Status dp_initial_step(Loop& L, double t0, const Vec& y0, const Vec& f0, double t_bound, double& h_out) {
+    const int n2 = 2 * L.n;
+    for (int i = 0; i < n2; ++i) L.ev[i] = L.opt.atol + L.opt.rtol * std::abs(y0[i]);
+    const double d0 = rms(y0, L.ev, n2);
+    const double d1 = rms(f0, L.ev, n2);
+    double h0 = (d0 < 1e-5 || d1 < 1e-5) ? 1e-6 : 0.01 * d0 / d1;
+    h0 = std::min(h0, std::abs(t_bound - t0));
+    for (int i = 0; i < n2; ++i) L.ys[i] = y0[i] + h0 * f0[i];
+    const Status s = rhs(L, t0 + h0, L.ys.data(), L.tmp2n.data());
+    if (s != Status::ok) return s;
+    for (int i = 0; i < n2; ++i) L.kn[i] = L.tmp2n[i] - f0[i];
+    const double d2 = rms(L.kn, L.ev, n2) / h0;
+    const double dm = std::max(d1, d2);
+    const double h1 = dm <= 1e-15 ? std::max(1e-6, h0 * 1e-3) : std::pow(0.01 / dm, 1.0 / 5);
+    h_out = std::min(std::min(100 * h0, h1), L.opt.h_max);
+    return Status::ok;
+}
+
+// The continuous extension of the accepted DOPRI5 step (_dp_dense): y0 = L.y0, y1 raw = L.y1.
+void dp_dense_setup(Loop& L, double h) {
+    const int n2 = 2 * L.n;
+    for (int i = 0; i < n2; ++i) {
+        L.d_ydiff[i] = L.y1[i] - L.y0[i];
+        L.d_bspl[i] = h * L.K(0, i) - L.d_ydiff[i];
+        L.d_r3[i] = L.d_ydiff[i] - h * L.K(6, i) - L.d_bspl[i];
+        double acc = 0.0;
+        for (int j = 0; j < 7; ++j) acc += DP_D[j] * L.K(j, i);
+        L.d_r4[i] = h * acc;
+    }
+}
+
+}  // namespace
+
+void dp_dense(const Loop& L, double t0, double h, double tt, double* out) {
+    const int n2 = 2 * L.n;
+    const double s = (tt - t0) / h;
+    const double s1 = 1.0 - s;
+    for (int i = 0; i < n2; ++i)
+        out[i] = L.y0[i] + s * (L.d_ydiff[i] + s1 * (L.d_bspl[i] + s * (L.d_r3[i] + s1 * L.d_r4[i])));
+}
+
+// DormandPrince5.step with the error measured on projected solutions (the driver's project_y
+// when the stabilization is the projection): the accepted projected end is kept in L.yq1.
+// Returns the accepted step size in h_acc, the new time in t_new.
+Status dp_step(Loop& L, double& h_acc, double& t_new) {
+    const int n2 = 2 * L.n;
+    const double t = L.t;
+    const double t_bound = L.opt.t1;
+    Status s;
+    if (!L.have_f) {
+        if ((s = rhs(L, t, L.y.data(), L.f.data())) != Status::ok) return s;
+        L.have_f = true;
+    }
+    double h = L.h;
+    if (!std::isfinite(h) || h <= 0) {
+        if ((s = dp_initial_step(L, t, L.y, L.f, t_bound, h)) != Status::ok) return s;
+    }
+    h = std::min(h, L.opt.h_max);
+    long long rejected = 0;
+    const double h_min = L.opt.h_min_factor * std::max(1.0, std::abs(t));
+    const bool proj = L.opt.stab == Stabilization::projection;
+    while (true) {
+        h = clip(t, passage_place(L, t, h), t_bound);
+        if (h < h_min) {
+            L.message = "dopri5: step size underflow";
+            return Status::not_finite;
+        }
+        L.K.row(0) = L.f.transpose();
+        if ((s = dp_stages(L, t, L.y, h)) != Status::ok) return s;
+        for (int i = 0; i < n2; ++i) {
+            double b = 0.0, e = 0.0;
+            for (int j = 0; j < 7; ++j) {
+                b += DP_B[j] * L.K(j, i);
+                e += (DP_B[j] - DP_BHAT[j]) * L.K(j, i);
+            }
+            L.y1[i] = L.y[i] + h * b;
+            L.ev[i] = h * e;
+        }
+        L.yq1 = L.y1;
+        if (proj) {  // err = project(t + h, y1) − project(t + h, y1 − err)
+            if ((s = project(L, t + h, L.yq1.data(), L.opt.projection)) != Status::ok) return s;
+            for (int i = 0; i < n2; ++i) L.yp[i] = L.y1[i] - L.ev[i];
+            if ((s = project(L, t + h, L.yp.data(), L.opt.projection)) != Status::ok) return s;
+            for (int i = 0; i < n2; ++i) L.ev[i] = L.yq1[i] - L.yp[i];
+        }
+        for (int i = 0; i < n2; ++i)
+            L.tmp2n[i] = L.opt.atol + L.opt.rtol * std::max(std::abs(L.y[i]), std::abs(L.y1[i]));
+        const double err = rms(L.ev, L.tmp2n, n2);
+        if (!std::isfinite(err)) {
+            ++rejected;
+            h *= 0.2;
+            continue;
+        }
+        if (err <= 1.0) {
+            double fac = err == 0.0 ? 5.0 : std::min(5.0, std::max(0.2, 0.9 * std::pow(err, -0.2)));
+            if (rejected) fac = std::min(fac, 1.0);
+            t_new = (h == t_bound - t) ? t_bound : t + h;
+            h_acc = h;
+            L.y0 = L.y;
+            dp_dense_setup(L, h);
+            L.h = std::min(h * fac, L.opt.h_max);
+            L.n_rejected += rejected;
+            return Status::ok;
+        }
+        ++rejected;
+        h *= std::max(0.2, 0.9 * std::pow(err, -0.2));
+    }
+}
+
+bool adaptive(const Loop& L) { return L.opt.method == Method::dopri5; }
+
+// A raw step of size h of the fixed-step method from (t, y) (f: F(t, y) when known)
+Status fixed_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out) {
+    if (L.opt.method == Method::rk4) return rk4_advance(L, t, y, f, h, out);
+    return midpoint_advance(L, t, y, f, h, L.opt.max_halvings, out);
+}
+
+}  // namespace detail
+
+// ------------------------------------------------------------------------------ singular passages
+
+namespace {
+
+constexpr double inf = std::numeric_limits<double>::infinity();
+
+// _integrators.PASSAGE_ROW_RTOL, PASSAGE_ITERATIONS, PASSAGE_FLOOR, PASSAGE_BAND
+constexpr double PASSAGE_ROW_RTOL = 1e-10;
+constexpr int PASSAGE_DENSE_ROWS = 32;
+constexpr int PASSAGE_MAX_ITERATIONS = 30;
+constexpr double PASSAGE_ITER_RTOL = 1e-6;
+constexpr double PASSAGE_FLOOR = 1e-7;
+constexpr double PASSAGE_BAND = 0.05;
+
+// _integrators.passage_time over the history ts, ss (count ≥ 2)
+bool passage_time(const Passages& P, double& out) {
+    const int c = P.count;
+    if (c < 2 || !(P.ss[c - 1] < P.ss[c - 2])) return false;
+    const double t0 = P.ts[c - 2], t1 = P.ts[c - 1], s0 = P.ss[c - 2], s1 = P.ss[c - 1];
+    const double lin = t1 + s1 * (t1 - t0) / (s0 - s1);
+    out = lin;
+    if (c < 3 || !(P.ss[c - 2] < P.ss[c - 3])) return true;
+    const double ta = P.ts[c - 3], sa = P.ss[c - 3];
+    const double d1 = (s0 - sa) / (t0 - ta);
+    const double d2 = (s1 - s0) / (t1 - t0);
+    const double c2 = (d2 - d1) / (t1 - ta);
+    const double b = d2 + c2 * (t1 - t0);
+    if (c2 == 0.0) return true;
+    const double disc = b * b - 4.0 * c2 * s1;
+    if (disc < 0.0) return true;
+    const double r = std::sqrt(disc);
+    const double r1 = (-b - r) / (2.0 * c2), r2 = (-b + r) / (2.0 * c2);
+    double best = inf;
+    if (r1 > 0.0) best = std::min(best, r1);
+    if (r2 > 0.0) best = std::min(best, r2);
+    if (best < inf) out = t1 + best;
+    return true;
+}
+
+}  // namespace
+
+void passage_setup(Loop& L) {
+    Passages& P = L.pas;
+    const int mr = std::max(L.m_all, 1), n = L.n;
+    P.B = Mat::Zero(mr, n);
+    P.G = Mat::Zero(mr, mr);
+    P.C = Mat::Zero(mr, mr);
+    for (Vec* v : {&P.x, &P.y, &P.v, &P.w}) *v = Vec::Zero(mr);
+    P.live.assign(static_cast<std::size_t>(mr), 0);
+    P.order.assign(static_cast<std::size_t>(mr), 0);
+    P.first.assign(static_cast<std::size_t>(mr), 0);
+    P.col_ptr.assign(static_cast<std::size_t>(n) + 1, 0);
+    P.col_rows.assign(static_cast<std::size_t>(mr) * static_cast<std::size_t>(n), 0);
+    if (mr <= PASSAGE_DENSE_ROWS) P.eig = Eigen::SelfAdjointEigenSolver<Mat>(mr);
+    if (L.opt.method == Method::dopri5) {  // DormandPrince5.passage_fractions: nodes 0.3 | 0.8
+        P.frac[0] = 0.45, P.frac[1] = 0.55, P.frac[2] = 0.65;
+        P.n_frac = 3;
+    } else {  // Integrator.passage_fractions (RK4, implicit midpoint)
+        P.frac[0] = 0.25, P.frac[1] = 0.75;
+        P.n_frac = 2;
+    }
+    passage_reset(L);
+}
+
+double singular_indicator(Loop& L, const Mat& A, int m) {
+    Passages& P = L.pas;
+    const int n = L.n;
+    if (m == 0) return inf;
+    double big = 0.0;
+    for (int i = 0; i < m; ++i) {
+        P.w[i] = linalg::row_norm(&A(i, 0), n);
+        big = std::max(big, P.w[i]);
+    }
+    if (!(big > 0.0 && std::isfinite(big))) {
+        P.v_len = -1;
+        return 0.0;
+    }
+    int k = 0;
+    for (int i = 0; i < m; ++i)
+        if (P.w[i] > PASSAGE_ROW_RTOL * big) P.live[static_cast<std::size_t>(k++)] = i;
+    // the equilibrated live rows; rows ordered by their first nonzero column (so the Gram
+    // matrix of a chain is banded: the Cholesky factor stays in its envelope)
+    for (int r = 0; r < k; ++r) {
+        const int i = P.live[static_cast<std::size_t>(r)];
+        const double d = 1.0 / P.w[i];
+        int fc = n;
+        for (int j = 0; j < n; ++j) {
+            const double b = A(i, j) * d;
+            P.B(r, j) = b;
+            if (b != 0.0 && fc == n) fc = j;
+        }
+        P.first[static_cast<std::size_t>(r)] = fc;
+        P.order[static_cast<std::size_t>(r)] = r;
+    }
+    std::stable_sort(P.order.begin(), P.order.begin() + k,
+                     [&P](int a, int b) { return P.first[static_cast<std::size_t>(a)] < P.first[static_cast<std::size_t>(b)]; });
+    // column lists (permuted row positions, increasing)
+    std::fill(P.col_ptr.begin(), P.col_ptr.end(), 0);
+    for (int p = 0; p < k; ++p) {
+        const int r = P.order[static_cast<std::size_t>(p)];
+        for (int j = 0; j < n; ++j)
+            if (P.B(r, j) != 0.0) ++P.col_ptr[static_cast<std::size_t>(j) + 1];
+    }
+    for (int j = 0; j < n; ++j) P.col_ptr[static_cast<std::size_t>(j) + 1] += P.col_ptr[static_cast<std::size_t>(j)];
+    {
+        // fill (col_ptr as running cursor, restored after)
+        for (int p = 0; p < k; ++p) {
+            const int r = P.order[static_cast<std::size_t>(p)];
+            for (int j = 0; j < n; ++j)
+                if (P.B(r, j) != 0.0) P.col_rows[static_cast<std::size_t>(P.col_ptr[static_cast<std::size_t>(j)]++)] = p;
+        }
+        for (int j = n; j > 0; --j) P.col_ptr[static_cast<std::size_t>(j)] = P.col_ptr[static_cast<std::size_t>(j) - 1];
+        P.col_ptr[0] = 0;
+    }
+    // Gram matrix G = (DA)(DA)ᵀ in the permuted order, lower triangle; envelope first[p]
+    for (int p = 0; p < k; ++p) {
+        for (int q = 0; q <= p; ++q) P.G(p, q) = 0.0;
+        P.first[static_cast<std::size_t>(p)] = p;
+    }
+    for (int j = 0; j < n; ++j) {
+        const int a0 = P.col_ptr[static_cast<std::size_t>(j)], a1 = P.col_ptr[static_cast<std::size_t>(j) + 1];
+        for (int a = a0; a < a1; ++a) {
+            const int pa = P.col_rows[static_cast<std::size_t>(a)];
+            const double ba = P.B(P.order[static_cast<std::size_t>(pa)], j);
+            for (int b = a0; b <= a; ++b) {
+                const int pb = P.col_rows[static_cast<std::size_t>(b)];
+                P.G(pa, pb) += ba * P.B(P.order[static_cast<std::size_t>(pb)], j);
+                if (pb < P.first[static_cast<std::size_t>(pa)]) P.first[static_cast<std::size_t>(pa)] = pb;
+            }
+        }
+    }
+    if (k <= PASSAGE_DENSE_ROWS) {  // the dense symmetric eigensolver (lower triangle of G)
+        P.v_len = -1;
+        P.eig.compute(P.G.topLeftCorner(k, k), Eigen::EigenvaluesOnly);
+        if (P.eig.info() != Eigen::Success) return 0.0;
+        return std::sqrt(std::max(P.eig.eigenvalues()[0], 0.0));
+    }
+    // Cholesky G = C Cᵀ over the envelope (no fill outside it)
+    for (int p = 0; p < k; ++p) {
+        const int fp = P.first[static_cast<std::size_t>(p)];
+        for (int q = fp; q <= p; ++q) {
+            double acc = P.G(p, q);
+            const int lo = std::max(fp, P.first[static_cast<std::size_t>(q)]);
+            for (int r = lo; r < q; ++r) acc -= P.C(p, r) * P.C(q, r);
+            if (q < p) {
+                P.C(p, q) = acc / P.C(q, q);
+            } else {
+                if (!(acc > 0.0) || !std::isfinite(acc)) {
+                    P.v_len = -1;
+                    return 0.0;
+                }
+                P.C(p, p) = std::sqrt(acc);
+            }
+        }
+    }
+    // inverse iteration from the kept vector (natural order of the live rows) or a fixed start
+    if (P.v_len == k) {
+        for (int r = 0; r < k; ++r) P.x[r] = P.v[r];
+    } else {
+        for (int r = 0; r < k; ++r) P.x[r] = 1.0 + 0.5 * std::sin(1.0 + r);
+    }
+    double nx = 0.0;
+    for (int r = 0; r < k; ++r) nx += P.x[r] * P.x[r];
+    nx = std::sqrt(nx);
+    for (int r = 0; r < k; ++r) P.x[r] /= nx;
+    double lam = inf;
+    for (int it = 0; it < PASSAGE_MAX_ITERATIONS; ++it) {
+        for (int p = 0; p < k; ++p) {  // C u = P x
+            const int fp = P.first[static_cast<std::size_t>(p)];
+            double acc = P.x[P.order[static_cast<std::size_t>(p)]];
+            for (int r = fp; r < p; ++r) acc -= P.C(p, r) * P.w[r];
+            P.w[p] = acc / P.C(p, p);
+        }
+        for (int p = k - 1; p >= 0; --p) {  // Cᵀ z = u (column sweep over the envelope rows)
+            const double zp = P.w[p] / P.C(p, p);
+            P.w[p] = zp;
+            const int fp = P.first[static_cast<std::size_t>(p)];
+            for (int r = fp; r < p; ++r) P.w[r] -= P.C(p, r) * zp;
+        }
+        double ny = 0.0, xy = 0.0;
+        for (int p = 0; p < k; ++p) {
+            const int r = P.order[static_cast<std::size_t>(p)];
+            P.y[r] = P.w[p];
+        }
+        for (int r = 0; r < k; ++r) {
+            ny += P.y[r] * P.y[r];
+            xy += P.x[r] * P.y[r];
+        }
+        ny = std::sqrt(ny);
+        if (!(ny > 0.0 && std::isfinite(ny))) {
+            P.v_len = -1;
+            return 0.0;
+        }
+        const double prev = lam;
+        lam = xy / (ny * ny);
+        for (int r = 0; r < k; ++r) P.x[r] = P.y[r] / ny;
+        if (std::abs(lam - prev) <= PASSAGE_ITER_RTOL * lam) break;
+    }
+    for (int r = 0; r < k; ++r) P.v[r] = P.x[r];
+    P.v_len = k;
+    return std::sqrt(std::max(lam, 0.0));
+}
+
+void passage_reset(Loop& L) {
+    L.pas.count = 0;
+    L.pas.have_star = false;
+    L.pas.v_len = -1;
+}
+
+void passage_observe(Loop& L, double t, const Mat& A, int m) {
+    Passages& P = L.pas;
+    const double s = singular_indicator(L, A, m);
+    if (!(s >= PASSAGE_FLOOR && std::isfinite(s))) {
+        P.count = 0;
+        P.have_star = false;
+        return;
+    }
+    if ((P.count && !(t > P.ts[P.count - 1])) || (P.have_star && t >= P.t_star)) P.count = 0;
+    if (P.count == 3) {
+        for (int i = 0; i < 2; ++i) {
+            P.ts[i] = P.ts[i + 1];
+            P.ss[i] = P.ss[i + 1];
+        }
+        P.count = 2;
+    }
+    P.ts[P.count] = t;
+    P.ss[P.count] = s;
+    ++P.count;
+    P.have_star = passage_time(P, P.t_star);
+}
+
+// _integrators.place_step
+double passage_place(const Loop& L, double t, double h) {
+    const Passages& P = L.pas;
+    if (!L.opt.passages || !P.have_star) return h;
+    const double g = P.t_star - t;
+    const double fmax = P.frac[P.n_frac - 1];
+    if (!(g > 0.0) || g > (1.0 + fmax + PASSAGE_BAND) * h) return h;
+    const double x = g / h;
+    for (int i = 0; i < P.n_frac; ++i) {
+        const double c = P.frac[i];
+        if (std::abs(x - c) <= PASSAGE_BAND || std::abs(x - 1.0 - c) <= PASSAGE_BAND) return h;
+    }
+    double best = 0.0;
+    for (int i = 0; i < P.n_frac; ++i) {
+        const double c = P.frac[i];
+        double s = g / c;
+        if (s <= h) best = std::max(best, s);
+        s = g - c * h;
+        if (0.2 * h <= s && s <= h) best = std::max(best, s);
+    }
+    return best > 0.0 ? best : h;
+}
+
+void hermite_quintic(int n, const double* y0, const double* f0, const double* y1, const double* f1,
+                     double h, double s, double* out) {
+    const double t = s / h;
+    const double t2 = t * t, t3 = t2 * t, t4 = t3 * t, t5 = t4 * t;
+    const double b1 = 10.0 * t3 - 15.0 * t4 + 6.0 * t5;
+    const double b2 = t - 6.0 * t3 + 8.0 * t4 - 3.0 * t5;
+    const double b3 = -4.0 * t3 + 7.0 * t4 - 3.0 * t5;
+    const double b4 = 0.5 * (t2 - 3.0 * t3 + 3.0 * t4 - t5);
+    const double b5 = 0.5 * (t3 - 2.0 * t4 + t5);
+    const double d1 = 30.0 * t2 - 60.0 * t3 + 30.0 * t4;
+    const double d2 = 1.0 - 18.0 * t2 + 32.0 * t3 - 15.0 * t4;
+    const double d3 = -12.0 * t2 + 28.0 * t3 - 15.0 * t4;
+    const double d4 = t - 4.5 * t2 + 6.0 * t3 - 2.5 * t4;
+    const double d5 = 1.5 * t2 - 4.0 * t3 + 2.5 * t4;
+    const double hh = h * h;
+    for (int i = 0; i < n; ++i) {
+        const double dq = y1[i] - y0[i];
+        const double v0 = f0[i], v1 = f1[i], a0 = f0[n + i], a1 = f1[n + i];
+        out[i] = y0[i] + dq * b1 + h * (v0 * b2 + v1 * b3) + hh * (a0 * b4 + a1 * b5);
+        out[n + i] = (dq / h) * d1 + (v0 * d2 + v1 * d3) + h * (a0 * d4 + a1 * d5);
+    }
+}
+}  // namespace nonmin::sim
