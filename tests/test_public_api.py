@@ -6,7 +6,8 @@ import sys
 import nonmin
 
 EXPECTED_TOP = {
-    "Activate", "Deactivate", "Event", "Model", "Reset", "State", "Trajectory", "__version__",
+    "Activate", "Deactivate", "Event", "EventSet", "Model", "Output", "Reset", "Solver", "State",
+    "Trajectory", "__version__",
     "assemble", "check_model", "constraint_force", "control", "core", "errors",
     "forward_dynamics", "impact_map", "library", "load_trajectory", "model", "sim", "simulate",
     "analysis", "inverse_dynamics", "reactions",

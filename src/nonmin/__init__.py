@@ -35,32 +35,36 @@ from . import sim as sim
 from . import sweeps as sweeps
 from .analysis import inverse_dynamics as inverse_dynamics
 from .analysis import reactions as reactions
+from ._version import __version__ as __version__
 from .core import constraint_force as constraint_force
 from .core import forward_dynamics as forward_dynamics
 from .core import impact_map as impact_map
 from .model import Model as Model
 from .model import State as State
 from .model import assemble as assemble
-from .model import check_model as check_model
 from .sim import Activate as Activate
 from .sim import Deactivate as Deactivate
 from .sim import Event as Event
+from .sim import EventSet as EventSet
+from .sim import Output as Output
 from .sim import Reset as Reset
+from .sim import Solver as Solver
 from .sim import Trajectory as Trajectory
+from .sim import check_model as check_model
 from .sim import load_trajectory as load_trajectory
 from .sim import simulate as simulate
 from .sim import simulate_batch as simulate_batch
 from .sweeps import sweep as sweep
 
-#: Package version.
-__version__ = "0.1.0"
-
 __all__ = [
     "Activate",
     "Deactivate",
     "Event",
+    "EventSet",
     "Model",
+    "Output",
     "Reset",
+    "Solver",
     "State",
     "Trajectory",
     "__version__",

@@ -26,8 +26,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from . import __version__
 from ._files import write_text
+from ._version import __version__
 from .errors import InputError, MissingDependencyError, NonminError, OutputError, ScenarioError
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_MISSING_DEP, EXIT_INTERNAL = 0, 1, 2, 3, 4
@@ -151,7 +151,7 @@ def _load_model_arg(spec: str, allow_code: bool = False) -> tuple[Any, Any]:
 
 
 def cmd_check(args: argparse.Namespace) -> int:
-    from .model import check_model
+    from .sim import check_model
 
     model, state = _load_model_arg(args.model, args.allow_code)
     report = check_model(model, state, duration=args.duration, samples=args.samples)

@@ -36,7 +36,7 @@ def site(tmp_path_factory: pytest.TempPathFactory) -> Path:
 EXPECTED = {
     "nonmin/core.html": ["forward_dynamics", "nullspace_projector", "impact_map", "solve_dynamics"],
     "nonmin/sim.html": ["simulate", "Trajectory", "Event", "Activate"],
-    "nonmin/model.html": ["assemble", "check_model", "FunctionModel"],
+    "nonmin/model.html": ["assemble", "FunctionModel"],
     "nonmin/model/planar.html": ["PlanarBuilder", "PlanarModel"],
     "nonmin/control.html": ["Regulator", "Tracker", "ForceControl"],
     "nonmin/errors.html": ["ShapeError", "MissingDependencyError"],

@@ -1315,7 +1315,7 @@ def _api_numbers() -> None:
 
     def check(**kw: Any) -> Callable[[Path], Any]:
         def act(tmp: Path) -> Any:
-            from nonmin.model import check_model
+            from nonmin import check_model
 
             mech = library.get("crossed_four_bar")
             return check_model(mech.model, mech.state, **kw)

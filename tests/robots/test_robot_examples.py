@@ -104,7 +104,7 @@ def test_examples_pass_the_model_checker(name: str) -> None:
     if name == "fourbar_mjcf":
         pytest.importorskip("mujoco")
     import nonmin.model.robots as robots
-    from nonmin.model import check_model
+    from nonmin import check_model
 
     robot, state = getattr(robots, name)()
     report = check_model(robot, state, duration=0.0)

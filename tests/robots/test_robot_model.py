@@ -7,9 +7,10 @@ import pytest
 
 pin = pytest.importorskip("pinocchio")
 
+from nonmin import check_model  # noqa: E402
 from nonmin.core import forward_dynamics  # noqa: E402
 from nonmin.errors import InputError, ShapeError, UnknownNameError  # noqa: E402
-from nonmin.model import Model, check_model  # noqa: E402
+from nonmin.model import Model  # noqa: E402
 from nonmin.model.robots import (  # noqa: E402
     FrameConstraint,
     JointCoupling,

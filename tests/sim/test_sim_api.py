@@ -35,6 +35,7 @@ def test_public_api_is_pinned() -> None:
         "DormandPrince5", "Event", "EventRecord", "ImplicitMidpoint", "Integrator",
         "NoStabilization", "Projection", "Reset", "Stabilization", "Status", "StepResult",
         "StepperState", "Trajectory", "load_trajectory", "simulate",
+        "Solver", "EventSet", "Output", "check_model", "ModelReport", "CheckItem",
     }
     assert set(sim.METHODS) == {"rk4", "dopri5", "midpoint"}
     assert set(sim.STABILIZATIONS) == {"none", "baumgarte", "projection"}

@@ -167,7 +167,7 @@ def test_compiled_regulator_state_is_the_python_record() -> None:
     assert loop.start(0.0, mech.state.q, mech.state.qd) == eng.SIM_DONE
     assert loop.run(100) == eng.SIM_DONE
     rec = loop.take()
-    got = _engine.merge_state(ctl.initial_state(), creg, mech.model.k)
+    got = _engine.merge_state(ctl, ctl.initial_state(), creg)
     want = ctl.initial_state()
     for t, q, qd in zip(rec["t"][1:], rec["q"][1:], rec["qd"][1:], strict=True):
         want = ctl.update(t, q, qd, want, active=mech.state.active)

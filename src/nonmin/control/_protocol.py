@@ -50,3 +50,18 @@ class Controller(ABC):
     ) -> Any:
         """Next controller state after an accepted step ending at ``(t, q, qd)``; pure."""
         return state
+
+    def engine_controller(self, model: Any, program: Any, active: frozenset[str]) -> Any | None:
+        """The compiled engine's form of this controller for the active set ``active``, or
+        None (default): the engine then calls the controller back at every evaluation.
+
+        ``program`` is the model's compiled program (:meth:`nonmin.model.Model.engine_program`).
+        A compiled form must compute the same ``u`` as :meth:`__call__` to round-off.
+        """
+        return None
+
+    def engine_state(self, state: Any, compiled: Any) -> Any:
+        """The controller state after the accepted steps that ``compiled`` (what
+        :meth:`engine_controller` returned) took: what :meth:`update` over those steps would
+        have given."""
+        return state

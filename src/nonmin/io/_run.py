@@ -33,13 +33,15 @@ def simulate_kwargs(sc: Scenario) -> dict[str, Any]:
         )
     kw.update(extra)
     from ..sim import simulate
+    from ..sim._options import SHORTHANDS
 
     params = inspect.signature(simulate).parameters
+    known = {k for k, v in params.items() if v.kind == v.KEYWORD_ONLY} | set(SHORTHANDS)
     for key in kw:
-        if key not in params:
+        if key not in known:
             raise ScenarioError(
                 f"{sc.path}: key 'simulate.options.{key}': not a keyword of nonmin.sim.simulate; "
-                f"expected one of {sorted(k for k, v in params.items() if v.kind == v.KEYWORD_ONLY)}"
+                f"expected one of {sorted(known)}"
             )
     return kw
 

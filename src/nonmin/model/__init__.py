@@ -9,8 +9,6 @@ from ._assembly import AssemblyResidual as AssemblyResidual
 from ._assembly import assemble as assemble
 from ._assembly import assembly_residual as assembly_residual
 from ._assembly import consistent as consistent
-from ._check import ModelReport as ModelReport
-from ._check import check_model as check_model
 from ._function import FunctionConstraint as FunctionConstraint
 from ._function import FunctionModel as FunctionModel
 from ._protocol import CONSTRAINT_KINDS as CONSTRAINT_KINDS
@@ -41,7 +39,6 @@ __all__ = [
     "FunctionModel",
     "Geometry",
     "Model",
-    "ModelReport",
     "ModelTerms",
     "PiecewisePolynomial",
     "Polynomial",
@@ -55,7 +52,6 @@ __all__ = [
     "TimeFunction",
     "assemble",
     "assembly_residual",
-    "check_model",
     "consistent",
 ]
 

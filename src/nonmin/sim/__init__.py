@@ -1,6 +1,7 @@
 """Simulation through singular configurations and switching topology.
 
-One entry point, :func:`simulate`, with pluggable integrators (:data:`METHODS`: ``"rk4"``,
+One entry point, :func:`simulate`, whose options are values (:class:`Solver`,
+:class:`EventSet`, :class:`Output` and a stabilization), with pluggable integrators (:data:`METHODS`: ``"rk4"``,
 ``"dopri5"``, ``"midpoint"``), stabilizations (:data:`STABILIZATIONS`: ``"none"``,
 ``"baumgarte"``, ``"projection"``), events with transitions as values (:class:`Event`,
 :class:`Activate`, :class:`Deactivate`, :class:`Reset`), automatic unilateral contact, and an
@@ -16,6 +17,9 @@ change point.
 
 from ._batch import BatchTrajectory as BatchTrajectory
 from ._batch import simulate_batch as simulate_batch
+from ._check import CheckItem as CheckItem
+from ._check import ModelReport as ModelReport
+from ._check import check_model as check_model
 from ._events import Activate as Activate
 from ._events import Deactivate as Deactivate
 from ._events import Event as Event
@@ -28,6 +32,9 @@ from ._integrators import ImplicitMidpoint as ImplicitMidpoint
 from ._integrators import Integrator as Integrator
 from ._integrators import StepperState as StepperState
 from ._integrators import StepResult as StepResult
+from ._options import EventSet as EventSet
+from ._options import Output as Output
+from ._options import Solver as Solver
 from ._simulate import ADAPTIVE_RANK_RTOL as ADAPTIVE_RANK_RTOL
 from ._simulate import DEFAULT_DT as DEFAULT_DT
 from ._simulate import simulate as simulate
@@ -49,20 +56,26 @@ __all__ = [
     "Activate",
     "BatchTrajectory",
     "Baumgarte",
+    "CheckItem",
     "Deactivate",
     "DormandPrince5",
     "Event",
     "EventRecord",
+    "EventSet",
     "ImplicitMidpoint",
     "Integrator",
+    "ModelReport",
     "NoStabilization",
+    "Output",
     "Projection",
     "Reset",
+    "Solver",
     "Stabilization",
     "Status",
     "StepResult",
     "StepperState",
     "Trajectory",
+    "check_model",
     "load_trajectory",
     "simulate",
     "simulate_batch",

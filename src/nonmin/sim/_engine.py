@@ -200,52 +200,17 @@ class ControllerCallback:
 
 
 def compiled_controller(controller: Any, model: Model, program: Any, active: frozenset[str]) -> Any | None:
-    """The engine's compiled form of a built-in controller for one active set, or None (then
-    it is called back). So far: :class:`~nonmin.control.Regulator` with ``sigma = 0`` and no
-    active rheonomic constraint (its target is then fixed per active set)."""
-    from ..control import Regulator
-
-    if type(controller) is not Regulator or controller.sigma != 0.0:
-        return None
-    if any(c.kind == "rheonomic" and c.name in active for c in model.constraints):
-        return None
-    if controller.model is not model:
-        return None
-    c: Any = controller  # (its validated private fields)
-    q_star = np.ascontiguousarray(c.target_for(active), dtype=np.float64)
-    blocks = [tuple(int(i) for i in b) for b in c._qblocks]
-
-    def arr(x: Any) -> Any:
-        return np.ascontiguousarray(x, dtype=np.float64)
-
-    return _engine().SimRegulator(
-        program, q_star, arr(c._Kp), arr(c._Kd), blocks, arr(c._lo), arr(c._hi),
-        -1.0 if c.rtol is None else float(c.rtol), c.on_infeasible == "raise",
-    )  # fmt: skip
+    """The engine's compiled form of a controller for one active set, or None (then it is
+    called back): what its ``engine_controller(model, program, active)`` returns (the
+    protocol of :class:`nonmin.control.Controller`; the simulator imports no controller)."""
+    make = getattr(controller, "engine_controller", None)
+    return None if make is None else make(model, program, active)
 
 
-def merge_state(state: Any, compiled: Any, k: int) -> Any:
-    """The controller state after the steps a compiled controller saw (``ControlState.record``
-    over them)."""
-    from dataclasses import replace
-
-    from ..control._common import ControlState
-
-    st = state if isinstance(state, ControlState) else ControlState.initial(k)
-    d = compiled.stats
-    if d["steps"] == 0:
-        return st
-    sat_steps = st.saturated_steps or (0,) * k
-    max_u = st.max_abs_u or (0.0,) * k
-    return replace(
-        st,
-        steps=st.steps + int(d["steps"]),
-        saturated_steps=tuple(int(a + b) for a, b in zip(sat_steps, d["saturated_steps"])),
-        saturated=tuple(bool(b) for b in d["saturated"]),
-        infeasible_steps=st.infeasible_steps + int(d["infeasible_steps"]),
-        min_sigma_pb=min(st.min_sigma_pb, float(d["min_sigma_pb"])),
-        max_abs_u=tuple(max(float(a), float(b)) for a, b in zip(max_u, d["max_abs_u"])),
-    )
+def merge_state(controller: Any, state: Any, compiled: Any) -> Any:
+    """The controller state after the steps its compiled form took (the controller's
+    ``engine_state(state, compiled)``)."""
+    return controller.engine_state(state, compiled)
 
 
 # --------------------------------------------------------------------------- the run

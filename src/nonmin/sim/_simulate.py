@@ -64,6 +64,7 @@ from ..model import ConstraintTerms, Model, State
 from . import _durable, _engine, _fastpath
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
 from ._integrators import METHODS, Integrator, SingularPassages, StepperState, hermite_quintic
+from ._options import EventSet, Output, Solver, resolve_options
 from ._progress import Progress
 from ._stabilization import Projection, Stabilization, resolve_stabilization
 from ._trajectory import Status, Trajectory
@@ -463,31 +464,16 @@ def simulate(
     qd0: ArrayLike | None = None,
     *,
     active: Iterable[str] | str | None = None,
-    method: Integrator | str = "rk4",
-    dt: float | None = None,
-    rtol: float = 1e-8,
-    atol: float = 1e-10,
-    stabilization: Stabilization | str | None = "projection",
     controller: Any = None,
-    events: Iterable[Event] = (),
-    contact: bool = True,
-    restitution: float | dict[str, float] = 0.0,
-    t_eval: ArrayLike | None = None,
-    max_steps: int = 10_000_000,
-    throw: bool = True,
-    progress: bool | None = None,
-    rank_rtol: float | None = None,
-    impact_velocity_threshold: float = 1e-6,
-    zeno_max_events: int = 20,
-    zeno_window: float = 1e-6,
-    event_rearm: float = 1e-9,
-    project_initial: bool | None = None,
-    h0: float | None = None,
+    method: Integrator | str | None = None,
+    dt: float | None = None,
+    solver: Solver | None = None,
+    stabilization: Stabilization | str | None = "projection",
+    events: EventSet | Iterable[Event] = (),
+    output: Output | None = None,
     engine: str = "auto",
-    checkpoint: str | os.PathLike[str] | None = None,
-    checkpoint_every: float | None = None,
     resume: str | os.PathLike[str] | Trajectory | None = None,
-    **unknown: Any,
+    **options: Any,
 ) -> Trajectory:
     """Simulate a constrained mechanical system through singularities and topology switches.
 
@@ -504,56 +490,26 @@ def simulate(
         ``qd0`` and ``active`` too.
     active : iterable of str, optional
         Initially active constraints (default ``model.default_active``).
-    method : str or Integrator, default "rk4"
-        ``"rk4"`` (fixed step ``dt``), ``"dopri5"`` (adaptive, ``rtol``/``atol``),
-        ``"midpoint"`` (implicit midpoint, fixed ``dt``), or an :class:`Integrator` object.
-    dt : float, optional
-        Step of fixed-step methods (default :data:`DEFAULT_DT`); for adaptive ones the largest
-        step allowed.
-    rtol, atol : float
-        Tolerances of adaptive methods.
-    stabilization : str or Stabilization, default "projection"
-        ``"none"``, ``"baumgarte"``, ``"projection"`` (mass-metric post-step projection).
     controller : callable ``(t, q, qd, state, active=...) -> u``, optional
         A :class:`nonmin.control.Controller` (``initial_state`` and ``update`` are used when
         present); ``u`` has shape (k,) and enters as ``B(q) u``.
-    events : iterable of Event
-        User events (see :class:`Event`).
-    contact : bool, default True
-        Automatic impact/release handling of unilateral constraints.
-    restitution : float or dict, default 0.0
-        Newton restitution of automatic contact impacts (per constraint name with a dict).
-    t_eval : array_like, optional
-        Record at these times (non-decreasing, inside ``t_span``) plus the two samples (before
-        and after the transition) of every event; default: every accepted step. Values between
-        step ends come from the method's continuous extension (dopri5's own; for the fixed-step
-        rk4 and midpoint the quintic Hermite interpolant of ``q, qd, qdd`` at the projected
-        step ends, :func:`~nonmin.sim._integrators.hermite_quintic`), then the stabilization.
-        Events are still located on partial steps of the method itself.
-    max_steps : int
-        Fail after this many accepted steps.
-    throw : bool, default True
-        Raise on failure; with False return the partial trajectory with ``status`` failed.
-    progress : bool or None
-        Progress bar (None: only when stderr is a terminal).
-    rank_rtol : float, optional
-        Rank tolerance of A (relative, on the row-equilibrated A); default: the core's 1e-10
-        for fixed-step methods, :data:`ADAPTIVE_RANK_RTOL` = 1e-6 for adaptive ones.
-    impact_velocity_threshold : float, default 1e-6
-        A bounce whose separation speed (m/s along the gap) is at most this becomes a plastic,
-        persistent contact (the Zeno accumulation point is truncated there). Bounces whose
-        predicted flight time is below two fixed steps are treated the same way.
-    zeno_max_events, zeno_window : int, float
-        Raise :class:`~nonmin.errors.ZenoError` when more than ``zeno_max_events`` events fire
-        within ``zeno_window`` seconds (defaults 20 and 1e-6 s).
-    event_rearm : float, default 1e-9
-        A user event that fired cannot fire again until ``|guard| > event_rearm``: guards that
-        stay at 0 after their transition (a constraint that was just activated) do not chatter.
-    project_initial : bool, optional
-        Project the initial state onto the active constraints (default: True with the
-        projection stabilization, False otherwise).
-    h0 : float, optional
-        First step of adaptive methods (default: Hairer's starting-step heuristic).
+    method, dt : shorthands of ``solver``
+        The integrator (``"rk4"``, ``"dopri5"``, ``"midpoint"`` or an :class:`Integrator`
+        value) and its step: ``simulate(m, 1, method="rk4", dt=1e-3)`` is
+        ``simulate(m, 1, solver=Solver("rk4", dt=1e-3))``.
+    solver : Solver, optional
+        The integrator with its step, tolerances, rank tolerance, step budget and initial
+        projection (:class:`~nonmin.sim.Solver`; default ``Solver()``: RK4 at
+        :data:`DEFAULT_DT` with the core's rank tolerance).
+    stabilization : str or Stabilization, default "projection"
+        ``"none"``, ``"baumgarte"``, ``"projection"`` (mass-metric post-step projection), or a
+        :class:`Stabilization` value.
+    events : EventSet or iterable of Event
+        The user events and the automatic contact settings (:class:`~nonmin.sim.EventSet`;
+        a plain iterable of :class:`Event` means ``EventSet(events)``).
+    output : Output, optional
+        Sampling (``t_eval``), progress bar, checkpoints and failure policy
+        (:class:`~nonmin.sim.Output`).
     engine : {"auto", "compiled", "engine", "python"}, default "auto"
         ``"python"``: the general driver. ``"engine"``: the whole loop in the compiled engine
         (C++, :mod:`nonmin.sim._engine`; same algorithm, results to round-off): every built-in
@@ -563,7 +519,7 @@ def simulate(
         called back); custom Integrator or Stabilization classes are not covered
         (:class:`~nonmin.errors.InputError` names what is missing);
         failures hand over to the general driver as with ``"compiled"``. ``"compiled"``: the
-        whole run in numba's compiled loop (same algorithm, same results to round-off, ~100× faster); it needs method
+        whole run in numba's compiled loop (same algorithm, same results to round-off); it needs method
         ``"rk4"``, the mass-metric projection, no controller, no events, no automatic contact,
         numba, and a model with a compiled program (:meth:`nonmin.model.Model.fast_program`:
         planar models without springs, dampers, drivers or user-defined joints), and raises
@@ -573,18 +529,19 @@ def simulate(
         on any default path).
         ``trajectory.metadata["engine"]`` tells which ran. If a kernel fails in the compiled loop, the general driver takes over
         at the last accepted step (and raises the typed error).
-    checkpoint : path, optional
-        A ``.npz`` file that receives the samples so far (status ``interrupted``) every
-        ``checkpoint_every`` seconds of simulated time, and when the run is interrupted.
-        Written durably: temporary file, fsync, rename — the file is always complete.
-    checkpoint_every : float, optional
-        Simulated seconds between checkpoints (needs ``checkpoint``).
     resume : path or Trajectory, optional
         Continue an interrupted run (a checkpoint, or any trajectory of the same model ending
         before ``t1``) from its last sample: its samples are kept in front of the new ones.
         The integrator, the controller's internal state and the events' re-arming restart at
         that sample, so a resumed run matches an uninterrupted one to the integration error
         (to round-off with a fixed-step method, the same ``dt`` and every step recorded).
+    **options
+        Flat shorthands of the fields of the three values: ``rtol``, ``atol``, ``h0``,
+        ``rank_rtol``, ``max_steps``, ``project_initial`` (:class:`Solver`); ``contact``,
+        ``restitution``, ``impact_velocity_threshold``, ``zeno_max_events``, ``zeno_window``,
+        ``event_rearm`` (:class:`EventSet`); ``t_eval``, ``progress``, ``checkpoint``,
+        ``checkpoint_every``, ``throw`` (:class:`Output`). A field given both ways with
+        different values raises :class:`~nonmin.errors.InputError`.
 
     Returns
     -------
@@ -600,11 +557,20 @@ def simulate(
         When the integration cannot go on (unless ``throw=False``).
     """
     engine = _fastpath.check_engine(engine)
-    if unknown:
-        import inspect
-
-        known = [k for k, v in inspect.signature(simulate).parameters.items() if v.kind == v.KEYWORD_ONLY]
-        raise InputError(f"simulate: unknown keyword argument(s) {sorted(unknown)}; known: {known}")
+    flat = dict(options)
+    if method is not None:
+        flat["method"] = method
+    if dt is not None:
+        flat["dt"] = dt
+    sol, evset, out = resolve_options(solver, events, output, flat)
+    method, dt, rtol, atol, h0 = sol.method, sol.dt, sol.rtol, sol.atol, sol.h0
+    rank_rtol, max_steps, project_initial = sol.rank_rtol, sol.max_steps, sol.project_initial
+    contact = evset.contact
+    restitution = evset.restitution if isinstance(evset.restitution, float) else dict(evset.restitution)
+    impact_velocity_threshold, event_rearm = evset.impact_velocity_threshold, evset.event_rearm
+    zeno_max_events, zeno_window = evset.zeno_max_events, evset.zeno_window
+    t_eval, progress, throw = out.t_eval, out.progress, out.throw
+    checkpoint, checkpoint_every = out.checkpoint, out.checkpoint_every
     # ---------------------------------------------------------------- model / mechanism
     if not isinstance(model, Model):
         mech = model
@@ -644,36 +610,24 @@ def simulate(
     qd = np.zeros(n) if qd0 is None else _vector(qd0, "qd0", n)
     act = model.resolve_active(active)
     stab = resolve_stabilization(stabilization)
-    if dt is not None:
-        dt = _positive(dt, "dt")
-    integ = _resolve_method(method, dt, _positive(rtol, "rtol"), _positive(atol, "atol"))
+    integ = _resolve_method(method, dt, rtol, atol)
     if integ.adaptive:
-        h_init = 0.0 if h0 is None else _positive(h0, "h0")
+        h_init = 0.0 if h0 is None else h0
         if dt is not None and hasattr(integ, "h_max"):
             integ = type(integ)(**{**integ.__dict__, "h_max": dt})
     else:
         step = getattr(integ, "dt", None) or dt or DEFAULT_DT
         h_init = _positive(step, "dt")
-    events = tuple(events)
+    events = evset.events
     for ev in events:
-        if not isinstance(ev, Event):
-            raise InputError(f"events must be Event values, got {type(ev).__name__}")
         tr = ev.transition
         if isinstance(tr, Activate | Deactivate):
             _check_names(model, tr.names, f"event {ev.name!r}")
     if isinstance(restitution, dict):
         _check_names(model, restitution, "restitution")
-        for nm, e in restitution.items():
-            if not 0.0 <= _real(e, f"restitution[{nm!r}]") <= 1.0:
-                raise InputError(f"restitution[{nm!r}] must lie in [0, 1], got {e!r}")
-    elif not 0.0 <= _real(restitution, "restitution") <= 1.0:
-        raise InputError(f"restitution must lie in [0, 1], got {restitution!r}")
     t_out: FloatArray | None = None
     if t_eval is not None:
-        try:
-            t_out = np.asarray(t_eval, dtype=float).ravel()
-        except (TypeError, ValueError):
-            raise InputError(f"t_eval must be an array of times, got {type(t_eval).__name__}") from None
+        t_out = np.array(t_eval, dtype=float)
         _durable.check_budget(t0=t0, t1=t1, h=None, max_steps=1, t_out=t_out, n=n, k=k,
                               c=len(model.constraint_names))  # its size, before reading it
         if not np.isfinite(t_out).all():
@@ -684,24 +638,11 @@ def simulate(
             raise InputError(f"t_eval must be non-decreasing and inside t_span {(t0, t1)}")
     if controller is not None and not callable(controller):
         raise InputError(f"controller must be callable, got {type(controller).__name__}")
-    if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
-        raise InputError(f"max_steps must be an integer ≥ 1, got {max_steps!r}")
     _durable.check_budget(t0=t0, t1=t1, h=dt if integ.adaptive else h_init, max_steps=int(max_steps),
                           t_out=t_out, n=n, k=k, c=len(model.constraint_names))
     if rank_rtol is None and integ.adaptive:
         rank_rtol = ADAPTIVE_RANK_RTOL
-    elif rank_rtol is not None and not (0.0 < _real(rank_rtol, "rank_rtol") < 1.0):
-        raise InputError(f"rank_rtol must lie in (0, 1), got {rank_rtol!r}")
-    v_thresh = _real(impact_velocity_threshold, "impact_velocity_threshold")
-    if not (v_thresh >= 0.0 and math.isfinite(v_thresh)):
-        raise InputError(f"impact_velocity_threshold must be ≥ 0, got {impact_velocity_threshold!r}")
-    if isinstance(zeno_max_events, bool) or not isinstance(zeno_max_events, int | np.integer) or zeno_max_events < 1:
-        raise InputError(f"zeno_max_events must be an integer ≥ 1, got {zeno_max_events!r}")
-    zeno_max = int(zeno_max_events)
-    zeno_window = _positive(zeno_window, "zeno_window")
-    rearm_tol = _real(event_rearm, "event_rearm")
-    if not (rearm_tol >= 0.0 and math.isfinite(rearm_tol)):
-        raise InputError(f"event_rearm must be ≥ 0, got {event_rearm!r}")
+    v_thresh, zeno_max, rearm_tol = impact_velocity_threshold, zeno_max_events, event_rearm
     project_initial = isinstance(stab, Projection) if project_initial is None else bool(project_initial)
 
     cstate = (_durable.user_call("controller.initial_state", t0, controller.initial_state)
@@ -790,7 +731,7 @@ def simulate(
                 if ccb is not None:
                     system.cstate = ccb.state
                 if creg is not None:
-                    system.cstate = _engine.merge_state(system.cstate, creg, k)
+                    system.cstate = _engine.merge_state(controller, system.cstate, creg)
             if not er.started:  # the first evaluation failed: the general driver raises
                 er = None
                 meta["engine"] = "python"
@@ -862,7 +803,7 @@ def simulate(
                     if ccb is not None:
                         system.cstate = ccb.state
                     if creg is not None:
-                        system.cstate = _engine.merge_state(system.cstate, creg, k)
+                        system.cstate = _engine.merge_state(controller, system.cstate, creg)
                 for i, g in zip(g_idx, er.guards):
                     gvals[i] = g
                 n_rejected += er.n_rejected

@@ -195,7 +195,7 @@ class Trajectory:
 
     # ------------------------------------------------------------------ files
     def _metadata_json(self) -> str:
-        from .. import __version__
+        from .._version import __version__
 
         meta = dict(self.metadata)
         meta.update(

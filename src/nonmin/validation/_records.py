@@ -251,7 +251,7 @@ def machine_info() -> dict[str, Any]:
         load = ()
     import scipy
 
-    from .. import __version__
+    from .._version import __version__
 
     return {
         "platform": platform.platform(),

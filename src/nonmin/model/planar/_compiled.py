@@ -536,7 +536,7 @@ def _constraints(
                 phit[row] = -fd
         phi[lay.angle_rows] = pa
     if lay.generic:
-        from ._model import _Kin
+        from ._elements import _Kin
 
         kin = _Kin(model, q, qd)
         if phit is None:

@@ -11,17 +11,14 @@ matrix ``Ȧ`` and ``γ = Ȧ qd`` in closed form (no finite differences).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
 from ...errors import InputError, ModelError, NonminError
 from .._protocol import FloatArray
-
-if TYPE_CHECKING:
-    from ._model import _Kin
 
 __all__ = [
     "GROUND",
@@ -673,3 +670,93 @@ class Torque:
     name: str
     body_a: str
     body_b: str
+
+
+# --------------------------------------------------------------------------- kinematics
+
+
+class _Indexed(Protocol):
+    """What :class:`_Kin` reads of a planar model: its coordinate count and, per body name,
+    the indices ``(ix, iy, iθ)`` of its coordinates (``iθ = −1`` for a point mass)."""
+
+    @property
+    def _index(self) -> Mapping[str, tuple[int, int, int]]: ...
+
+    @property
+    def n(self) -> int: ...
+
+
+class _Kin:
+    """Per-evaluation kinematics of all bodies (positions, angles, rates, rotation matrices)."""
+
+    __slots__ = ("_cache", "model", "n", "q", "qd")
+
+    def __init__(self, model: _Indexed, q: FloatArray, qd: FloatArray) -> None:
+        self.model = model
+        self.q = q
+        self.qd = qd
+        self.n = model.n
+        self._cache: dict[str, tuple[float, float, float, float, float, float, float]] = {}
+
+    def _body(self, name: str) -> tuple[float, float, float, float, float, float, float]:
+        """``(x, y, θ, ẋ, ẏ, θ̇, ·)`` of a body (zeros for the ground / θ of a point mass)."""
+        c = self._cache.get(name)
+        if c is not None:
+            return c
+        if name == GROUND:
+            out = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        else:
+            ix, iy, ith = self.model._index[name]
+            th = float(self.q[ith]) if ith >= 0 else 0.0
+            om = float(self.qd[ith]) if ith >= 0 else 0.0
+            out = (float(self.q[ix]), float(self.q[iy]), th, float(self.qd[ix]), float(self.qd[iy]), om, 0.0)
+        self._cache[name] = out
+        return out
+
+    def rotate(self, body: str, v: tuple[float, float]) -> FloatArray:
+        """Global components of the body-fixed vector v."""
+        th = self._body(body)[2]
+        c, s = math.cos(th), math.sin(th)
+        return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+    def point(self, p: Point) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+        """``(p, R s, ṗ, θ̇)`` of a body-fixed point."""
+        x, y, th, xd, yd, om, _ = self._body(p.body)
+        c, s = math.cos(th), math.sin(th)
+        sx, sy = p.local
+        rs = np.array([c * sx - s * sy, s * sx + c * sy])
+        pos = np.array([x + rs[0], y + rs[1]])
+        vel = np.array([xd - om * rs[1], yd + om * rs[0]])
+        return pos, rs, vel, om
+
+    def angle(self, body: str) -> tuple[float, float]:
+        b = self._body(body)
+        return b[2], b[5]
+
+    def add_jac(self, rows: FloatArray, body: str, rs: FloatArray, sign: float) -> None:
+        """``rows += sign·[I, (R s)^⊥]`` in the columns of ``body`` (rows: shape (2, n))."""
+        if body == GROUND:
+            return
+        ix, iy, ith = self.model._index[body]
+        rows[0, ix] += sign
+        rows[1, iy] += sign
+        if ith >= 0:
+            rows[0, ith] -= sign * rs[1]
+            rows[1, ith] += sign * rs[0]
+
+    def add_jacdot(self, rows: FloatArray, body: str, rs: FloatArray, om: float, sign: float) -> None:
+        """``rows += sign·d/dt [I, (R s)^⊥] = sign·[0, −θ̇ R s]``."""
+        if body == GROUND:
+            return
+        ith = self.model._index[body][2]
+        if ith >= 0:
+            rows[0, ith] -= sign * om * rs[0]
+            rows[1, ith] -= sign * om * rs[1]
+
+    def add_angle(self, A: FloatArray, row: int, body: str, coef: float) -> None:
+        if body == GROUND:
+            return
+        ith = self.model._index[body][2]
+        if ith < 0:
+            raise ModelError(f"body {body!r} is a point mass and has no rotation coordinate")
+        A[row, ith] += coef

@@ -16,7 +16,8 @@ test_planar_program.py`` demands agreement with :meth:`PlanarModel.evaluate` to 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from collections.abc import Sequence
+from typing import Any, Protocol
 
 from ... import _engine  # type: ignore[attr-defined]  # the compiled extension (no stubs)
 from .._timefn import Callback, TimeFunction
@@ -40,8 +41,24 @@ from ._elements import (
     Weld,
 )
 
-if TYPE_CHECKING:
-    from ._model import PlanarModel
+
+class PlanarModelLike(Protocol):
+    """What the compiler reads of a :class:`~nonmin.model.planar.PlanarModel` (this module
+    sits below the model and does not import it)."""
+
+    @property
+    def gravity(self) -> Any: ...
+    @property
+    def bodies(self) -> Sequence[Any]: ...
+    @property
+    def joints(self) -> Sequence[Any]: ...
+    @property
+    def forces(self) -> Sequence[Any]: ...
+    @property
+    def actuators(self) -> Sequence[Any]: ...
+
+    @property
+    def n(self) -> int: ...
 
 __all__ = ["description", "engine_program"]
 
@@ -49,7 +66,7 @@ __all__ = ["description", "engine_program"]
 KIND_CODES = {"holonomic": 0, "rheonomic": 1, "nonholonomic": 2, "unilateral": 3}
 
 
-def description(model: PlanarModel) -> Any | None:
+def description(model: PlanarModelLike) -> Any | None:
     """The engine description of ``model``, or None if a joint is user-defined (a
     :class:`~nonmin.model.planar.Joint` subclass the compiler does not know: its
     :meth:`Joint.terms` is Python)."""
@@ -142,7 +159,7 @@ def description(model: PlanarModel) -> Any | None:
     return d
 
 
-def engine_program(model: PlanarModel) -> Any | None:
+def engine_program(model: PlanarModelLike) -> Any | None:
     """The engine's ``PlanarProgram`` of ``model`` (all constraints; the active set is a mask
     given to each evaluation), or None when a joint is user-defined."""
     d = description(model)

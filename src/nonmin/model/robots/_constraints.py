@@ -397,3 +397,17 @@ class JointDriver:
 
 
 RobotConstraint = FrameConstraint | JointCoupling | JointLimit | JointDriver
+
+
+def _joint_limits_option(joint_limits: Any) -> bool | str:
+    """Validate ``joint_limits``: True (enforce), False / "warn" (warn, not enforced), "ignore"."""
+    if joint_limits is True or joint_limits is False:
+        return bool(joint_limits)
+    if joint_limits == "warn":
+        return False
+    if joint_limits == "ignore":
+        return "ignore"
+    raise InputError(
+        f"joint_limits must be True (enforce as unilateral constraints), False or 'warn' "
+        f"(not enforced, a JointLimitWarning names them) or 'ignore', got {joint_limits!r}"
+    )

@@ -41,22 +41,22 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ...errors import FileFormatError, JointLimitWarning, ModelError, missing_dependency
-from ._constraints import FrameConstraint, JointCoupling, RobotConstraint
-from ._pinocchio import pin
+from ._constraints import FrameConstraint, JointCoupling, RobotConstraint, _joint_limits_option
 
 try:
     import mujoco
 except ImportError as exc:  # pragma: no cover - exercised in a subprocess test
     raise missing_dependency("mujoco", "mujoco", "Robots from MJCF (RobotModel.from_mjcf)") from exc
-
-if TYPE_CHECKING:
-    from ._pinocchio import RobotModel
+try:
+    import pinocchio as pin
+except ImportError as exc:  # pragma: no cover - exercised in a subprocess test
+    raise missing_dependency("pinocchio", "pin", "Robots from URDF/MJCF (nonmin.model.robots)") from exc
 
 __all__ = ["MAX_MJCF_BYTES", "build_pinocchio_model", "equality_constraints", "load_mjcf"]
 
@@ -214,7 +214,7 @@ def equality_constraints(mj: Any, info: dict[str, Any]) -> tuple[list[RobotConst
 
 
 def load_mjcf(
-    cls: type[RobotModel],
+    cls: Any,
     path: str | Path,
     *,
     constraints: tuple[RobotConstraint, ...] = (),
@@ -223,8 +223,11 @@ def load_mjcf(
     default_active: Any = None,
     name: str | None = None,
     joint_limits: bool | str = True,
-) -> RobotModel:
+) -> Any:
     """Build a :class:`RobotModel` from an MJCF file (see the module docstring).
+
+    ``cls`` is :class:`~nonmin.model.robots.RobotModel` or a subclass (this module sits below
+    it: the model's ``from_mjcf`` calls here with itself).
 
     Joint position limits (``limited``/``range``): with ``joint_limits=True`` those of hinge
     and slide joints become unilateral :class:`JointLimit` constraints ``"<joint>.lower"`` /
@@ -237,8 +240,6 @@ def load_mjcf(
     p = Path(path)
     if not p.is_file():
         raise FileFormatError(f"path: MJCF file {str(p)!r} does not exist")
-    from ._pinocchio import _joint_limits_option
-
     enforce = _joint_limits_option(joint_limits)
     try:
         size = p.stat().st_size

@@ -78,6 +78,7 @@ from ._constraints import (
     JointDriver,
     JointLimit,
     RobotConstraint,
+    _joint_limits_option,
     complete_basis,
 )
 from ._tree import compile_tree
@@ -134,20 +135,6 @@ def joint_limit_constraints(limits: dict[str, tuple[float, float]]) -> list[Join
         if np.isfinite(b):
             out.append(JointLimit(f"{joint}.upper", joint, b, "upper"))
     return out
-
-
-def _joint_limits_option(joint_limits: Any) -> bool | str:
-    """Validate ``joint_limits``: True (enforce), False / "warn" (warn, not enforced), "ignore"."""
-    if joint_limits is True or joint_limits is False:
-        return bool(joint_limits)
-    if joint_limits == "warn":
-        return False
-    if joint_limits == "ignore":
-        return "ignore"
-    raise InputError(
-        f"joint_limits must be True (enforce as unilateral constraints), False or 'warn' "
-        f"(not enforced, a JointLimitWarning names them) or 'ignore', got {joint_limits!r}"
-    )
 
 
 def _limits_text(limits: dict[str, tuple[float, float]], where: str) -> str:

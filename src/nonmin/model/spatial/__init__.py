@@ -6,7 +6,7 @@ see :mod:`nonmin.model.spatial._quaternion`.
 """
 
 from ._builder import SpatialBuilder as SpatialBuilder
-from ._builder import check_inertia as check_inertia
+from ._inertia import check_inertia as check_inertia
 from ._model import GROUND as GROUND
 from ._model import JOINT_KINDS as JOINT_KINDS
 from ._model import Actuator as Actuator

@@ -15,6 +15,8 @@ from numpy.typing import ArrayLike
 
 from ...errors import InputError, ModelError, UnknownNameError
 from .._protocol import FloatArray
+from ._inertia import INERTIA_RTOL as INERTIA_RTOL
+from ._inertia import check_inertia
 from ._model import (
     GROUND,
     Actuator,
@@ -28,10 +30,6 @@ from ._model import (
 from ._quaternion import rotation_matrix
 
 __all__ = ["SpatialBuilder", "check_inertia"]
-
-#: Relative tolerance of the inertia checks (symmetry, triangle inequality).
-INERTIA_RTOL = 1e-9
-
 
 def _vec3(x: ArrayLike, name: str) -> FloatArray:
     try:
@@ -59,46 +57,6 @@ def _perpendicular_pair(u: FloatArray) -> tuple[FloatArray, FloatArray]:
     f = trial - (trial @ u) * u
     f /= np.linalg.norm(f)
     return f, np.cross(u, f)
-
-
-def check_inertia(inertia: ArrayLike, name: str = "inertia") -> FloatArray:
-    """Validate a rigid-body inertia tensor about the centre of mass.
-
-    It must be a finite symmetric 3 × 3 matrix with positive principal moments that satisfy
-    the triangle inequality ``I_i + I_j ≥ I_k`` (every physical mass distribution does).
-    A 3-vector is read as the diagonal.
-
-    Raises
-    ------
-    ModelError
-        If the tensor is not physical.
-    """
-    try:
-        J = np.asarray(inertia, dtype=float)
-    except (TypeError, ValueError):
-        raise ModelError(f"{name} must be a 3×3 matrix or 3-vector, got {inertia!r}") from None
-    if J.shape == (3,):
-        J = np.diag(J)
-    if J.shape != (3, 3):
-        raise ModelError(f"{name} must have shape (3, 3) or (3,), got shape {J.shape}")
-    if not np.isfinite(J).all():
-        raise ModelError(f"{name} must be finite, got {J.tolist()}")
-    scale = float(np.max(np.abs(J))) or 1.0
-    if np.max(np.abs(J - J.T)) > INERTIA_RTOL * scale:
-        raise ModelError(f"{name} must be symmetric, got {J.tolist()}")
-    J = 0.5 * (J + J.T)
-    lam = np.linalg.eigvalsh(J)
-    if lam[0] <= 0.0:
-        raise ModelError(
-            f"{name} must be positive definite (principal moments > 0), got principal moments "
-            f"{lam.tolist()}"
-        )
-    if lam[0] + lam[1] < lam[2] * (1.0 - INERTIA_RTOL):
-        raise ModelError(
-            f"{name} violates the triangle inequality I1 + I2 ≥ I3 of a physical body: "
-            f"principal moments {lam.tolist()}"
-        )
-    return J
 
 
 class SpatialBuilder:

@@ -41,6 +41,7 @@ from .._protocol import (
     Model,
     _as_vector,
 )
+from ._inertia import check_inertia  # validates replace(bodies=...) variants too
 from ._quaternion import E_matrix, G_matrix, H_matrix, point_tensor, rotation_matrix
 
 __all__ = [
@@ -446,7 +447,6 @@ class SpatialModel(Model):
             raise ModelError(f"body names must be unique, got {[b.name for b in self.bodies]}")
         if not self.bodies:
             raise ModelError("a spatial model needs at least one body")
-        from ._builder import check_inertia  # validates replace(bodies=...) variants too
 
         for b in self.bodies:
             if not (np.isfinite(b.mass) and b.mass > 0.0):

@@ -11,15 +11,36 @@ energies for any active mask with no Python (formulas in ``engine/include/nonmin
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from collections.abc import Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
 from ... import _engine  # type: ignore[attr-defined]  # the compiled extension (no stubs)
 from ._quaternion import point_tensor
 
-if TYPE_CHECKING:
-    from ._model import SpatialModel
+
+class SpatialModelLike(Protocol):
+    """What the compiler reads of a :class:`~nonmin.model.spatial.SpatialModel` (this module
+    sits below the model and does not import it)."""
+
+    @property
+    def gravity(self) -> Any: ...
+    @property
+    def bodies(self) -> Sequence[Any]: ...
+    @property
+    def springs(self) -> Sequence[Any]: ...
+    @property
+    def actuators(self) -> Sequence[Any]: ...
+    @property
+    def _plan(self) -> Any: ...
+
+    @property
+    def constraints(self) -> Sequence[Any]: ...
+
+    def body_index(self, name: str) -> int: ...
+
+    def joint(self, name: str) -> Any: ...
 
 __all__ = ["description", "engine_program"]
 
@@ -31,7 +52,7 @@ def _engine_fn(motion: Any) -> Any:
     return motion.engine()
 
 
-def description(model: SpatialModel) -> Any:
+def description(model: SpatialModelLike) -> Any:
     """The engine description (``nonmin._engine.SpatialDescription``) of ``model``."""
     d = _engine.SpatialDescription()
     d.set_gravity(tuple(float(g) for g in model.gravity))
@@ -96,7 +117,7 @@ def description(model: SpatialModel) -> Any:
     return d
 
 
-def engine_program(model: SpatialModel) -> Any:
+def engine_program(model: SpatialModelLike) -> Any:
     """The engine's ``SpatialProgram`` of ``model`` (every constraint; the active set is a mask
     given to each evaluation)."""
     return _engine.SpatialProgram(description(model))

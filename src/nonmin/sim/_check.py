@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, NonminError
-from ._protocol import Model, State
+from ..model import Model, State
 
 __all__ = ["CheckItem", "ModelReport", "check_model"]
 
@@ -275,7 +275,7 @@ def check_model(
     rank = cond = mu = np.zeros(0)
     drops: tuple[float, ...] = ()
     if duration > 0:
-        from ..sim import simulate
+        from ._simulate import simulate
 
         traj: Any = simulate(
             model,
