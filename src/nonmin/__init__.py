@@ -33,9 +33,9 @@ from . import library as library
 from . import model as model
 from . import sim as sim
 from . import sweeps as sweeps
+from ._version import __version__ as __version__
 from .analysis import inverse_dynamics as inverse_dynamics
 from .analysis import reactions as reactions
-from ._version import __version__ as __version__
 from .core import constraint_force as constraint_force
 from .core import forward_dynamics as forward_dynamics
 from .core import impact_map as impact_map

@@ -183,7 +183,7 @@ def join(prev: Trajectory, new: Trajectory, drop_last: bool) -> Trajectory:
     from ._trajectory import _ARRAYS
 
     cut = len(prev) - 1 if drop_last else len(prev)
-    arrays = {a: np.concatenate((np.asarray(getattr(prev, a))[:cut], np.asarray(getattr(new, a))))
+    arrays: dict[str, Any] = {a: np.concatenate((np.asarray(getattr(prev, a))[:cut], np.asarray(getattr(new, a))))
               for a in _ARRAYS}
     meta = dict(new.metadata)
     meta["resumed_at"] = float(prev.t[-1])

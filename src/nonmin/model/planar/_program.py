@@ -16,7 +16,7 @@ test_planar_program.py`` demands agreement with :meth:`PlanarModel.evaluate` to 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, Protocol
 
 from ... import _engine  # type: ignore[attr-defined]  # the compiled extension (no stubs)
@@ -59,6 +59,9 @@ class PlanarModelLike(Protocol):
 
     @property
     def n(self) -> int: ...
+
+    @property
+    def _index(self) -> Mapping[str, tuple[int, int, int]]: ...
 
 __all__ = ["description", "engine_program"]
 
