@@ -36,6 +36,7 @@ def test_public_api_is_pinned() -> None:
         "NoStabilization", "Projection", "Reset", "Stabilization", "Status", "StepResult",
         "StepperState", "Trajectory", "load_trajectory", "simulate",
         "Solver", "EventSet", "Output", "check_model", "ModelReport", "CheckItem",
+        "BatchTrajectory", "simulate_batch",
     }
     assert set(sim.METHODS) == {"rk4", "dopri5", "midpoint"}
     assert set(sim.STABILIZATIONS) == {"none", "baumgarte", "projection"}
