@@ -30,6 +30,7 @@ MODULES: tuple[str, ...] = (
     "nonmin.model.robots",
     "nonmin.library",
     "nonmin.sim",
+    "nonmin.analysis",
     "nonmin.control",
     "nonmin.viz",
     "nonmin.io",

@@ -143,3 +143,26 @@ def test_bad_input_is_typed() -> None:
         nonmin.inverse_dynamics(model, state.q, z, z, actuation=np.zeros((3, 2)))
     with pytest.raises(InputError, match="positive definite"):
         nonmin.inverse_dynamics(model, state.q, z, z, weight=[1.0, -1.0])
+
+
+def test_a_trajectory_of_states_is_stacked() -> None:
+    model, state = three_rrr()
+    rng = np.random.default_rng(6)
+    q = np.tile(state.q, (4, 1))
+    qd = np.array([admissible_velocity(model, state.q, rng) for _ in range(4)])
+    u0 = rng.normal(size=(4, model.k))
+    B = model.input_matrix(state.q)
+    qdd = np.array(
+        [model.forward_dynamics(state.q, v, f=B @ u).qdd for v, u in zip(qd, u0, strict=True)]
+    )
+    qdd[2] += 0.1  # one inconsistent state
+    res = nonmin.inverse_dynamics(model, q, qd, qdd, t=np.arange(4.0))
+    assert res.u.shape == (4, model.k) and res.f_c.shape == (4, model.n)
+    np.testing.assert_array_equal(res.ok, [True, True, False, True])
+    assert res.message.startswith("state 2: qdd is not consistent")
+    for i in (0, 1, 3):
+        one = nonmin.inverse_dynamics(model, q[i], qd[i], qdd[i], t=float(i))
+        np.testing.assert_array_equal(res.u[i], one.u)
+        np.testing.assert_allclose(res.u[i], u0[i], atol=TOL)
+    with pytest.raises(ShapeError, match="qdd"):
+        nonmin.inverse_dynamics(model, q, qd, qdd[:2])

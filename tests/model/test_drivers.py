@@ -250,13 +250,17 @@ def _spatial_driven():
     b.add_body("arm", mass=1.5, inertia=[0.01, 0.05, 0.05], position=[0.5, 3.0, 0.0])
     b.add_revolute("shoulder", "ground", "arm", point=[0.0, 3.0, 0.0], axis=[0.0, 0.0, 1.0])
     b.add_angle_driver("turn", "shoulder", Expression("0.8*t + 0.3*sin(2*t)"))
+    # a slider on a rail along (1, 1, 0)/√2 through (0, −3, 0), pushed by its slide s(t)
+    b.add_body("slider", mass=0.7, inertia=[0.01, 0.01, 0.01], position=[0.0, -3.0, 0.0])
+    b.add_prismatic("rail", "ground", "slider", point=[0.0, -3.0, 0.0], axis=[1.0, 1.0, 0.0])
+    b.add_slide_driver("push", "rail", Polynomial([0.0, 0.5, 0.25]))
     return b.build()
 
 
 def test_spatial_drivers_engine_matches_python_and_follow_their_motions() -> None:
     m = _spatial_driven()
     kinds = {c.name: c.kind for c in m.constraints}
-    assert kinds["drive_x"] == kinds["path"] == kinds["rope"] == kinds["turn"] == "rheonomic"
+    assert {kinds[k] for k in ("drive_x", "path", "rope", "turn", "push")} == {"rheonomic"}
     rng = np.random.default_rng(1)
     q0 = m.reference_configuration()
     for t in (0.0, 0.4, 1.3):
@@ -285,6 +289,10 @@ def test_spatial_drivers_engine_matches_python_and_follow_their_motions() -> Non
     th = 0.8 * t + 0.3 * np.sin(2 * t)
     want = np.stack([0.5 * np.cos(th), 3.0 + 0.5 * np.sin(th)], -1)
     np.testing.assert_allclose(traj.q[:, 7 * arm : 7 * arm + 2], want, atol=1e-9)
+    sl = m.body_index("slider")
+    s = 0.5 * t + 0.25 * t * t
+    want = np.stack([s / np.sqrt(2), -3.0 + s / np.sqrt(2), 0 * s], -1)
+    np.testing.assert_allclose(traj.q[:, 7 * sl : 7 * sl + 3], want, atol=1e-9)
 
 
 # --------------------------------------------------------------------------- robots
@@ -347,3 +355,26 @@ def test_engine_loop_and_python_driver_agree_on_driven_models() -> None:
         b = nonmin.simulate(m, 0.2, st, dt=2e-3, t_eval=te, engine="python")
         np.testing.assert_allclose(a.q, b.q, atol=1e-10)
         np.testing.assert_allclose(a.f_c, b.f_c, atol=1e-8 * max(1.0, np.abs(b.f_c).max()))
+
+
+def test_planar_slide_driver_pushes_a_cart_along_a_tilted_rail() -> None:
+    b = PlanarBuilder("cart")
+    b.body("cart", mass=2.0, inertia=0.1, points={"c": (0.0, 0.0)})
+    b.body("pole", mass=0.5, inertia=0.05, points={"top": (0.0, 0.4), "mid": (0.0, 0.0)})
+    axis = (np.cos(0.5), np.sin(0.5))
+    b.prismatic("rail", ("ground", (0.0, 0.0)), "c", axis=axis)
+    b.revolute("hinge", "c", "top")
+    push = Spline([0.0, 0.5, 1.0], [0.0, 0.3, 0.2], bc_type="clamped")
+    b.drive_slide("push", "rail", push)
+    m = b.build()
+    st = assemble(m, [0.0, 0.0, 0.0, 0.0, -0.4, 0.0])
+    rng = np.random.default_rng(3)
+    for t in (0.1, 0.7):  # engine program = Python evaluation
+        q, qd = st.q + 0.1 * rng.normal(size=m.n), rng.normal(size=m.n)
+        py = m._solve_one(t, q, qd, m.default_active, None, 1e-10, 0)
+        np.testing.assert_allclose(m.forward_dynamics(q, qd, t=t).qdd, py.qdd, rtol=1e-9, atol=1e-9)
+    traj = nonmin.simulate(m, 1.0, st, dt=1e-3, t_eval=np.linspace(0, 1, 11))
+    s = np.array([push(t)[0] for t in traj.t])
+    np.testing.assert_allclose(traj.q[:, :2], np.outer(s, axis), atol=1e-9)
+    r = traj.with_reactions(m, ["push"]).reactions["push"]
+    assert r.kind == "planar" and r.body_b == "cart" and r.determined.all()

@@ -29,7 +29,8 @@ Feasibility, reported rather than assumed:
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -50,7 +51,8 @@ FEASIBILITY_RTOL = 1e-8
 
 @dataclass(frozen=True)
 class InverseDynamics:
-    """Result of :func:`inverse_dynamics` at one state.
+    """Result of :func:`inverse_dynamics` at one state, or stacked over N states (then every
+    array gains a leading axis of length N and the verdicts and ranks are arrays of shape (N,)).
 
     Attributes
     ----------
@@ -105,9 +107,11 @@ class InverseDynamics:
     message: str
 
     @property
-    def ok(self) -> bool:
-        """True when the motion is consistent and achievable (u reproduces it exactly)."""
-        return self.consistent and self.achievable
+    def ok(self) -> Any:
+        """True when the motion is consistent and achievable (u reproduces it exactly); an
+        array of shape (N,) for a trajectory."""
+        both = np.logical_and(self.consistent, self.achievable)
+        return bool(both) if np.ndim(both) == 0 else both
 
 
 def _vector(x: ArrayLike, name: str, n: int) -> FloatArray:
@@ -184,14 +188,15 @@ def inverse_dynamics(
     Parameters
     ----------
     model : Model
-    q, qd, qdd : array_like, shape (n,)
-        The motion at one instant (q̇ admissible, q̈ consistent: both are checked).
+    q, qd, qdd : array_like, shape (n,) or (N, n)
+        The motion at one instant, or at N instants of a trajectory (q̇ admissible, q̈
+        consistent: both are checked).
     actuation : array_like, shape (n, k), optional
         Input matrix B (``f = B u``); default the model's ``input_matrix(q)``.
     weight : array_like, shape (k, k) or (k,), optional
         SPD weight W: u minimizes ``uᵀ W u`` among the inputs that produce the motion
         (default W = I, the minimum-norm u of the paper's Γ).
-    t : float
+    t : float or array_like, shape (N,)
         Time (drivers, rheonomic constraints).
     active : iterable of str, optional
         Active constraints (default the model's default active set).
@@ -202,7 +207,7 @@ def inverse_dynamics(
     -------
     InverseDynamics
         u, the forces, the residuals and the verdicts ``consistent``, ``achievable``,
-        ``fully_actuated`` and ``redundancy``.
+        ``fully_actuated`` and ``redundancy`` (stacked over the N states of a trajectory).
 
     Raises
     ------
@@ -224,8 +229,46 @@ def inverse_dynamics(
     >>> th = np.pi / 6
     >>> r = nonmin.inverse_dynamics(m, [np.sin(th), -np.cos(th)], [0, 0], [0, 0])
     >>> round(float(r.u[0]), 6), round(9.81 * np.tan(th), 6), r.ok
-    (5.663810, 5.66381, True)
+    (5.66381, 5.66381, True)
     """
+    qa = np.asarray(q, dtype=np.float64) if not isinstance(q, np.ndarray) else q
+    if np.ndim(qa) == 2:  # a trajectory: one state after the other, results stacked
+        Q, QD, QDD = (np.asarray(x, dtype=np.float64) for x in (q, qd, qdd))
+        N = Q.shape[0]
+        for name, x in (("qd", QD), ("qdd", QDD)):
+            if x.shape != Q.shape:
+                raise ShapeError(f"{name} must have the shape of q {Q.shape}, got shape {x.shape}")
+        try:
+            T = np.broadcast_to(np.asarray(t, dtype=np.float64), (N,))
+        except ValueError:
+            raise ShapeError(
+                f"t must be a scalar or have shape ({N},), got shape {np.shape(t)}"
+            ) from None
+        rows = [
+            inverse_dynamics(
+                model,
+                Q[i],
+                QD[i],
+                QDD[i],
+                actuation=actuation,
+                weight=weight,
+                t=float(T[i]),
+                active=active,
+                rtol=rtol,
+            )
+            for i in range(N)
+        ]
+        stacked: dict[str, Any] = {}
+        for fld in fields(InverseDynamics):
+            vals = [getattr(r, fld.name) for r in rows]
+            if fld.name == "message":
+                bad = [f"state {i}: {m}" for i, m in enumerate(vals) if m]
+                stacked[fld.name] = "; ".join(bad[:5]) + (
+                    f"; ... ({len(bad)} states)" if len(bad) > 5 else ""
+                )
+            else:
+                stacked[fld.name] = np.array(vals)
+        return InverseDynamics(**stacked)
     n = model.n
     qv = _vector(q, "q", n)
     v = _vector(qd, "qd", n)

@@ -27,6 +27,7 @@ from ._elements import (
     Revolute,
     Rod,
     RotationalSpring,
+    SlideDriver,
     Spring,
     Torque,
     Weld,
@@ -305,6 +306,17 @@ class PlanarBuilder:
         if not f0 > 0.0:
             raise ModelError(f"{w}: the prescribed distance at t = 0 must be > 0, got {f0}")
         return self._add_joint(DistanceDriver(name, self._ref(a, w), self._ref(b, w), prof, f0), active)
+
+    def drive_slide(self, name: str, joint: str, motion: Any, *, active: bool = True) -> str:
+        """Rheonomic driver of a prismatic joint's slide ``s = (R_a u)·(p_b − p_a) = f(t)`` (the
+        joint's own points and axis; ``motion`` as in :meth:`drive_coordinate`)."""
+        jt = next((j for j in self._joints if j.name == joint), None)
+        if jt is None:
+            raise UnknownNameError(f"drive_slide {name!r}: unknown joint {joint!r}; known: {[j.name for j in self._joints]}")
+        if not isinstance(jt, Prismatic):
+            raise ModelError(f"drive_slide {name!r}: joint {joint!r} must be prismatic, got {type(jt).__name__}")
+        prof = as_time_function(motion, f"driver {name!r}")
+        return self._add_joint(SlideDriver(name, jt.a, jt.axis, jt.b, prof), active)
 
     def drive_path(self, name: str, point: PointRef, x: Any, y: Any, *, active: bool = True) -> str:
         """Rheonomic driver of a point along a path, ``p = (x(t), y(t))`` in world coordinates

@@ -38,6 +38,7 @@ __all__ = [
     "Revolute",
     "Rod",
     "RotationalSpring",
+    "SlideDriver",
     "Spring",
     "Torque",
     "Weld",
@@ -610,6 +611,43 @@ class PathDriver(Joint):
         fy = tuple(float(v) for v in self.y(float(t)))
         gamma = -(oma * oma) * rsa - np.array([fx[2], fy[2]])
         return pa - np.array([fx[0], fy[0]]), A, Ad, gamma, -np.array([fx[1], fy[1]])
+
+
+@dataclass(frozen=True)
+class SlideDriver(Joint):
+    """Prescribed slide of point b along the axis ``u`` through point a (on a's body), 1 row:
+    ``φ = (R_a u)·(p_b − p_a) − f(t)`` (a driven prismatic joint). It is the line row of
+    :class:`PointOnLine` with the axis turned by −90° (its normal is ``R_a u``), minus f:
+    ``φ_t = −ḟ``, ``γ = γ_line − f̈``."""
+
+    a: Point
+    axis: Vec2
+    b: Point
+    profile: Profile
+
+    @property
+    def kind(self) -> Literal["holonomic", "rheonomic", "nonholonomic", "unilateral"]:
+        return "rheonomic"
+
+    @property
+    def dim(self) -> int:
+        return 1
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.a.body, self.b.body)
+
+    @property
+    def line_axis(self) -> Vec2:
+        """The axis whose left normal is ``u``: ``(u_y, −u_x)``."""
+        return (self.axis[1], -self.axis[0])
+
+    def terms(self, kin: _Kin, t: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        A = np.zeros((1, kin.n))
+        Ad = np.zeros((1, kin.n))
+        phi, gamma = _line_row(kin, self.a, self.line_axis, self.b, A, Ad, 0)
+        f, fd, fdd = (float(v) for v in self.profile(float(t)))
+        return np.array([phi - f]), A, Ad, np.array([gamma - fdd]), np.array([-fd])
 
 
 # ----------------------------------------------------------------------------- forces

@@ -36,6 +36,7 @@ from ._elements import (
     Revolute,
     Rod,
     RotationalSpring,
+    SlideDriver,
     Spring,
     Torque,
     Weld,
@@ -132,6 +133,10 @@ def description(model: PlanarModelLike) -> Any | None:
         elif tj is DistanceDriver:
             assert isinstance(j, DistanceDriver)
             d.add_rod(c, 0, pt(j.a), pt(j.b), j.reference, 1.0)
+            d.set_drivers(-1, driver(j.profile))
+        elif tj is SlideDriver:
+            assert isinstance(j, SlideDriver)
+            d.add_line(c, 0, pt(j.a), j.line_axis[0], j.line_axis[1], pt(j.b))
             d.set_drivers(-1, driver(j.profile))
         elif tj is PathDriver:
             assert isinstance(j, PathDriver)

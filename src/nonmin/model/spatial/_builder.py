@@ -386,6 +386,26 @@ class SpatialBuilder:
         )
         return self
 
+    def add_slide_driver(self, name: str, joint: str, motion: object, *, active: bool = True) -> SpatialBuilder:
+        """Prescribed slide ``s(t)`` of a prismatic or cylindrical joint along its axis (1 row):
+        ``φ = (R_a u)·(p_b − p_a) − f(t)``, zero at the reference configuration."""
+        from dataclasses import replace
+
+        from .._timefn import as_time_function
+
+        j = next((x for x in self._joints if x.name == joint), None)
+        if j is None:
+            raise UnknownNameError(f"driver {name!r}: unknown joint {joint!r}; known: {[x.name for x in self._joints]}")
+        if j.kind not in ("prismatic", "cylindrical"):
+            raise ModelError(f"driver {name!r}: joint {joint!r} must be prismatic or cylindrical, got {j.kind}")
+        fn = as_time_function(motion, f"driver {name!r}")
+        self._add_joint("slide_driver", name, j.body_a, j.body_b, j.point, [], [], j.axis, active)
+        self._joints[-1] = replace(
+            self._joints[-1], point_a=j.point_a.copy(), point_b=j.point_b.copy(),
+            vectors_a=j.vectors_a[:1].copy(), motions=(fn,),
+        )
+        return self
+
     def add_distance_driver(
         self, name: str, body_a: str, body_b: str, *, point_a: ArrayLike, point_b: ArrayLike, motion: object,
         active: bool = True,

@@ -61,14 +61,16 @@ GROUND = "ground"
 
 JointKind = Literal[
     "spherical", "revolute", "prismatic", "cylindrical", "universal", "weld", "point_on_plane",
-    "coordinate_driver", "path_driver", "distance_driver", "angle_driver",
+    "coordinate_driver", "path_driver", "distance_driver", "angle_driver", "slide_driver",
 ]
 #: The joint kinds of the spatial builder.
 JOINT_KINDS: tuple[str, ...] = (
     "spherical", "revolute", "prismatic", "cylindrical", "universal", "weld", "point_on_plane"
 )
 #: Driver kinds (rheonomic): a prescribed COM coordinate, point path, distance, joint angle.
-DRIVER_KINDS: tuple[str, ...] = ("coordinate_driver", "path_driver", "distance_driver", "angle_driver")
+DRIVER_KINDS: tuple[str, ...] = (
+    "coordinate_driver", "path_driver", "distance_driver", "angle_driver", "slide_driver"
+)
 _JOINT_ROWS = {
     "spherical": 3,
     "revolute": 5,
@@ -81,6 +83,7 @@ _JOINT_ROWS = {
     "path_driver": 3,
     "distance_driver": 1,
     "angle_driver": 1,
+    "slide_driver": 1,
 }
 
 
@@ -324,6 +327,10 @@ class _RowPlan:
                     rows.append(([(att(GROUND, ax, False), 1.0)], d))
                     drivers.append((len(motions), 0.0))
                     motions.append(j.motions[c])
+            if kind == "slide_driver":  # (R_a u)·(p_b − p_a) − f(t)
+                rows.append((A_(0), d))
+                drivers.append((len(motions), 0.0))
+                motions.append(j.motions[0])
             if kind == "angle_driver":
                 # φ = sin(θ − f) = cos f·P2 − sin f·P1 with P1 = (R_a f_a)·(R_b f_b) = cos θ and
                 # P2 = (R_a g_a)·(R_b f_b) = sin θ: two auxiliary rows evaluated after the others
