@@ -17,6 +17,7 @@ CLAIMS = [
     "all determined: True",
     "pivot determined: [False False  True]  pivot2: [False False  True]",
     "engine program: True",
+    "all ok: True",
     "ok=True fully_actuated=True dof=2 redundancy=2",
 ]
 #: printed residual -> bound it must meet
