@@ -14,6 +14,7 @@ void register_all(nanobind::module_& m) {
     bind_rbd(m);
     bind_sim(m);
     bind_sim_batch(m);
+    bind_events(m);
 }
 
 }  // namespace nonmin::bindings

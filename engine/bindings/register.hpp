@@ -17,5 +17,6 @@ void bind_rbd(nanobind::module_& m);      // rbd.cpp: TreeProgram (robots)
 void bind_sim(nanobind::module_& m);      // sim.cpp: SimLoop, SimOptions, PyProgram (needs Program)
 void bind_sim_batch(nanobind::module_& m);  // sim_batch.cpp: simulate_batch (k runs of the loop)
 void bind_batch(nanobind::module_& m);    // batch.cpp: forward_batch (model + kernel over N states)
+void bind_events(nanobind::module_& m);   // events.cpp: polyhedral_projection (event layer kernel)
 
 }  // namespace nonmin::bindings

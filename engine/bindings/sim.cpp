@@ -16,6 +16,7 @@
 #include "nonmin/program.hpp"
 #include "nonmin/sim/control.hpp"
 #include "nonmin/sim/loop.hpp"
+#include "nonmin/sim/events.hpp"
 #include "register.hpp"
 
 namespace nb = nanobind;
@@ -328,6 +329,7 @@ void bind_sim(nb::module_& m) {
     m.attr("SIM_DONE") = static_cast<int>(sim::Outcome::done);
     m.attr("SIM_HANDOVER") = static_cast<int>(sim::Outcome::handover);
     m.attr("SIM_EVENT") = static_cast<int>(sim::Outcome::event);
+    m.attr("SIM_TRANSITION") = static_cast<int>(sim::Outcome::transition);
 
     nb::class_<SimLoop>(m, "SimLoop", "The engine's simulation loop over one Program and one active set.")
         .def(
@@ -446,6 +448,36 @@ void bind_sim(nb::module_& m) {
                 return v;
             },
             "The contact guards' values at the last accepted step end.")
+        .def(
+            "set_contact",
+            [](SimLoop& s, const std::vector<double>& restitution, double v_thresh) {
+                if (restitution.size() != s.program->constraints().size())
+                    raise_typed("ShapeError", "restitution must have one value per constraint");
+                sim::set_contact_options(*s.loop, restitution, v_thresh);
+            },
+            nb::arg("restitution"), nb::arg("v_thresh"),
+            "Newton's e of automatic impacts per constraint and the impact velocity threshold.")
+        .def_prop_ro(
+            "events",
+            [](const SimLoop& s) {
+                nb::list out;
+                const auto n = static_cast<std::size_t>(s.loop->n), c = static_cast<std::size_t>(s.loop->c);
+                for (const sim::EventInfo& e : s.loop->events) {
+                    nb::dict d;
+                    d["t"] = e.t;
+                    d["name"] = e.name;
+                    d["transition"] = e.text;
+                    d["q_before"] = copy_array(e.q_before.data(), {n});
+                    d["qd_before"] = copy_array(e.qd_before.data(), {n});
+                    d["q_after"] = copy_array(e.q_after.data(), {n});
+                    d["qd_after"] = copy_array(e.qd_after.data(), {n});
+                    d["active_before"] = copy_array(e.active_before.data(), {c});
+                    d["active_after"] = copy_array(e.active_after.data(), {c});
+                    out.append(d);
+                }
+                return out;
+            },
+            "The transitions the engine's event layer applied in the last run() (SIM_TRANSITION).")
         .def_prop_ro("t", [](const SimLoop& s) { return s.loop->t; })
         .def_prop_ro(
             "y",

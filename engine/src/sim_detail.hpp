@@ -14,6 +14,10 @@ bool adaptive(const Loop& L);
 // A raw step of size h of the fixed-step method from (t, y) (f: F(t, y) when known) into out.
 Status fixed_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out);
 
+// DormandPrince5.advance: one raw step of size h from (t, y) (f: F(t, y) when known) into out
+// (the event layer's partial steps; L.K is overwritten).
+Status dp_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out);
+
 // DormandPrince5.step from (L.t, L.y): the accepted step size in h_acc, the new time in t_new;
 // L.y1 the raw end, L.yq1 the projected one, L.K the stages, the continuous extension set up.
 Status dp_step(Loop& L, double& h_acc, double& t_new);

@@ -257,6 +257,23 @@ Status dp_step(Loop& L, double& h_acc, double& t_new) {
     }
 }
 
+Status dp_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out) {
+    Status st;
+    if (f) {
+        L.K.row(0) = f->transpose();
+    } else {
+        if ((st = rhs(L, t, y.data(), L.tmp2n.data())) != Status::ok) return st;
+        L.K.row(0) = L.tmp2n.transpose();
+    }
+    if ((st = dp_stages(L, t, y, h)) != Status::ok) return st;
+    for (int i = 0; i < 2 * L.n; ++i) {
+        double b = 0.0;
+        for (int j = 0; j < 7; ++j) b += DP_B[j] * L.K(j, i);
+        out[i] = y[i] + h * b;
+    }
+    return Status::ok;
+}
+
 bool adaptive(const Loop& L) { return L.opt.method == Method::dopri5; }
 
 // A raw step of size h of the fixed-step method from (t, y) (f: F(t, y) when known)

@@ -4,6 +4,7 @@
 // sim_integrators.cpp, declared in sim_detail.hpp).
 // Each function names the Python function it mirrors; the order of the decisions is theirs.
 #include "nonmin/sim/loop.hpp"
+#include "nonmin/sim/events.hpp"
 #include "nonmin/linalg.hpp"
 #include "sim_detail.hpp"
 
@@ -16,6 +17,7 @@ using detail::adaptive;
 using detail::clip;
 using detail::dp_dense;
 using detail::dp_step;
+using detail::dp_advance;
 using detail::fixed_advance;
 
 namespace {
@@ -395,89 +397,28 @@ Outcome fail(Loop& L, Status s) {
 
 }  // namespace
 
-// ------------------------------------------------------------------------------ guards
+// ------------------------------------------------------------------------------ for the event layer
+// (the contact guards, their location and transitions: sim_events.cpp)
 
-void set_guards(Loop& L, const std::vector<ContactGuard>& guards) {
-    L.guards = guards;
-    L.guard_new.assign(guards.size(), 0.0);
-    L.one_mask.assign(static_cast<std::size_t>(L.c), 0);
-    bool release = false;
-    for (const ContactGuard& g : guards) release |= g.release;
-    if (release && L.m > 0) {
-        L.DA = Mat::Zero(L.m, L.n);
-        L.lam_c = Vec::Zero(std::max(L.m, L.n));
-        L.lam_tmp = Vec::Zero(std::max(L.m, L.n));
-        L.svd_a = Eigen::JacobiSVD<Mat>(L.m, L.n, Eigen::ComputeThinU | Eigen::ComputeThinV);
+Status partial_step(Loop& L, double t, const Vec& y, const Vec* f, double s, Vec& out) {
+    Status st;
+    if (s <= 0.0) {
+        out = y;
+    } else if (adaptive(L)) {
+        if ((st = dp_advance(L, t, y, f, s, out)) != Status::ok) return st;
+    } else if ((st = fixed_advance(L, t, y, f, s, out)) != Status::ok) {
+        return st;
     }
+    return stab_project(L, t + s, out.data());
 }
 
-namespace {
+void record_sample(Loop& L, const Point& p, double t) { record(L, p, t); }
 
-// λ = ((DA)⁺ D)ᵀ f_c over the active rows (nonmin.core.linalg.range_basis(A, rtol).pinv().T @ f_c),
-// A = L.Ac at the point just evaluated; into L.lam_c (m).
-void release_forces(Loop& L, const double* f_c) {
-    const int m = L.m, n = L.n;
-    const double tol = base_rtol(L.opt);
-    double big = 0.0;
-    for (int i = 0; i < m; ++i) {
-        L.rnorm[i] = linalg::row_norm(&L.Ac(i, 0), n);  // scaled: no overflow above ~1e154
-        big = std::max(big, L.rnorm[i]);
-    }
-    for (int i = 0; i < m; ++i) {
-        const double d = L.rnorm[i] > tol * big ? 1.0 / L.rnorm[i] : 0.0;
-        L.rnorm[i] = d;
-        for (int j = 0; j < n; ++j) L.DA(i, j) = L.Ac(i, j) * d;
-    }
-    L.svd_a.compute(L.DA);
-    const auto& sv = L.svd_a.singularValues();
-    const auto& U = L.svd_a.matrixU();
-    const auto& V = L.svd_a.matrixV();
-    const int kk = static_cast<int>(sv.size());
-    for (int k = 0; k < kk; ++k) {  // c_k = (1/s_k) v_kᵀ f_c where kept
-        double c = 0.0;
-        if (sv[k] > tol * sv[0]) {
-            for (int j = 0; j < n; ++j) c += V(j, k) * f_c[j];
-            c /= sv[k];
-        }
-        L.lam_tmp[k] = c;
-    }
-    for (int i = 0; i < m; ++i) {
-        double s = 0.0;
-        for (int k = 0; k < kk; ++k) s += U(i, k) * L.lam_tmp[k];
-        L.lam_c[i] = L.rnorm[i] * s;
-    }
-}
+void dense_output(const Loop& L, double t0, double h, double tt, double* out) { dp_dense(L, t0, h, tt, out); }
 
-// The contact guards at the step end (the point p1 just evaluated): new values into
-// L.guard_new; `fired` when one crossed downward or an impact gap stays below zero.
-Status contact_guards(Loop& L, double t, const double* q, const double* qd, const double* f_c, bool& fired) {
-    fired = false;
-    bool lam_done = false;
-    for (std::size_t i = 0; i < L.guards.size(); ++i) {
-        const ContactGuard& G = L.guards[i];
-        double g1;
-        if (G.release) {
-            if (!lam_done) {
-                release_forces(L, f_c);
-                lam_done = true;
-            }
-            g1 = L.lam_c[G.row];
-        } else {
-            L.one_mask[static_cast<std::size_t>(G.constraint)] = 1;
-            const Status s = L.prog->evaluate(t, q, qd, L.one_mask.data(), NEED_PHI, L.T, *L.ws);
-            L.one_mask[static_cast<std::size_t>(G.constraint)] = 0;
-            if (s != Status::ok) return s;
-            g1 = L.T.phi[L.prog->constraints()[static_cast<std::size_t>(G.constraint)].row];
-            if (!std::isfinite(g1)) return Status::not_finite;
-        }
-        L.guard_new[i] = g1;
-        const double g0 = G.g;
-        if ((g0 > 0.0 && g1 <= 0.0) || (!G.release && g0 <= 0.0 && g1 < 0.0)) fired = true;
-    }
-    return Status::ok;
-}
+Status stabilize(Loop& L, double t, double* y) { return stab_project(L, t, y); }
 
-}  // namespace
+Status stabilize_sample(Loop& L, double t, double* y) { return stab_project_sample(L, t, y); }
 
 // ------------------------------------------------------------------------------ driver
 
@@ -587,6 +528,31 @@ Outcome run(Loop& L, long long max_steps) {
             if (!fired && L.watch &&
                 (s = L.watch->check(t_new, L.yq1.data(), L.yq1.data() + n, L.p1.f_c.data(), fired)) != Status::ok)
                 return fail(L, s);
+            if (fired && !L.watch) {  // contact guards only: the engine's event layer
+                if (inside) {
+                    for (int i = 0; i < n; ++i) {
+                        L.fp1[i] = L.yq1[n + i];
+                        L.fp1[n + i] = L.p1.qdd[i];
+                    }
+                }
+                FiredStep st;
+                st.t_start = t_start;
+                st.h = h;
+                st.t_new = t_new;
+                st.f_start = f_start;
+                st.have_p1 = have_p1;
+                st.inside = inside;
+                st.h_next = adapt ? L.h : L.opt.dt;
+                L.h = h_before;
+                if ((s = contact_event(L, st)) == Status::ok) {
+                    ++L.n_steps;
+                    return Outcome::transition;
+                }
+                if (s == Status::callback_error) return Outcome::callback;
+                L.message.clear();  // the Python driver takes the step (and raises what fails)
+                L.have_f = false;
+                return Outcome::event;
+            }
             if (fired) {  // not accepted: the event layer takes this step from its start
                 L.h = h_before;
                 L.have_f = false;

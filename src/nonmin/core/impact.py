@@ -115,13 +115,10 @@ class PolyhedralProjection(NamedTuple):
         The minimizer.
     at_bound : ndarray of bool, shape (m_in,)
         Inequality rows at equality at ``x`` (within :data:`FEASIBILITY_RTOL`).
-    face : tuple of int
-        The inequality rows held as equalities by the projection that gave ``x``.
     """
 
     x: FloatArray
     at_bound: NDArray[np.bool_]
-    face: tuple[int, ...]
 
 
 def _row_scale(A: FloatArray, x: FloatArray, r: FloatArray) -> FloatArray:
@@ -194,11 +191,17 @@ def polyhedral_projection(
     m_in = Ai.shape[0]
     if m_in > MAX_INEQUALITY_ROWS:
         raise InputError(f"A_in: at most {MAX_INEQUALITY_ROWS} inequality rows, got {m_in}")
+    if _fast.engine_on():  # engine/src/sim_events.cpp: polyhedral_projection (the same search)
+        c = np.ascontiguousarray
+        found, xe, ab = _fast._engine.polyhedral_projection(
+            c(Mm), c(x), c(Ae.reshape(-1, n)), c(re), c(Ai.reshape(-1, n)), c(ri), resolve_rtol(rtol))
+        if found:
+            return PolyhedralProjection(np.asarray(xe), np.asarray(ab) != 0.0)
     zero = np.zeros(n)
     tol = FEASIBILITY_RTOL
     feasible: list[int] = []
     empty: list[int] = []
-    best: tuple[float, FloatArray, tuple[int, ...]] | None = None
+    best: tuple[float, FloatArray] | None = None
     eq_res0: FloatArray | None = None
     for size in range(m_in + 1):
         for face in combinations(range(m_in), size):
@@ -222,12 +225,12 @@ def polyhedral_projection(
                 feasible.append(mask)
                 d = float(dx @ Mm @ dx)
                 if best is None or d < best[0]:
-                    best = (d, xf, face)
+                    best = (d, xf)
     if best is None:
         raise SimulationError("polyhedral_projection: the constraints admit no point (empty polyhedron)")
     xs = best[1]
     at = np.abs(Ai @ xs + ri) <= tol * _row_scale(Ai, np.maximum(np.abs(xs), np.abs(x)), ri)
-    return PolyhedralProjection(xs, at, best[2])
+    return PolyhedralProjection(xs, at)
 
 
 class SimultaneousImpact(NamedTuple):

@@ -18,11 +18,14 @@ controllers replace the callback later).
 Covered: the methods ``"rk4"``, ``"dopri5"``, ``"midpoint"`` (the three classes exactly), the
 stabilizations ``"none"``, ``"baumgarte"``, ``"projection"`` (exactly those classes), ``t_eval``,
 ``project_initial``, ``rank_rtol``, ``max_steps``, ``h0``, controllers (Python callback), user
-events and automatic unilateral contact: the engine evaluates every guard at each projected
-step end (the general driver's guard code, called back: :func:`._simulate._engine_watch`); the
-step in which one crosses is left to the general driver, which takes it from its start,
-locates the crossing and applies the transition (impact map, release, Activate/Deactivate,
-Reset, Zeno truncation) exactly as before, and the engine resumes after it. Not covered (the
+events and automatic unilateral contact. The contact guards are evaluated, located and their
+transitions applied in the engine (``engine/src/sim_events.cpp``: Brent's method on the
+method's partial steps, the simultaneous impact, the Gauss check, releases), which returns
+once per event with what it did (``SIM_TRANSITION``); user guards are called back at each
+projected step end (:func:`._simulate._engine_watch`) and the step in which one crosses is
+left to the general driver, which takes it from its start, locates the crossing and applies
+the transition (Activate/Deactivate, Reset, and any contact event of that step) exactly as
+before, and the engine resumes after it. Not covered (the
 general driver runs them): custom :class:`~nonmin.sim.Integrator` or
 :class:`~nonmin.sim.Stabilization` subclasses, and runs with the core's backend set to
 ``"numpy"`` under ``engine="auto"``.
@@ -286,7 +289,9 @@ class EngineResult(NamedTuple):
     handover: bool  # a numerical failure: the general driver continues from (t, y)
     event: bool  # a watched guard crossed: the general driver takes the next step
     message: str
-    guards: list[float]  # the contact guards' values at the last accepted step end
+    guards: list[float]  # the contact guards' values at the last accepted step end (or event)
+    transition: bool = False  # the engine located contact events and applied them (`events`)
+    events: tuple[dict[str, Any], ...] = ()  # what the engine's event layer applied
 
 
 def run(
@@ -303,18 +308,25 @@ def run(
     watch: Callable[[float, FloatArray, FloatArray, FloatArray], bool] | None = None,
     guards: list[tuple[bool, int, int, float]] | None = None,
     compiled: Any = None,
+    contact: tuple[list[float], float] | None = None,
 ) -> EngineResult:
     """Run the engine loop to ``opts.t1``, a handover or a watched event.
 
     Either ``start = (t0, q0, qd0)`` (initial projection, evaluation and sample) or ``resume =
     (t, y, h, n_steps, out_i)`` (a state the general driver reached). Every block of samples is
-    given to ``sink`` as soon as it is taken (so an interruption keeps them).
+    given to ``sink`` as soon as it is taken (so an interruption keeps them). ``contact =
+    (restitution per constraint, impact velocity threshold)`` configures the engine's event
+    layer (engine/src/sim_events.cpp), which locates and applies contact events itself when no
+    user guard is watched (``transition`` and ``events`` of the result).
     """
     eng = _engine()
     tv = np.zeros(0) if t_out is None else np.ascontiguousarray(t_out, dtype=np.float64)
     ctl = (None, None) if controller is None else (controller.control, controller.update)
     loop = eng.SimLoop(program, active_mask, opts, tv, t_out is None, ctl[0], ctl[1], watch, guards or [],
                        compiled)  # fmt: skip
+
+    if contact is not None and guards:
+        loop.set_contact(contact[0], contact[1])
 
     def take() -> None:
         blk = loop.take()
@@ -350,4 +362,5 @@ def run(
     return EngineResult(True, float(loop.t), np.asarray(loop.y), float(loop.h), int(loop.n_steps),
                         int(loop.n_rhs), int(loop.n_rejected), int(loop.out_i),
                         code == eng.SIM_HANDOVER, code == eng.SIM_EVENT, str(loop.message),
-                        list(loop.guard_values))  # fmt: skip
+                        list(loop.guard_values), code == eng.SIM_TRANSITION,
+                        tuple(loop.events) if code == eng.SIM_TRANSITION else ())  # fmt: skip

@@ -649,6 +649,7 @@ def simulate(
               if hasattr(controller, "initial_state") else None)
     unilateral = tuple(c.name for c in model.constraints if c.kind == "unilateral") if contact else ()
     system = _System(model, controller, stab, rank_rtol, n, k, act, cstate, unilateral=unilateral)
+    contact_opts = ([_restitution_of(restitution, c.name) for c in model.constraints], v_thresh)
     use_engine = False
     if engine in ("auto", "engine"):
         why = _engine.ineligible(integ, stab, events, unilateral, engine)
@@ -798,6 +799,7 @@ def simulate(
                         sink=rec.extend, progress=bar, controller=ccb, compiled=creg,
                         resume=(t, state.y, state.h if integ.adaptive else h_init, n_steps, out_i),
                         watch=_engine_watch(system, watches, gvals, disarmed, rearm_tol), guards=guards,
+                        contact=contact_opts,
                     )  # fmt: skip
                 finally:
                     if ccb is not None:
@@ -818,6 +820,24 @@ def simulate(
                 if er.handover:
                     engine_on = False
                     meta["engine"] = f"engine, then python from t = {t:.12g}"
+                if er.transition:  # the engine located and applied contact events (no user guard)
+                    label = ""
+                    for d in er.events:
+                        after = _mask_names(model, d["active_after"])
+                        records.append(EventRecord(float(d["t"]), str(d["name"]), str(d["transition"]),
+                                                   d["q_before"], d["qd_before"], d["q_after"], d["qd_after"],
+                                                   _mask_names(model, d["active_before"]), after))  # fmt: skip
+                        recent_events.append(float(d["t"]))
+                        label = str(d["name"])
+                        system.active = after
+                    _zeno_check(recent_events, t, zeno_window, zeno_max, label)
+                    q, qd = er.y[:n].copy(), er.y[n:].copy()
+                    if controller is not None and hasattr(controller, "update"):
+                        system.cstate = _durable.user_call("controller.update", t, controller.update, t, q, qd,
+                                                           system.cstate, active=system.active)  # fmt: skip
+                    watches = _watches(events, system.active, unilateral)
+                    gvals = list(er.guards)  # (contact watches only: no user events on this path)
+                    continue
                 if t >= t1:
                     break
                 if passages is not None:  # the history is the engine's: start afresh here
@@ -954,14 +974,7 @@ def simulate(
                     h_cap = cap_i if h_cap == 0.0 else (min(h_cap, cap_i) if cap_i > 0 else h_cap)
                     recent_events.append(te)
                     p = system.point(te, qn, qdn)
-                while recent_events and recent_events[0] < te - zeno_window:
-                    recent_events.pop(0)
-                if len(recent_events) > zeno_max:
-                    raise ZenoError(
-                        f"{len(recent_events)} events within {zeno_window:g} s before t = {te:.12g} "
-                        f"(last: {label!r}); Zeno accumulation not resolved — raise "
-                        "impact_velocity_threshold or zeno_max_events"
-                    )
+                _zeno_check(recent_events, te, zeno_window, zeno_max, label)
                 rec.add(p, system.active)
                 qn, qdn = p.q, p.qd
                 t = te
@@ -1102,6 +1115,23 @@ def _engine_guards(
         idx.append(i)
         out.append((release, index[w.name], rows[w.name].start if release else 0, float(gvals[i])))
     return idx, out
+
+
+def _zeno_check(recent_events: list[float], te: float, zeno_window: float, zeno_max: int, label: str) -> None:
+    """Raise ZenoError when more than ``zeno_max`` events fell within ``zeno_window`` before te."""
+    while recent_events and recent_events[0] < te - zeno_window:
+        recent_events.pop(0)
+    if len(recent_events) > zeno_max:
+        raise ZenoError(
+            f"{len(recent_events)} events within {zeno_window:g} s before t = {te:.12g} "
+            f"(last: {label!r}); Zeno accumulation not resolved — raise "
+            "impact_velocity_threshold or zeno_max_events"
+        )
+
+
+def _mask_names(model: Model, mask: Any) -> frozenset[str]:
+    """The active set of an engine mask (declaration order)."""
+    return frozenset(c.name for c, a in zip(model.constraints, mask) if a)
 
 
 def _past_root(gfun: Callable[[float], float], s: float, h: float, g0: float) -> float:

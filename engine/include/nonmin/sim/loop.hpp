@@ -167,6 +167,8 @@ enum class Outcome : int {
     callback = 2,  // a Python callback raised: its exception is kept by the binding
     event = 3,     // a watched guard crossed in the step: the step was not accepted, the state
                    // is its start (the event layer takes that step)
+    transition = 4,  // contact guards crossed: the engine located the event and applied it
+                     // (sim/events.hpp); the state is after it, Loop::events says what happened
 };
 
 // One evaluation of the dynamics at a state (what a sample records).
@@ -175,6 +177,14 @@ struct Point {
     Vec q, qd, qdd, f_c, u;
     int rank = 0;
     double mu = 0.0, cond = 1.0, energy = 0.0, phi_norm = 0.0, vel_norm = 0.0;
+};
+
+// One transition applied by the engine's event layer (the fields of nonmin.sim.EventRecord).
+struct EventInfo {
+    double t = 0.0;
+    std::string name, text;
+    Vec q_before, qd_before, q_after, qd_after;
+    std::vector<std::uint8_t> active_before, active_after;
 };
 
 // The loop: model, solver, options, the active set (fixed on this path), the integration
@@ -233,6 +243,10 @@ struct Loop {
 
     Samples rec;
     Passages pas;
+
+    // the engine's event layer (sim/events.hpp, sim_events.cpp): what the last transition did
+    std::vector<EventInfo> events;
+    std::shared_ptr<struct EventScratch> evs;
 
     explicit Loop(int m_max, int n_) : solver(m_max, n_) {}
 };

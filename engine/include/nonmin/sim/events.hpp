@@ -1,0 +1,89 @@
+// The engine's event layer for unilateral contact (engine/src/sim_events.cpp), specified by the
+// Python driver (nonmin/sim/_simulate.py: the `fired` branch of simulate, _set_impact, _apply's
+// release, _guard_value) and the NumPy kernel nonmin.core.polyhedral_projection:
+//
+//   * the contact guards at a step end (gaps of the inactive unilateral constraints, normal
+//     forces of the active ones), all gaps from one evaluation of the program;
+//   * the location of a crossing: Brent's method on the partial step of the run's method from
+//     the step start, projected (the state the integrator produces there), to EVENT_XTOL;
+//   * the transition: one impact over every contact closing at the instant (Newton's law per
+//     contact in inequality form, multiplier-free: the mass-metric projection onto a polyhedron,
+//     docs/theory.md "Simultaneous impacts"), the Gauss check of the contacts left closed, or a
+//     release; then the projection onto the new active set and the samples before and after.
+//
+// User guards (Python callbacks) are not located here: a step in which one crosses is left to
+// the Python driver (Outcome::event), as is a step in which both kinds cross.
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include "loop.hpp"
+
+namespace nonmin::sim {
+
+constexpr double EVENT_XTOL = 1e-13;     // _simulate.EVENT_XTOL (s)
+constexpr double EVENT_RTOL = 1e-15;     // brentq's rtol in the driver
+constexpr int EVENT_MAX_ITER = 200;      // brentq's maxiter in the driver
+constexpr double RELEASE_RTOL = 1e-10;   // _simulate.RELEASE_RTOL
+constexpr double FEASIBILITY_RTOL = 1e-9;  // nonmin.core.impact.FEASIBILITY_RTOL
+constexpr int MAX_INEQUALITY_ROWS = 16;    // nonmin.core.impact.MAX_INEQUALITY_ROWS
+
+// Scratch of polyhedral_projection, sized for faces of up to m_max rows in n unknowns.
+struct PolyWork {
+    Mat A;  // face rows
+    Vec r, bias, dx, xf, zero, best, res, scale_eq0;
+    std::vector<int> idx;
+    std::vector<std::uint32_t> feasible, empty;
+    void reserve(int m_max, int n);
+};
+
+// x = argmin ½ (x − x0)ᵀ M (x − x0) subject to A_eq x + r_eq = 0 and A_in x + r_in ≥ 0
+// (row-major A_eq (m_eq × n), A_in (m_in × n), m_in ≤ MAX_INEQUALITY_ROWS): the feasible face
+// projection nearest to x0, each face one Solver::forward with zero force (see
+// nonmin.core.polyhedral_projection, the specification). at_bound (m_in): rows at equality at x.
+// Returns false (x untouched) when no face is feasible; `status` is the first failed solve.
+bool polyhedral_projection(Solver& S, const SolveOptions& so, int n, const double* M, const double* x0,
+                           const double* A_eq, const double* r_eq, int m_eq, const double* A_in,
+                           const double* r_in, int m_in, double* x, std::uint8_t* at_bound, PolyWork& w,
+                           Status& status);
+
+// Watch these contact guards during the steps (after make_loop; values at the start given).
+void set_guards(Loop& L, const std::vector<ContactGuard>& guards);
+
+// Newton's restitution of automatic impacts per constraint (declaration order) and the impact
+// velocity threshold (simulate's restitution and impact_velocity_threshold); after set_guards.
+void set_contact_options(Loop& L, const std::vector<double>& restitution, double v_thresh);
+
+// The contact guards at the projected step end (the point just evaluated, its f_c given): new
+// values into L.guard_new; `fired` when one crossed downward or an impact gap stays below zero.
+Status contact_guards(Loop& L, double t, const double* q, const double* qd, const double* f_c, bool& fired);
+
+// What the step that fired looked like (the state of run() at that moment).
+struct FiredStep {
+    double t_start = 0.0, h = 0.0, t_new = 0.0;
+    bool f_start = false;  // L.f is F(t_start, y_start)
+    bool have_p1 = false;  // L.p1 is the evaluation at the projected step end
+    bool inside = false;   // L.fp1 holds F there (the Hermite interpolant is available)
+    double h_next = 0.0;   // the step the method proposes after this one
+};
+
+// Locate the earliest crossing in the step (from L.y at t_start), record the requested samples
+// up to it and the sample there, apply the transition, project, record the sample after it, and
+// leave the loop at the event: L.t, L.y, the active set and the guards are those after it,
+// L.events what was applied. On a failure nothing is recorded or changed and the status is
+// returned (the Python driver then takes the step).
+Status contact_event(Loop& L, const FiredStep& st);
+
+// Provided by sim_loop.cpp for the event layer: the driver's at(s) before its point() — a partial
+// step of size s ≥ 0 of the run's method from (t, y) (f: F(t, y) when known), projected by the
+// run's stabilization —, a recorded sample, and the DOPRI5 continuous extension of the step.
+Status partial_step(Loop& L, double t, const Vec& y, const Vec* f, double s, Vec& out);
+void record_sample(Loop& L, const Point& p, double t);
+void dense_output(const Loop& L, double t0, double h, double tt, double* out);
+Status stabilize(Loop& L, double t, double* y);
+Status stabilize_sample(Loop& L, double t, double* y);  // a sample from a continuous extension
+
+// The active set of the loop (rows, position-level rows, controller attachment, guard buffers).
+void set_active(Loop& L, const std::uint8_t* active);
+
+}  // namespace nonmin::sim
