@@ -415,3 +415,20 @@ def test_robot_contact_wrench_rebuilds_the_generalized_force() -> None:
         )
         fv += J.T @ np.concatenate([getattr(rc, f"force_{side}"), getattr(rc, f"torque_{side}")])
     np.testing.assert_allclose(robot.velocity_map(q).T @ fv, rc.generalized, atol=1e-9)
+
+
+def test_simulate_stores_reactions_when_asked() -> None:
+    model = _bar_pendulum()
+    q0, qd0 = _pendulum_state(0.4, 0.0, 1.2)
+    traj = nonmin.simulate(model, 0.1, q0, qd0, dt=1e-2, reactions=True)
+    assert set(traj.reactions) == {"pivot"} and traj.reactions["pivot"].force_b.shape == (len(traj), 2)
+    ref = traj.with_reactions(model).reactions["pivot"]
+    np.testing.assert_array_equal(traj.reactions["pivot"].force_b, ref.force_b)
+    plain = nonmin.simulate(model, 0.1, q0, qd0, dt=1e-2)
+    assert plain.reactions == {}
+    from nonmin.errors import InputError
+    from nonmin.sim import Output
+
+    assert Output(reactions=["pivot"]).reactions == ("pivot",)
+    with pytest.raises(InputError, match="reactions"):
+        Output(reactions="pivot")

@@ -229,6 +229,10 @@ class Output:
         Simulated seconds between checkpoints (needs ``checkpoint``).
     throw : bool, default True
         Raise on failure; with False return the partial trajectory with ``status`` failed.
+    reactions : bool or tuple of str, default False
+        Store each constraint's reaction (its wrench on the bodies it joins, per sample) in
+        ``Trajectory.reactions``: True for every constraint, or the names to keep
+        (:meth:`Trajectory.with_reactions`, read from the recorded ``f_c`` after the run).
 
     Examples
     --------
@@ -243,8 +247,13 @@ class Output:
     checkpoint: str | os.PathLike[str] | None = None
     checkpoint_every: float | None = None
     throw: bool = True
+    reactions: bool | tuple[str, ...] = False
 
     def __post_init__(self) -> None:
+        if not isinstance(self.reactions, bool):
+            if isinstance(self.reactions, str) or not all(isinstance(x, str) for x in self.reactions):
+                raise InputError(f"reactions must be True/False or constraint names, got {self.reactions!r}")
+            object.__setattr__(self, "reactions", tuple(self.reactions))
         if self.t_eval is not None:
             try:
                 t = np.array(self.t_eval, dtype=float).ravel()

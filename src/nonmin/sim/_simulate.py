@@ -1038,6 +1038,8 @@ def simulate(
     finally:
         bar.close()
     result = snapshot(status, message)
+    if out.reactions and len(result):  # each constraint's wrench per sample (nonmin.analysis)
+        result = result.with_reactions(model, None if out.reactions is True else out.reactions, rtol=rank_rtol)
     if ck_path is not None:  # the checkpoint ends as the whole run, whatever its status
         bar.write(result)
     return result
