@@ -7,10 +7,17 @@ settings; the results of the engines are compared (max |q_engine − q_other|).
 
 Cases: the crossed four-bar and A02 N = 2 (planar programs), the UR5 with its tool point pinned
 and the dual-arm grasp (robots: TreeProgram), the UR5 with a regulator (controller called back),
-the arm2r_wall contact run (impact and release), a pendulum FunctionModel (PyProgram: the model
-called back). Medians of ``--repeat`` runs after one warm-up (which includes any compilation).
+the arm2r_wall contact run (impact and release), the UR5 falling 5 cm onto a floor (contact
+events and the joint limits of its URDF, located and applied in the engine's event layer), a
+pendulum FunctionModel (PyProgram: the model called back). Medians of ``--repeat`` runs after
+one warm-up (which includes any compilation).
+
+``--contact-overhead`` (issue #17, target 3): the UR5 on the floor against the same run without
+contact (``EventSet(contact=False)``: no floor, no joint limits), RK4 dt = 1e-3, 3 s sampled every
+10 ms, runs interleaved, ratio of the medians.
 
     python benchmarks/loop_bench.py [--repeat 3] [--engines engine,python,compiled] [--json out.json]
+    python benchmarks/loop_bench.py --contact-overhead [--repeat 15]
 """
 
 from __future__ import annotations
@@ -37,6 +44,60 @@ def _robot(name: str) -> tuple[Any, np.ndarray]:
 
     case = rb.CASES[name](1.0)
     return case.model, case.q0
+
+
+def _ur5_floor() -> tuple[Any, np.ndarray]:
+    """The UR5 (no closure) at the ur5_point case's configuration, its ee_link 5 cm above a
+    floor (a unilateral contact ``"floor"``); it falls onto it under gravity."""
+    import robot_bench as rb
+
+    from nonmin.model.robots import FrameConstraint, RobotModel
+
+    urdf = rb._erd_root() / "ur_description" / "urdf" / "ur5_robot.urdf"
+    q0 = np.array([0.2, -1.0, 1.3, -0.6, 0.9, 0.4])
+    z = RobotModel.from_urdf(urdf).frame_placement(q0, "ee_link")[2, 3]
+    plane = np.eye(4)
+    plane[2, 3] = z - 0.05
+    model = RobotModel.from_urdf(urdf, constraints=[FrameConstraint.contact("floor", "ee_link",
+                                                                            plane_placement=plane)])  # fmt: skip
+    return model, q0
+
+
+def contact_overhead(repeat: int, T: float = 3.0) -> dict[str, Any]:
+    """The UR5 on the floor against the same run without contact, and against the floor as a
+    bilateral constraint held from the start (no events: the cost of the constraint itself).
+    Wall and CPU (process) time, runs interleaved, medians; ratios to ``no_contact``."""
+    from nonmin.sim import EventSet
+
+    model, q0 = _ur5_floor()
+    te = np.linspace(0.0, T, int(round(100 * T)) + 1)
+    qb = q0.copy()  # the bilateral reference starts on the floor (its tool point assembled)
+    qb = nonmin.model.assemble(model, qb, active={"floor"}).q
+    runs: dict[str, tuple[Any, dict[str, Any]]] = {
+        "contact": (q0, {}),
+        "no_contact": (q0, {"events": EventSet(contact=False)}),
+        "floor_bilateral": (qb, {"events": EventSet(contact=False), "active": {"floor"}}),
+    }
+    wall: dict[str, list[float]] = {k: [] for k in runs}
+    cpu: dict[str, list[float]] = {k: [] for k in runs}
+    trs: dict[str, Any] = {}
+    for i in range(repeat + 1):
+        for name, (q, kw) in runs.items():
+            w, c = time.perf_counter(), time.process_time()
+            trs[name] = nonmin.simulate(model, T, q, np.zeros(6), dt=1e-3, t_eval=te, engine="engine",
+                                        progress=False, **kw)  # fmt: skip
+            if i:  # (the first round is the warm-up)
+                wall[name].append(time.perf_counter() - w)
+                cpu[name].append(time.process_time() - c)
+    out: dict[str, Any] = {"T": T, "repeat": repeat}
+    for name in runs:
+        out[name] = {"wall_ms_per_s": 1e3 * statistics.median(wall[name]) / T,
+                     "cpu_ms_per_s": 1e3 * statistics.median(cpu[name]) / T,
+                     "wall_ratio": statistics.median(wall[name]) / statistics.median(wall["no_contact"]),
+                     "cpu_ratio": statistics.median(cpu[name]) / statistics.median(cpu["no_contact"]),
+                     "events": len(trs[name].events), "n_rhs": trs[name].n_rhs}  # fmt: skip
+    out["contact_events"] = [(round(e.t, 4), e.name) for e in trs["contact"].events]
+    return out
 
 
 def _cases() -> dict[str, Callable[[], tuple[Any, dict[str, Any], float]]]:
@@ -70,6 +131,10 @@ def _cases() -> dict[str, Callable[[], tuple[Any, dict[str, Any], float]]]:
 
         return library.get("arm2r_wall"), {"dt": 1e-3, "controller": ctrl}, 0.45
 
+    def ur5_floor() -> tuple[Any, dict[str, Any], float]:
+        model, q0 = _ur5_floor()
+        return model, {"q0": q0, "dt": 1e-3}, 1.0
+
     def pend() -> tuple[Any, dict[str, Any], float]:
         from nonmin.model import FunctionConstraint, FunctionModel
 
@@ -85,7 +150,8 @@ def _cases() -> dict[str, Callable[[], tuple[Any, dict[str, Any], float]]]:
         return model, {"q0": [1.0, 0.0], "dt": 1e-3}, 1.0
 
     return {"crossed_four_bar": cfb, "A02_N2": a02, "ur5_point": ur5, "ur5_point_regulator": ur5_reg,
-            "dual_arm_grasp": dual, "arm2r_wall_contact": wall, "pendulum_function_model": pend}  # fmt: skip
+            "dual_arm_grasp": dual, "arm2r_wall_contact": wall, "ur5_floor_contact": ur5_floor,
+            "pendulum_function_model": pend}  # fmt: skip
 
 
 def run(names: list[str], engines: list[str], repeat: int) -> list[dict[str, Any]]:
@@ -151,7 +217,15 @@ def main() -> None:
     ap.add_argument("--engines", default="engine,python,compiled")
     ap.add_argument("--cases", default="")
     ap.add_argument("--json", default="")
+    ap.add_argument("--contact-overhead", action="store_true", help="the UR5 on the floor vs no contact")
     a = ap.parse_args()
+    if a.contact_overhead:
+        res = contact_overhead(a.repeat)
+        print(json.dumps(res, indent=1))
+        if a.json:
+            Path(a.json).write_text(json.dumps({"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+                                                "contact_overhead": res}, indent=1))  # fmt: skip
+        return
     engines = [e for e in a.engines.split(",") if e]
     rows = run([c for c in a.cases.split(",") if c], engines, a.repeat)
     print(markdown(rows, engines))

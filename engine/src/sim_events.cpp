@@ -5,6 +5,8 @@
 #include "nonmin/sim/events.hpp"
 #include "nonmin/linalg.hpp"
 
+#include <Eigen/Cholesky>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -17,6 +19,8 @@ namespace {
 
 constexpr double inf = std::numeric_limits<double>::infinity();
 constexpr double tiny = std::numeric_limits<double>::min();
+constexpr int RELEASE_FAST_ROWS = 12;        // release_forces: Cholesky path up to this many rows
+constexpr double RELEASE_FAST_COND = 1e4;    // … when cond(DA) is certified below this
 
 double base_rtol(const Options& o) { return o.rank_rtol > 0.0 ? o.rank_rtol : DEFAULT_RTOL; }
 
@@ -56,7 +60,7 @@ struct EventScratch {
     std::vector<std::uint8_t> uni_mask, mask, act_before, act_tmp;
     std::vector<double> restitution;  // per constraint (Newton's e of automatic impacts)
     double v_thresh = 1e-6;
-    Mat M, Ab, Ac, Aeq, Ain;
+    Mat M, Ab, Ac, Aeq, Ain, G, Li;  // (G, Li: release_forces' fast path)
     Vec gam_c, u, target, v, un, qdd, qdd_free, y, yt, gam_b, flight, rin, req, zero_m;
     std::vector<int> contacts;
     std::vector<std::uint8_t> fired, plastic, closed, forced, at_bound;
@@ -221,6 +225,8 @@ void set_guards(Loop& L, const std::vector<ContactGuard>& guards) {
         E->restitution.assign(static_cast<std::size_t>(c), 0.0);
         E->pw.reserve(m_all, n);
         E->M = Mat::Zero(n, n);
+        E->G = Mat::Zero(RELEASE_FAST_ROWS, RELEASE_FAST_ROWS);
+        E->Li = Mat::Zero(RELEASE_FAST_ROWS, RELEASE_FAST_ROWS);
         for (Mat* A : {&E->Ab, &E->Ac, &E->Aeq, &E->Ain}) *A = Mat::Zero(m_all, n);
         for (Vec* v : {&E->gam_c, &E->u, &E->target, &E->un, &E->gam_b, &E->flight, &E->rin, &E->req, &E->zero_m})
             *v = Vec::Zero(m_all);
@@ -253,10 +259,35 @@ void release_forces(Loop& L, const double* f_c) {
         L.rnorm[i] = linalg::row_norm(&L.Ac(i, 0), n);  // scaled: no overflow above ~1e154
         big = std::max(big, L.rnorm[i]);
     }
+    bool vanished = false;
     for (int i = 0; i < m; ++i) {
         const double d = L.rnorm[i] > tol * big ? 1.0 / L.rnorm[i] : 0.0;
+        vanished = vanished || d == 0.0;
         L.rnorm[i] = d;
         for (int j = 0; j < n; ++j) L.DA(i, j) = L.Ac(i, j) * d;
+    }
+    if (!vanished && m <= RELEASE_FAST_ROWS && m <= n) {
+        // Certified full row rank (the usual case, every step with an active contact): with
+        // G = (DA)(DA)ᵀ, σ_min² ≥ 1/tr(G⁻¹) and σ_max² ≤ tr(G); when their ratio is above
+        // RELEASE_FAST_COND⁻² the SVD's rank is m, and (DA)⁺ = (DA)ᵀG⁻¹, so
+        // λ = D G⁻¹ (DA) f_c (Cholesky of the m × m G) equals the SVD path to round-off.
+        auto G = L.evs->G.topLeftCorner(m, m);
+        G.noalias() = L.DA.topRows(m) * L.DA.topRows(m).transpose();
+        const double trG = G.trace();
+        Eigen::LLT<Eigen::Ref<Mat>> llt(G);
+        if (llt.info() == Eigen::Success) {
+            auto Li = L.evs->Li.topLeftCorner(m, m);
+            Li.setIdentity();
+            llt.matrixL().solveInPlace(Li);  // L⁻¹: tr(G⁻¹) = ‖L⁻¹‖²_F
+            const double trGi = Li.squaredNorm();
+            if (trGi * trG < RELEASE_FAST_COND * RELEASE_FAST_COND) {
+                auto b = L.lam_tmp.head(m);
+                b.noalias() = L.DA.topRows(m) * Eigen::Map<const Vec>(f_c, n);
+                llt.solveInPlace(b);
+                for (int i = 0; i < m; ++i) L.lam_c[i] = L.rnorm[i] * b[i];
+                return;
+            }
+        }
     }
     L.svd_a.compute(L.DA);
     const auto& sv = L.svd_a.singularValues();
