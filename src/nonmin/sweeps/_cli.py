@@ -22,7 +22,7 @@ def add_sweep_parser(sub: Any, allow_code_flag: Any, progress_flags: Any) -> Non
     sp.add_argument("--vary", action="append", default=[], metavar="KEY=SPEC", help="an axis (repeatable)")
     sp.add_argument("--samples", type=int, default=None, help="random draws of the LOW:HIGH axes")
     sp.add_argument("--seed", type=int, default=None, help="seed of the random draws")
-    sp.add_argument("--out", default=None, help="Zarr store (default: SCENARIO-sweep.zarr beside the cwd)")
+    sp.add_argument("--out", default=None, help="Zarr store (default: ./SCENARIO-sweep.zarr)")
     sp.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT", help="run the blocks on this Dask scheduler")
     sp.add_argument("--workers", type=int, default=None, help="local threads (default: the cores)")
     sp.add_argument("--chunk", type=int, default=64, help="runs per block (task, engine call, commit)")

@@ -180,6 +180,17 @@ def _axes(vary: Any) -> tuple[tuple[Any, ...], ...]:
     return tuple(out)
 
 
+def _require() -> None:
+    """xarray and zarr (extra ``sweep``), or a MissingDependencyError naming the extra."""
+    import importlib.util
+
+    missing = [m for m in ("xarray", "zarr") if importlib.util.find_spec(m) is None]
+    if missing:
+        from ..errors import MissingDependencyError
+
+        raise MissingDependencyError(f"nonmin.sweep needs {', '.join(missing)}: pip install 'nonmin[sweep]'")
+
+
 def _base(base: Any, allow_code: bool) -> Any:
     if isinstance(base, str | os.PathLike):
         from ..io import load_scenario
@@ -271,6 +282,7 @@ def sweep(
     """
     from ..io import Scenario
 
+    _require()
     base = _base(base, allow_code)
     axes = _axes(vary)
     if samples is not None and (isinstance(samples, bool) or not isinstance(samples, int) or samples < 1):
@@ -414,6 +426,7 @@ def _dataset(mem: dict[int, Any], runs: int, times: np.ndarray, coords: list[str
 
 def open_sweep(path: str | os.PathLike[str]) -> Any:
     """The xarray Dataset of a sweep store (lazily read; see :func:`sweep`)."""
+    _require()
     import xarray as xr
 
     p = Path(path)

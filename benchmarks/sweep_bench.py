@@ -1,0 +1,285 @@
+"""Many runs at once (issue 20): the batched engine loop against the same runs one by one and
+against ``mujoco.rollout``; parallel efficiency of sweeps from 1 to 2 workers.
+
+Runs: the crossed four-bar (crank 1 m, coupler 2 m, rocker 1 m, ground 2 m; sim_bench.py's
+mechanism) over 2 s from random crank angles θ0 ∈ [0, 2π) and crank rates ω0 ∈ ±[5, 9] rad/s,
+each started on the anti-parallelogram branch; RK4 (nonmin, with the mass-metric projection)
+at dt = 1e-3, samples every 10 ms.
+
+* nonmin batched: ``simulate_batch(..., threads=T)`` (the engine loop, k runs in one call).
+* nonmin one by one: ``simulate`` per run (the same engine loop, one call per run).
+* MuJoCo: ``mujoco.rollout.rollout`` of sim_bench.py's MJCF four-bar (hinge tree + equality
+  connect, semi-implicit Euler at the same dt; ``default`` and ``stiff`` solver settings),
+  2000 steps per run from the same initial states, T MjData (threads), in blocks of 500 runs
+  (its output holds every step).
+* work–precision: the batch also at dt = 5e-3 and 1e-2 (RK4's error grows as dt⁴, MuJoCo's
+  semi-implicit Euler's as dt: equal accuracy is a different dt for each).
+* accuracy: crank angle error against the exact 1-DOF reduction
+  (``nonmin.library.crossed_four_bar_reference``) on the first ``--ref`` runs, max over the
+  samples; branch: the largest distance of the rocker angle from its anti-parallelogram value
+  over every sample of every run.
+* parallel efficiency: ``nonmin.sweep`` of ``--sweep-runs`` runs with 1 and 2 local workers,
+  and on a ``dask.distributed.LocalCluster`` with 1 and 2 worker processes started here:
+  ``E = T1 / (2 T2)``.
+
+Usage::
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/sweep_bench.py              # 1e4 runs
+    python benchmarks/sweep_bench.py --runs 1000 --single 50 --sweep-runs 400   # quicker
+
+Prints a Markdown table and writes ``results/sweep_bench.json``; the load average is printed
+before and after (the machine is shared: ratios measured in one process, interleaved where it
+matters; re-run when quieter).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+T_FINAL = 2.0
+DT = 1e-3
+
+
+def states(k: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    th = rng.uniform(0.0, 2 * math.pi, k)
+    om = rng.uniform(5.0, 9.0, k) * rng.choice([-1.0, 1.0], k)
+    return th, om
+
+
+def anti_residual(theta: np.ndarray, psi: np.ndarray) -> np.ndarray:
+    z = np.exp(1j * theta)
+    with np.errstate(invalid="ignore"):  # a diverged run's NaN
+        anti = np.angle((z - 2.0) / (1.0 - 2.0 * z))
+    return np.abs((psi - anti + math.pi) % (2 * math.pi) - math.pi)
+
+
+def crank_errors(theta: np.ndarray, th0: np.ndarray, om0: np.ndarray, t: np.ndarray, R: int) -> list[float]:
+    from nonmin.library import crossed_four_bar_reference
+
+    out = []
+    for i in range(R):
+        ref = crossed_four_bar_reference(t, theta0=float(th0[i]), omega0=float(om0[i]))
+        out.append(float(np.max(np.abs(theta[i] - ref["theta"]))))
+    return out
+
+
+# --------------------------------------------------------------------------- nonmin
+
+
+def nonmin_batch(th0: np.ndarray, om0: np.ndarray, threads: int, dt: float = DT) -> tuple[float, Any]:
+    from nonmin import library
+    from nonmin.library._planar import _cfb_coordinates
+    from nonmin.sim import simulate_batch
+
+    model = library.get("crossed_four_bar").model
+    Q, V = _cfb_coordinates(th0, om0)
+    t = np.linspace(0.0, T_FINAL, round(T_FINAL / 0.01) + 1)
+    w0 = time.perf_counter()
+    bt = simulate_batch(model, T_FINAL, Q, V, dt=dt, t_eval=t, threads=threads)
+    return time.perf_counter() - w0, bt
+
+
+def nonmin_single(th0: np.ndarray, om0: np.ndarray) -> tuple[float, np.ndarray]:
+    from nonmin import library
+    from nonmin.library._planar import _cfb_coordinates
+    from nonmin.sim import simulate
+
+    model = library.get("crossed_four_bar").model
+    Q, V = _cfb_coordinates(th0, om0)
+    t = np.linspace(0.0, T_FINAL, round(T_FINAL / 0.01) + 1)
+    qs = []
+    w0 = time.perf_counter()
+    for i in range(len(th0)):
+        qs.append(simulate(model, T_FINAL, Q[i], V[i], dt=DT, t_eval=t, progress=False).q)
+    return time.perf_counter() - w0, np.array(qs)
+
+
+# --------------------------------------------------------------------------- MuJoCo
+
+
+def mujoco_rollout(th0: np.ndarray, om0: np.ndarray, setting: str, threads: int, block: int = 500
+                   ) -> tuple[float, np.ndarray]:  # fmt: skip
+    """Wall time of the rollouts and the crank/rocker angles every 10 ms (k, 201, 2)."""
+    import mujoco
+    import sim_bench as sb
+    from mujoco import rollout
+
+    ref = sb.crossed_four_bar_mechanism()
+    m = mujoco.MjModel.from_xml_string(sb.mjcf(ref, DT, setting))
+    jid = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"j{i}") for i in range(ref.nb)]
+    qadr = [int(m.jnt_qposadr[j]) for j in jid]
+    vadr = [int(m.jnt_dofadr[j]) for j in jid]
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    nstate = mujoco.mj_stateSize(m, spec)
+    d = mujoco.MjData(m)
+    k = len(th0)
+    init = np.empty((k, nstate))
+    for i in range(k):
+        mech = sb.crossed_four_bar_mechanism(sb.FourBarParams(theta0=float(th0[i]), omega0=float(om0[i])))
+        mujoco.mj_resetData(m, d)
+        for b, (kind, p) in enumerate(ref.parents):
+            if kind == "bar":
+                d.qpos[qadr[b]] = (mech.angles0[b] - mech.angles0[p]) - (ref.angles0[b] - ref.angles0[p])
+                d.qvel[vadr[b]] = mech.rates0[b] - mech.rates0[p]
+            else:
+                d.qpos[qadr[b]] = mech.angles0[b] - ref.angles0[b]
+                d.qvel[vadr[b]] = mech.rates0[b]
+        mujoco.mj_forward(m, d)
+        mujoco.mj_getState(m, d, init[i], spec)
+    nstep = round(T_FINAL / DT)
+    datas = [mujoco.MjData(m) for _ in range(threads)]
+    every = round(0.01 / DT)
+    angles = np.empty((k, nstep // every + 1, 2))
+    wall = 0.0
+    for lo in range(0, k, block):
+        hi = min(lo + block, k)
+        out = np.empty((hi - lo, nstep, nstate))
+        w0 = time.perf_counter()
+        rollout.rollout(m, datas if threads > 1 else datas[0], init[lo:hi], nstep=nstep, state=out,
+                        skip_checks=False)  # fmt: skip
+        wall += time.perf_counter() - w0
+        qpos = np.concatenate([init[lo:hi, None, 1:1 + m.nq], out[:, every - 1 :: every, 1:1 + m.nq]], axis=1)
+        angles[lo:hi, :, 0] = ref.angles0[0] + qpos[:, :, qadr[0]]
+        angles[lo:hi, :, 1] = ref.angles0[2] + qpos[:, :, qadr[2]]
+    return wall, angles
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--runs", type=int, default=10_000)
+    ap.add_argument("--single", type=int, default=200, help="runs timed one by one through simulate")
+    ap.add_argument("--ref", type=int, default=20, help="runs checked against the exact reference")
+    ap.add_argument("--sweep-runs", type=int, default=2000)
+    ap.add_argument("--repeat", type=int, default=3, help="interleaved rounds (medians)")
+    ap.add_argument("--skip-dask", action="store_true")
+    ap.add_argument("--json", default=str(HERE / "results" / "sweep_bench.json"))
+    args = ap.parse_args()
+    load0 = os.getloadavg()
+    th0, om0 = states(args.runs, 2026)
+    t = np.linspace(0.0, T_FINAL, 201)
+    rows: dict[str, Any] = {"runs": args.runs, "load_before": load0}
+    # ---- every path, interleaved ``--repeat`` times (medians): the load drifts on a shared machine
+    coarse_dt = (2.5e-3, 5e-3, 1e-2)  # work-precision
+    paths: dict[str, Any] = {
+        "nonmin simulate one by one": lambda: nonmin_single(th0[: args.single], om0[: args.single]),
+        "nonmin batch, 1 thread": lambda: nonmin_batch(th0, om0, 1),
+        "nonmin batch, 2 threads": lambda: nonmin_batch(th0, om0, 2),
+        "mujoco.rollout default, 1 thread": lambda: mujoco_rollout(th0, om0, "default", 1),
+        "mujoco.rollout default, 2 threads": lambda: mujoco_rollout(th0, om0, "default", 2),
+        "mujoco.rollout stiff, 1 thread": lambda: mujoco_rollout(th0, om0, "stiff", 1),
+    }
+    for h in coarse_dt:
+        paths[f"nonmin batch, 1 thread, dt = {h:g}"] = lambda h=h: nonmin_batch(th0, om0, 1, h)
+    walls: dict[str, list[float]] = {k: [] for k in paths}
+    outs: dict[str, Any] = {}
+    for _ in range(args.repeat):
+        for k, fn in paths.items():
+            w, out = fn()
+            walls[k].append(w / (args.single if "one by one" in k else args.runs))
+            outs[k] = out
+    per = {k: statistics.median(v) for k, v in walls.items()}
+    q_single, bt = outs["nonmin simulate one by one"], outs["nonmin batch, 1 thread"]
+    ang_def, ang_stiff = outs["mujoco.rollout default, 1 thread"], outs["mujoco.rollout stiff, 1 thread"]
+    coarse = {h: (None, outs[f"nonmin batch, 1 thread, dt = {h:g}"]) for h in coarse_dt}
+    same = bool(np.array_equal(bt.q[: args.single], q_single))
+    assert bt.q is not None
+    theta, psi = bt.q[:, :, 2], bt.q[:, :, 8]
+    acc = {
+        "nonmin": crank_errors(theta, th0, om0, t, args.ref),
+        "mujoco default": crank_errors(ang_def[:, :, 0], th0, om0, t, args.ref),
+        "mujoco stiff": crank_errors(ang_stiff[:, :, 0], th0, om0, t, args.ref),
+    }
+    for h, (_, b) in coarse.items():
+        acc[f"nonmin dt = {h:g}"] = crank_errors(b.q[:, :, 2], th0, om0, t, args.ref)
+    branch = {
+        "nonmin": float(np.nanmax(anti_residual(theta, psi))),
+        "mujoco default": float(np.nanmax(anti_residual(ang_def[:, :, 0], ang_def[:, :, 1]))),
+        "mujoco stiff": float(np.nanmax(anti_residual(ang_stiff[:, :, 0], ang_stiff[:, :, 1]))),
+    }
+    for h, (_, b) in coarse.items():
+        branch[f"nonmin dt = {h:g}"] = float(np.nanmax(anti_residual(b.q[:, :, 2], b.q[:, :, 8])))
+    rows.update(per_run_s=per, crank_error_max=dict((k, max(v)) for k, v in acc.items()),
+                crank_error_median=dict((k, float(np.median(v))) for k, v in acc.items()),
+                branch_distance_max=branch, batch_equals_single=same,
+                failed=int(np.count_nonzero(~bt.success)))  # fmt: skip
+    # ---- parallel efficiency
+    eff = efficiency(args.sweep_runs, not args.skip_dask)
+    rows["efficiency"] = eff
+    rows["load_after"] = os.getloadavg()
+    print(f"load average before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, after "
+          f"{rows['load_after'][0]:.2f} {rows['load_after'][1]:.2f} {rows['load_after'][2]:.2f}")  # fmt: skip
+    print(f"\n{args.runs} runs of the crossed four-bar over {T_FINAL} s, dt = {DT} (per run, ms)\n")
+    print("| path | per run (ms) | ratio to one-by-one | ratio to rollout default 1 thr |")
+    print("|---|---|---|---|")
+    for k, v in per.items():
+        print(f"| {k} | {v * 1e3:.3f} | {v / per['nonmin simulate one by one']:.3f} | "
+              f"{v / per['mujoco.rollout default, 1 thread']:.3f} |")  # fmt: skip
+    print("\n| engine | crank angle error, max / median over the checked runs (rad) | max branch distance (rad) |")
+    print("|---|---|---|")
+    for k in acc:
+        print(f"| {k} | {max(acc[k]):.2e} / {np.median(acc[k]):.2e} | {branch[k]:.2e} |")
+    print(f"\nbatched runs equal simulate() bitwise on the {args.single} runs timed one by one: {same}; "
+          f"failed runs: {rows['failed']}")  # fmt: skip
+    print("\n| sweep, " + f"{args.sweep_runs} runs | 1 worker (s) | 2 workers (s) | efficiency |")
+    print("|---|---|---|---|")
+    for k, (a, b) in eff.items():
+        print(f"| {k} | {a:.2f} | {b:.2f} | {a / (2 * b):.2f} |")
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).write_text(json.dumps(rows, indent=1), encoding="utf-8")
+    return 0
+
+
+def efficiency(runs: int, dask: bool) -> dict[str, tuple[float, float]]:
+    """Wall time of one sweep with 1 and 2 workers, locally and on a LocalCluster."""
+    from nonmin import library, sweep
+    from nonmin.library._planar import _cfb_coordinates
+
+    bar = library.get("crossed_four_bar")
+    th0, om0 = states(runs, 99)
+    Q, V = _cfb_coordinates(th0, om0)
+    states0 = list(zip(Q, V))  # one zipped axis: (q0, qd0) of each draw
+    t = np.linspace(0.0, T_FINAL, 201)
+    kw = {"t_span": T_FINAL, "dt": DT, "t_eval": t, "progress": False, "chunk": 50}
+    out: dict[str, tuple[float, float]] = {}
+    failed: list[int] = []
+
+    def timed(**extra: Any) -> float:
+        w0 = time.perf_counter()
+        res = sweep(bar.model, {("q0", "qd0"): states0}, **kw, **extra)
+        failed.append(res.failed)  # (seed 99: one run of the first 20 fails in simulate too)
+        return time.perf_counter() - w0
+
+    out["local threads"] = (timed(workers=1), timed(workers=2))
+    if dask:
+        from dask.distributed import Client, LocalCluster
+
+        times = []
+        for nw in (1, 2):
+            with LocalCluster(n_workers=nw, threads_per_worker=1, processes=True, dashboard_address=None) as lc, \
+                    Client(lc) as client:  # fmt: skip
+                timed(scheduler=client)  # warm-up (imports, model build on the workers)
+                times.append(timed(scheduler=client))
+        out["dask LocalCluster processes"] = (times[0], times[1])
+    print(f"failed runs in the sweeps: {sorted(set(failed))}")
+    return out
+
+
+if __name__ == "__main__":
+    sys.exit(main())
