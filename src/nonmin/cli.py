@@ -45,38 +45,53 @@ def _status_name(traj: Any) -> str:
     return str(getattr(st, "name", st)).lower()
 
 
-def _summary_row(name: str, traj: Any, wall: float) -> dict[str, Any]:
+def _summary_row(name: str, traj: Any, timings: dict[str, float], model: Any = None) -> dict[str, Any]:
+    """One row of the run/demo summary.
+
+    ``sim_s`` is the elapsed time of the simulation alone; ``render_s`` that of the plot, the
+    animation and the files. ``energy_balance`` is ``max |E − E₀ − W|`` with W the work of
+    controllers, actuators, dampers and drivers (:func:`nonmin.viz.energy_balance`): the drift
+    of a conservative run (plus impact losses), not the work a controller does.
+    """
     import numpy as np
 
-    e = np.asarray(getattr(traj, "energy", [np.nan]))
+    from .viz import energy_balance
+
     phi = np.asarray(getattr(traj, "phi_norm", [np.nan]))
     vel = np.asarray(getattr(traj, "velocity_residual_norm", [np.nan]))
     rank = np.asarray(getattr(traj, "rank", [0]))
+    bal = energy_balance(traj, model)
     return {
         "scenario": name,
         "status": _status_name(traj),
         "t_end": float(np.asarray(traj.t)[-1]),
-        "energy_drift": float(np.max(np.abs(e - e[0]))) if e.size else float("nan"),
+        "energy_balance": float(np.max(np.abs(bal.balance))) if bal is not None else float("nan"),
         "max_phi": float(np.max(phi)) if phi.size else float("nan"),
         "max_Aqd": float(np.max(vel)) if vel.size else float("nan"),
         "rank": f"{int(rank.min())}..{int(rank.max())}" if rank.size else "-",
         "events": len(getattr(traj, "events", ()) or ()),
-        "wall_s": wall,
+        "sim_s": float(timings.get("simulate", float("nan"))),
+        "render_s": float(sum(v for k, v in timings.items() if k != "simulate")),
     }
 
 
 def _format_rows(rows: Sequence[dict[str, Any]]) -> str:
     w = max([len("scenario"), *(len(str(r["scenario"])) for r in rows)])
     head = (
-        f"{'scenario':{w}s} {'status':16s} {'t_end':>7s} {'|ΔE| max':>10s} {'‖φ‖ max':>10s} "
-        f"{'‖Aqd‖ max':>10s} {'rank A':>7s} {'events':>6s} {'wall':>7s}"
+        f"{'scenario':{w}s} {'status':16s} {'t_end[s]':>8s} {'|E-E0-W|[J]':>11s} {'|phi| max':>10s} "
+        f"{'|Aqd| max':>10s} {'rank A':>7s} {'events':>6s} {'sim[s]':>7s} {'render[s]':>9s}"
     )
     lines = [head, "-" * len(head)]
     for r in rows:
         lines.append(
-            f"{r['scenario']:{w}s} {r['status']:16s} {r['t_end']:7.3g} {r['energy_drift']:10.2e} "
-            f"{r['max_phi']:10.2e} {r['max_Aqd']:10.2e} {r['rank']:>7s} {r['events']:6d} {r['wall_s']:6.1f}s"
+            f"{r['scenario']:{w}s} {r['status']:16s} {r['t_end']:8.3g} {r['energy_balance']:11.2e} "
+            f"{r['max_phi']:10.2e} {r['max_Aqd']:10.2e} {r['rank']:>7s} {r['events']:6d} "
+            f"{r['sim_s']:7.2f} {r['render_s']:9.2f}"
         )
+    lines.append(
+        "sim[s] = seconds spent simulating; render[s] = seconds spent on the plot, animation and files; "
+        "|E-E0-W| = energy balance (W: work of forces and controllers)"
+    )
     return "\n".join(lines)
 
 
@@ -89,18 +104,20 @@ def cmd_demo(args: argparse.Namespace) -> int:
     out = Path(args.out)
     rows = []
     failed = False
+    total0 = time.perf_counter()
     for name in args.only or DEMO_SCENARIOS:
         path = _scenario_dir() / f"{name}.toml"
         sc = load_scenario(path)
         print(f"[nonmin demo] {sc.name}: {sc.data.get('description', '')}", flush=True)
-        t0 = time.perf_counter()
         res = run_scenario(sc, out / name, progress=args.progress, t_final=args.t_final)
-        wall = time.perf_counter() - t0
+        tm = res.timings
+        print(f"    simulated {res.trajectory.t[-1] - res.trajectory.t[0]:.3g} s in "
+              f"{tm.get('simulate', 0.0):.2f} s" if len(res.trajectory) else "    no samples", flush=True)
         if len(res.trajectory):
-            rows.append(_summary_row(name, res.trajectory, wall))
+            rows.append(_summary_row(name, res.trajectory, tm, res.model))
         failed |= _status_name(res.trajectory) == "failed"
         for kind, f in res.files.items():
-            print(f"    {kind:11s} {f}")
+            print(f"    {kind:11s} {f}  ({tm.get(kind, 0.0):.2f} s)", flush=True)
         if _status_name(res.trajectory) == "interrupted":
             if rows:
                 write_text(out / "summary.txt", _format_rows(rows) + "\n")
@@ -109,7 +126,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print()
     print(_format_rows(rows))
     write_text(out / "summary.txt", _format_rows(rows) + "\n")
-    print(f"\nplots, animations and trajectories written to {out.resolve()}")
+    total = time.perf_counter() - total0
+    sim = sum(r["sim_s"] for r in rows)
+    print(f"\nin all {total:.1f} s (simulation {sim:.1f} s, rendering and files {total - sim:.1f} s)")
+    print(f"plots, animations and trajectories written to {out.resolve()}")
     return EXIT_FAILED if failed else EXIT_OK
 
 
@@ -117,13 +137,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     from .io import load_scenario, run_scenario
 
     sc = load_scenario(args.scenario, allow_code=args.allow_code)
-    t0 = time.perf_counter()
     res = run_scenario(sc, args.out, progress=args.progress, t_final=args.t_final,
                        checkpoint_every=args.checkpoint_every, resume=args.resume)
-    wall = time.perf_counter() - t0
     traj = res.trajectory
     if len(traj):
-        print(_format_rows([_summary_row(sc.name, traj, wall)]))
+        print(_format_rows([_summary_row(sc.name, traj, res.timings, res.model)]))
     for kind, f in res.files.items():
         print(f"{kind:11s} {f}")
     if _status_name(traj) == "interrupted":
@@ -221,9 +239,18 @@ def cmd_plot(args: argparse.Namespace) -> int:
     traj = _load_result(args.result)
     model = None if args.model is None else _model_for_result(traj, args.model, args.allow_code, "plot")
     out = Path(args.output or Path(args.result).with_suffix(".png"))
-    save_figure(plot_trajectory(traj, model), out)
+    save_figure(plot_trajectory(traj, model, title=traj.metadata.get("scenario_name")), out)
     print(out)
     return EXIT_OK
+
+
+def _result_fps(traj: Any) -> float:
+    """The frame rate a trajectory was animated with by ``run`` (its metadata), or the default."""
+    from .viz import DEFAULT_FPS
+
+    anim = (getattr(traj, "metadata", {}) or {}).get("animation")
+    fps = anim.get("fps") if isinstance(anim, dict) else None
+    return float(fps) if isinstance(fps, int | float) and 0 < fps <= 1000 else DEFAULT_FPS
 
 
 def cmd_animate(args: argparse.Namespace) -> int:
@@ -233,29 +260,83 @@ def cmd_animate(args: argparse.Namespace) -> int:
     model = _model_for_result(traj, args.model, args.allow_code, "animate")
     if len(traj) == 0:
         raise InputError(f"animate: {args.result!r} holds no samples")
-    out = animate(traj, model, args.output, fps=args.fps, speed=args.speed)
+    out_path = Path(args.output or Path(args.result).with_suffix(".gif"))
+    fps = args.fps if args.fps is not None else _result_fps(traj)
+    out = animate(traj, model, out_path, fps=fps, speed=args.speed,
+                  title=traj.metadata.get("scenario_name"), progress=args.progress is not False)
     print(out)
     return EXIT_OK
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from . import io
+
+    traj = _load_result(args.result)
+    model = None if args.model is None else _model_for_result(traj, args.model, args.allow_code, "export")
+    suffix = {"csv": ".csv", "parquet": ".parquet", "netcdf": ".nc"}[args.format]
+    out = Path(args.output or Path(args.result).with_suffix(suffix))
+    if args.format == "csv":
+        io.to_csv(traj, out, model)
+        print(out)
+        print(io._export.sidecar(out))
+    elif args.format == "parquet":
+        print(io.to_parquet(traj, out, model))
+    else:
+        print(io.to_netcdf(traj, out, model))
+    return EXIT_OK
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    from .viz.view import view
+
+    traj = _load_result(args.result)
+    model = _model_for_result(traj, args.model, args.allow_code, "view")
+    viewer = view(traj, model, port=args.port, speed=args.speed, open_browser=not args.no_browser)
+    print(f"nonmin view: {viewer.url}  (Ctrl-C to stop)", flush=True)
+    if args.seconds is not None:
+        time.sleep(args.seconds)
+        viewer.stop()
+        return EXIT_OK
+    try:
+        while True:
+            time.sleep(3600)
+    finally:
+        viewer.stop()
+
+
+def _first_line(obj: Any) -> str:
+    doc = (getattr(obj, "__doc__", None) or "").strip()
+    return " ".join(doc.split("\n\n", 1)[0].split())
 
 
 def cmd_list(args: argparse.Namespace) -> int:
     from . import control, library, sim
 
-    print("models (nonmin.library):")
+    def row(name: str, text: str) -> None:
+        text = text if len(text) <= 96 else text[:93] + "..."
+        print(f"  {name:28s} {text}")
+
+    print("models (nonmin.library.get(NAME); scenario [model] library = NAME):")
     for name in library.names():
-        print(f"  {name}")
-    print("integrators (simulate(method=...)):")
+        row(name, _first_line(library._registry._REGISTRY[name]))
+    print("integrators (simulate(method=NAME)):")
     for name in sorted(sim.METHODS):
-        print(f"  {name}")
-    print("stabilizers (simulate(stabilization=...)):")
+        row(name, _first_line(sim.METHODS[name]))
+    print("stabilizations (simulate(stabilization=NAME)):")
     for name in sorted(sim.STABILIZATIONS):
-        print(f"  {name}")
-    print("controllers ([controller] type = ...):")
+        row(name, _first_line(sim.STABILIZATIONS[name]))
+    print("controllers (nonmin.control; scenario [controller] type = NAME):")
     for name in control.names():
-        print(f"  {name}")
-    print("demo scenarios (nonmin demo --only ...):")
+        factory = control.get(name)
+        cls = getattr(factory, "__annotations__", {}).get("return", "")
+        row(name, f"{cls}: {_first_line(factory)}" if cls else _first_line(factory))
+    row("(API only) Switched", _first_line(control.Switched))
+    print("demo scenarios (nonmin demo --only NAME):")
     for name in DEMO_SCENARIOS:
-        print(f"  {name}")
+        from .io import load_scenario
+
+        sc = load_scenario(_scenario_dir() / f"{name}.toml")
+        row(name, sc.name)
     return EXIT_OK
 
 
@@ -381,19 +462,39 @@ def build_parser() -> argparse.ArgumentParser:
     model_flag(sp, required=False)
     sp.set_defaults(func=cmd_plot)
 
-    sp = sub.add_parser("animate", help="animate a saved trajectory")
+    sp = sub.add_parser("animate", help="animate a saved trajectory (GIF or MP4)")
     sp.add_argument("result", help="trajectory file (.npz) written by run/demo")
-    sp.add_argument("-o", "--output", required=True, help="FILE.gif or FILE.mp4")
-    sp.add_argument("--fps", type=_FPS, default=25.0)
+    sp.add_argument("-o", "--output", default=None, help="FILE.gif or FILE.mp4 (default RESULT.gif)")
+    sp.add_argument("--fps", type=_FPS, default=None,
+                    help="frames per second (default: the run's, else 20: the same frames as `run`)")
     sp.add_argument("--speed", type=_SPEED, default=1.0, help="playback speed factor")
     model_flag(sp, required=True)
+    progress_flags(sp)
     sp.set_defaults(func=cmd_animate)
 
     from .sweeps._cli import add_sweep_parser
 
     add_sweep_parser(sub, allow_code_flag, progress_flags)
 
-    sp = sub.add_parser("list", help="list models, integrators, stabilizers and controllers")
+    sp = sub.add_parser("export", help="export a saved trajectory to CSV, Parquet or NetCDF")
+    sp.add_argument("result", help="trajectory file (.npz) written by run/demo")
+    sp.add_argument("--format", choices=("csv", "parquet", "netcdf"), default="csv",
+                    help="csv (plain header + RESULT.csv.json metadata), parquet or netcdf "
+                    "(extra export); default csv")
+    sp.add_argument("-o", "--output", default=None, help="output file (default RESULT.csv/.parquet/.nc)")
+    model_flag(sp, required=False)
+    sp.set_defaults(func=cmd_export)
+
+    sp = sub.add_parser("view", help="open a saved trajectory in the interactive 3-D viewer (browser)")
+    sp.add_argument("result", help="trajectory file (.npz) written by run/demo")
+    sp.add_argument("--port", type=int, default=8080, help="port of the viewer's web server (default 8080)")
+    sp.add_argument("--speed", type=_SPEED, default=1.0, help="initial playback speed")
+    sp.add_argument("--no-browser", action="store_true", help="do not open a browser window")
+    sp.add_argument("--seconds", type=_TIME, default=None, help="stop after this many seconds")
+    model_flag(sp, required=True)
+    sp.set_defaults(func=cmd_view)
+
+    sp = sub.add_parser("list", help="list models, integrators, stabilizations, controllers (with descriptions)")
     sp.set_defaults(func=cmd_list)
     return p
 

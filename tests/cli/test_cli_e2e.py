@@ -32,7 +32,7 @@ def test_run_writes_all_outputs(tmp_path, capsys):
     assert traj.q.shape[1] == 9 and np.isfinite(traj.q).all()
     assert np.max(traj.phi_norm) < 1e-10
     assert traj.metadata["source"]["library"] == "crossed_four_bar"
-    csv = np.loadtxt(out / "trajectory.csv", delimiter=",", comments="#")
+    csv = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1)
     assert csv.shape[0] == len(traj)
     assert np.allclose(csv[:, 0], traj.t)
     _png_ok(out / "trajectory.png")

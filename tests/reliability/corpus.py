@@ -672,7 +672,7 @@ def _durability() -> None:
              *(("r.md",) if expected is E.OutputError else ()), check=text_intact("r.md", "previous report"))
 
     def anim_fail(tmp: Path) -> Any:
-        from matplotlib import animation
+        from PIL import Image
 
         from nonmin import library
         from nonmin.viz import animate
@@ -681,11 +681,11 @@ def _durability() -> None:
         mech = library.get("crossed_four_bar")
         tr = sim(mech, (0.0, 0.02), mech.state.q)
 
-        def save(self: Any, fname: Any, *a: Any, **k: Any) -> None:
-            Path(fname).write_bytes(b"partial gif")
+        def save(self: Any, fp: Any, *a: Any, **k: Any) -> None:  # the GIF writer (Pillow)
+            Path(fp).write_bytes(b"partial gif")
             raise OSError(28, "No space left on device")
 
-        with mock.patch.object(animation.Animation, "save", save):
+        with mock.patch.object(Image.Image, "save", save):
             animate(tr, mech.model, tmp / "a.gif", fps=5)
 
     case("animate fails mid-write (ENOSPC)", cat, anim_fail, E.OutputError, "a.gif",

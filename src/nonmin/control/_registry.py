@@ -41,7 +41,7 @@ def _hybrid_force(
     u_max: ArrayLike | None = None,
     **kw: Any,
 ) -> ForceControl:
-    """Hybrid position/force control: a :class:`Regulator` in N(A) plus commanded constraint
+    """Hybrid position/force control (:class:`ForceControl`): a :class:`Regulator` in N(A) plus commanded constraint
     forces ``{constraint name: force}`` (corrected eq. (fc_fp)), see :class:`ForceControl`."""
     motion = Regulator(model, target, Kp, Kd, **kw)
     return ForceControl(motion, dict(forces), u_min=u_min, u_max=u_max)
@@ -51,6 +51,8 @@ def _hybrid_force(
 CONTROLLERS: dict[str, Callable[..., Any]] = {
     "regulator": _regulator,
     "tracker": _tracker,
+    "force_control": _hybrid_force,
+    # the name before 0.3, kept so that older scenario files still load
     "hybrid_force": _hybrid_force,
 }
 

@@ -136,6 +136,9 @@ class ScenarioResult:
     model: Any
     trajectory: Any
     files: dict[str, Path] = field(default_factory=dict)
+    #: Wall-clock seconds of each stage: ``"simulate"`` (the call to simulate), and one entry
+    #: per file written (``"trajectory"``, ``"csv"``, ``"plot"``, ``"animation"``).
+    timings: dict[str, float] = field(default_factory=dict)
 
 
 #: Largest number of output samples a scenario may ask for through ``output_dt`` (each sample
@@ -232,6 +235,9 @@ def run_scenario(
             if target is None or not target.is_file():
                 raise InputError(f"resume: there is no trajectory file {str(target)!r} to resume")
             kw["resume"] = target
+    import time
+
+    start = time.perf_counter()
     try:
         traj = simulate(
             model,
@@ -247,10 +253,11 @@ def run_scenario(
         )
     except InputError as exc:
         raise ScenarioError(f"{sc.path}: table [simulate]: {exc}") from None
-    result = ScenarioResult(scenario=sc, model=model, trajectory=traj)
+    result = ScenarioResult(scenario=sc, model=model, trajectory=traj,
+                            timings={"simulate": time.perf_counter() - start})
     if write:
         assert out is not None
-        result.files = write_outputs(result, out)
+        result.files = write_outputs(result, out, progress=progress)
     return result
 
 
@@ -272,14 +279,20 @@ def _output_names(sc: Scenario, out: Path) -> dict[str, Path | None]:
     return names
 
 
-def write_outputs(result: ScenarioResult, out: Path) -> dict[str, Path]:
+def write_outputs(result: ScenarioResult, out: Path, *, progress: bool | None = None) -> dict[str, Path]:
     """Write trajectory file, CSV, plots and animation as the [output] table asks.
+
+    The wall time of each file goes to ``result.timings``; ``progress`` (not False) lets the
+    animation report on stderr when it takes more than 2 s.
 
     Every file is written durably (temporary + fsync + rename: the previous file survives any
     failure); names from the scenario are confined to ``out``. The trajectory file is written
     first, so an interrupted or failed run keeps its samples even if a later output fails.
     """
+    import time
+
     from ..sim import Trajectory
+    from ..viz import DEFAULT_FPS
 
     sc, model, traj = result.scenario, result.model, result.trajectory
     opts = sc.section("output")
@@ -289,27 +302,39 @@ def write_outputs(result: ScenarioResult, out: Path) -> dict[str, Path]:
     lib = sc.section("model").get("library")
     if lib:
         source.update(library=lib, params=dict(sc.section("model").get("params", {})))
+    fps = float(opts.get("fps", DEFAULT_FPS))
     if isinstance(traj, Trajectory):
-        traj = dataclasses.replace(traj, metadata={**traj.metadata, "source": source, "scenario_name": sc.name})
+        traj = dataclasses.replace(traj, metadata={**traj.metadata, "source": source,
+                                                   "scenario_name": sc.name, "animation": {"fps": fps}})
         result.trajectory = traj
+    clock = time.perf_counter
     target = names["trajectory"]
     assert target is not None
+    t0 = clock()
     traj.save(target)
     files["trajectory"] = target
+    result.timings["trajectory"] = clock() - t0
     if names["csv"] is not None:
-        traj.to_csv(names["csv"])
+        t0 = clock()
+        from ._export import to_csv
+
+        to_csv(traj, names["csv"], model)
         files["csv"] = names["csv"]
+        result.timings["csv"] = clock() - t0
     if len(traj) == 0:
         return files
     if names["plot"] is not None:
         from ..viz import plot_trajectory, save_figure
 
+        t0 = clock()
         files["plot"] = save_figure(plot_trajectory(traj, model, title=sc.name), names["plot"])
+        result.timings["plot"] = clock() - t0
     anim = names["animation"]
     if anim is not None and model.geometry(traj.q[0]) is not None:
         from ..viz import animate
 
-        files["animation"] = animate(
-            traj, model, anim, fps=float(opts.get("fps", 20)), title=sc.name
-        )
+        t0 = clock()
+        files["animation"] = animate(traj, model, anim, fps=fps, title=sc.name,
+                                     progress=progress is not False)
+        result.timings["animation"] = clock() - t0
     return files

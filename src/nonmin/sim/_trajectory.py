@@ -244,38 +244,15 @@ class Trajectory:
         return load_trajectory(path)
 
     def to_csv(self, path: str | os.PathLike[str]) -> None:
-        """Write a flat CSV: t, q_*, qd_*, qdd_*, u_*, diagnostics, active flags.
+        """Write a plain CSV (one header row: t, q_*, qd_*, qdd_*, fc_*, u_*, diagnostics,
+        active_*) and a sidecar ``<path>.json`` with the metadata and each column's unit.
 
-        ``#`` header lines carry the metadata JSON; the column line follows.
+        ``pandas.read_csv(path)`` loads it; see :func:`nonmin.io.to_csv` (also Parquet and
+        xarray/NetCDF there).
         """
-        cols: list[str] = ["t"]
-        cols += [f"q_{c}" for c in self.coordinate_names]
-        cols += [f"qd_{c}" for c in self.coordinate_names]
-        cols += [f"qdd_{c}" for c in self.coordinate_names]
-        cols += [f"fc_{c}" for c in self.coordinate_names]
-        cols += [f"u_{a}" for a in self.actuator_names]
-        cols += ["rank", "cond", "mu", "energy", "phi_norm", "velocity_residual_norm"]
-        cols += [f"active_{c}" for c in self.constraint_names]
-        data = np.column_stack(
-            [
-                self.t,
-                self.q,
-                self.qd,
-                self.qdd,
-                self.f_c,
-                self.u,
-                self.rank,
-                self.cond,
-                self.mu,
-                self.energy,
-                self.phi_norm,
-                self.velocity_residual_norm,
-                self.active_mask.astype(float),
-            ]
-        )
-        header = "nonmin trajectory; metadata: " + self._metadata_json() + "\n" + ",".join(cols)
-        with atomic_write(path, "wb") as fh:
-            np.savetxt(fh, data, delimiter=",", header=header, comments="# ", fmt="%.17g")
+        from ..io._export import to_csv
+
+        to_csv(self, path)
 
 
 def _json_default(obj: Any) -> Any:

@@ -55,44 +55,50 @@ def _mark_events(ax: Any, events: Sequence[tuple[float, str]], label: bool = Fal
             )
 
 
-def _legend(ax: Any, names: Sequence[str] | None, count: int) -> None:
-    if names and count <= 12:
-        ax.legend(list(names)[:count], fontsize=7, ncol=min(count, 6), loc="upper right")
+def _legend(ax: Any, labels: Sequence[str] | None, count: int) -> None:
+    """A legend outside the axes on the right (never over the curves or the event labels)."""
+    if not labels or count == 0:
+        return
+    ncol = 1 if count <= 10 else 2 if count <= 24 else 3
+    ax.legend(list(labels)[:count], fontsize=6, ncol=ncol, loc="upper left",
+              bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, frameon=False)
 
 
-def _singularity_distance(traj: Any, model: Model) -> np.ndarray | None:
-    """σ_r/σ₁ of the (equilibrated) active A at every sample, r = the largest rank met.
+def _unit_text(units: Sequence[str]) -> str:
+    seen = [u for u in dict.fromkeys(units) if u != "?"]
+    return ", ".join(seen) if seen else "?"
 
-    Dips towards 0 show the configurations where A loses rank (singular or change points),
-    which the sampled rank itself rarely hits exactly.
-    """
-    from ..core import range_basis
 
-    q = _field(traj, "q")
-    rank = _field(traj, "rank")
-    if q is None or rank is None or rank.size == 0 or int(np.max(rank)) == 0:
-        return None
-    rmax = int(np.max(rank))
-    actives = getattr(traj, "active", None)
-    out = np.empty(len(q))
-    for i, qi in enumerate(q):
-        act = actives[i] if actives is not None else None
-        A = model.constraint_jacobian(float(traj.t[i]), qi, act)
-        s = range_basis(A).s
-        out[i] = s[rmax - 1] / s[0] if s.size >= rmax and s[0] > 0 else 0.0
-    return out
+def _coordinate_names(traj: Any, model: Model | None) -> list[str] | None:
+    if model is not None:
+        return list(model.coordinate_names)
+    names = getattr(traj, "coordinate_names", None)
+    if names:
+        return list(names)
+    meta = getattr(traj, "metadata", None) or {}
+    coords = meta.get("coordinate_names") if isinstance(meta, dict) else None
+    return list(coords) if coords else None
 
 
 def plot_trajectory(traj: Any, model: Model | None = None, *, title: str | None = None) -> Any:
     """Plot a :class:`~nonmin.sim.Trajectory`: coordinates, velocities, constraint forces,
-    rank of A with cond(M̄) and μ, energy and constraint residuals, with events marked.
+    rank of the active A with cond(M̄), μ and σ_r/σ₁, and the energy balance with the
+    constraint residuals, with events marked.
+
+    Every curve is labelled with its coordinate and unit (m, rad; rates m/s, rad/s;
+    generalized forces N, N·m). The rank axis has integer ticks. σ_r/σ₁ is computed on the
+    constraints active at each sample (:func:`~nonmin.viz.singularity_distance`). The energy
+    panel shows the balance ``|E − E₀ − W|`` where W is the work of actuators, controllers,
+    dampers and drivers (:func:`~nonmin.viz.energy_balance`): the drift of a conservative
+    system, and the error of the bookkeeping of a driven one (impacts show as steps).
 
     Parameters
     ----------
     traj : Trajectory
         Result of :func:`nonmin.sim.simulate` (or a loaded one).
     model : Model, optional
-        Used for coordinate names in legends.
+        The model the trajectory came from: needed for σ_r/σ₁ and the work W (without it the
+        energy panel shows ``|E − E₀|`` and says so).
     title : str, optional
 
     Returns
@@ -100,62 +106,86 @@ def plot_trajectory(traj: Any, model: Model | None = None, *, title: str | None 
     matplotlib.figure.Figure
     """
     plt = pyplot()
+    from matplotlib.ticker import MaxNLocator
+
+    from ._diagnostics import (
+        coordinate_units,
+        energy_balance,
+        force_unit,
+        singularity_distance,
+        velocity_unit,
+    )
+
     t = np.asarray(traj.t)
-    names = list(model.coordinate_names) if model is not None else None
-    if names is None:
-        meta = getattr(traj, "metadata", None) or {}
-        coords = meta.get("coordinate_names") if isinstance(meta, dict) else None
-        names = list(coords) if coords else None
+    names = _coordinate_names(traj, model)
     events = _event_times(traj)
-    fig, axes = plt.subplots(5, 1, figsize=(9, 12), sharex=True, constrained_layout=True)
+    fig, axes = plt.subplots(5, 1, figsize=(10, 12.5), sharex=True, constrained_layout=True)
     q = _field(traj, "q")
     qd = _field(traj, "qd")
     fc = _field(traj, "f_c")
-    ax = axes[0]
-    if q is not None:
-        ax.plot(t, q, lw=1)
-        _legend(ax, names, q.shape[1])
-    ax.set_ylabel("q")
-    ax = axes[1]
-    if qd is not None:
-        ax.plot(t, qd, lw=1)
-    ax.set_ylabel("qd")
-    ax = axes[2]
-    if fc is not None and fc.size:
-        ax.plot(t, fc, lw=1)
-    ax.set_ylabel("f_c (generalized)")
+    n = q.shape[1] if q is not None and q.ndim == 2 else 0
+    names = names if names is not None and len(names) == n else [f"q{i}" for i in range(n)]
+    units = coordinate_units(model, names) if n else ()
+    for ax, data, sym, unit_of in (
+        (axes[0], q, "q", lambda u: u),
+        (axes[1], qd, "q̇", velocity_unit),
+        (axes[2], fc, "f_c", force_unit),
+    ):
+        if data is None or data.size == 0:
+            ax.set_ylabel(sym)
+            continue
+        us = [unit_of(u) for u in units]
+        ax.plot(t, data, lw=1)
+        _legend(ax, [f"{c} [{u}]" for c, u in zip(names, us, strict=True)], data.shape[1])
+        label = {"q": "coordinates q", "q̇": "velocities q̇",
+                 "f_c": "constraint forces f_c\n(generalized)"}[sym]
+        ax.set_ylabel(f"{label} [{_unit_text(us)}]")
     ax = axes[3]
     rank = _field(traj, "rank")
     cond = _field(traj, "cond_mbar", "cond")
     mu = _field(traj, "mu")
-    if rank is not None:
-        ax.step(t, rank, where="post", color="C0", label="rank A")
-        ax.set_ylabel("rank A", color="C0")
-        lo, hi = float(np.min(rank)), float(np.max(rank))
+    handles = []
+    if rank is not None and rank.size:
+        handles += ax.step(t, rank, where="post", color="C0", label="rank of active A")
+        ax.set_ylabel("rank of active A", color="C0")
+        lo, hi = int(np.min(rank)), int(np.max(rank))
         ax.set_ylim(lo - 0.5, hi + 0.5)
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax2 = ax.twinx()
-    if cond is not None:
-        ax2.semilogy(t, np.maximum(cond, 1.0), color="C1", lw=1, label="cond(M̄)")
-    if mu is not None:
-        ax2.semilogy(t, np.maximum(np.abs(mu), 1e-300), color="C2", lw=1, label="μ")
-    ratio = _singularity_distance(traj, model) if model is not None else None
-    if ratio is not None:
-        ax2.semilogy(t, np.maximum(ratio, 1e-17), color="C3", lw=1, label="σ_r/σ₁ of A")
-    ax2.set_ylabel("cond(M̄), μ, σ_r/σ₁")
-    ax2.legend(fontsize=7, loc="upper right")
+    if cond is not None and cond.size:
+        handles += ax2.semilogy(t, np.maximum(cond, 1.0), color="C1", lw=1, label="cond(M̄)")
+    if mu is not None and mu.size:
+        handles += ax2.semilogy(t, np.maximum(np.abs(mu), 1e-300), color="C2", lw=1,
+                                label="μ [kg, kg·m²]")
+    ratio = singularity_distance(traj, model) if model is not None else None
+    if ratio is not None and np.isfinite(ratio).any():
+        handles += ax2.semilogy(t, np.maximum(ratio, 1e-17), color="C3", lw=1,
+                                label="σ_r/σ₁ of active A")
+    ax2.set_ylabel("cond(M̄), μ, σ_r/σ₁ (log)")
+    if handles:
+        ax.legend(handles=handles, fontsize=6, loc="upper left", bbox_to_anchor=(1.08, 1.0),
+                  borderaxespad=0.0, frameon=False)
     ax = axes[4]
-    energy = _field(traj, "energy")
-    if energy is not None and energy.size:
-        de = np.abs(energy - energy[0])
-        ax.semilogy(t, np.maximum(de, 1e-17), label="|E − E₀| [J]", lw=1)
+    bal = energy_balance(traj, model)
+    if bal is not None:
+        if bal.known:
+            ax.semilogy(t, np.maximum(np.abs(bal.balance), 1e-17), lw=1,
+                        label="energy balance |E − E₀ − W| [J]")
+            if np.max(np.abs(bal.work)) > 0:
+                ax.semilogy(t, np.maximum(np.abs(bal.work), 1e-17), lw=1, ls=":", color="0.4",
+                            label="|W| work of forces, controllers, drivers [J]")
+        else:
+            ax.semilogy(t, np.maximum(np.abs(bal.balance), 1e-17), lw=1,
+                        label="|E − E₀| [J] (no model: work W not subtracted)")
     phi = _field(traj, "phi_norm", "position_residual_norm")
-    if phi is not None:
-        ax.semilogy(t, np.maximum(phi, 1e-17), label="‖φ‖", lw=1)
+    if phi is not None and phi.size:
+        ax.semilogy(t, np.maximum(phi, 1e-17), label="‖φ‖ position residual [m, rad]", lw=1)
     vel = _field(traj, "velocity_residual_norm", "velocity_residual")
-    if vel is not None:
-        ax.semilogy(t, np.maximum(vel, 1e-17), label="‖A qd + φ_t‖", lw=1)
-    ax.set_ylabel("drift / residuals")
-    ax.legend(fontsize=7, loc="upper right")
+    if vel is not None and vel.size:
+        ax.semilogy(t, np.maximum(vel, 1e-17), label="‖A q̇ + φ_t‖ [m/s, rad/s]", lw=1)
+    ax.set_ylabel("energy balance,\nresiduals (log)")
+    ax.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0,
+              frameon=False)
     ax.set_xlabel("t [s]")
     for i, a in enumerate(axes):
         _mark_events(a, events, label=(i == 0))

@@ -1,0 +1,108 @@
+"""Exports load in one line (CSV with a plain header, Parquet, xarray/NetCDF with units), and
+the command line's verbs agree with each other and with the API (issue 23)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import nonmin
+from nonmin import library
+from nonmin.cli import DEMO_SCENARIOS, main
+from nonmin.io import columns, to_csv
+
+
+@pytest.fixture(scope="module")
+def slider_traj():
+    mech = library.get("slider_crank")
+    return mech.model, nonmin.simulate(mech, (0.0, 0.2), dt=1e-2, progress=False)
+
+
+def test_csv_loads_with_pandas_and_numpy(tmp_path, slider_traj):
+    pd = pytest.importorskip("pandas")
+    model, traj = slider_traj
+    path = to_csv(traj, tmp_path / "t.csv", model)
+    df = pd.read_csv(path)
+    cols = columns(traj, model)
+    assert list(df.columns) == list(cols)
+    assert len(df) == len(traj)
+    assert np.array_equal(df["t"].to_numpy(), traj.t)
+    assert np.array_equal(df[f"q_{model.coordinate_names[0]}"].to_numpy(), traj.q[:, 0])
+    data = np.loadtxt(path, delimiter=",", skiprows=1)
+    assert data.shape == (len(traj), len(cols))
+    side = json.loads((tmp_path / "t.csv.json").read_text())
+    assert side["columns"]["t"] == "s"
+    assert side["columns"]["q_crank.theta"] == "rad" and side["columns"]["qd_crank.x"] == "m/s"
+    assert side["columns"]["fc_crank.theta"] == "N*m"
+    assert side["metadata"]["coordinate_names"] == list(model.coordinate_names)
+    # Trajectory.to_csv writes the same file
+    traj.to_csv(tmp_path / "u.csv")
+    assert (tmp_path / "u.csv").read_text().splitlines()[0].startswith("t,q_")
+
+
+def test_parquet_and_xarray_carry_units(tmp_path, slider_traj):
+    pd = pytest.importorskip("pandas")
+    pq = pytest.importorskip("pyarrow.parquet")
+    pytest.importorskip("xarray")
+    from nonmin.io import to_netcdf, to_parquet, to_xarray
+
+    model, traj = slider_traj
+    path = to_parquet(traj, tmp_path / "t.parquet", model)
+    df = pd.read_parquet(path)
+    assert np.array_equal(df["t"].to_numpy(), traj.t)
+    schema = pq.read_schema(path)
+    assert schema.field("q_crank.theta").metadata[b"unit"] == b"rad"
+    assert json.loads(schema.metadata[b"nonmin"])["coordinate_names"] == list(model.coordinate_names)
+    ds = to_xarray(traj, model)
+    assert ds["q"].shape == traj.q.shape and ds["t"].attrs["units"] == "s"
+    assert list(ds["coordinate_unit"].values[:3]) == ["m", "m", "rad"]
+    nc = to_netcdf(traj, tmp_path / "t.nc", model)
+    assert nc.stat().st_size > 1000
+
+
+def test_run_and_animate_make_the_same_frames_and_default_paths(tmp_path, capsys):
+    from PIL import Image
+
+    from nonmin.cli import _scenario_dir
+
+    out = tmp_path / "run"
+    assert main(["run", str(_scenario_dir() / "crossed_four_bar.toml"), "--out", str(out),
+                 "--t-final", "0.5", "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert "sim[s]" in printed and "render[s]" in printed and "wall" not in printed
+    with Image.open(out / "animation.gif") as im:
+        run_frames = im.n_frames
+    # animate without -o writes RESULT.gif, with the run's frame rate
+    target = out / "trajectory.gif"
+    assert main(["animate", str(out / "trajectory.npz"), "--model", "crossed_four_bar",
+                 "--no-progress"]) == 0
+    with Image.open(target) as im:
+        assert im.n_frames == run_frames
+    # plot without -o writes RESULT.png; export without -o writes RESULT.csv and its sidecar
+    assert main(["plot", str(out / "trajectory.npz")]) == 0
+    assert (out / "trajectory.png").stat().st_size > 10_000
+    assert main(["export", str(out / "trajectory.npz")]) == 0
+    assert (out / "trajectory.csv").exists() and (out / "trajectory.csv.json").exists()
+
+
+def test_list_names_match_the_api_and_describe(capsys):
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    assert "force_control" in out and "ForceControl" in out and "Switched" in out
+    line = next(ln for ln in out.splitlines() if ln.strip().startswith("slider_crank"))
+    assert len(line.split()) > 2  # a description follows the name
+    for name in DEMO_SCENARIOS:
+        assert name in out
+
+
+def test_demo_summary_separates_simulation_from_rendering(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path), "--t-final", "0.2", "--no-progress",
+                 "--only", "arm_wall"]) == 0
+    out = capsys.readouterr().out
+    summary = (tmp_path / "summary.txt").read_text()
+    head = summary.splitlines()[0]
+    assert "sim[s]" in head and "render[s]" in head and "wall" not in head.lower()
+    assert "|E-E0-W|" in head
+    assert "simulated 0.2 s in" in out and "in all" in out

@@ -1,0 +1,169 @@
+"""Plots and animations are correct and complete (issue 23): diagnostics on the active
+constraints, the energy balance instead of work shown as drift, units, legends, integer rank
+ticks, every model element drawn, a 2-D view for planar URDF loops, fast rendering."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+
+import nonmin
+from nonmin import library
+from nonmin.core import range_basis
+from nonmin.viz import (
+    animate,
+    coordinate_units,
+    energy_balance,
+    frame_times,
+    plot_trajectory,
+    singularity_distance,
+)
+from nonmin.viz._scene import model_scene
+
+
+@pytest.fixture(scope="module")
+def arm_wall():
+    """The demo's arm_wall scenario, shortened: free motion, then the wall impact."""
+    from nonmin.cli import _scenario_dir
+    from nonmin.io import load_scenario, run_scenario
+
+    res = run_scenario(load_scenario(_scenario_dir() / "arm_wall.toml"), write=False, t_final=0.6,
+                       progress=False)
+    return res.model, res.trajectory
+
+
+def test_singularity_distance_uses_the_active_constraints(arm_wall):
+    model, traj = arm_wall
+    ratio = singularity_distance(traj, model)
+    te = traj.events[0].t
+    pre = traj.t < te
+    assert pre.any() and (~pre).any()
+    assert set(traj.rank[pre]) == {4} and 5 in set(traj.rank[~pre])
+    # before the impact only 4 rows are active: the old curve (rank 5 of the whole run) read 0
+    assert np.all(ratio[pre] > 0.3), ratio[pre].min()
+    # against an independent SVD of the active rows (equilibrated as range_basis does)
+    i = int(np.flatnonzero(pre)[3])
+    A = model.constraint_jacobian(float(traj.t[i]), traj.q[i], traj.active[i])
+    s = range_basis(A).s
+    assert ratio[i] == pytest.approx(s[3] / s[0], rel=1e-12)
+    sv = np.linalg.svd(A / np.linalg.norm(A, axis=1, keepdims=True), compute_uv=False)
+    assert ratio[i] == pytest.approx(sv[3] / sv[0], rel=1e-6)
+
+
+def test_energy_balance_separates_work_from_drift(arm_wall):
+    model, traj = arm_wall
+    bal = energy_balance(traj, model)
+    pre = traj.t < traj.events[0].t
+    de = np.abs(traj.energy - traj.energy[0])
+    # the controller does ~7.6 J of work before the impact: that is not drift
+    assert de[pre].max() > 5.0
+    assert np.abs(bal.work[pre]).max() > 5.0
+    assert np.abs(bal.balance[pre]).max() < 0.01 * de[pre].max()
+    # a conservative run: W = 0 and the balance is the drift itself
+    mech = library.get("A01_pendulum")
+    tr = nonmin.simulate(mech, (0.0, 0.5), dt=1e-2, progress=False)
+    b = energy_balance(tr, mech.model)
+    assert np.max(np.abs(b.work)) < 1e-12
+    assert np.allclose(b.balance, tr.energy - tr.energy[0], atol=1e-12)
+    # without the model, the panel says W is unknown
+    assert energy_balance(tr).known is False
+
+
+def test_plot_units_legends_integer_rank_and_balance(arm_wall):
+    model, traj = arm_wall
+    fig = plot_trajectory(traj, model)
+    try:
+        q_ax, qd_ax, fc_ax, rank_ax, e_ax = fig.axes[:5]
+        labels = [t.get_text() for t in q_ax.get_legend().get_texts()]
+        assert any(lab.endswith("[m]") for lab in labels) and any(lab.endswith("[rad]") for lab in labels)
+        assert "[m, rad]" in q_ax.get_ylabel() and "[m/s, rad/s]" in qd_ax.get_ylabel()
+        assert "[N, N·m]" in fc_ax.get_ylabel()
+        fig.canvas.draw()
+        ticks = [t for t in rank_ax.get_yticks() if rank_ax.get_ylim()[0] <= t <= rank_ax.get_ylim()[1]]
+        assert ticks and all(float(t).is_integer() for t in ticks)
+        e_labels = [t.get_text() for t in e_ax.get_legend().get_texts()]
+        assert any("E − E₀ − W" in lab for lab in e_labels)
+        assert not any("drift" in lab for lab in e_labels)
+        # legends sit outside the axes (never over the curves or the event labels)
+        bbox = q_ax.get_legend().get_window_extent()
+        assert bbox.x0 >= q_ax.get_window_extent().x1 - 1
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+
+
+def test_legend_of_the_15_coordinate_n_four_bar():
+    mech = library.get("A02_n_four_bar", N=2)
+    tr = nonmin.simulate(mech, (0.0, 0.05), dt=1e-2, progress=False)
+    fig = plot_trajectory(tr, mech.model)
+    try:
+        assert mech.model.n == 15
+        assert len(fig.axes[0].get_legend().get_texts()) == 15
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+
+
+@pytest.mark.parametrize(("name", "kinds"), [
+    ("arm2r_wall", {"wall", "pin", "bar", "joint"}),
+    ("slider_crank", {"block", "guide", "pin", "bar"}),
+    ("A01_pendulum", {"mass", "rod"}),
+    ("A02_n_four_bar", {"pin", "bar", "joint"}),
+])
+def test_every_element_has_a_drawing(name, kinds):
+    mech = library.get(name)
+    scene = model_scene(mech.model)
+    drawn = {p.kind for p in scene.static} | {p.kind for p in scene.frame(mech.state.q)}
+    assert kinds <= drawn, (name, drawn)
+
+
+def test_released_constraint_is_drawn_light(arm_wall):
+    model, traj = arm_wall
+    scene = model_scene(model)
+    wall = [p for p in scene.static_at(traj.active[0]) if p.kind == "wall"]
+    assert wall and not wall[0].active
+    wall = [p for p in scene.static_at(traj.active[-1]) if p.kind == "wall"]
+    assert wall[0].active
+
+
+def test_planar_urdf_loop_gets_a_2d_view():
+    from nonmin.model.robots import fourbar
+
+    model, state = fourbar()
+    scene = model_scene(model, [state.q])
+    assert scene.dim == 2 and scene.axes == ("x", "z")
+    kinds = {p.kind for p in scene.frame(state.q)}
+    assert {"bar", "pin", "closure"} <= kinds
+
+
+def test_units_of_coordinates():
+    from nonmin.model.robots import two_arm_grasp
+
+    assert coordinate_units(library.get("slider_crank").model, ["crank.x", "crank.theta"]) == ("m", "rad")
+    model, _ = two_arm_grasp()
+    units = dict(zip(model.coordinate_names, coordinate_units(model, model.coordinate_names), strict=True))
+    assert units["box.x"] == "m" and units["box.qw"] == "1" and units["left_yaw"] == "rad"
+
+
+def test_demo_scene_renders_fast_and_with_the_run_frame_count(tmp_path, arm_wall):
+    model, traj = arm_wall
+    fps = 15.0
+    start = time.process_time()
+    out = animate(traj, model, tmp_path / "a.gif", fps=fps, progress=False)
+    cpu = time.process_time() - start
+    from PIL import Image
+
+    with Image.open(out) as im:
+        frames = im.n_frames
+        im.seek(frames - 1)
+        last = np.asarray(im.convert("RGB"))
+    assert frames == len(frame_times(traj.t, fps=fps))
+    # the wall (dark grey, hatched) is in the picture
+    grey = np.all(np.abs(last.astype(int) - 90) < 12, axis=-1)
+    assert grey.sum() > 300
+    # 2-D frames cost ~10 ms of CPU each (matplotlib only draws the axes once)
+    assert cpu < 0.1 * frames + 3.0, (cpu, frames)
