@@ -13,6 +13,13 @@ def _python_blocks(text: str) -> list[str]:
     return re.findall(r"```python\n(.*?)```", text, flags=re.S)
 
 
+def _shown_output(text: str) -> str:
+    """The ```text block right after the first python block (what the quick start prints)."""
+    m = re.search(r"```python\n.*?```\s*```text\n(.*?)```", text, flags=re.S)
+    assert m, "the quick start shows no output block"
+    return m.group(1).strip()
+
+
 def test_quick_start_executes(capsys):
     blocks = _python_blocks((ROOT / "README.md").read_text())
     assert blocks, "README has no python block"
@@ -23,7 +30,7 @@ def test_quick_start_executes(capsys):
     assert traj.status.value == "success"
     # the printed numbers in the README must be what the code prints
     printed = capsys.readouterr().out.strip().splitlines()[-1]
-    claimed = next(ln for ln in blocks[0].splitlines() if ln.startswith("# ["))[2:]
+    claimed = _shown_output((ROOT / "README.md").read_text()).splitlines()[-1]
     # qdd and status verbatim; energy drift to the two printed digits; closure at round-off
     (p_arr, p_rest), (c_arr, c_rest) = (x.split("]", 1) for x in (printed, claimed))
     assert p_arr.split() == c_arr.split(), (printed, claimed)
@@ -38,3 +45,17 @@ def test_ci_runs_readme_test_command():
     cmds = re.findall(r"```bash\n(.*?)```", readme, flags=re.S)
     test_cmd = next(c.strip() for c in cmds if "pytest" in c and "pip install" in c)
     assert test_cmd in (ROOT / ".ci" / "run").read_text()
+
+
+def test_readme_shows_what_its_code_prints(tmp_path):
+    """docs/refresh_tutorials.py --check on the README: every output block is current."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, MPLBACKEND="Agg", NONMIN_NO_BROWSER="1")
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "docs" / "refresh_tutorials.py"), "--check", str(ROOT / "README.md")],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]

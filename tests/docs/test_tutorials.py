@@ -1,8 +1,11 @@
-"""Every tutorial in docs/tutorials runs: its ```python blocks, in order, form one script.
+"""Every tutorial in docs/tutorials runs, and every output it shows is what it prints now.
 
-The script runs in a fresh interpreter in a temporary directory with the Agg backend, and must
-finish within :data:`TIME_LIMIT` (the tutorials themselves take a few seconds on an idle
-machine; the limit leaves room for a loaded CI machine).
+Each page runs in a fresh interpreter (``docs/refresh_tutorials.py --check``: its ```python
+blocks in order, in a temporary directory with the Agg backend) and must finish within
+:data:`TIME_LIMIT`; each ```text block after a python block must say what that block prints
+(numbers compared by value, round-off digits below 1e-12 aside), and the output must contain
+the claims the prose makes (:data:`CLAIMS`). The README's quick start is checked the same way
+(``tests/test_readme.py``). Refresh a stale page with ``python docs/refresh_tutorials.py PAGE``.
 """
 
 from __future__ import annotations
@@ -57,18 +60,25 @@ def test_all_tutorials_present() -> None:
         assert len(python_blocks((TUTORIALS / name).read_text(encoding="utf-8"))) >= 3
 
 
+def run_checked(page: Path, workdir: Path) -> subprocess.CompletedProcess[str]:
+    """Run ``docs/refresh_tutorials.py --check --echo`` on a page in a fresh interpreter."""
+    env = dict(os.environ, MPLBACKEND="Agg", PYTHONHASHSEED="0", NONMIN_NO_BROWSER="1")
+    return subprocess.run(
+        [sys.executable, str(ROOT / "docs" / "refresh_tutorials.py"), "--check", "--echo",
+         "--workdir", str(workdir), str(page)],
+        cwd=workdir, env=env, capture_output=True, text=True, timeout=TIME_LIMIT,
+    )
+
+
 @pytest.mark.parametrize("name", EXPECTED)
 def test_tutorial_runs(name: str, tmp_path: Path) -> None:
-    script = tmp_path / (Path(name).stem + ".py")
-    script.write_text(tutorial_script(TUTORIALS / name), encoding="utf-8")
-    env = dict(os.environ, MPLBACKEND="Agg", PYTHONHASHSEED="0")
     start = time.perf_counter()
-    proc = subprocess.run(
-        [sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
-        timeout=TIME_LIMIT,
-    )
+    proc = run_checked(TUTORIALS / name, tmp_path)
     elapsed = time.perf_counter() - start
-    assert proc.returncode == 0, f"{name} failed after {elapsed:.1f} s:\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}"
+    assert proc.returncode == 0, (
+        f"{name}: failed or shows stale output after {elapsed:.1f} s (refresh it with "
+        f"python docs/refresh_tutorials.py docs/tutorials/{name}):\n{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}"
+    )
     for phrase in CLAIMS[name]:
         assert phrase in proc.stdout, f"{name}: output lacks {phrase!r}:\n{proc.stdout}"
     # every tutorial saves at least one figure; the files must be non-empty PNGs
@@ -76,6 +86,21 @@ def test_tutorial_runs(name: str, tmp_path: Path) -> None:
     assert pngs, f"{name} wrote no figure"
     for png in pngs:
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_same_output_compares_numbers_by_value() -> None:
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("nonmin_docs_refresh2", ROOT / "docs" / "refresh_tutorials.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.same_output("rank A = 7, e = 1.5e-15", "rank A = 7, e = 3.1e-16")
+    assert mod.same_output("x = [1.  0.5]", "x = [1.0 0.50]")
+    assert not mod.same_output("rank A = 7", "rank A = 6")
+    assert not mod.same_output("drift 1.2e-06 J", "drift 1.3e-06 J")
+    assert not mod.same_output("status success", "status failed")
+    assert not mod.same_output("a b", "a b c")
 
 
 def test_refresh_tool_rewrites_output_blocks(tmp_path: Path) -> None:

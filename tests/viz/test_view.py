@@ -153,3 +153,31 @@ def test_browser_shows_a_urdf_robot_with_meshes_and_a_loop(tmp_path):
         if pw is not None:
             pw.stop()
         v.stop()
+
+
+def test_readme_five_lines_open_a_urdf_loop(monkeypatch, tmp_path):
+    """The README's 'your URDF with a loop closure' snippet: at most 5 lines from pip install
+    to the viewer, and they run (on the shipped four-bar URDF, no browser opened)."""
+    import ast
+    import re
+    import shutil as sh
+
+    from nonmin.model.robots import data_path
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    block = next(b for b in re.findall(r"```py\n(.*?)```", readme, flags=re.S) if "viz.view(" in b)
+    lines = [ln for ln in block.splitlines() if ln.strip()]
+    assert len(lines) <= 5 and lines[0].startswith("# pip install")
+    sh.copy(data_path("fourbar.urdf"), tmp_path / "fourbar.urdf")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("NONMIN_NO_BROWSER", "1")
+    tree = ast.parse(block)
+    last = tree.body.pop()
+    ns: dict = {}
+    exec(compile(tree, "README", "exec"), ns)
+    viewer = eval(compile(ast.Expression(last.value), "README", "eval"), ns)
+    try:
+        assert viewer.url.startswith("http://")
+        assert set(viewer.body_nodes) == {"/bodies/crank", "/bodies/coupler", "/bodies/rocker"}
+    finally:
+        viewer.stop()

@@ -102,6 +102,10 @@ def test_legend_of_the_15_coordinate_n_four_bar():
     try:
         assert mech.model.n == 15
         assert len(fig.axes[0].get_legend().get_texts()) == 15
+        fig.canvas.draw()  # a constant rank (14) still gets integer ticks only
+        rank_ax = fig.axes[3]
+        ticks = [t for t in rank_ax.get_yticks() if rank_ax.get_ylim()[0] <= t <= rank_ax.get_ylim()[1]]
+        assert ticks == [14.0]
     finally:
         import matplotlib.pyplot as plt
 

@@ -18,10 +18,13 @@ from ._plots import plot_snapshot as plot_snapshot
 from ._plots import plot_trajectory as plot_trajectory
 from ._plots import save_figure as save_figure
 from ._reactions import plot_reaction as plot_reaction
+from .view import Viewer as Viewer
+from .view import view as view
 
 __all__ = [
     "DEFAULT_FPS",
     "EnergyBalance",
+    "Viewer",
     "animate",
     "coordinate_units",
     "draw_geometry",
@@ -33,4 +36,5 @@ __all__ = [
     "plot_trajectory",
     "save_figure",
     "singularity_distance",
+    "view",
 ]

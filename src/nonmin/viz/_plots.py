@@ -106,7 +106,7 @@ def plot_trajectory(traj: Any, model: Model | None = None, *, title: str | None 
     matplotlib.figure.Figure
     """
     plt = pyplot()
-    from matplotlib.ticker import MaxNLocator
+    from matplotlib.ticker import FixedLocator, MaxNLocator
 
     from ._diagnostics import (
         coordinate_units,
@@ -150,7 +150,10 @@ def plot_trajectory(traj: Any, model: Model | None = None, *, title: str | None 
         ax.set_ylabel("rank of active A", color="C0")
         lo, hi = int(np.min(rank)), int(np.max(rank))
         ax.set_ylim(lo - 0.5, hi + 0.5)
-        ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+        if hi - lo <= 12:  # every rank met, and only integers (also when the rank is constant)
+            ax.yaxis.set_major_locator(FixedLocator(list(range(lo, hi + 1))))
+        else:
+            ax.yaxis.set_major_locator(MaxNLocator(integer=True, min_n_ticks=1))
     ax2 = ax.twinx()
     if cond is not None and cond.size:
         handles += ax2.semilogy(t, np.maximum(cond, 1.0), color="C1", lw=1, label="cond(M̄)")
@@ -163,7 +166,7 @@ def plot_trajectory(traj: Any, model: Model | None = None, *, title: str | None 
                                 label="σ_r/σ₁ of active A")
     ax2.set_ylabel("cond(M̄), μ, σ_r/σ₁ (log)")
     if handles:
-        ax.legend(handles=handles, fontsize=6, loc="upper left", bbox_to_anchor=(1.08, 1.0),
+        ax.legend(handles=handles, fontsize=6, loc="upper left", bbox_to_anchor=(1.17, 1.0),
                   borderaxespad=0.0, frameon=False)
     ax = axes[4]
     bal = energy_balance(traj, model)
@@ -231,10 +234,43 @@ def _bounds(geoms: Sequence[Geometry]) -> tuple[np.ndarray, np.ndarray]:
     return lo - pad, hi + pad
 
 
+def _draw_prims(ax: Any, prims: Sequence[Any], lo: np.ndarray, hi: np.ndarray, alpha: float) -> None:
+    """Draw 2-D scene primitives (:mod:`._scene`) with matplotlib."""
+    from ._scene import clip_line
+
+    for p in prims:
+        col = "0.75" if not p.active else None
+        if p.kind == "bar":
+            ax.plot(p.pts[:, 0], p.pts[:, 1], "-", lw=3.5, color=col or "C0", alpha=alpha,
+                    solid_capstyle="round", zorder=3)
+        elif p.kind in ("rod", "spring"):
+            ax.plot(p.pts[:, 0], p.pts[:, 1], "-", lw=1.2, color=col or ("C2" if p.kind == "spring" else "0.15"),
+                    alpha=alpha, zorder=2)
+        elif p.kind in ("guide", "wall"):
+            seg = clip_line(p.pts[0], p.pts[1], lo, hi) if p.infinite else p.pts
+            if seg is None:
+                continue
+            ax.plot(seg[:, 0], seg[:, 1], "-" if p.kind == "wall" else "--", color=col or "0.35",
+                    lw=3 if p.kind == "wall" else 1.2, alpha=alpha, zorder=1)
+        elif p.kind == "pin":
+            ax.plot(*p.pts[0], marker="^", ms=11, mfc="none", mec="0.25", alpha=alpha, zorder=1)
+        elif p.kind in ("joint", "closure"):
+            ax.plot(*p.pts[0], "o", ms=6, mfc="white", mec=col or ("C3" if p.kind == "closure" else "0.1"),
+                    alpha=alpha, zorder=5)
+        elif p.kind == "mass":
+            ax.plot(*p.pts[0], "o", ms=10, color=col or "0.15", alpha=alpha, zorder=5)
+        elif p.kind == "block":
+            ax.plot(*p.pts[0], "s", ms=12, mfc="C1", mec="0.1", alpha=alpha, zorder=4)
+
+
 def plot_snapshot(
     model: Model, qs: np.ndarray | Sequence[np.ndarray], *, title: str | None = None
 ) -> Any:
     """Draw the mechanism at one or several configurations (later ones darker).
+
+    Planar models (and spatial ones moving in a coordinate plane) are drawn element by element
+    as in :func:`~nonmin.viz.animate` (ground pins, walls, guides, sliders, ...); other
+    spatial models as 3-D segments with equal axis scales.
 
     Parameters
     ----------
@@ -246,25 +282,38 @@ def plot_snapshot(
     -------
     matplotlib.figure.Figure
     """
+    from ._scene import model_scene, scene_bounds
+
     plt = pyplot()
     qarr = np.atleast_2d(np.asarray(qs, dtype=float))
     geoms = [model.geometry(q) for q in qarr]
     if any(g is None for g in geoms):
         raise InputError(f"model {model.name!r} has no geometry to draw")
     gs: list[Geometry] = [g for g in geoms if g is not None]
-    dim = gs[0].dim
+    scene = model_scene(model, list(qarr))
     fig = plt.figure(figsize=(6, 5), constrained_layout=True)
-    ax = fig.add_subplot(111, projection="3d" if dim == 3 else None)
-    for i, g in enumerate(gs):
-        a = 0.25 + 0.75 * (i + 1) / len(gs)
-        draw_geometry(ax, g, color="C0", alpha=a)
-    lo, hi = _bounds(gs)
-    ax.set_xlim(lo[0], hi[0])
-    ax.set_ylim(lo[1], hi[1])
-    if dim == 2:
+    if scene.dim == 2:
+        ax = fig.add_subplot(111)
+        frames = [scene.frame(q) for q in qarr]
+        lo, hi = scene_bounds(scene, frames)
+        _draw_prims(ax, scene.static, lo, hi, 1.0)
+        for i, prims in enumerate(frames):
+            _draw_prims(ax, prims, lo, hi, 0.25 + 0.75 * (i + 1) / len(frames))
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
         ax.set_aspect("equal")
+        ax.grid(True, lw=0.3)
+        ax.set_xlabel(f"{scene.axes[0]} [m]")
+        ax.set_ylabel(f"{scene.axes[1]} [m]")
     else:
+        ax = fig.add_subplot(111, projection="3d")
+        for i, g in enumerate(gs):
+            draw_geometry(ax, g, color="C0", alpha=0.25 + 0.75 * (i + 1) / len(gs))
+        lo, hi = _bounds(gs)
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
         ax.set_zlim(lo[2], hi[2])
+        ax.set_box_aspect(tuple(np.maximum(hi - lo, 1e-9)))
     ax.set_title(title or model.name)
     return fig
 

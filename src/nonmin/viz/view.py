@@ -21,6 +21,7 @@ from viser until :func:`view` is called.
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections.abc import Sequence
@@ -230,7 +231,8 @@ def view(
     speed : float
         Initial playback speed (1 = real time).
     open_browser : bool
-        Open the system's web browser on the page.
+        Open the system's web browser on the page (not when the environment variable
+        ``NONMIN_NO_BROWSER`` is set to anything but 0: tests, remote shells).
     autoplay : bool
         Start playing at once (a trajectory only).
     force_scale : float, optional
@@ -278,14 +280,19 @@ def view(
 
 
 def _default_q(model: Any) -> np.ndarray:
-    for attr in ("default_configuration", "neutral_configuration"):
-        fn = getattr(model, attr, None)
-        if callable(fn):
-            try:
-                return np.asarray(fn(), dtype=float)
-            except Exception:
-                pass
-    return np.zeros(model.n)
+    """The configuration a model alone is shown at: its neutral one, assembled onto its
+    default active constraints when that succeeds (so a loop shows closed)."""
+    q = np.zeros(model.n)
+    fn = getattr(model, "neutral_configuration", None)
+    if callable(fn):
+        q = np.asarray(fn(), dtype=float)
+    from ..errors import NonminError
+    from ..model import assemble
+
+    try:
+        return np.asarray(assemble(model, q).q, dtype=float)
+    except NonminError:
+        return q
 
 
 def _build(server: Any, model: Any, traj: Any, ts: np.ndarray, qs: np.ndarray, speed: float,
@@ -316,7 +323,7 @@ def _build(server: Any, model: Any, traj: Any, ts: np.ndarray, qs: np.ndarray, s
     server.scene.add_grid("/ground", width=2 * size, height=2 * size, cell_size=size / 10,
                           section_size=size / 2, plane="xy", position=(center[0], center[1], 0.0))
     server.initial_camera.look_at = tuple(center)
-    server.initial_camera.position = tuple(center + size * np.array([0.9, -1.3, 0.7]))
+    server.initial_camera.position = tuple(center + size * np.array([0.75, -1.05, 0.6]))
     body_nodes: list[str] = []
     visuals: list[_Visual] = []
     spatial_boxes: list[tuple[str, int, Any]] = []
@@ -453,10 +460,19 @@ def _build(server: Any, model: Any, traj: Any, ts: np.ndarray, qs: np.ndarray, s
                 state["from_slider"] = False
             show(t)
 
+    def goto(t: float) -> None:
+        state["t"] = float(t)
+        state["from_slider"] = True
+        try:
+            t_slider.value = min(max(float(t), float(ts[0])), float(ts[-1]))
+        finally:
+            state["from_slider"] = False
+        show(float(t))
+
     thread = threading.Thread(target=run, name="nonmin-view", daemon=True)
     thread.start()
-    viewer = Viewer(url=url, server=server, body_nodes=body_nodes, _stop=stop, _thread=thread, _show=show)
-    if open_browser:
+    viewer = Viewer(url=url, server=server, body_nodes=body_nodes, _stop=stop, _thread=thread, _show=goto)
+    if open_browser and os.environ.get("NONMIN_NO_BROWSER", "") in ("", "0"):
         import webbrowser
 
         webbrowser.open(url)
