@@ -99,7 +99,7 @@ def _format_rows(rows: Sequence[dict[str, Any]]) -> str:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from .io import load_scenario, run_scenario
+    from .io import load_scenario, run_scenario, write_outputs
 
     out = Path(args.out)
     rows = []
@@ -109,10 +109,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
         path = _scenario_dir() / f"{name}.toml"
         sc = load_scenario(path)
         print(f"[nonmin demo] {sc.name}: {sc.data.get('description', '')}", flush=True)
-        res = run_scenario(sc, out / name, progress=args.progress, t_final=args.t_final)
+        print("    simulating ...", flush=True)
+        res = run_scenario(sc, progress=args.progress, t_final=args.t_final, write=False)
         tm = res.timings
         print(f"    simulated {res.trajectory.t[-1] - res.trajectory.t[0]:.3g} s in "
               f"{tm.get('simulate', 0.0):.2f} s" if len(res.trajectory) else "    no samples", flush=True)
+        if len(res.trajectory):
+            print("    writing the trajectory, CSV, plot and animation ...", flush=True)
+        res.files = write_outputs(res, sc.output_dir(out / name), progress=args.progress)
         if len(res.trajectory):
             rows.append(_summary_row(name, res.trajectory, tm, res.model))
         failed |= _status_name(res.trajectory) == "failed"

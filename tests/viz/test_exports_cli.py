@@ -106,3 +106,17 @@ def test_demo_summary_separates_simulation_from_rendering(tmp_path, capsys):
     assert "sim[s]" in head and "render[s]" in head and "wall" not in head.lower()
     assert "|E-E0-W|" in head
     assert "simulated 0.2 s in" in out and "in all" in out
+
+
+def test_view_verb_serves_a_saved_trajectory(tmp_path, capsys, monkeypatch):
+    pytest.importorskip("viser")
+    mech = library.get("slider_crank")
+    traj = nonmin.simulate(mech, (0.0, 0.1), dt=1e-2, progress=False)
+    traj.save(tmp_path / "t.npz")
+    monkeypatch.setenv("NONMIN_NO_BROWSER", "1")
+    assert main(["view", str(tmp_path / "t.npz"), "--model", "slider_crank", "--port", "0",
+                 "--seconds", "0.5"]) == 0
+    assert "nonmin view: http://127.0.0.1:" in capsys.readouterr().out
+    # a trajectory of another model is refused before anything is served
+    assert main(["view", str(tmp_path / "t.npz"), "--model", "crossed_four_bar", "--port", "0",
+                 "--seconds", "0.1"]) == 2
