@@ -70,7 +70,7 @@ def contact_overhead(repeat: int, T: float = 3.0) -> dict[str, Any]:
     from nonmin.sim import EventSet
 
     model, q0 = _ur5_floor()
-    te = np.linspace(0.0, T, int(round(100 * T)) + 1)
+    te = np.linspace(0.0, T, round(100 * T) + 1)
     qb = q0.copy()  # the bilateral reference starts on the floor (its tool point assembled)
     qb = nonmin.model.assemble(model, qb, active={"floor"}).q
     runs: dict[str, tuple[Any, dict[str, Any]]] = {

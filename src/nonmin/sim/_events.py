@@ -130,8 +130,10 @@ class EventRecord:
     ----------
     t : float
     name : str
-        Event name; automatic contact events are ``"impact:<constraint>"`` and
-        ``"release:<constraint>"``.
+        Event name; automatic contact events are ``"impact:<constraint>"`` (one impact over
+        every contact closing at that instant: ``"impact:<c1>+<c2>+…"``, the contacts whose gap
+        crossed, in declaration order; docs/theory.md "Simultaneous impacts"),
+        ``"release:<constraint>"`` and ``"release-refused:<constraint>"``.
     transition : str
         Human-readable description of the transition applied.
     q_before, qd_before, q_after, qd_after : ndarray, shape (n,)
