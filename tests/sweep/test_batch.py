@@ -153,3 +153,18 @@ def test_adaptive_runs_with_t_eval_match_simulate(bar):
         ref = simulate(bar.model, 0.2, Q[i], V[i], method="dopri5", rtol=1e-8, t_eval=t)
         np.testing.assert_array_equal(bt.q[i], ref.q)
         assert bt.n_steps[i] == ref.n_steps
+
+
+def test_option_values_as_for_simulate(bar):
+    from nonmin.sim import Output, Solver
+
+    Q, V = _states(2, seed=6)
+    t = np.linspace(0, 0.1, 6)
+    bt = simulate_batch(bar.model, 0.1, Q, V, solver=Solver("rk4", dt=5e-4), output=Output(t_eval=t))
+    ref = simulate(bar.model, 0.1, Q[1], V[1], solver=Solver("rk4", dt=5e-4), output=Output(t_eval=t))
+    np.testing.assert_array_equal(bt.q[1], ref.q)
+    assert bt.n_steps[1] == ref.n_steps == 200
+    with pytest.raises(InputError, match="output"):
+        simulate_batch(bar.model, 0.1, Q, V, output=Output(t_eval=t, throw=False))
+    with pytest.raises(InputError, match="unknown keyword"):
+        simulate_batch(bar.model, 0.1, Q, V, t_eval=t, nonsense=1)

@@ -253,6 +253,14 @@ def simulate_batch(
     active: Iterable[str] | Sequence[Iterable[str]] | None = None,
     record: Iterable[str] = ("q", "qd"),
     threads: int | None = None,
+    controller: Any = None,
+    method: Any = None,
+    dt: float | None = None,
+    solver: Any = None,
+    stabilization: Any = "projection",
+    events: Any = (),
+    output: Any = None,
+    engine: str = "auto",
     **options: Any,
 ) -> BatchTrajectory:
     """Simulate k runs of one model (or k parameter variants) in the compiled engine at once.
@@ -282,13 +290,13 @@ def simulate_batch(
         9-coordinate model is 1.4 GB.
     threads : int, optional
         Threads of the batched engine loop (default: the machine's cores).
-    **options
-        :func:`simulate`'s keywords (``method``, ``dt``, ``rtol``, ``atol``, ``stabilization``,
-        ``t_eval``, ``rank_rtol``, ``project_initial``, ``max_steps``, ``h0``, ``events``,
-        ``contact``, ``restitution``, ``controller``, ``engine``, ...). ``t_eval`` is the common
-        output grid (default with a fixed-step method: every step, ``t0 + i dt``; an adaptive
-        method needs it). ``throw``, ``progress``, ``checkpoint``, ``resume`` are not batch
-        options: a failed run keeps its status and message and never stops the batch.
+    controller, method, dt, solver, stabilization, events, output, engine, **options
+        As for :func:`simulate` (the values :class:`~nonmin.sim.Solver`,
+        :class:`~nonmin.sim.EventSet`, :class:`~nonmin.sim.Output` and their flat shorthands),
+        shared by every run. ``t_eval`` is the common output grid (default with a fixed-step
+        method: every step, ``t0 + i dt``; an adaptive method needs it). ``throw``,
+        ``progress``, ``checkpoint``, ``resume``, ``reactions`` are not batch options: a failed
+        run keeps its status and message and never stops the batch.
 
     Returns
     -------
@@ -299,12 +307,23 @@ def simulate_batch(
     InputError, ShapeError, NonFiniteError, UnknownNameError
         Bad arguments (as :func:`simulate`; per-run arrays name the run).
     """
+    from dataclasses import replace
+
     from . import _simulate as S
+    from ._options import resolve_options
     from ._stabilization import Projection, resolve_stabilization
 
-    for bad in ("throw", "progress", "checkpoint", "checkpoint_every", "resume"):
+    for bad in ("throw", "progress", "checkpoint", "checkpoint_every", "resume", "reactions"):
         if bad in options:
             raise InputError(f"simulate_batch: {bad!r} is not a batch option (a failed run keeps its status)")
+    flat = dict(options)
+    if method is not None:
+        flat["method"] = method
+    if dt is not None:
+        flat["dt"] = dt
+    sol, evset, out = resolve_options(solver, events, output, flat)
+    if out.checkpoint is not None or out.reactions or not out.throw or out.progress:
+        raise InputError("simulate_batch: output= may set t_eval only (no checkpoint, reactions, throw, progress)")
     rec = tuple(record)
     unknown = sorted(set(rec) - set(RECORDABLE))
     if unknown:
@@ -355,14 +374,10 @@ def simulate_batch(
         acts = (a0,) * k
     # ---------------------------------------------------------------- settings
     t0, t1 = S._t_span(t_span)
-    method = options.get("method", "rk4")
-    dt = options.get("dt")
-    if dt is not None:
-        dt = S._positive(dt, "dt")
-    integ = S._resolve_method(method, dt, S._positive(options.get("rtol", 1e-8), "rtol"),
-                              S._positive(options.get("atol", 1e-10), "atol"))  # fmt: skip
-    stab = resolve_stabilization(options.get("stabilization", "projection"))
-    t_eval = options.get("t_eval")
+    dt = sol.dt
+    integ = S._resolve_method(sol.method, dt, sol.rtol, sol.atol)
+    stab = resolve_stabilization(stabilization)
+    t_eval = out.t_eval
     if t_eval is None:
         if integ.adaptive:
             raise InputError("simulate_batch: an adaptive method needs t_eval (the runs' steps differ)")
@@ -386,17 +401,13 @@ def simulate_batch(
             f"simulate_batch: {k} runs × {N} samples × {width} values need {k * N * width * 8 / 2**30:.3g} GiB "
             f"(limit {MAX_BATCH_BYTES / 2**30:g}); pass a coarser t_eval or record fewer arrays"
         )
-    rank_rtol = options.get("rank_rtol")
+    rank_rtol = sol.rank_rtol
     if rank_rtol is None and integ.adaptive:
         rank_rtol = S.ADAPTIVE_RANK_RTOL
-    elif rank_rtol is not None and not (0.0 < S._real(rank_rtol, "rank_rtol") < 1.0):
-        raise InputError(f"rank_rtol must lie in (0, 1), got {rank_rtol!r}")
-    pi = options.get("project_initial")
+    pi = sol.project_initial
     project_initial = isinstance(stab, Projection) if pi is None else bool(pi)
-    max_steps = options.get("max_steps", 10_000_000)
-    if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
-        raise InputError(f"max_steps must be an integer ≥ 1, got {max_steps!r}")
-    h0 = options.get("h0")
+    max_steps = sol.max_steps
+    h0 = sol.h0
     h_init = (0.0 if h0 is None else S._positive(h0, "h0")) if integ.adaptive else \
         S._positive(getattr(integ, "dt", None) or dt or S.DEFAULT_DT, "dt")  # fmt: skip
     if integ.adaptive and dt is not None and hasattr(integ, "h_max"):
@@ -405,15 +416,12 @@ def simulate_batch(
 
     _durable.check_budget(t0=t0, t1=t1, h=dt if integ.adaptive else h_init, max_steps=int(max_steps),
                           t_out=t_out, n=n, k=model.k, c=len(model.constraint_names))  # fmt: skip
-    engine = options.get("engine", "auto")
     # ---------------------------------------------------------------- which runs batch
-    events = tuple(options.get("events", ()))
-    contact = bool(options.get("contact", True))
-    unilateral = any(c.kind == "unilateral" for c in model.constraints) and contact
+    unilateral = any(c.kind == "unilateral" for c in model.constraints) and evset.contact
     why = None
     if engine not in ("auto", "engine"):
         why = f"engine={engine!r}"
-    elif events or unilateral or options.get("controller") is not None:
+    elif evset.events or unilateral or controller is not None:
         why = "events, automatic contact or a controller (the event steps and callbacks run in Python)"
     else:
         why = _engine.ineligible(integ, stab, (), (), engine)
@@ -436,8 +444,8 @@ def simulate_batch(
     }  # fmt: skip
     names = model.constraint_names
     masks = np.array([[nm in a for nm in names] for a in acts], dtype=np.uint8).reshape(k, len(names))
-    sim_kw = {key: v for key, v in options.items() if key != "t_eval"}
-    sim_kw["t_eval"] = t_out
+    sim_kw: dict[str, Any] = {"solver": sol, "events": evset, "stabilization": stabilization, "engine": engine,
+                              "controller": controller, "output": replace(out, t_eval=t_out, throw=False)}  # fmt: skip
     if why is None:
         opts = _engine.options(integ, stab, dt=h_init, t1=t1, h0=h_init, rank_rtol=rank_rtol,
                                drift_factor=S.DRIFT_RANK_FACTOR, project_initial=project_initial,
@@ -460,8 +468,7 @@ def simulate_batch(
         redo = list(range(k))
         meta["engine"] = f"simulate, one run at a time ({why})"
     for i in redo:  # through simulate, exactly as one run
-        tr = S.simulate(models[int(of_all[i])], (t0, t1), Q[i], V[i], active=acts[i], throw=False, progress=False,
-                        **sim_kw)  # fmt: skip
+        tr = S.simulate(models[int(of_all[i])], (t0, t1), Q[i], V[i], active=acts[i], **sim_kw)
         _fill(d, i, tr, t_out, rec)
         runs[i] = tr
         status[i], message[i] = tr.status, tr.message
