@@ -267,7 +267,8 @@ def simulate_batch(
 
     Run i starts from ``(q0[i], qd0[i])`` with the model ``params[i]`` and the active set
     ``active[i]``; every other setting is :func:`simulate`'s and means the same for each run.
-    ``simulate(model, t_span, q0=Q)`` with ``Q`` of shape (k, n) calls this.
+    (A function of its own rather than ``simulate`` with a (k, n) ``q0``: its result is a
+    :class:`BatchTrajectory`, not a :class:`Trajectory`, and its failures never raise.)
 
     Parameters
     ----------
