@@ -209,6 +209,7 @@ Status dp_step(Loop& L, double& h_acc, double& t_new) {
     long long rejected = 0;
     const double h_min = L.opt.h_min_factor * std::max(1.0, std::abs(t));
     const bool proj = L.opt.stab == Stabilization::projection;
+    const double noise = passage_noise(L);
     while (true) {
         h = clip(t, passage_place(L, t, h), t_bound);
         if (h < h_min) {
@@ -233,8 +234,10 @@ Status dp_step(Loop& L, double& h_acc, double& t_new) {
             if ((s = project(L, t + h, L.yp.data(), L.opt.projection)) != Status::ok) return s;
             for (int i = 0; i < n2; ++i) L.ev[i] = L.yq1[i] - L.yp[i];
         }
-        for (int i = 0; i < n2; ++i)
-            L.tmp2n[i] = L.opt.atol + L.opt.rtol * std::max(std::abs(L.y[i]), std::abs(L.y1[i]));
+        for (int i = 0; i < n2; ++i) {
+            const double big = std::max(std::abs(L.y[i]), std::abs(L.y1[i]));
+            L.tmp2n[i] = L.opt.atol + L.opt.rtol * big + noise * (1.0 + big);
+        }
         const double err = rms(L.ev, L.tmp2n, n2);
         if (!std::isfinite(err)) {
             ++rejected;
@@ -297,6 +300,7 @@ constexpr int PASSAGE_MAX_ITERATIONS = 30;
 constexpr double PASSAGE_ITER_RTOL = 1e-6;
 constexpr double PASSAGE_FLOOR = 1e-7;
 constexpr double PASSAGE_BAND = 0.05;
+constexpr double PASSAGE_NOISE = 100.0;
 
 // _integrators.passage_time over the history ts, ss (count ≥ 2)
 bool passage_time(const Passages& P, double& out) {
@@ -487,7 +491,13 @@ double singular_indicator(Loop& L, const Mat& A, int m) {
     return std::sqrt(std::max(lam, 0.0));
 }
 
+double passage_noise(const Loop& L) {
+    if (!L.opt.passages || !std::isfinite(L.pas.sigma)) return 0.0;
+    return PASSAGE_NOISE * std::numeric_limits<double>::epsilon() / std::max(L.pas.sigma, PASSAGE_FLOOR);
+}
+
 void passage_reset(Loop& L) {
+    L.pas.sigma = inf;
     L.pas.count = 0;
     L.pas.have_star = false;
     L.pas.v_len = -1;
@@ -496,6 +506,7 @@ void passage_reset(Loop& L) {
 void passage_observe(Loop& L, double t, const Mat& A, int m) {
     Passages& P = L.pas;
     const double s = singular_indicator(L, A, m);
+    P.sigma = s;
     if (!(s >= PASSAGE_FLOOR && std::isfinite(s))) {
         P.count = 0;
         P.have_star = false;

@@ -456,7 +456,9 @@ void resume(Loop& L, double t, const double* y, double h, long long n_steps, std
     L.n_steps = n_steps;
     L.out_i = out_i;
     L.message.clear();
-    passage_reset(L);  // a state reached elsewhere: the history starts afresh
+    passage_reset(L);  // a state reached elsewhere: the history starts afresh, from this state
+    if (L.opt.passages && L.any_active && evaluate(L, t, L.y.data(), L.y.data() + L.n, NEED_A) == Status::ok)
+        passage_observe(L, t, L.Ac, L.m);
 }
 
 Outcome run(Loop& L, long long max_steps) {

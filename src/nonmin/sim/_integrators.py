@@ -168,6 +168,14 @@ PASSAGE_ITER_RTOL = 1e-6
 #: least a quarter step from it, where the indicator is ≳ 1e-5 (A02 N = 2 at dt = 1e-4).
 PASSAGE_FLOOR = 1e-7
 
+#: Round-off of a projected state near a singular configuration, relative to ``eps·(1 + |y|)``
+#: and divided by the indicator σ (the projection's sensitivity: the tangent space turns by
+#: δq/σ): :class:`DormandPrince5` adds ``noise = PASSAGE_NOISE·eps/σ`` (× (1 + |y_i|)) to its
+#: error scale, so that an error estimate of projected solutions at that level is not taken
+#: for a truncation error (which made the step collapse to 1e-11 s a microsecond before A02's
+#: first passage at rtol 1e-10).
+PASSAGE_NOISE = 100.0
+
 
 def _passage_start(m: int) -> FloatArray:
     """Deterministic start vector of the inverse iteration (not symmetric: the mechanisms are)."""
@@ -245,6 +253,7 @@ class SingularPassages:
         self._s: list[float] = []
         self._v: FloatArray | None = None
         self.t_star: float | None = None
+        self.sigma = math.inf  # the last indicator observed
 
     def reset(self) -> None:
         """Forget the history (a new active set, or a state reached elsewhere)."""
@@ -252,10 +261,24 @@ class SingularPassages:
         self._s.clear()
         self._v = None
         self.t_star = None
+        self.sigma = math.inf
+
+    @property
+    def noise(self) -> float:
+        """Relative round-off level of a projected state at the last step end
+        (:data:`PASSAGE_NOISE`)."""
+        if not math.isfinite(self.sigma):
+            return 0.0
+        return PASSAGE_NOISE * float(np.finfo(float).eps) / max(self.sigma, PASSAGE_FLOOR)
+
+    def __call__(self, t: float, h: float) -> float:
+        """:meth:`place` (the object is the ``place`` argument of :meth:`Integrator.step`)."""
+        return self.place(t, h)
 
     def observe(self, t: float, A: FloatArray) -> None:
         """Record the indicator at a projected step end ``t`` with the active rows ``A``."""
         s, self._v = singular_indicator(A, self._v)
+        self.sigma = s
         if not (s >= PASSAGE_FLOOR and math.isfinite(s)):
             self._t.clear()
             self._s.clear()
@@ -376,8 +399,10 @@ class Integrator(ABC):
 
         ``project(t, y) -> y`` (optional) is the stabilization's projection; adaptive methods
         measure their error estimate on projected solutions (see :class:`DormandPrince5`).
-        ``place(t, h) -> h'`` (optional, :meth:`SingularPassages.place`) shortens a step
-        attempt so that no stage falls next to a predicted singular instant.
+        ``place(t, h) -> h'`` (optional, a :class:`SingularPassages`) shortens a step
+        attempt so that no stage falls next to a predicted singular instant; its ``noise``
+        attribute (if any) widens an adaptive method's error scale by the projection's
+        round-off level.
         """
 
 
@@ -559,7 +584,10 @@ class DormandPrince5(Integrator):
         (step-size underflow).
     passages : bool
         Place every attempt so that a predicted singular instant falls at 0.45–0.65 of it,
-        between the nodes 0.3 and 0.8 (:class:`SingularPassages`).
+        between the nodes 0.3 and 0.8 (:class:`SingularPassages`), and widen the error scale
+        by the projection's round-off level ``PASSAGE_NOISE·eps/σ_min·(1 + |y_i|)`` (measured,
+        A02 N = 2, 10 s, rtol 1e-10: 1426 steps, 124 rejected, 0.6 s; without: 2239 steps,
+        788 rejected, steps down to 1e-11 s a microsecond before the first passage).
     """
 
     rtol: float = 1e-8
@@ -614,6 +642,7 @@ class DormandPrince5(Integrator):
         h = min(h, self.h_max)
         rejected = 0
         h_min = self.h_min_factor * max(1.0, abs(t))
+        noise = float(getattr(place, "noise", 0.0))
         while True:
             h = _clip(t, h if place is None else place(t, h), t_bound)
             if h < h_min:
@@ -626,7 +655,8 @@ class DormandPrince5(Integrator):
             err_vec = h * (_DP_E @ K)
             if project is not None:
                 err_vec = project(t + h, y1) - project(t + h, y1 - err_vec)
-            scale = self.atol + self.rtol * np.maximum(np.abs(y), np.abs(y1))
+            big = np.maximum(np.abs(y), np.abs(y1))
+            scale = self.atol + self.rtol * big + noise * (1.0 + big)
             err = float(np.sqrt(np.mean((err_vec / scale) ** 2)))
             if not np.isfinite(err):
                 rejected += 1

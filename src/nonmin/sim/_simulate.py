@@ -842,6 +842,7 @@ def simulate(
                     break
                 if passages is not None:  # the history is the engine's: start afresh here
                     passages.reset()
+                    passages.observe(t, model.constraint_terms(t, state.y[:n], state.y[n:], system.active).A)
                 # er.event: the general driver takes this step (locates, applies the transition)
             if n_steps >= max_steps:
                 raise SimulationError(f"max_steps = {max_steps} reached at t = {t:.12g}")
@@ -850,7 +851,7 @@ def simulate(
                 # step need it for the continuous extension
                 state = state._replace(f=system.rhs(state.t, state.y))
             y_start, f_start, t_start = state.y, state.f, state.t
-            res = integ.step(system.rhs, state, t1, project_y, passages.place) if passages is not None \
+            res = integ.step(system.rhs, state, t1, project_y, passages) if passages is not None \
                 else integ.step(system.rhs, state, t1, project_y)  # fmt: skip
             n_rejected += res.n_rejected
             n_steps += 1

@@ -95,6 +95,7 @@ struct Passages {
     int count = 0;
     bool have_star = false;
     double t_star = 0.0;
+    double sigma = std::numeric_limits<double>::infinity();  // the last indicator observed
     // indicator scratch, sized from m_all and n at make_loop
     Mat B, G, C;                 // equilibrated live rows (k × n), Gram (k × k), its Cholesky
     Vec x, y, v, w;              // iteration vectors (k); v: the vector kept between calls
@@ -289,6 +290,8 @@ void passage_setup(Loop& L);
 void passage_observe(Loop& L, double t, const Mat& A, int m);
 void passage_reset(Loop& L);
 double passage_place(const Loop& L, double t, double h);
+// SingularPassages.noise: PASSAGE_NOISE·eps/σ at the last step end (0 without one).
+double passage_noise(const Loop& L);
 
 // hermite_quintic of _integrators.py into out (2n): y(t0 + s) from both ends of a step.
 void hermite_quintic(int n, const double* y0, const double* f0, const double* y1, const double* f1,
