@@ -389,6 +389,15 @@ Status stab_project_sample(Loop& L, double t, double* y) {
     return project(L, t, y, po);
 }
 
+// SingularPassages after a state reached elsewhere (resume, an event's transition): the
+// history restarts with the indicator at (L.t, L.y) under the active set (as the driver's
+// reset + observe)
+void passage_restart(Loop& L) {
+    passage_reset(L);
+    if (L.opt.passages && L.any_active && evaluate(L, L.t, L.y.data(), L.y.data() + L.n, NEED_A) == Status::ok)
+        passage_observe(L, L.t, L.Ac, L.m);
+}
+
 Outcome fail(Loop& L, Status s) {
     if (s == Status::callback_error) return Outcome::callback;
     if (L.message.empty()) L.message = "kernel status " + std::to_string(static_cast<int>(s));
@@ -456,9 +465,7 @@ void resume(Loop& L, double t, const double* y, double h, long long n_steps, std
     L.n_steps = n_steps;
     L.out_i = out_i;
     L.message.clear();
-    passage_reset(L);  // a state reached elsewhere: the history starts afresh, from this state
-    if (L.opt.passages && L.any_active && evaluate(L, t, L.y.data(), L.y.data() + L.n, NEED_A) == Status::ok)
-        passage_observe(L, t, L.Ac, L.m);
+    passage_restart(L);  // a state reached elsewhere: the history starts afresh, from this state
 }
 
 Outcome run(Loop& L, long long max_steps) {
@@ -548,6 +555,7 @@ Outcome run(Loop& L, long long max_steps) {
                 L.h = h_before;
                 if ((s = contact_event(L, st)) == Status::ok) {
                     ++L.n_steps;
+                    passage_restart(L);
                     return Outcome::transition;
                 }
                 if (s == Status::callback_error) return Outcome::callback;
