@@ -171,3 +171,10 @@ def test_the_basins_script_runs(tmp_path: Path):
     assert res.returncode == 0, res.stderr
     assert "9 runs" in res.stdout and " 0 failed" in res.stdout
     assert out.stat().st_size > 1000
+
+
+def test_progress_shows_runs_failures_and_eta(scenario: Path, capsys: pytest.CaptureFixture[str]):
+    sweep(scenario, {"model.params.omega0": [7.0, 0.1]}, chunk=1, workers=1, progress=True)
+    err = capsys.readouterr().err
+    last = err.replace("\r", "\n").strip().splitlines()[-1]
+    assert "sweep: 2/2 runs (0 from the store), 1 failed" in last and "ETA 0 s" in last
