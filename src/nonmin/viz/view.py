@@ -13,7 +13,9 @@ server and (by default) opens the browser on it. The page shows
   (``(Aᵀ)⁺ f_c`` read out of ``Trajectory.f_c`` by
   :func:`~nonmin.control.constraint_force_components`; 1 N = ``force_scale`` m);
 * a *Playback* panel: play/pause, a time slider to scrub, the playback speed, loop; the
-  current time, the active constraint set and the last event, updated as it plays.
+  current time, the active constraint set and the last event, updated as it plays;
+* an *Active set over time* panel: the number of active constraints and the rank of A
+  against time, and the instants at which constraints switch on or off.
 
 The server runs in background threads; :meth:`Viewer.stop` ends it. Nothing is imported
 from viser until :func:`view` is called.
@@ -375,6 +377,8 @@ def _build(server: Any, model: Any, traj: Any, ts: np.ndarray, qs: np.ndarray, s
         speed_in = server.gui.add_number("speed", initial_value=float(speed), min=0.01, max=100.0, step=0.05)
         loop = server.gui.add_checkbox("Loop", initial_value=True)
         info = server.gui.add_markdown("")
+    if traj is not None and len(ts) > 1:
+        _active_set_panel(server, traj)
     names = tuple(getattr(traj, "constraint_names", ())) if traj is not None else ()
     mask = getattr(traj, "active_mask", None) if traj is not None else None
     events = [(float(e.t), str(e.name)) for e in getattr(traj, "events", ())] if traj is not None else []
@@ -477,6 +481,35 @@ def _build(server: Any, model: Any, traj: Any, ts: np.ndarray, qs: np.ndarray, s
 
         webbrowser.open(url)
     return viewer
+
+
+def _active_set_panel(server: Any, traj: Any) -> None:
+    """A panel with the active set over time: the number of active constraints and the rank of
+    A as step curves, and the list of the times at which the active set changes."""
+    from viser import uplot
+
+    mask = np.asarray(traj.active_mask, dtype=bool)
+    names = tuple(traj.constraint_names)
+    t = np.asarray(traj.t, dtype=float)
+    changes = []
+    for i in range(1, len(t)):
+        if not np.array_equal(mask[i], mask[i - 1]):
+            on = [n for n, a, b in zip(names, mask[i - 1], mask[i], strict=True) if b and not a]
+            off = [n for n, a, b in zip(names, mask[i - 1], mask[i], strict=True) if a and not b]
+            changes.append(f"- {t[i]:.4f} s: " + ", ".join([f"+{n}" for n in on] + [f"−{n}" for n in off]))
+    with server.gui.add_folder("Active set over time", expand_by_default=True):
+        server.gui.add_uplot(
+            data=(t, mask.sum(axis=1).astype(float), np.asarray(traj.rank, dtype=float)),
+            series=(uplot.Series(label="t [s]"),
+                    uplot.Series(label="active constraints", stroke="#d62728", width=2),
+                    uplot.Series(label="rank A", stroke="#1f77b4", width=2, dash=(4.0, 4.0))),
+            scales={"x": uplot.Scale(time=False)},
+            aspect=2.0,
+        )
+        server.gui.add_markdown(
+            ("changes of the active set:\n" + "\n".join(changes[:30])
+             + (f"\n- … {len(changes) - 30} more" if len(changes) > 30 else ""))
+            if changes else "the active set does not change in this run")
 
 
 def _align(a: np.ndarray, b: np.ndarray) -> np.ndarray:
