@@ -25,7 +25,7 @@ LAYERS: list[set[str]] = [
     {"nonmin.core"},
     {"nonmin.model"},
     {"nonmin.library", "nonmin.control", "nonmin.viz"},
-    {"nonmin.analysis"},
+    {"nonmin.analysis", "nonmin.linear"},
     {"nonmin.sim"},
     {"nonmin.io", "nonmin.validation"},
     {"nonmin.sweeps"},

@@ -12,6 +12,7 @@ EXPECTED_TOP = {
     "forward_dynamics", "impact_map", "library", "load_trajectory", "model", "sim", "simulate",
     "analysis", "inverse_dynamics", "reactions",
     "simulate_batch", "sweep", "sweeps",
+    "linear", "linearize", "equilibrium", "modes",
 }
 
 EXPECTED_CORE = {

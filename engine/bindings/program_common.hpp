@@ -40,6 +40,8 @@ using NpArr = nb::ndarray<nb::numpy, double>;
             raise_error("NotSymmetricError", what + ": matrix not symmetric");
         case Status::bad_shape:
             raise_error("ShapeError", what + ": bad shape");
+        case Status::not_differentiable:
+            raise_error("ModelError", what + ": this model's program has no forward-mode derivatives");
         case Status::callback_error:
             raise_error("SimulationError", what + ": a Python callback failed");
         default:

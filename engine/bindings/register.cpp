@@ -15,6 +15,7 @@ void register_all(nanobind::module_& m) {
     bind_sim(m);
     bind_sim_batch(m);
     bind_events(m);
+    bind_derivatives(m);
 }
 
 }  // namespace nonmin::bindings

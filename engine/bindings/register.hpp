@@ -18,5 +18,6 @@ void bind_sim(nanobind::module_& m);      // sim.cpp: SimLoop, SimOptions, PyPro
 void bind_sim_batch(nanobind::module_& m);  // sim_batch.cpp: simulate_batch (k runs of the loop)
 void bind_batch(nanobind::module_& m);    // batch.cpp: forward_batch (model + kernel over N states)
 void bind_events(nanobind::module_& m);   // events.cpp: polyhedral_projection (event layer kernel)
+void bind_derivatives(nanobind::module_& m);  // derivatives.cpp: term_tangents (forward mode)
 
 }  // namespace nonmin::bindings

@@ -2,6 +2,8 @@
 // Formulas: src/nonmin/model/planar/_elements.py (the per-joint reference) and _compiled.py.
 #include "nonmin/planar.hpp"
 
+#include "nonmin/dual_terms.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -11,32 +13,34 @@ namespace nonmin {
 namespace {
 
 // Kinematics of one body-fixed point: position p, R s, velocity ṗ, θ̇ and the body's columns
-// (−1: none, for the ground and a point mass's rotation).
+// (−1: none, for the ground and a point mass's rotation). S: double or Dual (dual.hpp).
+template <class S>
 struct PointKin {
-    double px, py, rx, ry, vx, vy, om;
+    S px, py, rx, ry, vx, vy, om;
     int ix, iy, ith;
 };
 
-inline PointKin point_kin(const PlanarDescription& d, const PlanarWorkspace& w, const double* q,
-                          const double* qd, const PlanarPoint& P) {
-    PointKin k;
+template <class S>
+inline PointKin<S> point_kin(const PlanarDescription& d, const S* cs, const S* sn, const S* q, const S* qd,
+                             const PlanarPoint& P) {
+    PointKin<S> k;
     if (P.body < 0) {
         k.px = P.sx;
         k.py = P.sy;
         k.rx = P.sx;
         k.ry = P.sy;
-        k.vx = k.vy = k.om = 0.0;
+        k.vx = k.vy = k.om = S(0.0);
         k.ix = k.iy = k.ith = -1;
         return k;
     }
     const PlanarBody& B = d.bodies[static_cast<std::size_t>(P.body)];
-    const double c = w.c[static_cast<std::size_t>(P.body)];
-    const double s = w.s[static_cast<std::size_t>(P.body)];
+    const S c = cs[P.body];
+    const S s = sn[P.body];
     k.rx = c * P.sx - s * P.sy;
     k.ry = s * P.sx + c * P.sy;
     k.px = q[B.ix] + k.rx;
     k.py = q[B.iy] + k.ry;
-    k.om = B.ith >= 0 ? qd[B.ith] : 0.0;
+    k.om = B.ith >= 0 ? qd[B.ith] : S(0.0);
     k.vx = qd[B.ix] - k.om * k.ry;
     k.vy = qd[B.iy] + k.om * k.rx;
     k.ix = B.ix;
@@ -45,12 +49,21 @@ inline PointKin point_kin(const PlanarDescription& d, const PlanarWorkspace& w, 
     return k;
 }
 
-inline void add(double* v, int i, double x) {
+// The scalar type of a pointer argument, not deduced from the value (so that constants mix).
+template <class T>
+struct Same {
+    using type = T;
+};
+
+template <class S>
+inline void add(S* v, int i, const typename Same<S>::type& x) {
     if (i >= 0) v[i] += x;
 }
 
 // Σ over the two ends: D = J_b − J_a; adds coef·Dᵀw to f (w a 2-vector).
-inline void add_DT(double* f, const PointKin& a, const PointKin& b, double wx, double wy) {
+template <class S>
+inline void add_DT(S* f, const PointKin<S>& a, const PointKin<S>& b, const typename Same<S>::type& wx,
+                   const typename Same<S>::type& wy) {
     add(f, b.ix, wx);
     add(f, b.iy, wy);
     add(f, b.ith, -wx * b.ry + wy * b.rx);  // w·(R s_b)^⊥
@@ -210,13 +223,48 @@ std::unique_ptr<Workspace> PlanarProgram::make_workspace() const {
 Status PlanarProgram::evaluate(double t, const double* q, const double* qd, const std::uint8_t* active,
                                unsigned need, Terms& out, Workspace& wsb) const {
     auto& w = static_cast<PlanarWorkspace&>(wsb);
+    return eval<double>(t, q, qd, active, need, out, w.c.data(), w.s.data(), w.treg.data());
+}
+
+Status PlanarProgram::evaluate_tangent(double t, const double* q, const double* qd, const double* dq,
+                                       const double* dqd, const std::uint8_t* active, unsigned need,
+                                       Terms& out, Terms& tangent, Workspace& wsb) const {
+    auto& w = static_cast<PlanarWorkspace&>(wsb);
+    const auto n = static_cast<std::size_t>(n_);
+    if (w.dq.size() != n) {  // first use of this workspace for derivatives: size the dual scratch
+        w.dq.assign(n, Dual());
+        w.dqd.assign(n, Dual());
+        w.dc.assign(d_.bodies.size(), Dual(1.0));
+        w.ds.assign(d_.bodies.size(), Dual(0.0));
+        w.dterms.resize(n_, k_, m_all_);
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+        w.dq[i] = Dual(q[i], dq[i]);
+        w.dqd[i] = Dual(qd[i], dqd[i]);
+    }
+    const Status st = eval<Dual>(t, w.dq.data(), w.dqd.data(), active, need, w.dterms, w.dc.data(), w.ds.data(),
+                                 w.treg.data());
+    if (st != Status::ok) return st;
+    split_dual(w.dterms, need, out, tangent);
+    return Status::ok;
+}
+
+// The evaluation on the scalar S (double: evaluate; Dual: evaluate_tangent). The drivers are
+// functions of t alone, evaluated in double.
+template <class S>
+Status PlanarProgram::eval(double t, const S* q, const S* qd, const std::uint8_t* active, unsigned need,
+                           TermsOf<S>& out, S* cs, S* sn, double* treg) const {
+    using std::cos;
+    using std::hypot;
+    using std::isfinite;
+    using std::sin;
     const int n = n_;
     {
-        double acc = 0.0;
+        S acc = S(0.0);
         for (int i = 0; i < n; ++i) acc += q[i] * q[i] + qd[i] * qd[i];
-        if (!std::isfinite(acc) || !std::isfinite(t)) {
+        if (!isfinite(acc) || !std::isfinite(t)) {
             for (int i = 0; i < n; ++i)
-                if (!std::isfinite(q[i]) || !std::isfinite(qd[i])) return Status::not_finite;
+                if (!isfinite(q[i]) || !isfinite(qd[i])) return Status::not_finite;
             if (!std::isfinite(t)) return Status::not_finite;
         }
     }
@@ -224,37 +272,37 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
     for (std::size_t i = 0; i < nb; ++i) {
         const int ith = d_.bodies[i].ith;
         if (ith >= 0) {
-            w.c[i] = std::cos(q[ith]);
-            w.s[i] = std::sin(q[ith]);
+            cs[i] = cos(q[ith]);
+            sn[i] = sin(q[ith]);
         } else {
-            w.c[i] = 1.0;
-            w.s[i] = 0.0;
+            cs[i] = S(1.0);
+            sn[i] = S(0.0);
         }
     }
     if (need & NEED_M) {
         out.M.setZero();
         for (int i = 0; i < n; ++i) out.M(i, i) = mdiag_[i];
     }
-    double V_springs = 0.0;
+    S V_springs = S(0.0);
     const bool want_springs = (need & (NEED_H | NEED_ENERGY)) != 0;
     if (need & NEED_H) {
-        out.h = fg_;
+        for (int i = 0; i < n; ++i) out.h[i] = fg_[i];
         out.f_passive.setZero();
     }
     if (want_springs) {
-        double* h = out.h.data();
-        double* fp = out.f_passive.data();
+        S* h = out.h.data();
+        S* fp = out.f_passive.data();
         for (const PlanarSpring& sp : d_.springs) {
-            const PointKin a = point_kin(d_, w, q, qd, sp.a);
-            const PointKin b = point_kin(d_, w, q, qd, sp.b);
-            const double dx = b.px - a.px, dy = b.py - a.py;
-            const double ell2 = dx * dx + dy * dy;
-            const double ell = std::hypot(dx, dy);
+            const PointKin<S> a = point_kin(d_, cs, sn, q, qd, sp.a);
+            const PointKin<S> b = point_kin(d_, cs, sn, q, qd, sp.b);
+            const S dx = b.px - a.px, dy = b.py - a.py;
+            const S ell2 = dx * dx + dy * dy;
+            const S ell = hypot(dx, dy);
             if (sp.stiffness != 0.0) {
                 V_springs += 0.5 * sp.stiffness * (ell - sp.rest_length) * (ell - sp.rest_length);
                 if (need & NEED_H) {
                     if (ell > 0.0) {
-                        const double coef = -sp.stiffness * (1.0 - sp.rest_length / ell);
+                        const S coef = -sp.stiffness * (1.0 - sp.rest_length / ell);
                         add_DT(h, a, b, coef * dx, coef * dy);
                     } else if (sp.rest_length != 0.0) {
                         return Status::not_finite;  // zero length: force direction undefined
@@ -262,25 +310,25 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                 }
             }
             if (sp.damping != 0.0 && (need & NEED_H) && ell2 > 0.0) {
-                const double ddx = b.vx - a.vx, ddy = b.vy - a.vy;
-                const double coef = -sp.damping * (dx * ddx + dy * ddy) / ell2;
+                const S ddx = b.vx - a.vx, ddy = b.vy - a.vy;
+                const S coef = -sp.damping * (dx * ddx + dy * ddy) / ell2;
                 add_DT(fp, a, b, coef * dx, coef * dy);
             }
         }
         for (const PlanarRotationalSpring& rs : d_.rotational_springs) {
             const int ia = rs.body_a >= 0 ? d_.bodies[static_cast<std::size_t>(rs.body_a)].ith : -1;
             const int ib = rs.body_b >= 0 ? d_.bodies[static_cast<std::size_t>(rs.body_b)].ith : -1;
-            const double rel = (ib >= 0 ? q[ib] : 0.0) - (ia >= 0 ? q[ia] : 0.0) - rs.rest_angle;
+            const S rel = (ib >= 0 ? q[ib] : 0.0) - (ia >= 0 ? q[ia] : 0.0) - rs.rest_angle;
             if (rs.stiffness != 0.0) {
                 V_springs += 0.5 * rs.stiffness * rel * rel;
                 if (need & NEED_H) {
-                    const double tau = -rs.stiffness * rel;
+                    const S tau = -rs.stiffness * rel;
                     add(h, ib, tau);
                     add(h, ia, -tau);
                 }
             }
             if (rs.damping != 0.0 && (need & NEED_H)) {
-                const double tau = -rs.damping * ((ib >= 0 ? qd[ib] : 0.0) - (ia >= 0 ? qd[ia] : 0.0));
+                const S tau = -rs.damping * ((ib >= 0 ? qd[ib] : 0.0) - (ia >= 0 ? qd[ia] : 0.0));
                 add(fp, ib, tau);
                 add(fp, ia, -tau);
             }
@@ -289,8 +337,8 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
     if ((need & NEED_B) && k_ > 0) {
         out.B.setZero();
         const int k = k_;
-        double* B = out.B.data();
-        auto addB = [&](int i, int col, double v) {
+        S* B = out.B.data();
+        auto addB = [&](int i, int col, const S& v) {
             if (i >= 0) B[static_cast<std::ptrdiff_t>(i) * k + col] += v;
         };
         for (int col = 0; col < k; ++col) {
@@ -299,30 +347,30 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                 addB(a.body_b >= 0 ? d_.bodies[static_cast<std::size_t>(a.body_b)].ith : -1, col, 1.0);
                 addB(a.body_a >= 0 ? d_.bodies[static_cast<std::size_t>(a.body_a)].ith : -1, col, -1.0);
             } else if (a.kind == PlanarActuatorKind::force) {
-                const PointKin p = point_kin(d_, w, q, qd, a.a);
+                const PointKin<S> p = point_kin(d_, cs, sn, q, qd, a.a);
                 addB(p.ix, col, a.ux);
                 addB(p.iy, col, a.uy);
                 addB(p.ith, col, -a.ux * p.ry + a.uy * p.rx);
             } else {
-                const PointKin pb = point_kin(d_, w, q, qd, a.b);
-                double ca = 1.0, sa = 0.0, rax = 0.0, ray = 0.0;
+                const PointKin<S> pb = point_kin(d_, cs, sn, q, qd, a.b);
+                S ca = S(1.0), sa = S(0.0), rax = S(0.0), ray = S(0.0);
                 int iax = -1, iay = -1, iath = -1;
                 if (a.a.body >= 0) {
                     const PlanarBody& Ba = d_.bodies[static_cast<std::size_t>(a.a.body)];
-                    ca = w.c[static_cast<std::size_t>(a.a.body)];
-                    sa = w.s[static_cast<std::size_t>(a.a.body)];
+                    ca = cs[a.a.body];
+                    sa = sn[a.a.body];
                     rax = q[Ba.ix];
                     ray = q[Ba.iy];
                     iax = Ba.ix;
                     iay = Ba.iy;
                     iath = Ba.ith;
                 }
-                const double ux = ca * a.ux - sa * a.uy, uy = sa * a.ux + ca * a.uy;
+                const S ux = ca * a.ux - sa * a.uy, uy = sa * a.ux + ca * a.uy;
                 addB(pb.ix, col, ux);
                 addB(pb.iy, col, uy);
                 addB(pb.ith, col, -ux * pb.ry + uy * pb.rx);
                 // reaction on body a at the global point p_b: lever p_b − r_a
-                const double lx = pb.px - rax, ly = pb.py - ray;
+                const S lx = pb.px - rax, ly = pb.py - ray;
                 addB(iax, col, -ux);
                 addB(iay, col, -uy);
                 addB(iath, col, -(-ux * ly + uy * lx));
@@ -334,16 +382,16 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
     auto drive = [&](int idx, double* f) -> Status {
         f[0] = f[1] = f[2] = 0.0;
         if (idx < 0) return Status::ok;
-        const int st = d_.drivers[static_cast<std::size_t>(idx)].fn.eval(t, f, w.treg.data());
+        const int st = d_.drivers[static_cast<std::size_t>(idx)].fn.eval(t, f, treg);
         if (st == TimeFunction::EVAL_FAILED) return Status::callback_error;
         return st == TimeFunction::EVAL_OK ? Status::ok : Status::not_finite;
     };
     if (cneed && m_all_ > 0) {
         const bool wantA = (need & NEED_A) != 0;
-        double* A = out.A.data();
-        double* gamma = out.gamma.data();
-        double* phi = out.phi.data();
-        double* vel = out.velocity.data();
+        S* A = out.A.data();
+        S* gamma = out.gamma.data();
+        S* phi = out.phi.data();
+        S* vel = out.velocity.data();
         const std::size_t nc = d_.constraints.size();
         for (std::size_t ci = 0; ci < nc; ++ci) {
             if (!active[ci]) continue;
@@ -353,11 +401,11 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
             for (int pi : prims_of_[ci]) {
                 const PlanarPrim& p = d_.prims[static_cast<std::size_t>(pi)];
                 const int row = c.row + p.offset;
-                double* Ar = A + static_cast<std::ptrdiff_t>(row) * n;
+                S* Ar = A + static_cast<std::ptrdiff_t>(row) * n;
                 switch (p.kind) {
                     case PlanarPrimKind::pin: {
-                        const PointKin a = point_kin(d_, w, q, qd, p.a);
-                        const PointKin b = point_kin(d_, w, q, qd, p.b);
+                        const PointKin<S> a = point_kin(d_, cs, sn, q, qd, p.a);
+                        const PointKin<S> b = point_kin(d_, cs, sn, q, qd, p.b);
                         double fx[3], fy[3];
                         if (Status st = drive(p.driver, fx); st != Status::ok) return st;
                         if (Status st = drive(p.driver2, fy); st != Status::ok) return st;
@@ -369,7 +417,7 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                         vel[row] = a.vx - b.vx - fx[1];
                         vel[row + 1] = a.vy - b.vy - fy[1];
                         if (wantA) {
-                            double* Ar1 = Ar + n;
+                            S* Ar1 = Ar + n;
                             add(Ar, a.ix, 1.0);
                             add(Ar1, a.iy, 1.0);
                             add(Ar, a.ith, -a.ry);
@@ -382,24 +430,24 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                         break;
                     }
                     case PlanarPrimKind::line: {
-                        const PointKin a = point_kin(d_, w, q, qd, p.a);
-                        const PointKin b = point_kin(d_, w, q, qd, p.b);
-                        double ca = 1.0, sa = 0.0;
+                        const PointKin<S> a = point_kin(d_, cs, sn, q, qd, p.a);
+                        const PointKin<S> b = point_kin(d_, cs, sn, q, qd, p.b);
+                        S ca = S(1.0), sa = S(0.0);
                         if (p.a.body >= 0) {
-                            ca = w.c[static_cast<std::size_t>(p.a.body)];
-                            sa = w.s[static_cast<std::size_t>(p.a.body)];
+                            ca = cs[p.a.body];
+                            sa = sn[p.a.body];
                         }
                         // n = R_a u^⊥, n^⊥ = (−n_y, n_x)
                         const double upx = -p.uy, upy = p.ux;
-                        const double nx = ca * upx - sa * upy, ny = sa * upx + ca * upy;
-                        const double npx = -ny, npy = nx;
-                        const double dx = b.px - a.px, dy = b.py - a.py;
-                        const double ddx = b.vx - a.vx, ddy = b.vy - a.vy;
-                        const double dn = nx * dx + ny * dy;
-                        const double dnp = dx * npx + dy * npy;
+                        const S nx = ca * upx - sa * upy, ny = sa * upx + ca * upy;
+                        const S npx = -ny, npy = nx;
+                        const S dx = b.px - a.px, dy = b.py - a.py;
+                        const S ddx = b.vx - a.vx, ddy = b.vy - a.vy;
+                        const S dn = nx * dx + ny * dy;
+                        const S dnp = dx * npx + dy * npy;
                         // −θ̇² R s at each end
-                        const double abx = -(b.om * b.om) * b.rx + (a.om * a.om) * a.rx;
-                        const double aby = -(b.om * b.om) * b.ry + (a.om * a.om) * a.ry;
+                        const S abx = -(b.om * b.om) * b.rx + (a.om * a.om) * a.rx;
+                        const S aby = -(b.om * b.om) * b.ry + (a.om * a.om) * a.ry;
                         double f[3];
                         if (Status st = drive(p.driver, f); st != Status::ok) return st;
                         phi[row] = dn - f[0];
@@ -413,14 +461,14 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                         break;
                     }
                     case PlanarPrimKind::rod: {
-                        const PointKin a = point_kin(d_, w, q, qd, p.a);
-                        const PointKin b = point_kin(d_, w, q, qd, p.b);
+                        const PointKin<S> a = point_kin(d_, cs, sn, q, qd, p.a);
+                        const PointKin<S> b = point_kin(d_, cs, sn, q, qd, p.b);
                         const double L = p.length;
                         const double k = p.sign / L;
-                        const double dx = b.px - a.px, dy = b.py - a.py;
-                        const double ddx = b.vx - a.vx, ddy = b.vy - a.vy;
-                        const double abx = -(b.om * b.om) * b.rx + (a.om * a.om) * a.rx;
-                        const double aby = -(b.om * b.om) * b.ry + (a.om * a.om) * a.ry;
+                        const S dx = b.px - a.px, dy = b.py - a.py;
+                        const S ddx = b.vx - a.vx, ddy = b.vy - a.vy;
+                        const S abx = -(b.om * b.om) * b.rx + (a.om * a.om) * a.rx;
+                        const S aby = -(b.om * b.om) * b.ry + (a.om * a.om) * a.ry;
                         double f[3] = {L, 0.0, 0.0};  // the length: constant, or driven (L: reference)
                         if (p.driver >= 0)
                             if (Status st = drive(p.driver, f); st != Status::ok) return st;
@@ -431,7 +479,7 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                         break;
                     }
                     case PlanarPrimKind::angle: {
-                        double ph = -p.angle_const, v = 0.0, g = 0.0;
+                        S ph = S(-p.angle_const), v = S(0.0), g = S(0.0);
                         const std::size_t na = p.angle_bodies.size();
                         for (std::size_t j = 0; j < na; ++j) {
                             const int b = p.angle_bodies[j];
@@ -455,7 +503,7 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
                         break;
                     }
                     case PlanarPrimKind::coord: {
-                        double ph = -p.angle_const, v = 0.0;
+                        S ph = S(-p.angle_const), v = S(0.0);
                         const std::size_t nq = p.coords.size();
                         for (std::size_t j = 0; j < nq; ++j) {
                             const int i = p.coords[j];
@@ -476,7 +524,7 @@ Status PlanarProgram::evaluate(double t, const double* q, const double* qd, cons
         }
     }
     if (need & NEED_ENERGY) {
-        double T = 0.0, V = 0.0;
+        S T = S(0.0), V = S(0.0);
         for (int i = 0; i < n; ++i) {
             T += mdiag_[i] * qd[i] * qd[i];
             V -= fg_[i] * q[i];

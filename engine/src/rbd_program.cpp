@@ -5,6 +5,8 @@
 
 #include "nonmin/rbd/tree_program.hpp"
 
+#include "nonmin/dual_terms.hpp"
+
 #include <algorithm>
 
 namespace nonmin::rbd {
@@ -36,24 +38,27 @@ int ang_v(const Joint& j) { return j.iv + (j.type == JointType::free_flyer ? 3 :
 
 }  // namespace
 
-TreeWorkspace::TreeWorkspace(const TreeDescription& d)
+template <class S>
+TreeScratch<S>::TreeScratch(const TreeDescription& d)
     : data(d.model),
-      qn(Vec::Zero(d.model.nq)),
-      v(Vec::Zero(d.model.nv)),
-      a0(Vec::Zero(d.model.nv)),
-      tau(Vec::Zero(d.model.nv)),
-      fv(Vec::Zero(d.model.nv)),
-      Mv(Mat::Zero(d.model.nv, d.model.nv)),
-      R(d.model.joints.size(), Mat3::Identity()),
-      Tq(d.model.joints.size(), Mat34::Zero()),
-      Y(Mat::Zero(7, d.model.nv)) {
+      qn(VecS::Zero(d.model.nq)),
+      v(VecS::Zero(d.model.nv)),
+      a0(VecS::Zero(d.model.nv)),
+      tau(VecS::Zero(d.model.nv)),
+      fv(VecS::Zero(d.model.nv)),
+      Mv(MatS::Zero(d.model.nv, d.model.nv)),
+      R(d.model.joints.size(), Mat3T<S>::Identity()),
+      Tq(d.model.joints.size(), Mat34T<S>::Zero()),
+      Y(MatS::Zero(7, d.model.nv)) {
     int m = 0;
     for (const TreeConstraint& c : d.constraints) m += row_count(c.type);
-    Av = Mat::Zero(m, d.model.nv);
+    Av = MatS::Zero(m, d.model.nv);
     int regs = 0;
     for (const TimeFunction& f : d.drivers) regs = std::max(regs, f.scratch_size());
     treg.assign(static_cast<std::size_t>(regs) + 1, 0.0);
 }
+template struct TreeScratch<double>;
+template struct TreeScratch<Dual>;
 
 TreeProgram::TreeProgram(TreeDescription description) : d_(std::move(description)) {
     const TreeModel& model = d_.model;
@@ -137,10 +142,13 @@ std::unique_ptr<Workspace> TreeProgram::make_workspace() const {
     return std::make_unique<TreeWorkspace>(d_);
 }
 
-Status TreeProgram::normalize(const double* q, TreeWorkspace& ws) const {
+template <class S>
+Status TreeProgram::normalize(const S* q, TreeScratch<S>& ws) const {
+    using std::isfinite;
+    using std::sqrt;
     const TreeModel& model = d_.model;
     for (int i = 0; i < model.nq; ++i) {
-        if (!std::isfinite(q[i])) return Status::not_finite;
+        if (!isfinite(q[i])) return Status::not_finite;
         ws.qn[i] = q[i];
     }
     if (!quat_) return Status::ok;
@@ -148,10 +156,10 @@ Status TreeProgram::normalize(const double* q, TreeWorkspace& ws) const {
         const Joint& j = model.joints[i];
         if (!is_quat(j.type)) continue;
         const int s = quat_q(j);
-        const double* e = q + s;
-        const double s2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2] + e[3] * e[3];
-        if (!(s2 > 0.0) || !std::isfinite(s2)) return Status::not_finite;
-        const double nrm = std::sqrt(s2);
+        const S* e = q + s;
+        const S s2 = e[0] * e[0] + e[1] * e[1] + e[2] * e[2] + e[3] * e[3];
+        if (!(s2 > 0.0) || !isfinite(s2)) return Status::not_finite;
+        const S nrm = sqrt(s2);
         for (int k = 0; k < 4; ++k) ws.qn[s + k] = e[k] / nrm;
         ws.Tq[i] = (2.0 / s2) * quaternion_G(e);
         if (j.type == JointType::free_flyer) ws.R[i] = quaternion_rotation(e);
@@ -159,7 +167,8 @@ Status TreeProgram::normalize(const double* q, TreeWorkspace& ws) const {
     return Status::ok;
 }
 
-void TreeProgram::velocity_map(const double* q, const double* qd, TreeWorkspace& ws) const {
+template <class S>
+void TreeProgram::velocity_map(const S* q, const S* qd, TreeScratch<S>& ws) const {
     const TreeModel& model = d_.model;
     for (std::size_t i = 0; i < model.joints.size(); ++i) {
         const Joint& j = model.joints[i];
@@ -167,56 +176,60 @@ void TreeProgram::velocity_map(const double* q, const double* qd, TreeWorkspace&
         if (!is_quat(j.type)) {
             for (int k = 0; k < nvj; ++k) {
                 ws.v[j.iv + k] = qd[j.iq + k];
-                ws.a0[j.iv + k] = 0.0;
+                ws.a0[j.iv + k] = S(0.0);
             }
             continue;
         }
         const int s = quat_q(j), a = ang_v(j);
-        const Eigen::Map<const Vec4> e(q + s), ed(qd + s);
-        const Vec3 w = ws.Tq[i] * ed;
+        const Eigen::Map<const Vec4T<S>> e(q + s), ed(qd + s);
+        const Vec3T<S> w = ws.Tq[i] * ed;
         // Ṫ qd on the quaternion block: G(ε̇) ε̇ = 0 leaves −2 (εᵀε̇)/|ε|² ω
-        const double ratio = -2.0 * e.dot(ed) / e.squaredNorm();
-        ws.v.segment<3>(a) = w;
-        ws.a0.segment<3>(a) = ratio * w;
+        const S ratio = -2.0 * e.dot(ed) / e.squaredNorm();
+        ws.v.template segment<3>(a) = w;
+        ws.a0.template segment<3>(a) = ratio * w;
         if (j.type == JointType::free_flyer) {
-            const Vec3 vl = ws.R[i].transpose() * Eigen::Map<const Vec3>(qd + j.iq);
-            ws.v.segment<3>(j.iv) = vl;
-            ws.a0.segment<3>(j.iv) = -w.cross(vl);  // d/dt Rᵀ = −[ω]× Rᵀ
+            const Vec3T<S> vl = ws.R[i].transpose() * Eigen::Map<const Vec3T<S>>(qd + j.iq);
+            ws.v.template segment<3>(j.iv) = vl;
+            ws.a0.template segment<3>(j.iv) = -w.cross(vl);  // d/dt Rᵀ = −[ω]× Rᵀ
         }
     }
 }
 
-void TreeProgram::apply_Tt(const TreeWorkspace& ws, const double* fv, double* fq) const {
+template <class S>
+void TreeProgram::apply_Tt(const TreeScratch<S>& ws, const S* fv, S* fq) const {
     for (const Run& r : runs_)
         for (int k = 0; k < r.len; ++k) fq[r.iq + k] = fv[r.iv + k];
     for (const QuatBlock& b : qblocks_) {
-        Eigen::Map<Vec4>(fq + b.qs) = ws.Tq[b.joint].transpose() * Eigen::Map<const Vec3>(fv + b.a);
-        if (b.free) Eigen::Map<Vec3>(fq + b.iq) = ws.R[b.joint] * Eigen::Map<const Vec3>(fv + b.iv);
+        Eigen::Map<Vec4T<S>>(fq + b.qs) = ws.Tq[b.joint].transpose() * Eigen::Map<const Vec3T<S>>(fv + b.a);
+        if (b.free) Eigen::Map<Vec3T<S>>(fq + b.iq) = ws.R[b.joint] * Eigen::Map<const Vec3T<S>>(fv + b.iv);
     }
 }
 
-double TreeProgram::tb(const TreeWorkspace& ws, const QuatBlock& b, int r, int c) {
+template <class S>
+S TreeProgram::tb(const TreeScratch<S>& ws, const QuatBlock& b, int r, int c) {
     if (!b.free) return ws.Tq[b.joint](r, c);
-    if (r < 3) return c < 3 ? ws.R[b.joint](c, r) : 0.0;  // Rᵀ on the position
-    return c >= 3 ? ws.Tq[b.joint](r - 3, c - 3) : 0.0;
+    if (r < 3) return c < 3 ? ws.R[b.joint](c, r) : S(0.0);  // Rᵀ on the position
+    return c >= 3 ? ws.Tq[b.joint](r - 3, c - 3) : S(0.0);
 }
 
-void TreeProgram::congruence(TreeWorkspace& ws, double* M) const {
+template <class S>
+void TreeProgram::congruence(TreeScratch<S>& ws, S* M) const {
+    using MatS = typename TreeScratch<S>::MatS;
     // M = Tᵀ M_v T with T the identity on the runs: runs × runs blocks are copies of M_v;
     // the rows of a quaternion block b are Y = T_bᵀ M_v[v_b, :] (then Y T on other quaternion
     // blocks), mirrored into its columns, so M is exactly symmetric.
     const int nq = d_.model.nq, nv = d_.model.nv;
-    Eigen::Map<Mat> out(M, nq, nq);
+    Eigen::Map<MatS> out(M, nq, nq);
     for (const Run& r1 : runs_)
         for (const Run& r2 : runs_)
             out.block(r1.iq, r2.iq, r1.len, r2.len) = ws.Mv.block(r1.iv, r2.iv, r1.len, r2.len);
-    Mat& Y = ws.Y;
+    MatS& Y = ws.Y;
     for (std::size_t bi = 0; bi < qblocks_.size(); ++bi) {
         const QuatBlock& b = qblocks_[bi];
         const int v0 = b.v0(), q0 = b.q0(), nvb = b.nv(), nqb = b.nq();
         for (int r = 0; r < nqb; ++r)
             for (int c = 0; c < nv; ++c) {
-                double acc = 0.0;
+                S acc = S(0.0);
                 for (int k = 0; k < nvb; ++k) acc += tb(ws, b, k, r) * ws.Mv(v0 + k, c);
                 Y(r, c) = acc;
             }
@@ -230,7 +243,7 @@ void TreeProgram::congruence(TreeWorkspace& ws, double* M) const {
             const QuatBlock& b2 = qblocks_[bj];
             for (int i = 0; i < nqb; ++i)
                 for (int c = 0; c < b2.nq(); ++c) {
-                    double acc = 0.0;
+                    S acc = S(0.0);
                     for (int k = 0; k < b2.nv(); ++k) acc += Y(i, b2.v0() + k) * tb(ws, b2, k, c);
                     out(q0 + i, b2.q0() + c) = acc;
                     if (bj != bi) out(b2.q0() + c, q0 + i) = acc;
@@ -238,60 +251,62 @@ void TreeProgram::congruence(TreeWorkspace& ws, double* M) const {
         }
         for (int i = 0; i < nqb; ++i)  // the diagonal block T_bᵀ M_bb T_b, symmetrized
             for (int c = i + 1; c < nqb; ++c) {
-                const double s = 0.5 * (out(q0 + i, q0 + c) + out(q0 + c, q0 + i));
+                const S s = 0.5 * (out(q0 + i, q0 + c) + out(q0 + c, q0 + i));
                 out(q0 + i, q0 + c) = s;
                 out(q0 + c, q0 + i) = s;
             }
     }
 }
 
-void TreeProgram::frame_rows(const TreeConstraint& c, TreeWorkspace& ws, bool rows, bool gamma,
-                             bool phi, double* A, double* g, double* p) const {
+template <class S>
+void TreeProgram::frame_rows(const TreeConstraint& c, TreeScratch<S>& ws, bool rows, bool gamma, bool phi,
+                             S* A, S* g, S* p) const {
+    using V3 = Vec3T<S>;
     const TreeModel& model = d_.model;
-    const TreeData& data = ws.data;
+    const TreeDataT<S>& data = ws.data;
     const Frame& fa = d_.frames[c.frame_a];
     const Frame& fb = d_.frames[c.frame_b];
-    FrameKinematics& ka = ws.ka;
-    FrameKinematics& kb = ws.kb;
+    FrameKinematicsT<S>& ka = ws.ka;
+    FrameKinematicsT<S>& kb = ws.kb;
     frame_kinematics(model, data, fa, gamma, ka);
     frame_kinematics(model, data, fb, gamma, kb);
     const int nv = model.nv;
-    const Vec3 zero = Vec3::Zero();
-    auto row = [&](int r, const Vec3& la, const Vec3& aa, const Vec3& lb, const Vec3& ab) {
-        double* a = A + static_cast<std::ptrdiff_t>(r) * nv;
-        for (int k = 0; k < nv; ++k) a[k] = 0.0;
+    const V3 zero = V3::Zero();
+    auto row = [&](int r, const V3& la, const V3& aa, const V3& lb, const V3& ab) {
+        S* a = A + static_cast<std::ptrdiff_t>(r) * nv;
+        for (int k = 0; k < nv; ++k) a[k] = S(0.0);
         if (fa.joint >= 0) add_jacobian_row(model, data, fa.joint, ka.oMf.p, la, aa, a);
         if (fb.joint >= 0) add_jacobian_row(model, data, fb.joint, kb.oMf.p, lb, ab, a);
     };
-    const Vec3& pa = ka.oMf.p;
-    const Vec3& pb = kb.oMf.p;
-    const Mat3& Ra = ka.oMf.R;
-    const Mat3& Rb = kb.oMf.R;
+    const V3& pa = ka.oMf.p;
+    const V3& pb = kb.oMf.p;
+    const Mat3T<S>& Ra = ka.oMf.R;
+    const Mat3T<S>& Rb = kb.oMf.R;
     switch (c.type) {
         case RowType::point:
         case RowType::weld:
         case RowType::hinge: {
             for (int i = 0; i < 3; ++i) {
-                const Vec3 e = Vec3::Unit(i);
+                const V3 e = V3::Unit(i);
                 if (rows) row(i, e, zero, -e, zero);
                 if (gamma) g[i] = ka.a[i] - kb.a[i];
                 if (phi) p[i] = pa[i] - pb[i];
             }
             if (c.type == RowType::weld) {
                 for (int i = 0; i < 3; ++i) {
-                    const Vec3 e = Vec3::Unit(i);
+                    const V3 e = V3::Unit(i);
                     if (rows) row(3 + i, zero, e, zero, -e);
                     if (gamma) g[3 + i] = ka.alpha[i] - kb.alpha[i];
                 }
-                if (phi) Eigen::Map<Vec3>(p + 3) = log3(Ra * Rb.transpose());
+                if (phi) Eigen::Map<V3>(p + 3) = log3<S>(Ra * Rb.transpose());
             } else if (c.type == RowType::hinge) {
-                const Vec3 Kb = Rb * c.axis;
+                const V3 Kb = Rb * c.axis;
                 for (int i = 0; i < 2; ++i) {
-                    const Vec3 U = Ra * (i == 0 ? c.u1 : c.u2);
-                    const Vec3 r = U.cross(Kb);
+                    const V3 U = Ra * (i == 0 ? c.u1 : c.u2);
+                    const V3 r = U.cross(Kb);
                     if (rows) row(3 + i, zero, r, zero, -r);
                     if (gamma) {
-                        const Vec3 rdot = ka.w.cross(U).cross(Kb) + U.cross(kb.w.cross(Kb));
+                        const V3 rdot = ka.w.cross(U).cross(Kb) + U.cross(kb.w.cross(Kb));
                         g[3 + i] = rdot.dot(ka.w - kb.w) + r.dot(ka.alpha - kb.alpha);
                     }
                     if (phi) p[3 + i] = U.dot(Kb);
@@ -302,28 +317,28 @@ void TreeProgram::frame_rows(const TreeConstraint& c, TreeWorkspace& ws, bool ro
         case RowType::planar_point:
         case RowType::planar_weld: {
             for (int i = 0; i < 2; ++i) {
-                const Vec3& e = i == 0 ? c.u1 : c.u2;
+                const V3 e = (i == 0 ? c.u1 : c.u2).template cast<S>();
                 if (rows) row(i, e, zero, -e, zero);
                 if (gamma) g[i] = e.dot(ka.a - kb.a);
                 if (phi) p[i] = e.dot(pa - pb);
             }
             if (c.type == RowType::planar_weld) {
-                const Vec3& n = c.axis;
+                const V3 n = c.axis.template cast<S>();
                 if (rows) row(2, zero, n, zero, -n);
                 if (gamma) g[2] = n.dot(ka.alpha - kb.alpha);
-                if (phi) p[2] = n.dot(log3(Ra * Rb.transpose()));
+                if (phi) p[2] = n.dot(log3<S>(Ra * Rb.transpose()));
             }
             return;
         }
         case RowType::point_on_plane:
         case RowType::contact: {
-            const Vec3 N = Ra * c.axis;
-            const Vec3 d = pb - pa;
-            const Vec3 Nxd = N.cross(d);
+            const V3 N = Ra * c.axis;
+            const V3 d = pb - pa;
+            const V3 Nxd = N.cross(d);
             if (rows) row(0, -N, Nxd, N, zero);
             if (gamma) {
-                const Vec3 dv = kb.v - ka.v;
-                const Vec3 Nd = ka.w.cross(N);
+                const V3 dv = kb.v - ka.v;
+                const V3 Nd = ka.w.cross(N);
                 g[0] = ka.alpha.dot(Nxd) + ka.w.dot(Nd.cross(d) + N.cross(dv)) + Nd.dot(dv) +
                        N.dot(kb.a - ka.a);
             }
@@ -338,12 +353,43 @@ Status TreeProgram::evaluate(double t, const double* q, const double* qd,
                              const std::uint8_t* active, unsigned need, Terms& out,
                              Workspace& wsb) const {
     TreeWorkspace& ws = static_cast<TreeWorkspace&>(wsb);
+    return eval<double>(t, q, qd, active, need, out, ws);
+}
+
+Status TreeProgram::evaluate_tangent(double t, const double* q, const double* qd, const double* dq,
+                                     const double* dqd, const std::uint8_t* active, unsigned need,
+                                     Terms& out, Terms& tangent, Workspace& wsb) const {
+    TreeWorkspace& ws = static_cast<TreeWorkspace&>(wsb);
+    const auto nq = static_cast<std::size_t>(d_.model.nq);
+    if (!ws.dual) {  // first use of this workspace for derivatives
+        ws.dual = std::make_unique<TreeScratch<Dual>>(d_);
+        ws.dq.assign(nq, Dual());
+        ws.dqd.assign(nq, Dual());
+        ws.dterms.resize(n_, k_, m_all_);
+    }
+    for (std::size_t i = 0; i < nq; ++i) {
+        ws.dq[i] = Dual(q[i], dq[i]);
+        ws.dqd[i] = Dual(qd[i], dqd[i]);
+    }
+    const Status st = eval<Dual>(t, ws.dq.data(), ws.dqd.data(), active, need, ws.dterms, *ws.dual);
+    if (st != Status::ok) return st;
+    split_dual(ws.dterms, need, out, tangent);
+    return Status::ok;
+}
+
+// The evaluation on the scalar S; the drivers are functions of t alone, evaluated in double.
+template <class S>
+Status TreeProgram::eval(double t, const S* q, const S* qd, const std::uint8_t* active, unsigned need,
+                         TermsOf<S>& out, TreeScratch<S>& ws) const {
+    using std::isfinite;
+    using MatS = typename TreeScratch<S>::MatS;
+    using VecS = typename TreeScratch<S>::VecS;
     const TreeModel& model = d_.model;
     const int nq = model.nq, nv = model.nv;
     Status st = normalize(q, ws);
     if (st != Status::ok) return st;
     for (int i = 0; i < nq; ++i)
-        if (!std::isfinite(qd[i])) return Status::not_finite;
+        if (!isfinite(qd[i])) return Status::not_finite;
     velocity_map(q, qd, ws);
 
     const bool want_M = need & NEED_M;
@@ -390,7 +436,7 @@ Status TreeProgram::evaluate(double t, const double* q, const double* qd,
         out.B.setZero();
         for (int c = 0; c < k_; ++c) {
             if (act_q_[c] >= 0) {
-                out.B(act_q_[c], c) = 1.0;
+                out.B(act_q_[c], c) = S(1.0);
                 continue;
             }
             const int iv = d_.actuated[c];
@@ -404,16 +450,16 @@ Status TreeProgram::evaluate(double t, const double* q, const double* qd,
     }
     if (!(want_rows || want_gamma || want_phi)) return Status::ok;
 
-    Mat& target = quat_ ? ws.Av : out.A;  // frame rows in velocity space
+    MatS& target = quat_ ? ws.Av : out.A;  // frame rows in velocity space
     for (std::size_t ci = 0; ci < d_.constraints.size(); ++ci) {
         if (active != nullptr && !active[ci]) continue;
         const TreeConstraint& c = d_.constraints[ci];
         const int r0 = constraints_[ci].row;
         const int dim = constraints_[ci].dim;
-        double* g = out.gamma.data() + r0;
-        double* p = out.phi.data() + r0;
+        S* g = out.gamma.data() + r0;
+        S* p = out.phi.data() + r0;
         if (c.type == RowType::unit_quaternion) {
-            const Eigen::Map<const Vec4> e(q + c.iq), ed(qd + c.iq);
+            const Eigen::Map<const Vec4T<S>> e(q + c.iq), ed(qd + c.iq);
             if (want_rows) {
                 out.A.row(r0).setZero();
                 for (int k = 0; k < 4; ++k) out.A(r0, c.iq + k) = e[k];
@@ -422,9 +468,9 @@ Status TreeProgram::evaluate(double t, const double* q, const double* qd,
             if (want_phi) p[0] = 0.5 * (e.squaredNorm() - 1.0);
         } else if (c.type == RowType::joint_coupling) {
             const auto& a = c.coef;
-            double val = q[c.iq] - c.ref1 - a[0], d1 = 0.0, d2 = 0.0, qd2 = 0.0;
+            S val = q[c.iq] - c.ref1 - a[0], d1 = S(0.0), d2 = S(0.0), qd2 = S(0.0);
             if (c.iq2 >= 0) {
-                const double x = q[c.iq2] - c.ref2;
+                const S x = q[c.iq2] - c.ref2;
                 val -= a[1] * x + a[2] * x * x + a[3] * x * x * x + a[4] * x * x * x * x;
                 d1 = a[1] + 2 * a[2] * x + 3 * a[3] * x * x + 4 * a[4] * x * x * x;
                 d2 = 2 * a[2] + 6 * a[3] * x + 12 * a[4] * x * x;
@@ -432,7 +478,7 @@ Status TreeProgram::evaluate(double t, const double* q, const double* qd,
             }
             if (want_rows) {
                 out.A.row(r0).setZero();
-                out.A(r0, c.iq) = 1.0;
+                out.A(r0, c.iq) = S(1.0);
                 if (c.iq2 >= 0) out.A(r0, c.iq2) -= d1;
             }
             if (want_gamma) g[0] = -d2 * qd2 * qd2;
@@ -441,9 +487,9 @@ Status TreeProgram::evaluate(double t, const double* q, const double* qd,
             const double s = c.coef[0];
             if (want_rows) {
                 out.A.row(r0).setZero();
-                out.A(r0, c.iq) = s;
+                out.A(r0, c.iq) = S(s);
             }
-            if (want_gamma) g[0] = 0.0;
+            if (want_gamma) g[0] = S(0.0);
             if (want_phi) p[0] = s * (q[c.iq] - c.ref1);
         } else if (c.type == RowType::joint_driver) {
             double f[3];
@@ -452,7 +498,7 @@ Status TreeProgram::evaluate(double t, const double* q, const double* qd,
             if (st != TimeFunction::EVAL_OK) return Status::not_finite;
             if (want_rows) {
                 out.A.row(r0).setZero();
-                out.A(r0, c.iq) = 1.0;
+                out.A(r0, c.iq) = S(1.0);
             }
             if (want_gamma) g[0] = -f[2];
             if (want_phi) p[0] = q[c.iq] - f[0];
@@ -464,7 +510,8 @@ Status TreeProgram::evaluate(double t, const double* q, const double* qd,
                 for (int r = 0; r < dim; ++r) apply_Tt(ws, ws.Av.row(r0 + r).data(), out.A.row(r0 + r).data());
         }
         if (need & NEED_VELOCITY)
-            for (int r = 0; r < dim; ++r) out.velocity[r0 + r] = out.A.row(r0 + r).dot(CVecMap(qd, nq));
+            for (int r = 0; r < dim; ++r)
+                out.velocity[r0 + r] = out.A.row(r0 + r).dot(Eigen::Map<const VecS>(qd, nq));
     }
     return Status::ok;
 }
@@ -495,7 +542,7 @@ Status TreeProgram::coriolis_matrix(const double* q, const double* qd, TreeWorks
         if (!std::isfinite(qd[i])) return Status::not_finite;
     velocity_map(q, qd, ws);
     forward_kinematics(model, ws.data, ws.qn.data(), true);
-    forward_motion(model, ws.data, ws.v.data(), nullptr);
+    forward_motion<double>(model, ws.data, ws.v.data(), nullptr);
     crba(model, ws.data, ws.Mv.data(), nv);
     Mat Cv = Mat::Zero(nv, nv);
     coriolis(model, ws.data, Cv.data(), nv);
@@ -524,7 +571,7 @@ Status TreeProgram::jacobian_dot(const double* q, const double* qd, const std::u
         if (!std::isfinite(qd[i])) return Status::not_finite;
     velocity_map(q, qd, ws);
     forward_kinematics(model, ws.data, ws.qn.data(), false);
-    forward_motion(model, ws.data, ws.v.data(), nullptr);
+    forward_motion<double>(model, ws.data, ws.v.data(), nullptr);
     Eigen::Map<Mat> out(Adot, m_all_, nq);
     Vec av(nv), adv(nv);
     const Vec3 zero = Vec3::Zero();
@@ -621,5 +668,8 @@ Status TreeProgram::jacobian_dot(const double* q, const double* qd, const std::u
     }
     return Status::ok;
 }
+
+template Status TreeProgram::normalize<double>(const double*, TreeScratch<double>&) const;
+template void TreeProgram::velocity_map<double>(const double*, const double*, TreeScratch<double>&) const;
 
 }  // namespace nonmin::rbd

@@ -46,22 +46,14 @@ bool TreeModel::has_quaternions() const {
     return false;
 }
 
-TreeData::TreeData(const TreeModel& model)
-    : oMi(model.joints.size()),
-      J(Eigen::Matrix<double, 6, Eigen::Dynamic>::Zero(6, model.nv)),
-      oI(model.joints.size()),
-      Ic(model.joints.size()),
-      ov(model.joints.size()),
-      oa(model.joints.size()),
-      of(model.joints.size()),
-      Bc(model.joints.size()) {}
-
-void forward_kinematics(const TreeModel& model, TreeData& data, const double* q, bool inertias) {
+template <class S>
+void forward_kinematics(const TreeModel& model, TreeDataT<S>& data, const S* q, bool inertias) {
+    using V3 = Vec3T<S>;
     const int nj = static_cast<int>(model.joints.size());
     for (int i = 0; i < nj; ++i) {
         const Joint& jt = model.joints[i];
-        const double* qi = q + jt.iq;
-        SE3 XJ;
+        const S* qi = q + jt.iq;
+        SE3T<S> XJ;
         switch (jt.type) {
             case JointType::revolute:
                 XJ.R = jt.axis_index >= 0 ? coordinate_rotation(jt.axis_index, qi[0])
@@ -71,58 +63,59 @@ void forward_kinematics(const TreeModel& model, TreeData& data, const double* q,
             case JointType::spherical: XJ.R = quaternion_rotation(qi); break;
             case JointType::free_flyer:
                 XJ.R = quaternion_rotation(qi + 3);
-                XJ.p = Vec3(qi[0], qi[1], qi[2]);
+                XJ.p = V3(qi[0], qi[1], qi[2]);
                 break;
-            case JointType::translation: XJ.p = Vec3(qi[0], qi[1], qi[2]); break;
+            case JointType::translation: XJ.p = V3(qi[0], qi[1], qi[2]); break;
         }
-        const SE3 liMi = jt.placement * XJ;
-        SE3& X = data.oMi[i];
+        const SE3T<S> liMi = jt.placement * XJ;
+        SE3T<S>& X = data.oMi[i];
         X = jt.parent >= 0 ? data.oMi[jt.parent] * liMi : liMi;
-        auto col = [&](int k, const Vec3& lin, const Vec3& ang) {
-            data.J.col(jt.iv + k).head<3>() = lin;
-            data.J.col(jt.iv + k).tail<3>() = ang;
+        auto col = [&](int k, const V3& lin, const V3& ang) {
+            data.J.col(jt.iv + k).template head<3>() = lin;
+            data.J.col(jt.iv + k).template tail<3>() = ang;
         };
         switch (jt.type) {
             case JointType::revolute: {
-                const Vec3 a = X.R * jt.axis;
+                const V3 a = X.R * jt.axis;
                 col(0, X.p.cross(a), a);
                 break;
             }
-            case JointType::prismatic: col(0, X.R * jt.axis, Vec3::Zero()); break;
+            case JointType::prismatic: col(0, X.R * jt.axis, V3::Zero()); break;
             case JointType::spherical:
                 for (int k = 0; k < 3; ++k) col(k, X.p.cross(X.R.col(k)), X.R.col(k));
                 break;
             case JointType::free_flyer:
                 for (int k = 0; k < 3; ++k) {
-                    col(k, X.R.col(k), Vec3::Zero());
+                    col(k, X.R.col(k), V3::Zero());
                     col(3 + k, X.p.cross(X.R.col(k)), X.R.col(k));
                 }
                 break;
             case JointType::translation:
-                for (int k = 0; k < 3; ++k) col(k, X.R.col(k), Vec3::Zero());
+                for (int k = 0; k < 3; ++k) col(k, X.R.col(k), V3::Zero());
                 break;
         }
-        if (inertias) data.oI[i] = Inertia::from_body(jt.mass, jt.com, jt.inertia, X);
+        if (inertias) data.oI[i] = InertiaT<S>::from_body(jt.mass, jt.com, jt.inertia, X);
     }
 }
 
-void forward_motion(const TreeModel& model, TreeData& data, const double* v, const double* a) {
+template <class S>
+void forward_motion(const TreeModel& model, TreeDataT<S>& data, const S* v, const S* a) {
     const int nj = static_cast<int>(model.joints.size());
     for (int i = 0; i < nj; ++i) {
         const Joint& jt = model.joints[i];
         const int nvj = joint_nv(jt.type);
-        Motion vJ, aJ;
+        MotionT<S> vJ, aJ;
         for (int k = 0; k < nvj; ++k) {
             const auto c = data.J.col(jt.iv + k);
-            vJ.lin += c.head<3>() * v[jt.iv + k];
-            vJ.ang += c.tail<3>() * v[jt.iv + k];
+            vJ.lin += c.template head<3>() * v[jt.iv + k];
+            vJ.ang += c.template tail<3>() * v[jt.iv + k];
             if (a != nullptr) {
-                aJ.lin += c.head<3>() * a[jt.iv + k];
-                aJ.ang += c.tail<3>() * a[jt.iv + k];
+                aJ.lin += c.template head<3>() * a[jt.iv + k];
+                aJ.ang += c.template tail<3>() * a[jt.iv + k];
             }
         }
-        Motion& vi = data.ov[i];
-        Motion& ai = data.oa[i];
+        MotionT<S>& vi = data.ov[i];
+        MotionT<S>& ai = data.oa[i];
         if (jt.parent >= 0) {
             vi = data.ov[jt.parent];
             ai = data.oa[jt.parent];
@@ -136,7 +129,8 @@ void forward_motion(const TreeModel& model, TreeData& data, const double* v, con
     }
 }
 
-void crba(const TreeModel& model, TreeData& data, double* M, int ld) {
+template <class S>
+void crba(const TreeModel& model, TreeDataT<S>& data, S* M, int ld) {
     const int nj = static_cast<int>(model.joints.size());
     for (int i = 0; i < nj; ++i) data.Ic[i] = data.oI[i];
     for (int i = nj - 1; i >= 0; --i) {
@@ -144,18 +138,18 @@ void crba(const TreeModel& model, TreeData& data, double* M, int ld) {
         const int nvi = joint_nv(jt.type);
         for (int c = 0; c < nvi; ++c) {
             const int col = jt.iv + c;
-            Motion S;
-            S.lin = data.J.col(col).head<3>();
-            S.ang = data.J.col(col).tail<3>();
-            const Force F = data.Ic[i] * S;
+            MotionT<S> Sm;
+            Sm.lin = data.J.col(col).template head<3>();
+            Sm.ang = data.J.col(col).template tail<3>();
+            const ForceT<S> F = data.Ic[i] * Sm;
             for (int j = i; j >= 0; j = model.joints[j].parent) {
                 const Joint& js = model.joints[j];
                 const int nvj = joint_nv(js.type);
                 for (int d = 0; d < nvj; ++d) {
                     const int row = js.iv + d;
                     if (j == i && d > c) continue;  // upper part of the diagonal block below
-                    const double val =
-                        data.J.col(row).head<3>().dot(F.lin) + data.J.col(row).tail<3>().dot(F.ang);
+                    const S val = data.J.col(row).template head<3>().dot(F.lin) +
+                                  data.J.col(row).template tail<3>().dot(F.ang);
                     M[row * ld + col] = val;
                     M[col * ld + row] = val;
                 }
@@ -166,10 +160,11 @@ void crba(const TreeModel& model, TreeData& data, double* M, int ld) {
     for (int k = 0; k < model.nv; ++k) M[k * ld + k] += model.armature[k];
 }
 
-void rnea(const TreeModel& model, TreeData& data, const double* a, double* tau) {
+template <class S>
+void rnea(const TreeModel& model, TreeDataT<S>& data, const S* a, S* tau) {
     const int nj = static_cast<int>(model.joints.size());
     for (int i = 0; i < nj; ++i) {
-        Motion ag = data.oa[i];
+        MotionT<S> ag = data.oa[i];
         ag.lin -= model.gravity;
         data.of[i] = data.oI[i] * ag;
         data.of[i] += cross_force(data.ov[i], data.oI[i] * data.ov[i]);
@@ -179,7 +174,8 @@ void rnea(const TreeModel& model, TreeData& data, const double* a, double* tau) 
         const int nvi = joint_nv(jt.type);
         for (int c = 0; c < nvi; ++c) {
             const auto col = data.J.col(jt.iv + c);
-            tau[jt.iv + c] = col.head<3>().dot(data.of[i].lin) + col.tail<3>().dot(data.of[i].ang);
+            tau[jt.iv + c] =
+                col.template head<3>().dot(data.of[i].lin) + col.template tail<3>().dot(data.of[i].ang);
         }
         if (jt.parent >= 0) data.of[jt.parent] += data.of[i];
     }
@@ -187,18 +183,22 @@ void rnea(const TreeModel& model, TreeData& data, const double* a, double* tau) 
         for (int k = 0; k < model.nv; ++k) tau[k] += model.armature[k] * a[k];
 }
 
-double potential_energy(const TreeModel& model, const TreeData& data) {
-    Vec3 h = Vec3::Zero();
+template <class S>
+S potential_energy(const TreeModel& model, const TreeDataT<S>& data) {
+    Vec3T<S> h = Vec3T<S>::Zero();
     for (std::size_t i = 0; i < model.joints.size(); ++i) h += data.oI[i].h;
     return -model.gravity.dot(h);
 }
 
-SE3 frame_placement(const TreeModel& /*model*/, const TreeData& data, const Frame& frame) {
-    return frame.joint >= 0 ? data.oMi[frame.joint] * frame.placement : frame.placement;
+template <class S>
+SE3T<S> frame_placement(const TreeModel& /*model*/, const TreeDataT<S>& data, const Frame& frame) {
+    if (frame.joint >= 0) return data.oMi[frame.joint] * frame.placement;
+    return SE3T<S>{frame.placement.R.template cast<S>(), frame.placement.p.template cast<S>()};
 }
 
-void frame_kinematics(const TreeModel& model, const TreeData& data, const Frame& frame, bool motion,
-                      FrameKinematics& out) {
+template <class S>
+void frame_kinematics(const TreeModel& model, const TreeDataT<S>& data, const Frame& frame, bool motion,
+                      FrameKinematicsT<S>& out) {
     out.oMf = frame_placement(model, data, frame);
     if (!motion) return;
     if (frame.joint < 0) {
@@ -208,27 +208,43 @@ void frame_kinematics(const TreeModel& model, const TreeData& data, const Frame&
         out.alpha.setZero();
         return;
     }
-    const Vec3& p = out.oMf.p;
-    const Motion& v = data.ov[frame.joint];
-    const Motion& a = data.oa[frame.joint];
+    const Vec3T<S>& p = out.oMf.p;
+    const MotionT<S>& v = data.ov[frame.joint];
+    const MotionT<S>& a = data.oa[frame.joint];
     out.w = v.ang;
     out.v = v.lin + v.ang.cross(p);
     out.alpha = a.ang;
     out.a = a.lin + a.ang.cross(p) + out.w.cross(out.v);
 }
 
-void add_jacobian_row(const TreeModel& model, const TreeData& data, int joint, const Vec3& p,
-                      const Vec3& c_lin, const Vec3& c_ang, double* row) {
-    const Vec3 wa = c_ang + p.cross(c_lin);
+template <class S>
+void add_jacobian_row(const TreeModel& model, const TreeDataT<S>& data, int joint, const Vec3T<S>& p,
+                      const Vec3T<S>& c_lin, const Vec3T<S>& c_ang, S* row) {
+    const Vec3T<S> wa = c_ang + p.cross(c_lin);
     for (int j = joint; j >= 0; j = model.joints[j].parent) {
         const Joint& jt = model.joints[j];
         const int nvj = joint_nv(jt.type);
         for (int k = 0; k < nvj; ++k) {
             const auto col = data.J.col(jt.iv + k);
-            row[jt.iv + k] += col.head<3>().dot(c_lin) + col.tail<3>().dot(wa);
+            row[jt.iv + k] += col.template head<3>().dot(c_lin) + col.template tail<3>().dot(wa);
         }
     }
 }
+
+#define NONMIN_RBD_INSTANTIATE(S)                                                                     \
+    template void forward_kinematics<S>(const TreeModel&, TreeDataT<S>&, const S*, bool);             \
+    template void forward_motion<S>(const TreeModel&, TreeDataT<S>&, const S*, const S*);             \
+    template void crba<S>(const TreeModel&, TreeDataT<S>&, S*, int);                                   \
+    template void rnea<S>(const TreeModel&, TreeDataT<S>&, const S*, S*);                              \
+    template S potential_energy<S>(const TreeModel&, const TreeDataT<S>&);                             \
+    template SE3T<S> frame_placement<S>(const TreeModel&, const TreeDataT<S>&, const Frame&);          \
+    template void frame_kinematics<S>(const TreeModel&, const TreeDataT<S>&, const Frame&, bool,       \
+                                      FrameKinematicsT<S>&);                                           \
+    template void add_jacobian_row<S>(const TreeModel&, const TreeDataT<S>&, int, const Vec3T<S>&,     \
+                                      const Vec3T<S>&, const Vec3T<S>&, S*);
+NONMIN_RBD_INSTANTIATE(double)
+NONMIN_RBD_INSTANTIATE(Dual)
+#undef NONMIN_RBD_INSTANTIATE
 
 namespace {
 

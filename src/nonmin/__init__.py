@@ -13,6 +13,8 @@ library     named mechanisms with consistent initial states (IFToMM benchmarks a
 sim         simulation through singular configurations and switching topology
 analysis    inverse dynamics and reactions by name
 control     controllers in dependent coordinates (regulation, tracking, hybrid force)
+linear      derivatives, linearization, equilibria, modes and LQR on the constraint manifold
+            (imported on first use: ``nonmin.linearize``, ``nonmin.equilibrium``, ``nonmin.modes``)
 viz         plots and animations (extra ``plot``)
 io          scenario files
 sweeps      parameter sweeps: batched runs, Zarr store, Dask (extra ``sweep``)
@@ -56,6 +58,27 @@ from .sim import simulate as simulate
 from .sim import simulate_batch as simulate_batch
 from .sweeps import sweep as sweep
 
+#: Names imported on first access (module ``__getattr__``): nonmin.linear and its entry points.
+_LAZY = {
+    "linear": ("nonmin.linear", None),
+    "linearize": ("nonmin.linear", "linearize"),
+    "equilibrium": ("nonmin.linear", "equilibrium"),
+    "modes": ("nonmin.linear", "modes"),
+}
+
+
+def __getattr__(name: str) -> object:
+    spec = _LAZY.get(name)
+    if spec is None:
+        raise AttributeError(f"module 'nonmin' has no attribute {name!r}")
+    from importlib import import_module
+
+    mod = import_module(spec[0])
+    value = mod if spec[1] is None else getattr(mod, spec[1])
+    globals()[name] = value
+    return value
+
+
 __all__ = [
     "Activate",
     "Deactivate",
@@ -74,13 +97,17 @@ __all__ = [
     "constraint_force",
     "control",
     "core",
+    "equilibrium",
     "errors",
     "forward_dynamics",
     "impact_map",
     "inverse_dynamics",
     "library",
+    "linear",
+    "linearize",
     "load_trajectory",
     "model",
+    "modes",
     "reactions",
     "sim",
     "simulate",

@@ -27,6 +27,7 @@
 #include <string>
 #include <vector>
 
+#include "dual.hpp"
 #include "program.hpp"
 #include "timefn.hpp"
 
@@ -108,6 +109,9 @@ struct PlanarDescription {
 struct PlanarWorkspace : Workspace {
     std::vector<double> c, s;  // cos θ, sin θ per body
     std::vector<double> treg;  // registers of the drivers' expression tapes
+    // evaluate_tangent's dual scratch (sized at its first use)
+    std::vector<Dual> dq, dqd, dc, ds;
+    TermsOf<Dual> dterms;
 };
 
 class PlanarProgram final : public Program {
@@ -117,6 +121,10 @@ class PlanarProgram final : public Program {
 
     Status evaluate(double t, const double* q, const double* qd, const std::uint8_t* active,
                     unsigned need, Terms& out, Workspace& ws) const override;
+    Status evaluate_tangent(double t, const double* q, const double* qd, const double* dq, const double* dqd,
+                            const std::uint8_t* active, unsigned need, Terms& out, Terms& tangent,
+                            Workspace& ws) const override;
+    bool differentiable() const override { return true; }
     std::unique_ptr<Workspace> make_workspace() const override;
     bool constant_mass() const override { return true; }
     bool thread_safe() const override { return thread_safe_; }
@@ -126,6 +134,12 @@ class PlanarProgram final : public Program {
     const Vec& gravity_force() const { return fg_; }
 
   private:
+    // The evaluation on the scalar S (double: evaluate; Dual: evaluate_tangent); cs, sn: the
+    // cos θ, sin θ scratch per body; treg: the drivers' registers (functions of t, in double).
+    template <class S>
+    Status eval(double t, const S* q, const S* qd, const std::uint8_t* active, unsigned need,
+                TermsOf<S>& out, S* cs, S* sn, double* treg) const;
+
     PlanarDescription d_;
     Vec mdiag_;  // diagonal of M
     Vec fg_;     // gravity force (constant)

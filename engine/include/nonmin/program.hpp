@@ -41,18 +41,35 @@ enum Need : unsigned {
 
 // Outputs of one evaluation. Sized once by Program::make_terms(); evaluate() writes in place.
 // Rows of A, gamma, phi, velocity of inactive constraints are left as they are (not read).
-struct Terms {
-    Mat M;          // n × n, symmetric
-    Vec h;          // n
-    Vec f_passive;  // n
-    Mat B;          // n × k
-    Mat A;          // m_all × n
-    Vec gamma;      // m_all
-    Vec phi;        // m_all
-    Vec velocity;   // m_all
-    double kinetic = 0.0;
-    double potential = 0.0;
+// Templated on the scalar: the programs that differentiate (evaluate_tangent) evaluate the
+// same code on dual numbers (dual.hpp) into a TermsOf<Dual>.
+template <class S>
+struct TermsOf {
+    using MatS = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+    using VecS = Eigen::Matrix<S, Eigen::Dynamic, 1>;
+    MatS M;          // n × n, symmetric
+    VecS h;          // n
+    VecS f_passive;  // n
+    MatS B;          // n × k
+    MatS A;          // m_all × n
+    VecS gamma;      // m_all
+    VecS phi;        // m_all
+    VecS velocity;   // m_all
+    S kinetic = S(0.0);
+    S potential = S(0.0);
+
+    void resize(int n, int k, int m_all) {
+        M = MatS::Zero(n, n);
+        h = VecS::Zero(n);
+        f_passive = VecS::Zero(n);
+        B = MatS::Zero(n, k);
+        A = MatS::Zero(m_all, n);
+        gamma = VecS::Zero(m_all);
+        phi = VecS::Zero(m_all);
+        velocity = VecS::Zero(m_all);
+    }
 };
+using Terms = TermsOf<double>;
 
 // Preallocated scratch of one Program, one per thread (a Program itself is immutable and may be
 // shared between threads).
@@ -78,16 +95,22 @@ class Program {
 
     Terms make_terms() const {
         Terms T;
-        T.M = Mat::Zero(n_, n_);
-        T.h = Vec::Zero(n_);
-        T.f_passive = Vec::Zero(n_);
-        T.B = Mat::Zero(n_, k_);
-        T.A = Mat::Zero(m_all_, n_);
-        T.gamma = Vec::Zero(m_all_);
-        T.phi = Vec::Zero(m_all_);
-        T.velocity = Vec::Zero(m_all_);
+        T.resize(n_, k_, m_all_);
         return T;
     }
+
+    // Forward-mode derivatives (dual.hpp; docs/theory.md "Derivatives"): what `need` asks at
+    // (t, q, qd) into `out` and its exact directional derivative along (dq, dqd) into
+    // `tangent` (same layout, energies included). Programs not templated on the scalar return
+    // Status::not_differentiable.
+    virtual Status evaluate_tangent(double t, const double* q, const double* qd, const double* dq,
+                                    const double* dqd, const std::uint8_t* active, unsigned need,
+                                    Terms& out, Terms& tangent, Workspace& ws) const {
+        (void)t, (void)q, (void)qd, (void)dq, (void)dqd, (void)active, (void)need, (void)out,
+            (void)tangent, (void)ws;
+        return Status::not_differentiable;
+    }
+    virtual bool differentiable() const { return false; }
 
     // True when M does not depend on q (planar absolute coordinates): the loop may validate and
     // factor it once.

@@ -25,6 +25,7 @@ enum class Status : int {
     not_symmetric = 3,       // M fails the symmetry test (SYMMETRY_RTOL)
     bad_shape = 4,
     callback_error = 5,      // a Python callback raised (its exception is kept by the binding)
+    not_differentiable = 6,  // the program has no forward-mode evaluation (Program::evaluate_tangent)
 };
 
 // Thrown inside the engine for errors that cannot be a status (programming errors, bad model

@@ -67,56 +67,81 @@ struct TreeModel {
 };
 
 // Mutable scratch of the algorithms, sized once from the model (no allocation afterwards).
-struct TreeData {
-    explicit TreeData(const TreeModel& model);
+// Templated on the scalar (double; Dual for forward-mode derivatives, dual.hpp).
+template <class S>
+struct TreeDataT {
+    explicit TreeDataT(const TreeModel& model)
+        : oMi(model.joints.size()),
+          J(Eigen::Matrix<S, 6, Eigen::Dynamic>::Zero(6, model.nv)),
+          oI(model.joints.size()),
+          Ic(model.joints.size()),
+          ov(model.joints.size()),
+          oa(model.joints.size()),
+          of(model.joints.size()),
+          Bc(model.joints.size()) {}
 
-    std::vector<SE3> oMi;       // joint placements in the world
-    Eigen::Matrix<double, 6, Eigen::Dynamic> J;  // 6 × nv: world joint motion subspaces
-    std::vector<Inertia> oI;    // body inertias in world axes at the world origin
-    std::vector<Inertia> Ic;    // composite (subtree) inertias (crba scratch)
-    std::vector<Motion> ov;     // body spatial velocities
-    std::vector<Motion> oa;     // body spatial accelerations (without gravity)
-    std::vector<Force> of;      // subtree forces (rnea scratch)
-    std::vector<Eigen::Matrix<double, 6, 6>> Bc;  // composite Coriolis operators (coriolis)
+    std::vector<SE3T<S>> oMi;       // joint placements in the world
+    Eigen::Matrix<S, 6, Eigen::Dynamic> J;  // 6 × nv: world joint motion subspaces
+    std::vector<InertiaT<S>> oI;    // body inertias in world axes at the world origin
+    std::vector<InertiaT<S>> Ic;    // composite (subtree) inertias (crba scratch)
+    std::vector<MotionT<S>> ov;     // body spatial velocities
+    std::vector<MotionT<S>> oa;     // body spatial accelerations (without gravity)
+    std::vector<ForceT<S>> of;      // subtree forces (rnea scratch)
+    std::vector<Eigen::Matrix<S, 6, 6>> Bc;  // composite Coriolis operators (coriolis)
 };
+using TreeData = TreeDataT<double>;
 
-// Placements oMi, world motion subspaces J and (when `inertias`) world body inertias oI at q
-// (nq). crba, rnea and potential_energy need the inertias; frame kinematics do not.
-void forward_kinematics(const TreeModel& model, TreeData& data, const double* q,
-                        bool inertias = true);
+// The algorithms below marked "(S)" are templates on the scalar, instantiated for double and
+// Dual in rbd_tree.cpp; the others are double only.
 
-// Spatial velocities ν_i and accelerations α_i (without gravity) for Pinocchio's joint
+// (S) Placements oMi, world motion subspaces J and (when `inertias`) world body inertias oI at
+// q (nq). crba, rnea and potential_energy need the inertias; frame kinematics do not.
+template <class S>
+void forward_kinematics(const TreeModel& model, TreeDataT<S>& data, const S* q, bool inertias = true);
+
+// (S) Spatial velocities ν_i and accelerations α_i (without gravity) for Pinocchio's joint
 // velocity v and acceleration a (nv each; a == nullptr means a = 0). Needs forward_kinematics.
-void forward_motion(const TreeModel& model, TreeData& data, const double* v, const double* a);
+template <class S>
+void forward_motion(const TreeModel& model, TreeDataT<S>& data, const S* v, const S* a);
 
-// Joint-space inertia M (nv × nv, full symmetric, armature on the diagonal): the composite
+// (S) Joint-space inertia M (nv × nv, full symmetric, armature on the diagonal): the composite
 // rigid-body algorithm, M_ij = J_iᵀ Ic_j J_j for i in the support of j. Needs forward_kinematics.
-void crba(const TreeModel& model, TreeData& data, double* M, int ld);
+template <class S>
+void crba(const TreeModel& model, TreeDataT<S>& data, S* M, int ld);
 
-// Inverse dynamics τ = M a + C(q, v) v + g(q) (Pinocchio's rnea, armature included) from the
-// velocities and accelerations of forward_motion(v, a), with gravity; `a` is the same joint
+// (S) Inverse dynamics τ = M a + C(q, v) v + g(q) (Pinocchio's rnea, armature included) from
+// the velocities and accelerations of forward_motion(v, a), with gravity; `a` is the same joint
 // acceleration (nullptr: 0), for the armature term. τ has nv entries.
-void rnea(const TreeModel& model, TreeData& data, const double* a, double* tau);
+template <class S>
+void rnea(const TreeModel& model, TreeDataT<S>& data, const S* a, S* tau);
 
-// Gravitational potential energy −Σ m_i gᵀ c_i. Needs forward_kinematics.
-double potential_energy(const TreeModel& model, const TreeData& data);
+// (S) Gravitational potential energy −Σ m_i gᵀ c_i. Needs forward_kinematics.
+template <class S>
+S potential_energy(const TreeModel& model, const TreeDataT<S>& data);
 
 // A frame's world placement, and its world-aligned kinematics (LOCAL_WORLD_ALIGNED in
 // Pinocchio): origin velocity, angular velocity, classical acceleration of the origin and
 // angular acceleration, from forward_motion.
-struct FrameKinematics {
-    SE3 oMf;
-    Vec3 v = Vec3::Zero(), w = Vec3::Zero(), a = Vec3::Zero(), alpha = Vec3::Zero();
+template <class S>
+struct FrameKinematicsT {
+    SE3T<S> oMf;
+    Vec3T<S> v = Vec3T<S>::Zero(), w = Vec3T<S>::Zero(), a = Vec3T<S>::Zero(), alpha = Vec3T<S>::Zero();
 };
-SE3 frame_placement(const TreeModel& model, const TreeData& data, const Frame& frame);
-void frame_kinematics(const TreeModel& model, const TreeData& data, const Frame& frame,
-                      bool motion, FrameKinematics& out);
+using FrameKinematics = FrameKinematicsT<double>;
+// (S)
+template <class S>
+SE3T<S> frame_placement(const TreeModel& model, const TreeDataT<S>& data, const Frame& frame);
+// (S)
+template <class S>
+void frame_kinematics(const TreeModel& model, const TreeDataT<S>& data, const Frame& frame,
+                      bool motion, FrameKinematicsT<S>& out);
 
-// row[0:nv] += c_linᵀ Jp + c_angᵀ Jω with Jp, Jω the LOCAL_WORLD_ALIGNED Jacobian of the point
-// p rigidly attached to `joint` (its linear rows at p, its angular rows): one constraint row
-// contributed by one frame. Touches only the columns of the joint's support.
-void add_jacobian_row(const TreeModel& model, const TreeData& data, int joint, const Vec3& p,
-                      const Vec3& c_lin, const Vec3& c_ang, double* row);
+// (S) row[0:nv] += c_linᵀ Jp + c_angᵀ Jω with Jp, Jω the LOCAL_WORLD_ALIGNED Jacobian of the
+// point p rigidly attached to `joint` (its linear rows at p, its angular rows): one constraint
+// row contributed by one frame. Touches only the columns of the joint's support.
+template <class S>
+void add_jacobian_row(const TreeModel& model, const TreeDataT<S>& data, int joint, const Vec3T<S>& p,
+                      const Vec3T<S>& c_lin, const Vec3T<S>& c_ang, S* row);
 
 // Christoffel-consistent Coriolis matrix C_v (nv × nv, row-major, leading dimension ld) at the
 // velocities of forward_motion: C_v v are rnea's velocity terms and Ṁ_v − 2 C_v is skew. With

@@ -30,6 +30,7 @@
 #include <string>
 #include <vector>
 
+#include "../dual.hpp"
 #include "../program.hpp"
 #include "../timefn.hpp"
 #include "tree.hpp"
@@ -74,17 +75,29 @@ struct TreeDescription {
     std::vector<TimeFunction> drivers;        // prescribed motions of joint_driver rows
 };
 
-struct TreeWorkspace : Workspace {
-    explicit TreeWorkspace(const TreeDescription& d);
-    TreeData data;
-    Vec qn, v, a0, tau, fv;
-    Mat Mv;  // nv × nv
-    Mat Av;  // m_all × nv (frame rows in velocity space, robots with quaternions)
-    std::vector<Mat3> R;     // per joint: rotation of its quaternion (free flyer, spherical)
-    std::vector<Mat34> Tq;   // per joint: 2 G(ε) / |ε|²
-    Mat Y;                   // 7 × nv scratch of the congruence (T_bᵀ M_v rows of one block)
-    FrameKinematics ka, kb;
-    std::vector<double> treg;  // registers of the drivers' expression tapes
+// The scratch of one evaluation on the scalar S (double; Dual for evaluate_tangent).
+template <class S>
+struct TreeScratch {
+    using VecS = Eigen::Matrix<S, Eigen::Dynamic, 1>;
+    using MatS = Eigen::Matrix<S, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+    explicit TreeScratch(const TreeDescription& d);
+    TreeDataT<S> data;
+    VecS qn, v, a0, tau, fv;
+    MatS Mv;  // nv × nv
+    MatS Av;  // m_all × nv (frame rows in velocity space, robots with quaternions)
+    std::vector<Mat3T<S>> R;     // per joint: rotation of its quaternion (free flyer, spherical)
+    std::vector<Mat34T<S>> Tq;   // per joint: 2 G(ε) / |ε|²
+    MatS Y;                      // 7 × nv scratch of the congruence (T_bᵀ M_v rows of one block)
+    FrameKinematicsT<S> ka, kb;
+    std::vector<double> treg;    // registers of the drivers' expression tapes (functions of t)
+};
+
+struct TreeWorkspace : Workspace, TreeScratch<double> {
+    explicit TreeWorkspace(const TreeDescription& d) : TreeScratch<double>(d) {}
+    // evaluate_tangent's scratch: dual copies of the state and of the terms (made at first use)
+    std::unique_ptr<TreeScratch<Dual>> dual;
+    std::vector<Dual> dq, dqd;
+    TermsOf<Dual> dterms;
 };
 
 class TreeProgram : public Program {
@@ -93,6 +106,10 @@ class TreeProgram : public Program {
 
     Status evaluate(double t, const double* q, const double* qd, const std::uint8_t* active,
                     unsigned need, Terms& out, Workspace& ws) const override;
+    Status evaluate_tangent(double t, const double* q, const double* qd, const double* dq, const double* dqd,
+                            const std::uint8_t* active, unsigned need, Terms& out, Terms& tangent,
+                            Workspace& ws) const override;
+    bool differentiable() const override { return true; }
     std::unique_ptr<Workspace> make_workspace() const override;
 
     const TreeDescription& description() const { return d_; }
@@ -102,8 +119,10 @@ class TreeProgram : public Program {
     // ws.qn = q with every quaternion divided by its norm (Status::not_finite if one is zero or
     // q is not finite) and the blocks of T (ws.R, ws.Tq); then the velocity map v = T(q) qd and
     // a0 = Ṫ(q, qd) qd. Used by evaluate(); public for the bindings' kinematics queries.
-    Status normalize(const double* q, TreeWorkspace& ws) const;
-    void velocity_map(const double* q, const double* qd, TreeWorkspace& ws) const;
+    template <class S>
+    Status normalize(const S* q, TreeScratch<S>& ws) const;
+    template <class S>
+    void velocity_map(const S* q, const S* qd, TreeScratch<S>& ws) const;
 
     // The Christoffel Coriolis matrix in q: C = Tᵀ C_v T + Tᵀ M_v Ṫ (n × n, row-major) at
     // (q, qd), and Ȧ = dA/dt along qd (m_all × n; rows of inactive constraints untouched):
@@ -114,12 +133,18 @@ class TreeProgram : public Program {
                         TreeWorkspace& ws, double* Adot) const;
 
   private:
+    // The evaluation on the scalar S (double: evaluate; Dual: evaluate_tangent).
+    template <class S>
+    Status eval(double t, const S* q, const S* qd, const std::uint8_t* active, unsigned need,
+                TermsOf<S>& out, TreeScratch<S>& ws) const;
     // aq += av Ṫ(q, qd) (a row nv -> nq).
     void add_Tdot_row(const TreeWorkspace& ws, const double* q, const double* qd, const double* av,
                       double* aq) const;
     // fq = Tᵀ fv (nv -> nq); also a row a_v of A_v to the row a_v T of A.
-    void apply_Tt(const TreeWorkspace& ws, const double* fv, double* fq) const;
-    void congruence(TreeWorkspace& ws, double* M) const;  // M = Tᵀ M_v T (symmetrized)
+    template <class S>
+    void apply_Tt(const TreeScratch<S>& ws, const S* fv, S* fq) const;
+    template <class S>
+    void congruence(TreeScratch<S>& ws, S* M) const;  // M = Tᵀ M_v T (symmetrized)
 
     // T is the identity on runs of coordinates (iq .. iq+len ↔ iv .. iv+len) and a small block
     // on each quaternion joint (quaternion qs..qs+4 ↔ angular velocity a..a+3; free flyer also
@@ -136,13 +161,15 @@ class TreeProgram : public Program {
         int nq() const { return free ? 7 : 4; }
     };
     // T_b (nv × nq of a quaternion block) entry (r, c).
-    static double tb(const TreeWorkspace& ws, const QuatBlock& b, int r, int c);
+    template <class S>
+    static S tb(const TreeScratch<S>& ws, const QuatBlock& b, int r, int c);
     std::vector<Run> runs_;
     std::vector<QuatBlock> qblocks_;
     std::vector<int> act_q_;  // per actuator: its coordinate when T is the identity there, else −1
     // Rows, γ and φ of one frame constraint (A rows in velocity space, nv columns).
-    void frame_rows(const TreeConstraint& c, TreeWorkspace& ws, bool rows, bool gamma, bool phi,
-                    double* A, double* g, double* p) const;
+    template <class S>
+    void frame_rows(const TreeConstraint& c, TreeScratch<S>& ws, bool rows, bool gamma, bool phi, S* A,
+                    S* g, S* p) const;
 
     TreeDescription d_;
     bool quat_ = false;

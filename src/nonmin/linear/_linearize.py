@@ -1,0 +1,564 @@
+"""Linearization of the projection dynamics on the tangent space of the constraint manifold.
+
+State coordinates (``docs/linear.md``). With ``Z_q`` (n × n_z) an orthonormal basis of N(A_h)
+at the operating point (A_h: the active rows with a position level — holonomic, rheonomic,
+unilateral) and ``Z`` (n × n_v) one of N(A) (all active rows, nonholonomic included):
+
+    z = Z_qᵀ (q − q₀)  ∈ R^{n_z},     v = Zᵀ q̇  ∈ R^{n_v},     x = (z, v).
+
+These are exact local coordinates of the state manifold ``{φ(q) = 0, A(q) q̇ = 0}`` (a graph
+over its tangent space), so ``ż = Z_qᵀ q̇`` and ``v̇ = Zᵀ q̈`` hold exactly. A tangent vector
+``(δz, δv)`` is the state deviation
+
+    δq = Z_q δz,       δq̇ = Z δv + K Z_q δz,     K δq = −(DA)⁺ D (∂A/∂q · δq) q̇₀,
+
+where ``K`` is the curvature (second-order geometry) of the manifold: differentiating
+``A(q) q̇ = 0`` keeps the perturbed velocity admissible (it vanishes at rest). Then
+
+    δż = Z_qᵀ (Z δv + K Z_q δz),
+    δv̇ = Zᵀ (∂q̈/∂q δq + ∂q̈/∂q̇ δq̇ + ∂q̈/∂f B_f δu),
+
+with the exact derivatives of :mod:`._derivatives` (forward mode, analytic kernel). For
+holonomic systems ``Z_q = Z`` and ``δż = δv``; for nonholonomic rows n_z > n_v. At a singular
+configuration N(A) is larger than the tangent space of any branch through the point: the
+linearization uses N(A(q₀)) (the span of the tangents of all branches; the rank-r solution of
+the kernel there) and says so (:attr:`LinearSystem.singular`, :attr:`LinearSystem.note`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..core.linalg import DEFAULT_RTOL, range_basis, resolve_rtol
+from ..errors import InputError, MissingDependencyError, ModelError, ShapeError
+from ..model import Model
+from ._derivatives import _kernel_point, _kernel_tangent, _vector, term_tangents
+
+FloatArray = NDArray[np.float64]
+
+__all__ = [
+    "Equilibrium",
+    "LinearSystem",
+    "Modes",
+    "equilibrium",
+    "linearize",
+    "modes",
+]
+
+#: Relative step of the configurations probed near q₀ to tell a singular configuration (rank of
+#: A rises at first order along a tangent direction) from redundant constraints (it does not:
+#: off the manifold by ~step², far below the rank tolerance).
+SINGULAR_PROBE = 1e-6
+
+
+@dataclass(frozen=True)
+class LinearSystem:
+    """A linearization ``ẋ = A x + B δu``, ``y = C x + D δu`` in tangent coordinates.
+
+    Attributes
+    ----------
+    A : ndarray, shape (n_x, n_x)
+        State matrix, ``n_x = n_z + n_v``, state ``x = (z, v)`` (module docstring).
+    B : ndarray, shape (n_x, p)
+        Input matrix of the p inputs.
+    C : ndarray, shape (2n, n_x)
+        Output map to the dependent coordinates: ``y = (δq, δq̇)``.
+    D : ndarray, shape (2n, p)
+        Zero.
+    q, qd : ndarray, shape (n,)
+        Operating point.
+    u : ndarray, shape (k,)
+        Actuator inputs at the operating point.
+    t : float
+    active : frozenset of str
+    inputs : str
+        ``"actuators"`` (δu are the actuator forces), ``"forces"`` (generalized forces) or
+        ``"matrix"`` (the columns of a given input map).
+    input_map : ndarray, shape (n, p)
+        Generalized force of each input (``B(q₀)`` for actuators).
+    Zq : ndarray, shape (n, n_z)
+        Orthonormal basis of N(A_h(q₀)): ``δq = Zq z``.
+    Zv : ndarray, shape (n, n_v)
+        Orthonormal basis of N(A(q₀)): ``δq̇ = Zv v + Kq z``.
+    Kq : ndarray, shape (n, n_z)
+        Curvature term of the velocity map (zero at rest).
+    drift : ndarray, shape (n_x,)
+        ``ẋ`` at the operating point (zero at an equilibrium): the system is affine,
+        ``ẋ = drift + A x + B δu``.
+    rank : int
+        Rank of the active A at q₀ used by the kernel.
+    generic_rank : int
+        Largest rank of A found at configurations 1e-6 away along the tangent space.
+    singular : bool
+        ``rank < generic_rank``: q₀ is a singular configuration (the tangent space used is
+        N(A(q₀)), larger than any branch's).
+    note : str
+        Which tangent space was used, in words.
+    """
+
+    A: FloatArray
+    B: FloatArray
+    C: FloatArray
+    D: FloatArray
+    q: FloatArray
+    qd: FloatArray
+    u: FloatArray
+    t: float
+    active: frozenset[str]
+    inputs: str
+    input_map: FloatArray
+    Zq: FloatArray
+    Zv: FloatArray
+    Kq: FloatArray
+    drift: FloatArray
+    rank: int
+    generic_rank: int
+    singular: bool
+    note: str = field(default="")
+
+    @property
+    def tangent_dim(self) -> int:
+        """n_z: dimension of the configuration tangent space used."""
+        return int(self.Zq.shape[1])
+
+    @property
+    def velocity_dim(self) -> int:
+        """n_v: dimension of the admissible velocities N(A)."""
+        return int(self.Zv.shape[1])
+
+    def to_dependent(self, x: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """The state deviation ``(δq, δq̇)`` in dependent coordinates of ``x``, shape (n_x,) or
+        (n_x, N) (columns); returns arrays of shape (n,) or (n, N)."""
+        xa = np.asarray(x)
+        if xa.shape[0] != self.A.shape[0]:
+            raise ShapeError(f"x must have {self.A.shape[0]} rows, got shape {xa.shape}")
+        nz = self.tangent_dim
+        z, v = xa[:nz], xa[nz:]
+        return self.Zq @ z, self.Zv @ v + self.Kq @ z
+
+    def from_dependent(self, q: ArrayLike, qd: ArrayLike) -> FloatArray:
+        """Tangent coordinates ``x = (Zqᵀ (q − q₀), Zvᵀ q̇)`` of a nearby state, shape (n_x,)."""
+        n = self.q.shape[0]
+        qv = _vector(q, "q", n)
+        vv = _vector(qd, "qd", n)
+        return np.concatenate([self.Zq.T @ (qv - self.q), self.Zv.T @ vv])
+
+    def to_control(self) -> Any:
+        """The system as a python-control ``StateSpace`` (extra ``control``)."""
+        try:
+            import control  # type: ignore[import-not-found, import-untyped, unused-ignore]
+        except ImportError:
+            raise MissingDependencyError(
+                "LinearSystem.to_control needs python-control: pip install 'nonmin[control]'"
+            ) from None
+        return control.ss(self.A, self.B, self.C, self.D)
+
+
+def _position_rows(model: Model, act: frozenset[str]) -> NDArray[np.bool_]:
+    mask: list[bool] = []
+    for c in model.constraints:
+        if c.name in act:
+            mask.extend([c.kind != "nonholonomic"] * c.dim)
+    return np.asarray(mask, dtype=bool)
+
+
+def _null_basis(A: FloatArray, tol: float) -> tuple[FloatArray, int]:
+    n = A.shape[1]
+    if A.shape[0] == 0:
+        return np.eye(n), 0
+    r = int(range_basis(A, tol).rank)
+    norms = np.linalg.norm(A, axis=1)
+    live = norms > tol * max(float(norms.max()), 1e-300)
+    Ae = np.where(live[:, None], A / np.where(live, norms, 1.0)[:, None], 0.0)
+    Vh = np.linalg.svd(Ae, full_matrices=True)[2]
+    return Vh[r:].T.copy(), r
+
+
+def _input_map(model: Model, inputs: Any, B: FloatArray) -> tuple[str, FloatArray]:
+    n = model.n
+    if inputs is None:
+        inputs = "actuators" if model.k > 0 else "forces"
+    if isinstance(inputs, str):
+        if inputs == "actuators":
+            return "actuators", B
+        if inputs == "forces":
+            return "forces", np.eye(n)
+        raise InputError(f"inputs must be 'actuators', 'forces' or an (n, p) array, got {inputs!r}")
+    arr = np.asarray(inputs, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[0] != n:
+        raise ShapeError(f"inputs must have shape ({n}, p), got shape {arr.shape}")
+    return "matrix", arr
+
+
+def linearize(
+    model: Model,
+    q: ArrayLike,
+    qd: ArrayLike | None = None,
+    f: ArrayLike | None = None,
+    *,
+    u: ArrayLike | None = None,
+    inputs: str | ArrayLike | None = None,
+    t: float = 0.0,
+    active: Iterable[str] | None = None,
+    rtol: float | None = None,
+) -> LinearSystem:
+    """Linearize the constrained dynamics at ``(q, q̇)`` in minimal tangent coordinates.
+
+    Parameters
+    ----------
+    model : Model
+        A planar model or a robot (its engine program is differentiated in forward mode).
+    q : array_like, shape (n,)
+        Configuration (on the manifold of the active position-level constraints).
+    qd : array_like, shape (n,), optional
+        Velocity in N(A(q)) (zero by default: linearization about a rest state).
+    f : array_like, shape (n,), optional
+        Applied generalized force at the operating point (besides the model's own).
+    u : array_like, shape (k,), optional
+        Actuator inputs at the operating point.
+    inputs : {"actuators", "forces"} or array_like of shape (n, p), optional
+        What δu is: actuator forces (default when the model has actuators), generalized forces
+        (default otherwise), or the columns of a given input map.
+    t : float
+        Time (rheonomic constraints are frozen at t).
+    active : iterable of str, optional
+        Active constraints (default ``model.default_active``).
+    rtol : float, optional
+        Rank tolerance (default :data:`nonmin.core.DEFAULT_RTOL`).
+
+    Returns
+    -------
+    LinearSystem
+
+    Examples
+    --------
+    >>> import numpy as np, nonmin
+    >>> mech = nonmin.library.a01_pendulum()
+    >>> lin = nonmin.linearize(mech.model, [0.0, -1.0])
+    >>> lin.A.shape, bool(np.allclose(np.linalg.eigvals(lin.A).imag.max(), np.sqrt(9.81)))
+    ((2, 2), True)
+    """
+    if not isinstance(model, Model):
+        raise InputError(f"model must be a nonmin Model, got {type(model).__name__}")
+    n, k = model.n, model.k
+    qv = _vector(q, "q", n)
+    vv = _vector(qd, "qd", n)
+    uv = _vector(u, "u", k)
+    fv = _vector(f, "f", n)
+    tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
+    act = model.resolve_active(active)
+    t = float(t)
+
+    base = term_tangents(model, qv, vv, np.zeros((0, n)), t=t, active=act)
+    A_all = base["A"]
+    pos = _position_rows(model, act)
+    Zv, r = _null_basis(A_all, tol)
+    Zq, _ = _null_basis(A_all[pos], tol) if np.any(pos) else (np.eye(n), 0)
+    nz, nv = Zq.shape[1], Zv.shape[1]
+    kind, Bf = _input_map(model, inputs, base["B"])
+    g = base["h"] + base["f_passive"] + fv + base["B"] @ uv
+    kp = _kernel_point(base["M"], g, A_all, base["gamma"], tol)
+
+    # directions (Zq e_i, 0): ∂q̈/∂q Zq and ∂A/∂q Zq (for the curvature term)
+    t1 = term_tangents(model, qv, vv, Zq.T, None, t=t, active=act)
+    dg1 = t1["dh"] + t1["df_passive"] + t1["dB"] @ uv
+    Fq, _ = _kernel_tangent(kp, t1["dM"], dg1, t1["dA"], t1["dgamma"])  # (nz, n)
+    if np.any(vv) and A_all.shape[0]:
+        Kq = -(kp.G @ ((t1["dA"] @ vv) * kp.d[None, :]).T)  # (n, nz)
+    else:
+        Kq = np.zeros((n, nz))
+    # directions (0, Zv e_j) and (0, Kq e_i): ∂q̈/∂q̇
+    DV = np.vstack([Zv.T, Kq.T])
+    t2 = term_tangents(model, qv, vv, np.zeros_like(DV), DV, t=t, active=act)
+    dg2 = t2["dh"] + t2["df_passive"]
+    Fqd, _ = _kernel_tangent(kp, t2["dM"], dg2, t2["dA"], t2["dgamma"])
+    Fv, Fk = Fqd[:nv], Fqd[nv:]
+    p = Bf.shape[1]
+    Fu, _ = _kernel_tangent(
+        kp,
+        np.zeros((p, n, n)),
+        Bf.T.copy(),
+        np.zeros((p, *A_all.shape)),
+        np.zeros((p, A_all.shape[0])),
+    )
+
+    Asys = np.zeros((nz + nv, nz + nv))
+    Asys[:nz, :nz] = Zq.T @ Kq
+    Asys[:nz, nz:] = Zq.T @ Zv
+    Asys[nz:, :nz] = Zv.T @ (Fq + Fk).T
+    Asys[nz:, nz:] = Zv.T @ Fv.T
+    Bsys = np.vstack([np.zeros((nz, p)), Zv.T @ Fu.T])
+    C = np.block([[Zq, np.zeros((n, nv))], [Kq, Zv]])
+    D = np.zeros((2 * n, p))
+    drift = np.concatenate([Zq.T @ vv, Zv.T @ kp.qdd])
+
+    generic = _generic_rank(model, qv, Zq, t, act, tol, r)
+    singular = generic > r
+    if singular:
+        note = (
+            f"singular configuration: rank A = {r} here and {generic} at configurations "
+            f"{SINGULAR_PROBE:g} away along the tangent space; the tangent space used is N(A(q)) of "
+            f"dimension {nz}, the span of the tangents of every branch through q (the linearization "
+            f"of the kernel's rank-{r} solution there)"
+        )
+    else:
+        note = f"regular configuration: tangent space N(A(q)) of dimension {nz} (rank A = {r})"
+    return LinearSystem(
+        A=Asys, B=Bsys, C=C, D=D, q=qv, qd=vv, u=uv, t=t, active=act, inputs=kind, input_map=Bf,
+        Zq=Zq, Zv=Zv, Kq=Kq, drift=drift, rank=r, generic_rank=max(generic, r), singular=bool(singular),
+        note=note,
+    )  # fmt: skip
+
+
+def _generic_rank(
+    model: Model, q: FloatArray, Zq: FloatArray, t: float, act: frozenset[str], tol: float, r: int
+) -> int:
+    """Largest rank of the active A at configurations SINGULAR_PROBE·(1 + ‖q‖) away along
+    three fixed pseudo-random tangent directions (a diagnostic; no derivative uses it)."""
+    if Zq.shape[1] == 0:
+        return r
+    rng = np.random.default_rng(20261126)
+    step = SINGULAR_PROBE * (1.0 + float(np.linalg.norm(q)))
+    best = r
+    zero = np.zeros_like(q)
+    for _ in range(3):
+        d = Zq @ rng.standard_normal(Zq.shape[1])
+        d /= np.linalg.norm(d)
+        A = model.constraint_terms(t, q + step * d, zero, act).A
+        if A.shape[0]:
+            best = max(best, int(range_basis(np.asarray(A, dtype=float), tol).rank))
+    return best
+
+
+# --------------------------------------------------------------------------- equilibria
+@dataclass(frozen=True)
+class Equilibrium:
+    """A static equilibrium on the constraint manifold (:func:`equilibrium`).
+
+    Attributes
+    ----------
+    q : ndarray, shape (n,)
+        Configuration: ``φ(q) = 0`` (position-level rows) and ``q̈(q, 0) = 0``.
+    u : ndarray, shape (k,)
+        The actuator inputs held.
+    residual : float
+        ``max(‖φ‖∞, ‖q̈‖∞)`` at q.
+    iterations : int
+    converged : bool
+    """
+
+    q: FloatArray
+    u: FloatArray
+    residual: float
+    iterations: int
+    converged: bool
+
+
+def equilibrium(
+    model: Model,
+    q_guess: ArrayLike,
+    *,
+    u: ArrayLike | None = None,
+    f: ArrayLike | None = None,
+    t: float = 0.0,
+    active: Iterable[str] | None = None,
+    tol: float = 1e-12,
+    max_iter: int = 50,
+    rtol: float | None = None,
+    throw: bool = True,
+) -> Equilibrium:
+    """A static equilibrium near ``q_guess``: Gauss–Newton on ``[φ(q); q̈(q, 0)] = 0``.
+
+    The Jacobian ``[A_h; ∂q̈/∂q]`` is exact (forward-mode terms, analytic kernel), so the
+    iteration converges quadratically near a regular equilibrium.
+
+    Parameters
+    ----------
+    model : Model
+    q_guess : array_like, shape (n,)
+        Start (need not satisfy the constraints).
+    u : array_like, shape (k,), optional
+        Actuator inputs held during the search (zero by default).
+    f : array_like, shape (n,), optional
+        Extra applied generalized force.
+    t : float
+    active : iterable of str, optional
+    tol : float
+        Stop when ``‖φ‖∞ ≤ tol·(1 + ‖q‖∞)`` and ``‖q̈‖∞ ≤ tol·(1 + ‖g‖)``-scaled, or the step
+        falls below ``tol·(1 + ‖q‖)``.
+    max_iter : int
+    rtol : float, optional
+        Rank tolerance.
+    throw : bool
+        Raise :class:`~nonmin.errors.ModelError` when the iteration does not converge
+        (default); otherwise return the last iterate with ``converged=False``.
+
+    Returns
+    -------
+    Equilibrium
+    """
+    if not isinstance(model, Model):
+        raise InputError(f"model must be a nonmin Model, got {type(model).__name__}")
+    n, k = model.n, model.k
+    q = _vector(q_guess, "q_guess", n).copy()
+    uv = _vector(u, "u", k)
+    fv = _vector(f, "f", n)
+    if not (isinstance(max_iter, int) and max_iter >= 1):
+        raise InputError(f"max_iter must be an integer ≥ 1, got {max_iter!r}")
+    tol_r = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
+    act = model.resolve_active(active)
+    pos = _position_rows(model, act)
+    zero = np.zeros(n)
+    res = np.inf
+    for it in range(1, max_iter + 1):
+        tt = term_tangents(model, q, zero, np.eye(n), None, t=t, active=act)
+        g = tt["h"] + tt["f_passive"] + fv + tt["B"] @ uv
+        kp = _kernel_point(tt["M"], g, tt["A"], tt["gamma"], tol_r)
+        dg = tt["dh"] + tt["df_passive"] + tt["dB"] @ uv
+        Fq, _ = _kernel_tangent(kp, tt["dM"], dg, tt["dA"], tt["dgamma"])
+        phi = tt["phi"][pos]
+        scale_a = 1.0 + float(np.abs(g).max(initial=0.0)) / max(
+            float(np.diag(tt["M"]).max(initial=1.0)), 1e-300
+        )
+        res_phi = float(np.abs(phi).max(initial=0.0))
+        res_a = float(np.abs(kp.qdd).max(initial=0.0))
+        res = max(res_phi, res_a)
+        if res_phi <= tol * (1.0 + float(np.abs(q).max())) and res_a <= tol * scale_a:
+            return Equilibrium(q=q, u=uv, residual=res, iterations=it - 1, converged=True)
+        J = np.vstack([tt["A"][pos], Fq.T])
+        rvec = np.concatenate([phi, kp.qdd])
+        step = np.linalg.lstsq(J, -rvec, rcond=None)[0]
+        q = q + step
+        if float(np.linalg.norm(step)) <= tol * (1.0 + float(np.linalg.norm(q))):
+            tt = term_tangents(model, q, zero, np.zeros((0, n)), t=t, active=act)
+            g = tt["h"] + tt["f_passive"] + fv + tt["B"] @ uv
+            kp = _kernel_point(tt["M"], g, tt["A"], tt["gamma"], tol_r)
+            res = max(
+                float(np.abs(tt["phi"][pos]).max(initial=0.0)),
+                float(np.abs(kp.qdd).max(initial=0.0)),
+            )
+            return Equilibrium(q=q, u=uv, residual=res, iterations=it, converged=True)
+    if throw:
+        raise ModelError(
+            f"equilibrium: no static equilibrium found from q_guess in {max_iter} Gauss–Newton steps "
+            f"(last residual {res:.3g}); try another guess or larger max_iter"
+        )
+    return Equilibrium(q=q, u=uv, residual=res, iterations=max_iter, converged=False)
+
+
+# --------------------------------------------------------------------------- modes
+@dataclass(frozen=True)
+class Modes:
+    """Small-oscillation modes about an equilibrium (:func:`modes`).
+
+    Attributes
+    ----------
+    eigenvalues : ndarray of complex, shape (n_x,)
+        All eigenvalues of the linearization's state matrix.
+    frequencies : ndarray, shape (p,)
+        Natural frequency ``ω_n = |λ|`` (rad/s) of each mode, increasing.
+    damped_frequencies : ndarray, shape (p,)
+        ``|Im λ|`` (rad/s).
+    damping_ratios : ndarray, shape (p,)
+        ``ζ = −Re λ / |λ|`` (negative: the mode grows).
+    shapes : ndarray of complex, shape (n, p)
+        Mode shapes in dependent coordinates (``δq = Zq z`` of the eigenvector), scaled to a
+        largest entry of 1 (real for undamped modes).
+    system : LinearSystem
+        The linearization they come from.
+    """
+
+    eigenvalues: NDArray[np.complex128]
+    frequencies: FloatArray
+    damped_frequencies: FloatArray
+    damping_ratios: FloatArray
+    shapes: NDArray[np.complex128]
+    system: LinearSystem
+
+    @property
+    def stable(self) -> bool:
+        """No eigenvalue with a positive real part (beyond 1e-9 of the largest |λ|)."""
+        lam = self.eigenvalues
+        scale = float(np.abs(lam).max(initial=0.0))
+        return bool(np.all(lam.real <= 1e-9 * max(scale, 1e-300)))
+
+
+def modes(
+    model: Model,
+    q_eq: ArrayLike,
+    *,
+    u: ArrayLike | None = None,
+    t: float = 0.0,
+    active: Iterable[str] | None = None,
+    rtol: float | None = None,
+) -> Modes:
+    """Eigenfrequencies, damping ratios and mode shapes about the rest state ``(q_eq, 0)``.
+
+    One mode per complex-conjugate pair of eigenvalues of :func:`linearize`'s state matrix; a
+    real pair ``±a`` (a statically unstable degree of freedom) is one mode with frequency ``a``
+    and damping ratio −1, and any other real eigenvalue is a mode of its own (``ζ = ±1``).
+    Only tangent coordinates enter, so the virtual mass and the constraint directions add no
+    spurious modes.
+
+    Parameters
+    ----------
+    model : Model
+    q_eq : array_like, shape (n,)
+        An equilibrium configuration (e.g. :func:`equilibrium`'s ``q``); at another
+        configuration the modes are those of the linearization there (``drift`` ≠ 0).
+    u : array_like, shape (k,), optional
+        Actuator inputs held.
+    t : float
+    active : iterable of str, optional
+    rtol : float, optional
+
+    Returns
+    -------
+    Modes
+    """
+    lin = linearize(model, q_eq, None, u=u, t=t, active=active, rtol=rtol, inputs="forces")
+    lam, V = np.linalg.eig(lin.A)
+    scale = float(np.abs(lam).max(initial=0.0))
+    tiny = 1e-9 * max(scale, 1e-300)
+    keep = [i for i in range(lam.size) if lam[i].imag > tiny]  # one of each conjugate pair
+    real = [i for i in range(lam.size) if abs(lam[i].imag) <= tiny]
+    used: set[int] = set()
+    for i in sorted(real, key=lambda i: -lam[i].real):  # a real pair ±a is one (divergent) mode
+        if i in used:
+            continue
+        used.add(i)
+        keep.append(i)
+        for j in real:
+            if j not in used and abs(lam[j].real + lam[i].real) <= 1e-8 * max(
+                abs(lam[i].real), tiny
+            ):
+                used.add(j)
+                break
+    order = sorted(keep, key=lambda i: (abs(lam[i]), lam[i].real))
+    nz = lin.tangent_dim
+    freqs, dfreq, zeta, shapes = [], [], [], []
+    for i in order:
+        w = abs(lam[i])
+        freqs.append(w)
+        dfreq.append(abs(lam[i].imag))
+        zeta.append(-lam[i].real / w if w > 0 else 0.0)
+        s = lin.Zq @ V[:nz, i]
+        j = int(np.argmax(np.abs(s)))
+        if abs(s[j]) > 0:
+            s = s / s[j]
+        shapes.append(s)
+    n = model.n
+    shp = np.array(shapes).T if shapes else np.zeros((n, 0), dtype=complex)
+    return Modes(
+        eigenvalues=lam,
+        frequencies=np.array(freqs, dtype=float),
+        damped_frequencies=np.array(dfreq, dtype=float),
+        damping_ratios=np.array(zeta, dtype=float),
+        shapes=shp.astype(np.complex128),
+        system=lin,
+    )

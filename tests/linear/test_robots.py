@@ -1,0 +1,160 @@
+"""Robots (TreeProgram on dual numbers) against Pinocchio and a reduced-coordinate model.
+
+* ∂q̈/∂q, ∂q̈/∂v, ∂q̈/∂τ of a UR5 whose end effector is held at a point (3 closure rows)
+  against Pinocchio's analytical ``computeConstraintDynamicsDerivatives`` (KKT derivatives,
+  Carpentier & Mansard) at several states: fixed base, so q = Pinocchio's configuration and
+  q̇ = v.
+* The robot four-bar (fourbar.urdf closed by a planar point, 1 DOF) at its hanging
+  equilibrium: the eigenvalue of the tangent-space linearization against the reduced model in
+  the crank angle θ — M_r = Jᵀ M J and K_r = −d/dθ (Jᵀ g(q(θ))) with q(θ) the closed loop solved
+  by Newton and J = ∂q/∂θ from the implicit-function theorem (Pinocchio's M and gravity; the
+  stiffness by a central difference of the reduced generalized force, so the reference knows
+  nothing of nonmin's derivative code).
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import nonmin
+from nonmin.linear import dynamics_derivatives
+
+pin = pytest.importorskip("pinocchio")
+
+#: Asked agreement with Pinocchio's analytical derivatives (relative to the largest entry).
+PIN_RTOL = 1e-7
+
+
+def _ur5_point():
+    from nonmin.model import assemble
+    from nonmin.model.robots import FrameConstraint, RobotModel
+
+    root = Path(pin.__file__).resolve().parents[4] / "share" / "example-robot-data" / "robots"
+    urdf = root / "ur_description" / "urdf" / "ur5_robot.urdf"
+    if not urdf.exists():
+        pytest.skip("example-robot-data's UR5 is not installed")
+    q_guess = np.array([0.2, -1.0, 1.3, -0.6, 0.9, 0.4])
+    free = RobotModel.from_urdf(urdf)
+    oMe = free.frame_placement(q_guess, "ee_link")
+    con = FrameConstraint.point("closure", "ee_link", placement_b=oMe)
+    model = RobotModel.from_urdf(urdf, constraints=[con], joint_limits="ignore")
+    q0 = assemble(model, q_guess).q
+    pm = model.pinocchio_model
+    fr = pm.frames[pm.getFrameId("ee_link")]
+    cm = pin.RigidConstraintModel(
+        pin.ContactType.CONTACT_3D,
+        pm,
+        fr.parentJoint,
+        fr.placement,
+        0,
+        pin.SE3(oMe),
+        pin.ReferenceFrame.LOCAL,
+    )
+    return model, q0, cm
+
+
+def test_ur5_point_closure_derivatives_match_pinocchio():
+    model, q0, cm = _ur5_point()
+    pm = model.pinocchio_model
+    pd = pm.createData()
+    cms = pin.StdVec_RigidConstraintModel()
+    cms.append(cm)
+    cds = pin.StdVec_RigidConstraintData()
+    cds.append(cm.createData())
+    pin.initConstraintDynamics(pm, pd, cms, cds)
+    prox = pin.ProximalSettings(1e-14, 1e-14, 1)
+    rng = np.random.default_rng(7)
+    A = model.constraint_jacobian(0.0, q0)
+    Z = np.linalg.svd(A)[2][A.shape[0] :].T
+    for trial in range(3):
+        v = Z @ rng.standard_normal(Z.shape[1])  # admissible velocity
+        tau = rng.standard_normal(pm.nv)
+        ddq = pin.constraintDynamics(pm, pd, q0, v, tau, cms, cds, prox)
+        ddq_dq, ddq_dv, ddq_dtau = (
+            np.array(x)
+            for x in pin.computeConstraintDynamicsDerivatives(pm, pd, cms, cds, prox)[:3]
+        )
+        d = dynamics_derivatives(model, q0, v, f=tau)
+        assert np.allclose(d.qdd, ddq, rtol=1e-10, atol=1e-10 * (1 + np.abs(ddq).max()))
+        for ours, theirs in ((d.dqdd_dq, ddq_dq), (d.dqdd_dqd, ddq_dv), (d.dqdd_df, ddq_dtau)):
+            scale = max(1.0, float(np.abs(theirs).max()))
+            assert np.abs(ours - theirs).max() <= PIN_RTOL * scale, trial
+
+
+def test_ur5_term_tangents_match_central_differences():
+    model, q0, _ = _ur5_point()
+    rng = np.random.default_rng(3)
+    qd = rng.standard_normal(model.n)
+    dq, dv = rng.standard_normal(model.n), rng.standard_normal(model.n)
+    t = nonmin.linear.term_tangents(model, q0, qd, dq, dv)
+    h = 1e-5
+
+    def ev(s):
+        return model.evaluate(0.0, q0 + s * dq, qd + s * dv)
+
+    p, m = ev(h), ev(-h)
+    for key, fp, fm in (
+        ("M", p.M, m.M), ("h", p.h, m.h), ("A", p.constraints.A, m.constraints.A),
+        ("gamma", p.constraints.gamma, m.constraints.gamma), ("phi", p.constraints.phi, m.constraints.phi),
+    ):  # fmt: skip
+        fd = (np.asarray(fp) - np.asarray(fm)) / (2 * h)
+        assert np.abs(t["d" + key][0] - fd).max() <= 1e-7 * max(1.0, float(np.abs(fd).max())), key
+
+
+def _reduced_fourbar_omega(model, q_eq):
+    """ω of the reduced 1-DOF model (crank angle) about q_eq: see the module docstring."""
+    pm = model.pinocchio_model
+    pd = pm.createData()
+    ic = 0  # the crank is the first coordinate (actuated joint "crank")
+
+    def close(theta, q):
+        q = q.copy()
+        q[ic] = theta
+        for _ in range(50):
+            phi = model.constraint_residual(0.0, q)
+            if np.abs(phi).max() < 1e-14:
+                break
+            A = model.constraint_jacobian(0.0, q)
+            dep = [i for i in range(model.n) if i != ic]
+            q[dep] -= np.linalg.solve(A[:, dep], phi)
+        return q
+
+    def jac(q):
+        A = model.constraint_jacobian(0.0, q)
+        dep = [i for i in range(model.n) if i != ic]
+        J = np.zeros(model.n)
+        J[ic] = 1.0
+        J[dep] = -np.linalg.solve(A[:, dep], A[:, ic])
+        return J
+
+    def g_red(theta):
+        q = close(theta, q_eq)
+        g = -pin.computeGeneralizedGravity(pm, pd, q)
+        return float(jac(q) @ g)
+
+    th = q_eq[ic]
+    J = jac(q_eq)
+    M = pin.crba(pm, pd, q_eq)
+    M = np.triu(M) + np.triu(M, 1).T
+    m_r = float(J @ M @ J)
+    h = 1e-5
+    k_r = -(g_red(th + h) - g_red(th - h)) / (2 * h)
+    return np.sqrt(k_r / m_r) if k_r > 0 else -np.sqrt(-k_r / m_r), g_red(th)
+
+
+def test_robot_fourbar_mode_matches_the_reduced_model():
+    from nonmin.model.robots import fourbar
+
+    model, state = fourbar("planar_point")
+    eq = nonmin.equilibrium(model, state.q)
+    assert eq.converged
+    m = nonmin.modes(model, eq.q)
+    assert m.frequencies.shape == (1,)
+    omega_ref, g_at_eq = _reduced_fourbar_omega(model, eq.q)
+    assert abs(g_at_eq) <= 1e-9
+    if omega_ref > 0:
+        assert abs(m.frequencies[0] - omega_ref) <= 1e-6 * omega_ref
+        assert m.stable
+    else:  # an unstable equilibrium: a real pair ±|ω|
+        assert np.allclose(np.sort(m.eigenvalues.real), [omega_ref, -omega_ref], rtol=1e-6)
