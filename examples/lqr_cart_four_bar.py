@@ -36,10 +36,22 @@ def _bar(length: float, mass: float) -> float:
 
 def cart_four_bar() -> nonmin.model.Model:
     """The cart with its four-bar (bars uniform, COM at the middle; points at the ends)."""
-    b = PlanarBuilder("cart_four_bar", gravity=(0.0, -9.81), description="inverted four-bar on a cart")
+    b = PlanarBuilder(
+        "cart_four_bar", gravity=(0.0, -9.81), description="inverted four-bar on a cart"
+    )
     b.body("cart", mass=2.0, inertia=0.05, points={"P1": (-BASE / 2, 0.0), "P2": (BASE / 2, 0.0)})
-    b.body("left", mass=0.6, inertia=_bar(LEFT, 0.6), points={"L0": (-LEFT / 2, 0.0), "L1": (LEFT / 2, 0.0)})
-    b.body("right", mass=0.5, inertia=_bar(RIGHT, 0.5), points={"R0": (-RIGHT / 2, 0.0), "R1": (RIGHT / 2, 0.0)})
+    b.body(
+        "left",
+        mass=0.6,
+        inertia=_bar(LEFT, 0.6),
+        points={"L0": (-LEFT / 2, 0.0), "L1": (LEFT / 2, 0.0)},
+    )
+    b.body(
+        "right",
+        mass=0.5,
+        inertia=_bar(RIGHT, 0.5),
+        points={"R0": (-RIGHT / 2, 0.0), "R1": (RIGHT / 2, 0.0)},
+    )
     b.body("coupler", mass=0.3, inertia=_bar(COUPLER, 0.3),
            points={"C0": (-COUPLER / 2, 0.0), "C1": (COUPLER / 2, 0.0)})  # fmt: skip
     b.prismatic("rail", ("ground", (0.0, 0.0)), ("cart", (0.0, 0.0)), axis=(1.0, 0.0))
@@ -68,11 +80,15 @@ def main(argv: list[str] | None = None) -> None:
     model = cart_four_bar()
     eq = nonmin.equilibrium(model, upright_guess(model))
     q_star = eq.q.copy()
-    q_star[0::3] -= eq.q[0]  # the whole machine may rest anywhere on the rail: put the cart at x = 0
+    q_star[0::3] -= eq.q[
+        0
+    ]  # the whole machine may rest anywhere on the rail: put the cart at x = 0
     m = nonmin.modes(model, q_star)
     lin = nonmin.linearize(model, q_star)
-    print(f"equilibrium in {eq.iterations} steps (residual {eq.residual:.1e}); tangent state "
-          f"{lin.A.shape[0]}; open-loop eigenvalues {np.round(np.sort_complex(m.eigenvalues), 4)}")
+    print(
+        f"equilibrium in {eq.iterations} steps (residual {eq.residual:.1e}); tangent state "
+        f"{lin.A.shape[0]}; open-loop eigenvalues {np.round(np.sort_complex(m.eigenvalues), 4)}"
+    )
     lqr = LQR(model, q_star, weight_q=10.0, weight_qd=1.0, weight_u=0.1)
     design = lqr.design()
     print(f"closed-loop eigenvalues {np.round(np.sort_complex(design.closed_loop_eigenvalues), 3)}")
@@ -80,8 +96,10 @@ def main(argv: list[str] | None = None) -> None:
     t1 = 1.0 if args.quick else 6.0
     traj = nonmin.simulate(model, (0.0, t1), q0, controller=lqr, method="rk4", dt=2e-3)
     err = np.abs(traj.q - q_star).max(axis=1)
-    print(f"start max|q − q*| = {err[0]:.3f}; after {t1:g} s: {err[-1]:.2e}; max |u| = "
-          f"{np.abs(traj.u).max():.2f} N; closure {np.max(traj.phi_norm):.1e}")
+    print(
+        f"start max|q − q*| = {err[0]:.3f}; after {t1:g} s: {err[-1]:.2e}; max |u| = "
+        f"{np.abs(traj.u).max():.2f} N; closure {np.max(traj.phi_norm):.1e}"
+    )
     fig, ax = figure(2, size=(7, 5))
     ax[0].semilogy(traj.t, err)
     ax[0].set_ylabel("max |q − q*|")

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <string>
 
+#include "nonmin/derivatives.hpp"
 #include "nonmin/program.hpp"
 #include "program_common.hpp"
 #include "register.hpp"
@@ -94,6 +95,69 @@ void bind_derivatives(nb::module_& m) {
         "and the derivatives stacked over the directions (dM: (d, n, n), dh: (d, n), ...). "
         "Rows of inactive constraints are not written. ModelError when the program has no "
         "forward-mode evaluation.");
+    nb::class_<DerivativeScratch>(m, "DerivativeScratch",
+                                  "Preallocated scratch of forward_derivatives for one program (one per thread).")
+        .def(nb::init<const Program&>(), nb::arg("program"));
+    m.def(
+        "forward_derivatives",
+        [](const Program& p, DerivativeScratch& s, double t, CArr1 q, CArr1 qd, nb::object f, nb::object u,
+           CMask active, double rtol) {
+            const auto n = static_cast<std::size_t>(p.n());
+            if (q.shape(0) != n || qd.shape(0) != n)
+                raise_error("ShapeError", "q and qd must have shape (" + std::to_string(n) + ",)");
+            if (active.shape(0) != p.constraints().size())
+                raise_error("ShapeError", "active must be a mask of shape (" +
+                                              std::to_string(p.constraints().size()) + ",)");
+            if (s.dq.size() != p.n()) raise_error("ShapeError", "scratch made for another program");
+            const double* fp = nullptr;
+            const double* up = nullptr;
+            CArr1 fa, ua;
+            if (!f.is_none()) {
+                fa = nb::cast<CArr1>(f);
+                if (fa.shape(0) != n) raise_error("ShapeError", "f must have shape (" + std::to_string(n) + ",)");
+                fp = fa.data();
+            }
+            if (!u.is_none()) {
+                ua = nb::cast<CArr1>(u);
+                if (ua.shape(0) != static_cast<std::size_t>(p.k()))
+                    raise_error("ShapeError", "u must have shape (" + std::to_string(p.k()) + ",)");
+                up = ua.data();
+            }
+            DerivativeOutputs out;
+            Status st;
+            if (p.thread_safe()) {
+                nb::gil_scoped_release release;
+                st = forward_derivatives(p, s, t, q.data(), qd.data(), fp, up, active.data(), rtol, out);
+            } else {
+                st = forward_derivatives(p, s, t, q.data(), qd.data(), fp, up, active.data(), rtol, out);
+            }
+            if (st != Status::ok) raise_status(st, "forward_derivatives");
+            auto vec = [&](const Vec& x) {
+                NpArr a = new_array({n});
+                std::memcpy(a.data(), x.data(), n * sizeof(double));
+                return a;
+            };
+            auto mat = [&](const Mat& x) {
+                NpArr a = new_array({n, n});
+                std::memcpy(a.data(), x.data(), n * n * sizeof(double));  // row-major n × n
+                return a;
+            };
+            nb::dict res;
+            res["qdd"] = vec(out.qdd);
+            res["f_c"] = vec(out.fc);
+            res["rank"] = out.rank;
+            res["dqdd_dq"] = mat(out.dqdd_dq);
+            res["dqdd_dqd"] = mat(out.dqdd_dqd);
+            res["dqdd_df"] = mat(out.dqdd_df);
+            res["dfc_dq"] = mat(out.dfc_dq);
+            res["dfc_dqd"] = mat(out.dfc_dqd);
+            res["dfc_df"] = mat(out.dfc_df);
+            return res;
+        },
+        nb::arg("program"), nb::arg("scratch"), nb::arg("t"), nb::arg("q"), nb::arg("qd"), nb::arg("f").none(),
+        nb::arg("u").none(), nb::arg("active"), nb::arg("rtol") = 1e-10,
+        "q̈, f_c and ∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂f, ∂f_c/∂· (n × n each) at one state: forward-mode model terms, "
+        "the kernel's derivative at its rank (nonmin/derivatives.hpp). f (n) and u (k) may be None.");
     m.def("differentiable", [](const Program& p) { return p.differentiable(); }, nb::arg("program"),
           "Whether the program evaluates on dual numbers (term_tangents).");
 }

@@ -325,4 +325,115 @@ Status TapeProgram::evaluate(double t, const double* q, const double* qd, const 
     return finite ? Status::ok : Status::not_finite;
 }
 
+Status TapeProgram::evaluate_tangent(double t, const double* q, const double* qd, const double* dq,
+                                     const double* dqd, const std::uint8_t* active, unsigned need, Terms& out,
+                                     Terms& tangent, Workspace& wsb) const {
+    const Status st = evaluate(t, q, qd, active, need, out, wsb);
+    if (st != Status::ok) return st;
+    auto& w = static_cast<TapeWorkspace&>(wsb);
+    const double* r = w.reg.data();
+    w.dreg.assign(w.reg.size(), 0.0);
+    double* dr = w.dreg.data();
+    const int n = n_;
+    std::copy(dq, dq + n, dr + 1);
+    std::copy(dqd, dqd + n, dr + 1 + n);
+    const int base = n_inputs();
+    const std::size_t N = d_.op.size();
+    const std::uint8_t* nd = need_.data();
+    for (std::size_t i = 0; i < N; ++i) {
+        if (!(nd[i] & need)) continue;
+        const int ja = d_.a[i], jb = d_.b[i];
+        const double x = r[ja], dx = dr[ja];
+        const double y = r[base + static_cast<int>(i)];
+        double dy = 0.0;
+        switch (static_cast<TapeOp>(d_.op[i])) {
+            case TapeOp::constant: continue;
+            case TapeOp::add: dy = dx + dr[jb]; break;
+            case TapeOp::sub: dy = dx - dr[jb]; break;
+            case TapeOp::mul: dy = dx * r[jb] + x * dr[jb]; break;
+            case TapeOp::div: dy = (dx - y * dr[jb]) / r[jb]; break;
+            case TapeOp::neg: dy = -dx; break;
+            case TapeOp::powi: {
+                const long k = static_cast<long>(d_.c[i]);
+                dy = k == 0 ? 0.0 : static_cast<double>(k) * powi(x, k - 1) * dx;
+                break;
+            }
+            case TapeOp::pow: {
+                const double b = r[jb], db = dr[jb];
+                dy = (dx != 0.0 ? b * std::pow(x, b - 1.0) * dx : 0.0) + (db != 0.0 ? y * std::log(x) * db : 0.0);
+                break;
+            }
+            case TapeOp::sqrt: dy = y > 0.0 ? 0.5 * dx / y : 0.0; break;
+            case TapeOp::sin: dy = std::cos(x) * dx; break;
+            case TapeOp::cos: dy = -std::sin(x) * dx; break;
+            case TapeOp::tan: dy = (1.0 + y * y) * dx; break;
+            case TapeOp::exp: dy = y * dx; break;
+            case TapeOp::log: dy = dx / x; break;
+            case TapeOp::asin: dy = dx / std::sqrt(1.0 - x * x); break;
+            case TapeOp::acos: dy = -dx / std::sqrt(1.0 - x * x); break;
+            case TapeOp::atan: dy = dx / (1.0 + x * x); break;
+            case TapeOp::atan2: {
+                const double b = r[jb], r2 = x * x + b * b;
+                dy = r2 > 0.0 ? (b * dx - x * dr[jb]) / r2 : 0.0;
+                break;
+            }
+            case TapeOp::sinh: dy = std::cosh(x) * dx; break;
+            case TapeOp::cosh: dy = std::sinh(x) * dx; break;
+            case TapeOp::tanh: dy = (1.0 - y * y) * dx; break;
+            case TapeOp::abs: dy = x > 0.0 ? dx : (x < 0.0 ? -dx : 0.0); break;
+            case TapeOp::sign: dy = 0.0; break;
+            case TapeOp::min: dy = x <= r[jb] ? dx : dr[jb]; break;
+            case TapeOp::max: dy = x >= r[jb] ? dx : dr[jb]; break;
+            case TapeOp::square: dy = 2.0 * x * dx; break;
+            default: dy = 0.0; break;
+        }
+        dr[base + static_cast<int>(i)] = dy;
+    }
+    if (need & NEED_M) tangent.M.setZero();
+    if (need & NEED_H) {
+        tangent.h.setZero();
+        tangent.f_passive.setZero();
+    }
+    if (need & NEED_B) tangent.B.setZero();
+    for (std::size_t ci = 0; ci < constraints_.size(); ++ci) {
+        if (!active[ci]) continue;
+        const ConstraintInfo& c = constraints_[ci];
+        if (need & NEED_A) tangent.A.middleRows(c.row, c.dim).setZero();
+        if (need & NEED_GAMMA) tangent.gamma.segment(c.row, c.dim).setZero();
+        if (need & NEED_PHI) tangent.phi.segment(c.row, c.dim).setZero();
+        if (need & NEED_VELOCITY) tangent.velocity.segment(c.row, c.dim).setZero();
+    }
+    double dT = 0.0, dV = 0.0;
+    for (std::size_t e = 0; e < d_.out_target.size(); ++e) {
+        const auto tg = static_cast<TapeTarget>(d_.out_target[e]);
+        if (!(target_need(tg) & need)) continue;
+        const int ci = out_row_constraint_[e];
+        if (ci >= 0 && !active[ci]) continue;
+        const double v = r[d_.out_reg[e]], dv = dr[d_.out_reg[e]];
+        const int idx = d_.out_index[e];
+        switch (tg) {
+            case TapeTarget::M:
+                if (need & NEED_M) tangent.M.data()[idx] = dv;
+                if (need & NEED_ENERGY) {
+                    const int a = idx / n, b = idx % n;
+                    dT += dv * qd[a] * qd[b] + v * (dqd[a] * qd[b] + qd[a] * dqd[b]);
+                }
+                break;
+            case TapeTarget::h: tangent.h[idx] = dv; break;
+            case TapeTarget::f_passive: tangent.f_passive[idx] = dv; break;
+            case TapeTarget::B: tangent.B.data()[idx] = dv; break;
+            case TapeTarget::A: tangent.A.data()[idx] = dv; break;
+            case TapeTarget::gamma: tangent.gamma[idx] = dv; break;
+            case TapeTarget::phi: tangent.phi[idx] = dv; break;
+            case TapeTarget::velocity: tangent.velocity[idx] = dv; break;
+            case TapeTarget::V: dV = dv; break;
+        }
+    }
+    if (need & NEED_ENERGY) {
+        tangent.kinetic = 0.5 * dT;
+        tangent.potential = dV;
+    }
+    return Status::ok;
+}
+
 }  // namespace nonmin

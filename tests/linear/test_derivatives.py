@@ -119,3 +119,30 @@ def test_bad_inputs_are_typed_errors():
         dynamics_derivatives(mech.model, [1.0, 0.0], [np.nan, 0.0])
     with pytest.raises(nonmin.errors.InputError, match="model"):
         dynamics_derivatives("pendulum", [1.0, 0.0])
+
+
+@pytest.mark.parametrize("name", sorted(MECHANISMS))
+def test_engine_pipeline_equals_the_numpy_specification(name):
+    model, q, qd, act = _state(name)
+    rng = np.random.default_rng(5)
+    u = rng.standard_normal(model.k)
+    f = rng.standard_normal(model.n)
+    e = dynamics_derivatives(model, q, qd, u=u, f=f, active=act, backend="engine")
+    p = dynamics_derivatives(model, q, qd, u=u, f=f, active=act, backend="numpy")
+    assert e.rank == p.rank
+    for key in (
+        "qdd",
+        "f_c",
+        "dqdd_dq",
+        "dqdd_dqd",
+        "dqdd_df",
+        "dqdd_du",
+        "dfc_dq",
+        "dfc_dqd",
+        "dfc_df",
+        "dfc_du",
+    ):
+        a, b = getattr(e, key), getattr(p, key)
+        assert np.abs(a - b).max(initial=0.0) <= 1e-10 * max(
+            1.0, float(np.abs(b).max(initial=0.0))
+        ), key

@@ -51,7 +51,9 @@ def test_pendulum_lqr_equals_the_reduced_model_lqr():
     b.force("push", "P", direction=(1.0, 0.0))
     model = b.build()
     q_star = np.array([0.0, L])
-    lqr = LQR(model, q_star, weight_q=np.diag([4.0, 9.0]), weight_qd=np.diag([0.5, 2.0]), weight_u=0.3)
+    lqr = LQR(
+        model, q_star, weight_q=np.diag([4.0, 9.0]), weight_qd=np.diag([0.5, 2.0]), weight_u=0.3
+    )
     d = lqr.design()
     s = float(d.system.Zq[0, 0])  # ±1: the tangent basis vector is (±1, 0)
     assert abs(abs(s) - 1.0) <= 1e-12

@@ -63,6 +63,7 @@ struct TapeDescription {
 
 struct TapeWorkspace : Workspace {
     std::vector<double> reg;
+    std::vector<double> dreg;  // evaluate_tangent: the registers' directional derivatives
 };
 
 class TapeProgram final : public Program {
@@ -72,6 +73,12 @@ class TapeProgram final : public Program {
 
     Status evaluate(double t, const double* q, const double* qd, const std::uint8_t* active,
                     unsigned need, Terms& out, Workspace& ws) const override;
+    // Forward mode over the tape: every register's derivative along (dq, dqd) by the chain rule
+    // of its instruction, after the value pass (docs/linear.md).
+    Status evaluate_tangent(double t, const double* q, const double* qd, const double* dq, const double* dqd,
+                            const std::uint8_t* active, unsigned need, Terms& out, Terms& tangent,
+                            Workspace& ws) const override;
+    bool differentiable() const override { return true; }
     std::unique_ptr<Workspace> make_workspace() const override;
 
     int size() const { return static_cast<int>(d_.op.size()); }

@@ -27,6 +27,7 @@ branch of the solution at the point (the one the kernel returns there).
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
@@ -327,6 +328,7 @@ def dynamics_derivatives(
     t: float = 0.0,
     active: Iterable[str] | None = None,
     rtol: float | None = None,
+    backend: str = "engine",
 ) -> DynamicsDerivatives:
     """``q̈``, ``f_c`` and their derivatives ∂/∂q, ∂/∂q̇, ∂/∂f, ∂/∂u at one state.
 
@@ -348,6 +350,10 @@ def dynamics_derivatives(
     active : iterable of str, optional
     rtol : float, optional
         Rank tolerance of the kernel (default :data:`nonmin.core.DEFAULT_RTOL`).
+    backend : {"engine", "numpy"}
+        ``"engine"``: the whole pipeline in C++ (``engine/src/derivatives.cpp``);
+        ``"numpy"``: the terms' tangents from the engine, the kernel derivative in NumPy (the
+        readable specification; same results to round-off).
 
     Returns
     -------
@@ -371,6 +377,10 @@ def dynamics_derivatives(
     fv = _vector(f, "f", n)
     tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
     act = model.resolve_active(active)
+    if backend not in ("engine", "numpy"):
+        raise InputError(f"backend must be 'engine' or 'numpy', got {backend!r}")
+    if backend == "engine":
+        return _engine_derivatives(model, float(t), qv, vv, uv, fv, act, tol)
     DQ = np.vstack([np.eye(n), np.zeros((n, n))])
     DV = np.vstack([np.zeros((n, n)), np.eye(n)])
     kp, tt, dqdd, dfc = _directional(model, float(t), qv, vv, uv, fv, act, tol, DQ, DV)
@@ -395,3 +405,45 @@ def dynamics_derivatives(
         dfc_df=dfc_f.T.copy(),
         dfc_du=dfc_f.T @ B,
     )
+
+
+#: Per-thread scratch of the C++ pipeline, per program (a few models at a time).
+_LOCAL = threading.local()
+
+
+def _engine_derivatives(
+    model: Model,
+    t: float,
+    q: FloatArray,
+    qd: FloatArray,
+    u: FloatArray,
+    f: FloatArray,
+    act: frozenset[str],
+    tol: float,
+) -> DynamicsDerivatives:
+    """The C++ pipeline (engine/src/derivatives.cpp), with a scratch cached per program."""
+    eng = _engine()
+    prog = _program(model)
+    cache: dict[int, tuple[Any, Any]] = getattr(_LOCAL, "scratch", None) or {}
+    _LOCAL.scratch = cache
+    got = cache.get(id(prog))
+    if got is None or got[0] is not prog:
+        if len(cache) >= 16:
+            cache.clear()
+        got = (prog, eng.DerivativeScratch(prog))
+        cache[id(prog)] = got
+    try:
+        r = eng.forward_derivatives(
+            prog, got[1], t, q, qd, f if np.any(f) else None, u if u.size and np.any(u) else None,
+            model.active_mask(act), tol,
+        )  # fmt: skip
+    except NotPositiveDefiniteError as exc:
+        raise NotPositiveDefiniteError(
+            f"M is not positive definite on N(A) at this state ({exc})"
+        ) from None
+    B = model.input_matrix(q) if model.k else np.zeros((model.n, 0))
+    return DynamicsDerivatives(
+        qdd=r["qdd"], f_c=r["f_c"], rank=int(r["rank"]),
+        dqdd_dq=r["dqdd_dq"], dqdd_dqd=r["dqdd_dqd"], dqdd_df=r["dqdd_df"], dqdd_du=r["dqdd_df"] @ B,
+        dfc_dq=r["dfc_dq"], dfc_dqd=r["dfc_dqd"], dfc_df=r["dfc_df"], dfc_du=r["dfc_df"] @ B,
+    )  # fmt: skip
