@@ -69,3 +69,28 @@ def test_lqr_rejects_bad_targets():
     mech = nonmin.library.a01_pendulum()
     with pytest.raises(nonmin.errors.InputError, match="no actuators"):
         LQR(mech.model, [0.0, -1.0])
+
+
+def test_lqr_redesigns_when_the_active_set_changes():
+    """A pole on a cart with an optional lock (a weld of pole to cart): 4 tangent states free,
+    2 locked; the controller designs once per active set and both loops are stable."""
+    b = PlanarBuilder("cart_pole_lock", gravity=(0.0, -9.81))
+    b.body("cart", mass=1.0, inertia=0.05, points={"hinge": (0.0, 0.0)})
+    b.body("pole", mass=0.3, inertia=0.3 * 0.8**2 / 12, points={"foot": (-0.4, 0.0)})
+    b.prismatic("rail", ("ground", (0.0, 0.0)), ("cart", (0.0, 0.0)), axis=(1.0, 0.0))
+    b.revolute("hinge", "hinge", "foot")
+    b.weld("lock", ("cart", (0.0, 0.0)), ("pole", (-0.4, 0.0)), angle=np.pi / 2, active=False)
+    b.actuator("push", "rail")
+    model = b.build()
+    q_star = np.array([0.0, 0.0, 0.0, 0.0, 0.4, np.pi / 2])
+    lqr = LQR(model, q_star, weight_q=5.0, weight_qd=0.5, weight_u=0.1)
+    free = model.resolve_active(None)
+    locked = free | {"lock"}
+    d_free, d_locked = lqr.design(free), lqr.design(locked)
+    assert d_free.system.A.shape == (4, 4) and d_locked.system.A.shape == (2, 2)
+    assert np.all(d_free.closed_loop_eigenvalues.real < 0) and np.all(d_locked.closed_loop_eigenvalues.real < 0)
+    q = q_star + np.array([0.05, 0.0, 0.0, 0.05, 0.0, 0.0])
+    u_free = lqr(0.0, q, np.zeros(6), active=free)
+    u_locked = lqr(0.0, q, np.zeros(6), active=locked)
+    assert np.isfinite(u_free).all() and np.isfinite(u_locked).all() and not np.allclose(u_free, u_locked)
+    assert lqr.design(locked) is d_locked

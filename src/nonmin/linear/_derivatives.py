@@ -441,7 +441,7 @@ def _engine_derivatives(
         raise NotPositiveDefiniteError(
             f"M is not positive definite on N(A) at this state ({exc})"
         ) from None
-    B = model.input_matrix(q) if model.k else np.zeros((model.n, 0))
+    B = r["B"] if "B" in r else (model.input_matrix(q) if model.k else np.zeros((model.n, 0)))
     return DynamicsDerivatives(
         qdd=r["qdd"], f_c=r["f_c"], rank=int(r["rank"]),
         dqdd_dq=r["dqdd_dq"], dqdd_dqd=r["dqdd_dqd"], dqdd_df=r["dqdd_df"], dqdd_du=r["dqdd_df"] @ B,
