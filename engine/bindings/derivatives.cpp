@@ -152,12 +152,17 @@ void bind_derivatives(nb::module_& m) {
             res["dfc_dq"] = mat(out.dfc_dq);
             res["dfc_dqd"] = mat(out.dfc_dqd);
             res["dfc_df"] = mat(out.dfc_df);
+            const auto k = static_cast<std::size_t>(p.k());
+            NpArr B = new_array({n, k});
+            if (k > 0) std::memcpy(B.data(), s.val.B.data(), n * k * sizeof(double));  // B(q), row-major
+            res["B"] = B;
             return res;
         },
         nb::arg("program"), nb::arg("scratch"), nb::arg("t"), nb::arg("q"), nb::arg("qd"), nb::arg("f").none(),
         nb::arg("u").none(), nb::arg("active"), nb::arg("rtol") = 1e-10,
         "q̈, f_c and ∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂f, ∂f_c/∂· (n × n each) at one state: forward-mode model terms, "
-        "the kernel's derivative at its rank (nonmin/derivatives.hpp). f (n) and u (k) may be None.");
+        "the kernel's derivative at its rank (nonmin/derivatives.hpp); also B(q) (n × k). f (n) and u (k) may be "
+        "None.");
     m.def("differentiable", [](const Program& p) { return p.differentiable(); }, nb::arg("program"),
           "Whether the program evaluates on dual numbers (term_tangents).");
 }

@@ -88,7 +88,7 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
     Vec dge(m), dg(n);
     auto direction = [&](Eigen::Ref<Vec> dqdd, Eigen::Ref<Vec> dfc, bool has_dq) {
         dg = s.tan.h + s.tan.f_passive;
-        if (k > 0 && has_dq) dg.noalias() += s.tan.B * uv;
+        if (k > 0 && has_dq && u != nullptr) dg.noalias() += s.tan.B * uv;
         Vec a = Vec::Zero(n), dPfc = Vec::Zero(n);
         if (m > 0) {
             for (int i = 0; i < m; ++i) {
@@ -120,7 +120,7 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
     out.dfc_dq.resize(n, n);
     out.dfc_dqd.resize(n, n);
     Vec col_a(n), col_b(n);
-    const unsigned need_q = NEED_M | NEED_H | NEED_A | NEED_GAMMA | (k > 0 ? NEED_B : 0u);
+    const unsigned need_q = NEED_M | NEED_H | NEED_A | NEED_GAMMA | (k > 0 && u != nullptr ? NEED_B : 0u);
     const unsigned need_v = NEED_H | NEED_GAMMA;
     for (int j = 0; j < n; ++j) {
         s.dq.setZero();
