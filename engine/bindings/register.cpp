@@ -16,6 +16,7 @@ void register_all(nanobind::module_& m) {
     bind_sim_batch(m);
     bind_events(m);
     bind_derivatives(m);
+    bind_control(m);
 }
 
 }  // namespace nonmin::bindings

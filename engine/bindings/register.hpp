@@ -16,6 +16,7 @@ void bind_spatial(nanobind::module_& m);  // spatial.cpp: SpatialDescription, Sp
 void bind_rbd(nanobind::module_& m);      // rbd.cpp: TreeProgram (robots)
 void bind_sim(nanobind::module_& m);      // sim.cpp: SimLoop, SimOptions, PyProgram (needs Program)
 void bind_sim_batch(nanobind::module_& m);  // sim_batch.cpp: simulate_batch (k runs of the loop)
+void bind_control(nanobind::module_& m);  // control.cpp: SimControl, SimPiecewisePolynomial, SimPySignal
 void bind_batch(nanobind::module_& m);    // batch.cpp: forward_batch (model + kernel over N states)
 void bind_events(nanobind::module_& m);   // events.cpp: polyhedral_projection (event layer kernel)
 void bind_derivatives(nanobind::module_& m);  // derivatives.cpp: term_tangents (forward mode)

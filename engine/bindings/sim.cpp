@@ -292,40 +292,6 @@ void bind_sim(nb::module_& m) {
         .def_rw("max_steps", &sim::Options::max_steps)
         .def_rw("passages", &sim::Options::passages);
 
-    nb::class_<sim::Regulator>(m, "SimRegulator",
-                               "nonmin.control.Regulator (σ = 0) compiled for one active set of the loop.")
-        .def(
-            "__init__",
-            [](sim::Regulator* self, const Program& prog, CArr1 q_star,
-               nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu> Kp,
-               nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu> Kd,
-               const std::vector<std::array<int, 4>>& qblocks, CArr1 u_min, CArr1 u_max, double rtol,
-               bool raise_infeasible) {
-                auto vec = [](CArr1 a) { return Vec(CVecMap(a.data(), static_cast<Eigen::Index>(a.shape(0)))); };
-                auto mat = [](const auto& a) {
-                    return Mat(CMatMap(a.data(), static_cast<Eigen::Index>(a.shape(0)),
-                                       static_cast<Eigen::Index>(a.shape(1))));
-                };
-                try {
-                    new (self) sim::Regulator(prog, vec(q_star), mat(Kp), mat(Kd), qblocks, vec(u_min), vec(u_max),
-                                              rtol, raise_infeasible);
-                } catch (const EngineError& e) {
-                    raise_typed("InputError", e.what());
-                }
-            },
-            nb::arg("program"), nb::arg("q_star"), nb::arg("Kp"), nb::arg("Kd"), nb::arg("quaternion_blocks"),
-            nb::arg("u_min"), nb::arg("u_max"), nb::arg("rtol"), nb::arg("raise_infeasible"))
-        .def_prop_ro("stats", [](const sim::Regulator& r) {
-            nb::dict d;
-            d["steps"] = r.steps;
-            d["infeasible_steps"] = r.infeasible_steps;
-            d["saturated_steps"] = r.saturated_steps;
-            d["saturated"] = std::vector<bool>(r.saturated.begin(), r.saturated.end());
-            d["min_sigma_pb"] = r.min_sigma_pb;
-            d["max_abs_u"] = r.max_abs_u;
-            return d;
-        });
-
     m.attr("SIM_DONE") = static_cast<int>(sim::Outcome::done);
     m.attr("SIM_HANDOVER") = static_cast<int>(sim::Outcome::handover);
     m.attr("SIM_EVENT") = static_cast<int>(sim::Outcome::event);
@@ -354,7 +320,7 @@ void bind_sim(nb::module_& m) {
                 if (!compiled.is_none()) {
                     if (ctrl) raise_typed("InputError", "SimLoop: a Python and a compiled controller");
                     self->compiled_ref = compiled;
-                    ctrl = nb::cast<sim::Regulator*>(compiled);
+                    ctrl = nb::cast<sim::Controller*>(compiled);  // bindings/control.cpp
                 }
                 std::vector<double> tv(t_out.data(), t_out.data() + t_out.shape(0));
                 self->loop = sim::make_loop(prog, active.data(), opt, tv, every, ctrl);

@@ -1,75 +1,794 @@
 // Built-in controllers compiled for the loop (see nonmin/sim/control.hpp).
 #include "nonmin/sim/control.hpp"
+#include "nonmin/linalg.hpp"
 
 #include <algorithm>
 #include <cmath>
 
 namespace nonmin::sim {
 
-Regulator::Regulator(const Program& prog, Vec q_star, Mat Kp, Mat Kd, std::vector<std::array<int, 4>> qblocks,
-                     Vec u_min, Vec u_max, double rtol, bool raise_infeasible)
-    : prog_(&prog), n_(prog.n()), k_(prog.k()), qs_(std::move(q_star)), lo_(std::move(u_min)),
-      hi_(std::move(u_max)), Kp_(std::move(Kp)), Kd_(std::move(Kd)), qblocks_(std::move(qblocks)),
-      rtol_(rtol > 0.0 ? rtol : DEFAULT_RTOL), raise_(raise_infeasible) {
-    if (qs_.size() != n_ || Kp_.rows() != n_ || Kp_.cols() != n_ || Kd_.rows() != n_ || Kd_.cols() != n_ ||
-        lo_.size() != k_ || hi_.size() != k_)
-        throw EngineError("Regulator: sizes do not match the program");
-    for (const auto& b : qblocks_)
+namespace {
+
+constexpr double TINY = std::numeric_limits<double>::min();
+constexpr double PROJECT_TOL = 1e-12;   // _targets.project_configuration's tol
+constexpr int PROJECT_MAX_ITER = 100;   // and max_iter
+constexpr double ON_MANIFOLD_TOL = 1e-9;  // _targets.ON_MANIFOLD_TOL
+// Step 3's fast path: σ_min(ZB) (a lower bound of it) must exceed the rank cutoff by this factor
+// and ZB must be this well conditioned (so that the LQ solve agrees with the SVD to round-off).
+constexpr double CERTIFY_FACTOR = 1e3;
+constexpr double CERTIFY_COND = 1e6;
+
+bool finite(const double* x, int len) {
+    for (int i = 0; i < len; ++i)
+        if (!std::isfinite(x[i])) return false;
+    return true;
+}
+
+double norm2(const double* x, int len) {
+    double s = 0.0;
+    for (int i = 0; i < len; ++i) s += x[i] * x[i];
+    return std::sqrt(s);
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------ signals
+
+PiecewisePolynomial::PiecewisePolynomial(std::vector<double> x, std::vector<double> c, int order, int dim,
+                                         bool hold)
+    : x_(std::move(x)), c_(std::move(c)), order_(order), dim_(dim), hold_(hold) {
+    pieces_ = static_cast<int>(x_.size()) - 1;
+    if (pieces_ < 1 || order_ < 1 || dim_ < 0 ||
+        c_.size() != static_cast<std::size_t>(order_) * pieces_ * dim_)
+        throw EngineError("PiecewisePolynomial: need x (p + 1 ≥ 2) and c (order, p, dim)");
+    for (int i = 0; i < pieces_; ++i)
+        if (!(x_[i] < x_[i + 1])) throw EngineError("PiecewisePolynomial: breakpoints must increase");
+    if (!finite(c_.data(), static_cast<int>(c_.size())) || !finite(x_.data(), static_cast<int>(x_.size())))
+        throw EngineError("PiecewisePolynomial: coefficients and breakpoints must be finite");
+}
+
+Status PiecewisePolynomial::eval(double t, double* x, double* v, double* a) {
+    if (!std::isfinite(t)) return Status::not_finite;
+    const double lo = x_.front(), hi = x_.back();
+    const bool outside = hold_ && (t < lo || t > hi);
+    const double s = outside ? std::min(std::max(t, lo), hi) : t;
+    // the piece: the last i with x_i ≤ s, within [0, p − 1] (scipy's interval search)
+    int i = static_cast<int>(std::upper_bound(x_.begin(), x_.end(), s) - x_.begin()) - 1;
+    i = std::min(std::max(i, 0), pieces_ - 1);
+    const double d = s - x_[i];
+    for (int j = 0; j < dim_; ++j) {
+        double p = 0.0, p1 = 0.0, p2 = 0.0;  // Horner with derivatives: p, p', p''/2
+        for (int o = 0; o < order_; ++o) {
+            const double c = c_[(static_cast<std::size_t>(o) * pieces_ + i) * dim_ + j];
+            p2 = p2 * d + p1;
+            p1 = p1 * d + p;
+            p = p * d + c;
+        }
+        x[j] = p;
+        if (v) v[j] = outside ? 0.0 : p1;
+        if (a) a[j] = outside ? 0.0 : 2.0 * p2;
+    }
+    return Status::ok;
+}
+
+// ------------------------------------------------------------------------------ the controller
+
+Projected::Projected(const Program& prog, ControlSpec spec)
+    : prog_(&prog), s_(std::move(spec)), n_(prog.n()), k_(prog.k()),
+      rtol_(s_.rtol > 0.0 ? s_.rtol : DEFAULT_RTOL),
+      solver_(prog.m_all() + prog.n() + static_cast<int>(s_.fixed.size()) + 1, prog.n()) {
+    const int n = n_, k = k_;
+    if (s_.Kp.rows() != n || s_.Kp.cols() != n || s_.Kd.rows() != n || s_.Kd.cols() != n ||
+        s_.u_min.size() != k || s_.u_max.size() != k)
+        throw EngineError("controller: sizes do not match the program");
+    if (s_.law == Law::regulator && s_.q_star.size() != n)
+        throw EngineError("controller: the target must have the program's n entries");
+    if (s_.law == Law::computed_torque && (!s_.reference || s_.reference->dim() != n))
+        throw EngineError("controller: the tracker needs a reference of dimension n");
+    for (const auto& b : s_.qblocks)
         for (int i : b)
-            if (i < 0 || i >= n_) throw EngineError("Regulator: a quaternion block index is out of range");
-    qsa_ = qs_;
+            if (i < 0 || i >= n) throw EngineError("controller: a quaternion block index is out of range");
+    for (int i : s_.fixed)
+        if (i < 0 || i >= n) throw EngineError("controller: a fixed coordinate index is out of range");
+    const int c = static_cast<int>(prog.constraints().size());
+    for (const auto& [con, sig] : s_.forces)
+        if (con < 0 || con >= c || !sig || sig->dim() != prog.constraints()[con].dim)
+            throw EngineError("controller: a force target names no constraint or has the wrong size");
     ws_ = prog.make_workspace();
     Tg_ = prog.make_terms();
     Tu_ = prog.make_terms();
-    zero_ = Vec::Zero(n_);
-    fpar_ = Vec::Zero(n_);
-    w_ = Vec::Zero(n_);
-    c_ = Vec::Zero(std::max(n_, 1));
-    uraw_ = Vec::Zero(k_);
-    us_ = Vec::Zero(k_);
-    P_ = Mat::Zero(n_, n_);
-    PB_ = Mat::Zero(n_, std::max(k_, 1));
-    last_q_ = Vec::Zero(n_);
-    last_qd_ = Vec::Zero(n_);
-    saturated_steps.assign(static_cast<std::size_t>(k_), 0);
-    saturated.assign(static_cast<std::size_t>(k_), 0);
-    max_abs_u.assign(static_cast<std::size_t>(k_), 0.0);
-    if (k_ > 0) svd_pb_ = Eigen::JacobiSVD<Mat>(n_, k_, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    Tr_ = prog.make_terms();
+    for (Vec* v : {&zero_, &fpar_, &w_, &a_, &e_, &x_, &qs_, &vs_, &as_, &last_q_, &last_qd_, &hw_, &tgt_,
+                   &dr_, &stepr_, &xr_, &qtmp_, &gtmp_, &c0_, &sf_, &pf_, &y_})
+        *v = Vec::Zero(n);
+    for (Memo& mm : memo_) mm.q = mm.v = mm.a = Vec::Zero(n);
+    Z_ = Mat::Zero(n, n);
+    uraw_ = Vec::Zero(k);
+    us_ = Vec::Zero(k);
+    zf_ = Vec::Zero(n);
+    PB_ = Mat::Zero(n, std::max(k, 1));
+    ZB_ = Mat::Zero(n, std::max(k, 1));
+    G_ = Mat::Zero(n, n);
+    Hq_ = Mat::Zero(n, n);
+    saturated_steps.assign(static_cast<std::size_t>(k), 0);
+    saturated.assign(static_cast<std::size_t>(k), 0);
+    max_abs_u.assign(static_cast<std::size_t>(k), 0.0);
+    mask_.assign(static_cast<std::size_t>(c), 0);
+    if (k > 0) {
+        svd_pb_ = Eigen::JacobiSVD<Mat>(n, k, Eigen::ComputeThinU | Eigen::ComputeThinV);
+        svd_vals_ = Eigen::JacobiSVD<Mat>(n, k);
+    }
 }
 
-void Regulator::attach(const Terms& T, const Mat& A, int m, const std::vector<int>& rows) {
+void Projected::attach(const Terms& T, const Mat& A, int m, const std::vector<int>& rows) {
+    const int n = n_, k = k_;
     T_ = &T;
     A_ = &A;
     m_ = m;
     rows_ = rows;
-    Au_ = Mat::Zero(std::max(m, 1), n_);
-    DA_ = Mat::Zero(std::max(m, 1), n_);
-    if (m > 0) svd_a_ = Eigen::JacobiSVD<Mat>(m, n_, Eigen::ComputeThinV);
+    // the active mask and the kinds of the active rows (constraints whose rows are active)
+    const auto& cons = prog_->constraints();
+    hol_.clear();
+    frows_.clear();
+    fdim_.clear();
+    std::fill(mask_.begin(), mask_.end(), 0);
+    int pos = 0;
+    for (std::size_t ci = 0; ci < cons.size(); ++ci) {
+        const ConstraintInfo& info = cons[ci];
+        if (pos >= m || std::find(rows.begin(), rows.end(), info.row) == rows.end()) continue;
+        mask_[ci] = 1;
+        const int at = static_cast<int>(std::find(rows.begin(), rows.end(), info.row) - rows.begin());
+        for (int r = 0; r < info.dim; ++r)
+            if (info.kind != ConstraintKind::nonholonomic) hol_.push_back(at + r);
+        pos += info.dim;
+    }
+    if (compiled_mask_.empty()) compiled_mask_ = mask_;
+    stale_ = mask_ != compiled_mask_;
+    if (stale_) return;  // (the other active set's evaluations go to s_.other_active_set)
+    // force control: the commanded constraints that are active, in the order of `forces`
+    for (const auto& [con, sig] : s_.forces) {
+        if (!mask_[static_cast<std::size_t>(con)]) continue;
+        const int at = static_cast<int>(std::find(rows.begin(), rows.end(), cons[con].row) - rows.begin());
+        for (int r = 0; r < cons[con].dim; ++r) frows_.push_back(at + r);
+        fdim_.push_back(cons[con].dim);
+    }
+    const int mr = std::max(m, 1);
+    const int mp = static_cast<int>(hol_.size() + s_.fixed.size());
+    Au_ = Mat::Zero(mr, n);
+    V_ = Mat::Zero(std::max(std::min(m, n), 1), n);
+    Bq_.assign(static_cast<std::size_t>(mr) * (n + 1), 0.0);
+    dq_.assign(static_cast<std::size_t>(mr), 0.0);
+    sq_.assign(static_cast<std::size_t>(mr), 0.0);
+    cq_.assign(static_cast<std::size_t>(mr) + 1, 0.0);
+    lq_ = linalg::LQWork(mr, n);
+    hv_ = Vec::Zero(std::max(n, k) + 1);
+    Ar_ = Mat::Zero(std::max(std::max(mp, m), 1), n);
+    br_ = Vec::Zero(std::max(std::max(mp, m), 1));
+    const int mf = static_cast<int>(frows_.size());
+    if (mf > 0) {
+        Mbar_L_ = Mat::Zero(n, n);
+        E_ = Mat::Zero(mf, n);
+        Gf_ = Mat::Zero(n + mf, std::max(k, 1));
+        rhs_ = Vec::Zero(n + mf);
+        lam_ = Vec::Zero(mf);
+        svd_g_ = Eigen::JacobiSVD<Mat>(n + mf, std::max(k, 1), Eigen::ComputeThinU | Eigen::ComputeThinV);
+    }
+    if (m > 0) {
+        Atrue_ = Mat::Zero(m, n);
+        svd_a_ = Eigen::JacobiSVD<Mat>(m, n, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    }
 }
 
-Status Regulator::control(double t, const double* q, const double* qd, const std::uint8_t* active, double* u) {
+Status Projected::control(double t, const double* q, const double* qd, const std::uint8_t* active, double* u) {
+    if (stale_) return s_.other_active_set ? s_.other_active_set->control(t, q, qd, active, u) : Status::bad_shape;
     if (!T_) return Status::bad_shape;
-    return law(t, q, qd, active, *T_, *A_, m_, u);
+    return law(t, q, qd, *T_, *A_, u);
 }
 
-Status Regulator::update(double t, const double* q, const double* qd, const std::uint8_t* active) {
+Status Projected::update(double t, const double* q, const double* qd, const std::uint8_t* active) {
+    if (stale_) return Status::ok;  // (Python records the steps of the other active set)
     // the loop's last evaluation of the law is usually at this very state (the sample at the
     // projected step end): record it; else evaluate the law here
     bool same = t == last_t_;
     for (int i = 0; same && i < n_; ++i) same = q[i] == last_q_[i] && qd[i] == last_qd_[i];
     if (!same) {
-        Status s = prog_->evaluate(t, q, qd, active, NEED_H | NEED_B | NEED_A, Tu_, *ws_);
+        const unsigned need = NEED_M | NEED_H | NEED_B | NEED_A | NEED_GAMMA;
+        Status s = prog_->evaluate(t, q, qd, active, need, Tu_, *ws_);
         if (s != Status::ok) return s;
         for (int i = 0; i < m_; ++i) Au_.row(i) = Tu_.A.row(rows_[static_cast<std::size_t>(i)]);
-        if ((s = law(t, q, qd, active, Tu_, Au_, m_, us_.data())) != Status::ok) return s;
+        if ((s = law(t, q, qd, Tu_, Au_, us_.data())) != Status::ok) return s;
     }
     record();
     return Status::ok;
 }
 
-void Regulator::record() {  // ControlState.record of the last law evaluation
+// ------------------------------------------------------------------------------ step 1
+
+// Z: rows orthonormal, spanning N(A) under the rank policy of range_basis(A, rtol) (P = ZᵀZ).
+// Every row live and m ≤ n: the certified LQ of D A (Solver::range_basis's first choice, the
+// same calls), Z = the rows m … n − 1 of its orthogonal factor. Otherwise Solver::range_basis
+// (V: r × n, rows spanning R(Aᵀ)) and Z from the Householder QR of Vᵀ (its last n − r columns).
+Status Projected::nullspace(const Mat& A) {
+    const int n = n_, m = m_;
+    lq_valid_ = false;
+    if (m == 0) {
+        rank_ = 0;
+        Z_.setIdentity();
+        return Status::ok;
+    }
+    const int live = linalg::equilibrate(A.data(), m, n, nullptr, rtol_, Bq_.data(), dq_.data(), sq_.data());
+    if (live == m && m >= linalg::QR_MIN_ROWS && m <= n && m <= linalg::DENSE_INVERSE_MAX_ROWS &&
+        linalg::lq_certified(Bq_.data(), m, n, rtol_, lq_, cq_.data()) != linalg::LQ_NONE) {
+        rank_ = m;
+        lq_valid_ = true;
+        if (n > m) linalg::lq_rows(lq_, m, n, m, n - m, Z_.data());
+        return Status::ok;
+    }
+    lq_valid_ = false;
+    rank_ = solver_.range_basis(A.data(), m, rtol_, V_.data());
+    const int r = rank_;
+    // Householder QR of X = Vᵀ (n × r), reflectors in the columns of G_ (rows j.. of column j)
+    Mat& H = Hq_;
+    for (int j = 0; j < r; ++j)
+        for (int i = 0; i < n; ++i) H(i, j) = V_(j, i);
+    for (int j = 0; j < r; ++j) {
+        double sq = 0.0;
+        for (int i = j; i < n; ++i) sq += H(i, j) * H(i, j);
+        const double nx = std::sqrt(sq);
+        const double alpha = H(j, j) > 0.0 ? -nx : nx;
+        const double v0 = H(j, j) - alpha;
+        const double vv = sq - H(j, j) * H(j, j) + v0 * v0;
+        H(j, j) = v0;
+        hv_[j] = vv > 0.0 ? 2.0 / vv : 0.0;  // β_j
+        for (int c = j + 1; c < r; ++c) {
+            double s = 0.0;
+            for (int i = j; i < n; ++i) s += H(i, j) * H(i, c);
+            s *= hv_[j];
+            for (int i = j; i < n; ++i) H(i, c) -= s * H(i, j);
+        }
+    }
+    for (int a = 0; a < n - r; ++a) {  // Z row a = H_0 ⋯ H_{r−1} e_{r+a}
+        double* z = &Z_(a, 0);
+        for (int i = 0; i < n; ++i) z[i] = 0.0;
+        z[r + a] = 1.0;
+        for (int j = r - 1; j >= 0; --j) {
+            double s = 0.0;
+            for (int i = j; i < n; ++i) s += H(i, j) * z[i];
+            s *= hv_[j];
+            for (int i = j; i < n; ++i) z[i] -= s * H(i, j);
+        }
+    }
+    return Status::ok;
+}
+
+// out = P x = Zᵀ(Z x) (out may be x)
+void Projected::project(const double* x, double* out) {
+    const int n = n_, d = n_ - rank_;
+    for (int a = 0; a < d; ++a) {
+        double s = 0.0;
+        for (int j = 0; j < n; ++j) s += Z_(a, j) * x[j];
+        hw_[a] = s;
+    }
+    for (int i = 0; i < n; ++i) {
+        double s = 0.0;
+        for (int a = 0; a < d; ++a) s += Z_(a, i) * hw_[a];
+        out[i] = s;
+    }
+}
+
+// PB = Zᵀ(Z B), kept for σ(PB) in record(), the SVD path and force control
+void Projected::ensure_pb(const Terms& T) {
+    if (pb_valid_) return;
+    const int n = n_, k = k_, d = n_ - rank_;
+    for (int j = 0; j < k; ++j) {
+        for (int a = 0; a < d; ++a) {
+            double s = 0.0;
+            for (int i = 0; i < n; ++i) s += Z_(a, i) * T.B(i, j);
+            hw_[a] = s;
+        }
+        for (int i = 0; i < n; ++i) {
+            double s = 0.0;
+            for (int a = 0; a < d; ++a) s += Z_(a, i) * hw_[a];
+            PB_(i, j) = s;
+        }
+    }
+    pb_valid_ = true;
+}
+
+// ------------------------------------------------------------------------------ references
+
+// pinv(A, rtol) @ b (nonmin.core.pseudo_inverse: A's own SVD truncated to the rank of the policy);
+// with full row rank it is the minimum-norm solution (DA)⁺ D b of Solver::min_norm.
+Status Projected::min_norm_true(const Mat& A, int m, const double* b, double* x) {
+    const SolveInfo info = solver_.min_norm(A.data(), m, b, rtol_, x);
+    if (info.status != Status::ok) return info.status;
+    if (info.rank == m) return Status::ok;
+    // rank-deficient: the truncated SVD of A itself
+    const int n = n_;
+    for (int i = 0; i < m; ++i) Atrue_.row(i) = A.row(i);  // (m is the active set's row count)
+    Eigen::JacobiSVD<Mat>& svd = svd_a_;
+    svd.compute(Atrue_);
+    const auto& sv = svd.singularValues();
+    const auto& U = svd.matrixU();
+    const auto& Vm = svd.matrixV();
+    for (int j = 0; j < n; ++j) x[j] = 0.0;
+    for (int kk = 0; kk < info.rank && kk < sv.size(); ++kk) {
+        if (!(sv[kk] > 0.0)) continue;
+        double c = 0.0;
+        for (int i = 0; i < m; ++i) c += U(i, kk) * b[i];
+        c /= sv[kk];
+        for (int j = 0; j < n; ++j) x[j] += Vm(j, kk) * c;
+    }
+    return Status::ok;
+}
+
+// _targets.project_configuration (Gauss–Newton onto the active position-level constraints, the
+// fixed coordinates kept), in place on x; check_on_manifold with `reject`.
+Status Projected::project_configuration(double t, double* x) {
+    const int n = n_;
+    const int mh = static_cast<int>(hol_.size()), nf = static_cast<int>(s_.fixed.size());
+    const int mr = mh + nf;
+    for (int i = 0; i < n; ++i) tgt_[i] = x[i];
+    const double scale = 1.0 + norm2(tgt_.data(), n);
+    const unsigned need = NEED_A | NEED_PHI | (s_.mass_metric ? NEED_M : 0u);
+    auto rows_at = [&](const double* xx, unsigned nd) -> Status {  // Ar_, br_ = A, φ (+ fixed)
+        const Status s = prog_->evaluate(t, xx, zero_.data(), mask_.data(), nd, Tr_, *ws_);
+        if (s != Status::ok) return s;
+        for (int i = 0; i < mh; ++i) {
+            const int r = rows_[static_cast<std::size_t>(hol_[static_cast<std::size_t>(i)])];
+            Ar_.row(i) = Tr_.A.row(r);
+            br_[i] = Tr_.phi[r];
+        }
+        for (int i = 0; i < nf; ++i) {
+            const int c = s_.fixed[static_cast<std::size_t>(i)];
+            Ar_.row(mh + i).setZero();
+            Ar_(mh + i, c) = 1.0;
+            br_[mh + i] = xx[c] - tgt_[c];
+        }
+        return Status::ok;
+    };
+    Status s;
+    if (s_.reject) {
+        if (mh == 0) return Status::ok;
+        if ((s = rows_at(x, NEED_PHI)) != Status::ok) return s;
+        return norm2(br_.data(), mh) > ON_MANIFOLD_TOL * scale ? Status::not_finite : Status::ok;
+    }
+    if (mr == 0) return Status::ok;
+    for (int it = 0; it < PROJECT_MAX_ITER; ++it) {
+        if ((s = rows_at(x, need)) != Status::ok) return s;
+        const double res = norm2(br_.data(), mr);
+        if (it == 0 && res <= PROJECT_TOL * scale) return Status::ok;  // the target itself
+        for (int j = 0; j < n; ++j) dr_[j] = tgt_[j] - x[j];
+        for (int i = 0; i < mr; ++i) {  // b = φ + A d
+            double a = br_[i];
+            for (int j = 0; j < n; ++j) a += Ar_(i, j) * dr_[j];
+            br_[i] = a;
+        }
+        if (s_.mass_metric) {  // Sᵀ(−A⁺b): forward dynamics with zero force and bias b
+            SolveOptions so;
+            so.rtol = rtol_;
+            const SolveInfo info = solver_.forward(Tr_.M.data(), zero_.data(), Ar_.data(), mr, br_.data(), so,
+                                                   stepr_.data(), nullptr);
+            if (info.status != Status::ok) return info.status;
+        } else {  // −(DA)⁺ D b
+            const SolveInfo info = solver_.min_norm(Ar_.data(), mr, br_.data(), rtol_, stepr_.data());
+            if (info.status != Status::ok) return info.status;
+            for (int j = 0; j < n; ++j) stepr_[j] = -stepr_[j];
+        }
+        for (int j = 0; j < n; ++j) {
+            stepr_[j] += dr_[j];
+            x[j] += stepr_[j];
+        }
+        if (res <= PROJECT_TOL * scale && norm2(stepr_.data(), n) <= 1e3 * PROJECT_TOL * scale) {
+            // converged: the residual after this step is at most res (the Gauss–Newton step
+            // minimizes the linearized one) plus O(‖step‖²), far below the check's 1e3·tol·scale
+            return finite(x, n) ? Status::ok : Status::not_finite;
+        }
+    }
+    if ((s = rows_at(x, NEED_A | NEED_PHI)) != Status::ok) return s;
+    const double res = norm2(br_.data(), mr);
+    if (!finite(x, n) || res > 1e3 * PROJECT_TOL * scale) return Status::not_finite;  // AssemblyError
+    return Status::ok;
+}
+
+// Tracker.desired (and a regulator's target under rheonomic constraints): qs_, vs_, as_ at t.
+Status Projected::desired(double t, const double* q) {
+    const int n = n_;
+    const bool tracker = s_.law == Law::computed_torque;
+    Status s;
+    if (tracker) {
+        if ((s = s_.reference->eval(t, qs_.data(), vs_.data(), as_.data())) != Status::ok) return s;
+    } else {
+        qs_ = s_.q_star;
+    }
+    unsigned signs = 0;
+    if (tracker)
+        for (std::size_t b = 0; b < s_.qblocks.size(); ++b) {
+            double dot = 0.0;
+            for (int i : s_.qblocks[b]) dot += q[i] * qs_[i];
+            if (dot < 0.0) signs |= 1u << b;
+        }
+    for (const Memo& mm : memo_)
+        if (mm.t == t && mm.signs == signs) {
+            qs_ = mm.q;
+            vs_ = mm.v;
+            as_ = mm.a;
+            return Status::ok;
+        }
+    if (!finite(qs_.data(), n) || (tracker && (!finite(vs_.data(), n) || !finite(as_.data(), n))))
+        return Status::not_finite;  // InputError of the Python controller
+    for (std::size_t b = 0; b < s_.qblocks.size(); ++b)
+        if (signs & (1u << b))
+            for (int i : s_.qblocks[b]) {
+                qs_[i] = -qs_[i];
+                vs_[i] = -vs_[i];
+                as_[i] = -as_[i];
+            }
+    if ((s = project_configuration(t, qs_.data())) != Status::ok) return s;
+    if (tracker && m_ > 0) {
+        // project_velocity: q̇* − A⁺(A q̇* + φ_t) at (q*, q̇*)
+        if ((s = prog_->evaluate(t, qs_.data(), vs_.data(), mask_.data(), NEED_A | NEED_VELOCITY, Tr_, *ws_)) !=
+            Status::ok)
+            return s;
+        for (int i = 0; i < m_; ++i) {
+            const int r = rows_[static_cast<std::size_t>(i)];
+            Ar_.row(i) = Tr_.A.row(r);
+            br_[i] = Tr_.velocity[r];
+        }
+        if ((s = min_norm_true(Ar_, m_, br_.data(), xr_.data())) != Status::ok) return s;
+        for (int j = 0; j < n; ++j) vs_[j] -= xr_[j];
+        // project_acceleration: q̈* − A⁺(A q̈* + γ) at (q*, q̇*)
+        if ((s = prog_->evaluate(t, qs_.data(), vs_.data(), mask_.data(), NEED_A | NEED_GAMMA, Tr_, *ws_)) !=
+            Status::ok)
+            return s;
+        for (int i = 0; i < m_; ++i) {
+            const int r = rows_[static_cast<std::size_t>(i)];
+            Ar_.row(i) = Tr_.A.row(r);
+            double a = Tr_.gamma[r];
+            for (int j = 0; j < n; ++j) a += Tr_.A(r, j) * as_[j];
+            br_[i] = a;
+        }
+        if ((s = min_norm_true(Ar_, m_, br_.data(), xr_.data())) != Status::ok) return s;
+        for (int j = 0; j < n; ++j) as_[j] -= xr_[j];
+    }
+    Memo& mm = memo_[static_cast<std::size_t>(memo_next_)];
+    memo_next_ = (memo_next_ + 1) % static_cast<int>(memo_.size());
+    mm.t = t;
+    mm.signs = signs;
+    mm.q = qs_;
+    mm.v = vs_;
+    mm.a = as_;
+    return Status::ok;
+}
+
+// ------------------------------------------------------------------------------ the law
+
+Status Projected::law(double t, const double* q, const double* qd, const Terms& T, const Mat& A, double* u) {
+    const int n = n_, k = k_, m = m_;
+    last_t_ = std::numeric_limits<double>::quiet_NaN();  // (set again when the law succeeds)
+    pb_valid_ = false;
+    Status s = nullspace(A);
+    if (s != Status::ok) return s;
+    if (s_.law == Law::regulator) {
+        // f_∥ = −P(f_g + Kp e + Kd qd), e = q − q* (q* projected, then aligned per quaternion block)
+        if (s_.project_target) {
+            if ((s = desired(t, q)) != Status::ok) return s;
+        } else {
+            qs_ = s_.q_star;
+        }
+        for (const auto& b : s_.qblocks) {
+            double dot = 0.0;
+            for (int i : b) dot += q[i] * qs_[i];
+            if (dot < 0.0)
+                for (int i : b) qs_[i] = -qs_[i];
+        }
+        if ((s = prog_->evaluate(t, q, zero_.data(), mask_.data(), NEED_H, Tg_, *ws_)) != Status::ok) return s;
+        for (int i = 0; i < n; ++i) {
+            double a = Tg_.h[i];
+            for (int j = 0; j < n; ++j) a += s_.Kp(i, j) * (q[j] - qs_[j]) + s_.Kd(i, j) * qd[j];
+            w_[i] = a;
+        }
+        project(w_.data(), fpar_.data());
+        for (int i = 0; i < n; ++i) fpar_[i] = -fpar_[i];
+    } else {
+        // computed torque: a = q̈* − Kd ė − Kp e, f_∥ = P(M(P a + w) − h − f_p), w = −(DA)⁺Dγ
+        if ((s = desired(t, q)) != Status::ok) return s;
+        for (int i = 0; i < n; ++i) {
+            e_[i] = q[i] - qs_[i];
+            x_[i] = qd[i] - vs_[i];
+        }
+        for (int i = 0; i < n; ++i) {
+            double a = as_[i];
+            for (int j = 0; j < n; ++j) a -= s_.Kd(i, j) * x_[j] + s_.Kp(i, j) * e_[j];
+            a_[i] = a;
+        }
+        if (m > 0) {
+            for (int i = 0; i < m; ++i) br_[i] = T.gamma[rows_[static_cast<std::size_t>(i)]];
+            const SolveInfo info = solver_.min_norm(A.data(), m, br_.data(), rtol_, w_.data());
+            if (info.status != Status::ok) return info.status;
+            for (int j = 0; j < n; ++j) w_[j] = -w_[j];
+        } else {
+            w_.setZero();
+        }
+        project(a_.data(), x_.data());  // x = P a + w
+        for (int i = 0; i < n; ++i) x_[i] += w_[i];
+        for (int i = 0; i < n; ++i) {  // y = M x − h − f_p
+            double a = -T.h[i] - T.f_passive[i];
+            for (int j = 0; j < n; ++j) a += T.M(i, j) * x_[j];
+            y_[i] = a;
+        }
+        project(y_.data(), fpar_.data());
+    }
+    if (k > 0 && k <= n - rank_) ensure_pb(T);  // (σ(PB) in record(): otherwise 0)
+    s = frows_.empty() ? actuate(T) : actuate_force(t, T, A);
+    if (s != Status::ok) return s;
+    for (int j = 0; j < k; ++j)
+        if (!std::isfinite(uraw_[j])) return Status::not_finite;
+    for (int j = 0; j < k; ++j) u[j] = std::min(std::max(uraw_[j], s_.u_min[j]), s_.u_max[j]);
+    last_t_ = t;
+    for (int i = 0; i < n; ++i) {
+        last_q_[i] = q[i];
+        last_qd_[i] = qd[i];
+    }
+    return Status::ok;
+}
+
+// ------------------------------------------------------------------------------ step 3
+
+// _common.actuate: u = (PB)⁺ f_∥ with rank(PB) by σ > rtol·max(σ_max, max column norm of B).
+Status Projected::actuate(const Terms& T) {
+    const int n = n_, k = k_, d = n_ - rank_;
+    if (k == 0) {
+        last_feasible_ = d == 0;
+        if (!last_feasible_ && s_.raise_infeasible) return Status::not_positive_definite;
+        return Status::ok;
+    }
+    double bscale = 0.0;
+    for (int j = 0; j < k; ++j) {
+        double sq = 0.0;
+        for (int i = 0; i < n; ++i) sq += T.B(i, j) * T.B(i, j);
+        bscale = std::max(bscale, sq);
+    }
+    bscale = std::sqrt(bscale);
+    if (d > 0 && k >= d) {
+        // ZB = Z B (d × k), zf = Z f_∥; LQ of ZB by Householder reflectors on its rows
+        Mat& W = ZB_;
+        double fro = 0.0;
+        for (int a = 0; a < d; ++a) {
+            for (int j = 0; j < k; ++j) {
+                double s = 0.0;
+                for (int i = 0; i < n; ++i) s += Z_(a, i) * T.B(i, j);
+                W(a, j) = s;
+                fro += s * s;
+            }
+            double s = 0.0;
+            for (int i = 0; i < n; ++i) s += Z_(a, i) * fpar_[i];
+            zf_[a] = s;
+        }
+        fro = std::sqrt(fro);
+        bool ok = true;
+        for (int a = 0; a < d && ok; ++a) {
+            double sq = 0.0;
+            for (int j = a; j < k; ++j) sq += W(a, j) * W(a, j);
+            const double nx = std::sqrt(sq);
+            if (!(nx > 0.0)) {
+                ok = false;
+                break;
+            }
+            const double alpha = W(a, a) > 0.0 ? -nx : nx;
+            const double v0 = W(a, a) - alpha;
+            const double vv = sq - W(a, a) * W(a, a) + v0 * v0;
+            const double beta = vv > 0.0 ? 2.0 / vv : 0.0;
+            // the reflector v = (v0, W(a, a+1..)) kept in row a past the diagonal; L_aa = alpha
+            W(a, a) = v0;
+            for (int b = a + 1; b < d; ++b) {
+                double s = 0.0;
+                for (int j = a; j < k; ++j) s += W(a, j) * W(b, j);
+                s *= beta;
+                for (int j = a; j < k; ++j) W(b, j) -= s * W(a, j);
+            }
+            hv_[a] = beta;
+            G_(a, a) = alpha;  // L's diagonal
+            for (int b = a + 1; b < d; ++b) G_(b, a) = W(b, a);  // L below the diagonal
+        }
+        if (ok) {
+            // ‖L⁻¹‖_F (σ_min(ZB) ≥ 1/‖L⁻¹‖_F) and y = L⁻¹ zf
+            double inv_fro = 0.0;
+            for (int c = 0; c < d; ++c) {  // column c of L⁻¹ by forward substitution
+                for (int i = 0; i < d; ++i) {
+                    double s = i == c ? 1.0 : 0.0;
+                    for (int j = c; j < i; ++j) s -= G_(i, j) * y_[j];
+                    y_[i] = i < c ? 0.0 : s / G_(i, i);
+                    if (i >= c) inv_fro += y_[i] * y_[i];
+                }
+            }
+            const double smin_lo = 1.0 / std::sqrt(inv_fro);
+            const double ref_hi = std::max({fro, bscale, TINY});
+            if (std::isfinite(smin_lo) && smin_lo > CERTIFY_FACTOR * rtol_ * ref_hi && fro <= CERTIFY_COND * smin_lo) {
+                for (int i = 0; i < d; ++i) {
+                    double s = zf_[i];
+                    for (int j = 0; j < i; ++j) s -= G_(i, j) * y_[j];
+                    y_[i] = s / G_(i, i);
+                }
+                // u = H_0 ⋯ H_{d−1} [y; 0]
+                for (int j = 0; j < k; ++j) uraw_[j] = j < d ? y_[j] : 0.0;
+                for (int a = d - 1; a >= 0; --a) {
+                    double s = 0.0;
+                    for (int j = a; j < k; ++j) s += W(a, j) * uraw_[j];
+                    s *= hv_[a];
+                    for (int j = a; j < k; ++j) uraw_[j] -= s * W(a, j);
+                }
+                last_feasible_ = true;
+                ++fast_actuations;
+                return Status::ok;
+            }
+        }
+    }
+    // the SVD of PB (the Python code's decision, everywhere the fast path is not certified)
+    ++svd_actuations;
+    ensure_pb(T);
+    svd_pb_.compute(PB_.leftCols(k));
+    const auto& sv = svd_pb_.singularValues();
+    const auto& U = svd_pb_.matrixU();
+    const auto& V = svd_pb_.matrixV();
+    const double ref = std::max({sv.size() ? sv[0] : 0.0, bscale, TINY});
+    int rank_pb = 0;
+    for (int i = 0; i < sv.size(); ++i) rank_pb += sv[i] > rtol_ * ref;
+    last_feasible_ = rank_pb >= d;
+    if (!last_feasible_ && s_.raise_infeasible) return Status::not_positive_definite;
+    for (int i = 0; i < sv.size(); ++i) {
+        double c = 0.0;
+        if (sv[i] > rtol_ * ref) {
+            for (int r = 0; r < n; ++r) c += U(r, i) * fpar_[r];
+            c /= sv[i];
+        }
+        y_[i] = c;
+    }
+    for (int j = 0; j < k; ++j) {
+        double a = 0.0;
+        for (int i = 0; i < sv.size(); ++i) a += V(j, i) * y_[i];
+        uraw_[j] = a;
+    }
+    return Status::ok;
+}
+
+// ForceControl.actuation: [PB; EB] u = [f_∥; E(c₀ − S f_∥) − λ*] by SVD, minimum norm.
+Status Projected::actuate_force(double t, const Terms& T, const Mat& A) {
+    const int n = n_, k = k_, m = m_, d = n_ - rank_;
+    const int mf = static_cast<int>(frows_.size());
+    Status s;
+    // λ* of the active commanded constraints, in order
+    {
+        int at = 0, fi = 0;
+        for (const auto& [con, sig] : s_.forces) {
+            if (!mask_[static_cast<std::size_t>(con)]) continue;
+            if ((s = sig->eval(t, lam_.data() + at, nullptr, nullptr)) != Status::ok) return s;
+            at += fdim_[static_cast<std::size_t>(fi++)];
+        }
+        if (!finite(lam_.data(), mf)) return Status::not_finite;
+    }
+    // c₀ = f_c of solve_dynamics(M, h + f_p, A, γ, rtol), with μ and M̄'s Cholesky factor
+    for (int i = 0; i < n; ++i) gtmp_[i] = T.h[i] + T.f_passive[i];
+    for (int i = 0; i < m; ++i) br_[i] = T.gamma[rows_[static_cast<std::size_t>(i)]];
+    SolveOptions so;
+    so.rtol = rtol_;
+    const SolveInfo info =
+        solver_.solve(T.M.data(), gtmp_.data(), A.data(), m, br_.data(), so, qtmp_.data(), c0_.data(), nullptr,
+                      Mbar_L_.data());
+    if (info.status != Status::ok) return info.status;
+    // S f_∥ = f_∥ − M M̄⁻¹ P f_∥
+    project(fpar_.data(), pf_.data());
+    ensure_pb(T);
+    for (int i = 0; i < n; ++i) {  // L y = P f_∥
+        double a = pf_[i];
+        for (int j = 0; j < i; ++j) a -= Mbar_L_(i, j) * pf_[j];
+        pf_[i] = a / Mbar_L_(i, i);
+    }
+    for (int i = n - 1; i >= 0; --i) {  // Lᵀ x = y
+        double a = pf_[i];
+        for (int j = i + 1; j < n; ++j) a -= Mbar_L_(j, i) * pf_[j];
+        pf_[i] = a / Mbar_L_(i, i);
+    }
+    for (int i = 0; i < n; ++i) {
+        double a = fpar_[i];
+        for (int j = 0; j < n; ++j) a -= T.M(i, j) * pf_[j];
+        sf_[i] = a;
+    }
+    // E: the commanded rows of (A⁺)ᵀ. With the certified LQ of step 1 (full row rank), A⁺ =
+    // (DA)⁺D = Qᵀ L⁻¹ D: row f of E is d_f (L⁻¹ e_f)ᵀ Q; else A's own SVD truncated to the rank.
+    if (lq_valid_) {
+        const int ld = lq_.m_max;
+        for (int f = 0; f < mf; ++f) {
+            const int row = frows_[static_cast<std::size_t>(f)];
+            const double df = dq_[static_cast<std::size_t>(row)];
+            for (int i = 0; i < m; ++i) hw_[i] = i < row ? 0.0 : -df * lq_.Li[static_cast<std::size_t>(i) * ld + row];
+            linalg::lq_min_norm(lq_, m, n, hw_.data(), &E_(f, 0));  // (−Qᵀ of −d_f L⁻¹ e_f)
+        }
+    } else {
+        for (int i = 0; i < m; ++i) Atrue_.row(i) = A.row(i);
+        svd_a_.compute(Atrue_);
+        const auto& sv = svd_a_.singularValues();
+        const auto& U = svd_a_.matrixU();
+        const auto& V = svd_a_.matrixV();
+        for (int f = 0; f < mf; ++f) {
+            const int row = frows_[static_cast<std::size_t>(f)];
+            for (int j = 0; j < n; ++j) {
+                double a = 0.0;
+                for (int kk = 0; kk < rank_ && kk < sv.size(); ++kk)
+                    if (sv[kk] > 0.0) a += V(j, kk) * U(row, kk) / sv[kk];
+                E_(f, j) = a;
+            }
+        }
+    }
+    // G = [PB; EB], rhs = [f_∥; E(c₀ − S f_∥) − λ*]
+    for (int i = 0; i < n; ++i) {
+        for (int j = 0; j < k; ++j) Gf_(i, j) = PB_(i, j);
+        rhs_[i] = fpar_[i];
+    }
+    for (int f = 0; f < mf; ++f) {
+        double r = -lam_[f];
+        for (int j = 0; j < n; ++j) r += E_(f, j) * (c0_[j] - sf_[j]);
+        rhs_[n + f] = r;
+        for (int j = 0; j < k; ++j) {
+            double a = 0.0;
+            for (int i = 0; i < n; ++i) a += E_(f, i) * T.B(i, j);
+            Gf_(n + f, j) = a;
+        }
+    }
+    if (k == 0) {
+        last_feasible_ = d + mf == 0;
+        if (!last_feasible_ && s_.raise_infeasible) return Status::not_positive_definite;
+        return Status::ok;
+    }
+    double bscale = 0.0;
+    for (int j = 0; j < k; ++j) {
+        double sq = 0.0;
+        for (int i = 0; i < n; ++i) sq += T.B(i, j) * T.B(i, j);
+        bscale = std::max(bscale, sq);
+    }
+    bscale = std::sqrt(bscale);
+    svd_g_.compute(Gf_);
+    const auto& sv = svd_g_.singularValues();
+    const auto& U = svd_g_.matrixU();
+    const auto& V = svd_g_.matrixV();
+    const double ref = std::max({sv.size() ? sv[0] : 0.0, bscale, TINY});
+    int rank = 0;
+    for (int i = 0; i < sv.size(); ++i) rank += sv[i] > rtol_ * ref;
+    last_feasible_ = rank >= d + mf;
+    if (!last_feasible_ && s_.raise_infeasible) return Status::not_positive_definite;
+    for (int i = 0; i < sv.size(); ++i) {
+        double c = 0.0;
+        if (sv[i] > rtol_ * ref) {
+            for (int r = 0; r < n + mf; ++r) c += U(r, i) * rhs_[r];
+            c /= sv[i];
+        }
+        y_[i] = c;
+    }
+    for (int j = 0; j < k; ++j) {
+        double a = 0.0;
+        for (int i = 0; i < sv.size(); ++i) a += V(j, i) * y_[i];
+        uraw_[j] = a;
+    }
+    return Status::ok;
+}
+
+// ------------------------------------------------------------------------------ bookkeeping
+
+// The smallest singular value of PB at the last law evaluation (σ(PB)[-1] of _common.actuate):
+// 0 when PB has more singular values than n − r (the others vanish exactly; the SVD of the
+// rounded PB gives them at round-off).
+double Projected::sigma_min_pb() {
+    const int n = n_, k = k_, d = n_ - rank_;
+    if (k == 0 || !pb_valid_) return 0.0;
+    if (std::min(n, k) > d) return 0.0;
+    svd_vals_.compute(PB_.leftCols(k));
+    const auto& sv = svd_vals_.singularValues();
+    return sv.size() ? sv[sv.size() - 1] : 0.0;
+}
+
+void Projected::record() {  // ControlState.record of the last law evaluation
     for (int j = 0; j < k_; ++j) {
-        const double lo = lo_[j], hi = hi_[j], v = uraw_[j];
+        const double lo = s_.u_min[j], hi = s_.u_max[j], v = uraw_[j];
         const bool sat = (v <= lo || v >= hi) && (std::isfinite(lo) || std::isfinite(hi));
         saturated[static_cast<std::size_t>(j)] = sat;
         saturated_steps[static_cast<std::size_t>(j)] += sat;
@@ -77,110 +796,7 @@ void Regulator::record() {  // ControlState.record of the last law evaluation
     }
     ++steps;
     infeasible_steps += last_feasible_ ? 0 : 1;
-    min_sigma_pb = std::min(min_sigma_pb, last_smin_);
-}
-
-Status Regulator::law(double t, const double* q, const double* qd, const std::uint8_t* active, const Terms& T,
-                      const Mat& A, int m, double* u) {
-    const int n = n_, k = k_;
-    last_t_ = std::numeric_limits<double>::quiet_NaN();  // (set again when the law succeeds)
-    // f_g = h(q, 0)
-    Status s = prog_->evaluate(t, q, zero_.data(), active, NEED_H, Tg_, *ws_);
-    if (s != Status::ok) return s;
-    // P = I − Σ_kept v vᵀ of range_basis(A, rtol)
-    P_.setIdentity();
-    int rank = 0;
-    if (m > 0) {
-        double big = 0.0;
-        for (int i = 0; i < m; ++i) {
-            double sq = 0.0;
-            for (int j = 0; j < n; ++j) sq += A(i, j) * A(i, j);
-            DA_(i, 0) = std::sqrt(sq);  // (norm kept in column 0 until scaled below)
-            big = std::max(big, DA_(i, 0));
-        }
-        for (int i = 0; i < m; ++i) {
-            const double nr = DA_(i, 0);
-            const double d = nr > rtol_ * big ? 1.0 / nr : 0.0;
-            for (int j = 0; j < n; ++j) DA_(i, j) = A(i, j) * d;
-        }
-        svd_a_.compute(DA_);
-        const auto& sv = svd_a_.singularValues();
-        const auto& V = svd_a_.matrixV();
-        for (int kk = 0; kk < sv.size(); ++kk) {
-            if (!(sv[kk] > rtol_ * sv[0])) continue;
-            ++rank;
-            for (int i = 0; i < n; ++i)
-                for (int j = 0; j < n; ++j) P_(i, j) -= V(i, kk) * V(j, kk);
-        }
-    }
-    // e = q − q*, q* aligned per quaternion block
-    qsa_ = qs_;
-    for (const auto& b : qblocks_) {
-        double dot = 0.0;
-        for (int i : b) dot += q[i] * qs_[i];
-        if (dot < 0.0)
-            for (int i : b) qsa_[i] = -qs_[i];
-    }
-    for (int i = 0; i < n; ++i) {
-        double a = Tg_.h[i];
-        for (int j = 0; j < n; ++j) a += Kp_(i, j) * (q[j] - qsa_[j]) + Kd_(i, j) * qd[j];
-        w_[i] = a;
-    }
-    for (int i = 0; i < n; ++i) {
-        double a = 0.0;
-        for (int j = 0; j < n; ++j) a += P_(i, j) * w_[j];
-        fpar_[i] = -a;
-    }
-    const int dof = n - rank;
-    bool feasible;
-    double s_min = 0.0;
-    if (k == 0) {
-        feasible = dof == 0;
-        if (!feasible && raise_) return Status::not_positive_definite;  // InfeasibleActuationError
-    } else {
-        PB_.noalias() = P_ * T.B;
-        double bscale = 0.0;
-        for (int j = 0; j < k; ++j) {
-            double sq = 0.0;
-            for (int i = 0; i < n; ++i) sq += T.B(i, j) * T.B(i, j);
-            bscale = std::max(bscale, sq);
-        }
-        bscale = std::sqrt(bscale);
-        svd_pb_.compute(PB_);
-        const auto& sv = svd_pb_.singularValues();
-        const auto& U = svd_pb_.matrixU();
-        const auto& V = svd_pb_.matrixV();
-        const double ref = std::max({sv.size() ? sv[0] : 0.0, bscale, std::numeric_limits<double>::min()});
-        int rank_pb = 0;
-        for (int i = 0; i < sv.size(); ++i) rank_pb += sv[i] > rtol_ * ref;
-        feasible = rank_pb >= dof;
-        if (!feasible && raise_) return Status::not_positive_definite;  // InfeasibleActuationError
-        for (int i = 0; i < sv.size(); ++i) {
-            double c = 0.0;
-            if (sv[i] > rtol_ * ref) {
-                for (int r = 0; r < n; ++r) c += U(r, i) * fpar_[r];
-                c /= sv[i];
-            }
-            c_[i] = c;
-        }
-        for (int j = 0; j < k; ++j) {
-            double a = 0.0;
-            for (int i = 0; i < sv.size(); ++i) a += V(j, i) * c_[i];
-            uraw_[j] = a;
-        }
-        s_min = sv.size() ? sv[sv.size() - 1] : 0.0;
-    }
-    for (int j = 0; j < k; ++j)
-        if (!std::isfinite(uraw_[j])) return Status::not_finite;
-    for (int j = 0; j < k; ++j) u[j] = std::min(std::max(uraw_[j], lo_[j]), hi_[j]);
-    last_t_ = t;
-    for (int i = 0; i < n; ++i) {
-        last_q_[i] = q[i];
-        last_qd_[i] = qd[i];
-    }
-    last_feasible_ = feasible;
-    last_smin_ = s_min;
-    return Status::ok;
+    min_sigma_pb = std::min(min_sigma_pb, sigma_min_pb());
 }
 
 }  // namespace nonmin::sim

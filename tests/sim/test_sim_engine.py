@@ -139,7 +139,7 @@ def test_regulator_compiled_equals_the_python_regulator(kw: dict[str, Any]) -> N
                          u_min=None if lim is None else -lim)  # fmt: skip
 
     prog = _engine.program_for(mech.model)
-    assert type(_engine.compiled_controller(reg(), mech.model, prog, mech.state.active)).__name__ == "SimRegulator"
+    assert type(_engine.compiled_controller(reg(), mech.model, prog, mech.state.active)).__name__ == "SimControl"
     a = simulate(mech, (0.0, 0.5), controller=reg(), engine="engine", progress=False, **kw)
     with use_backend("numpy"):
         b = simulate(mech, (0.0, 0.5), controller=reg(), engine="python", progress=False, **kw)

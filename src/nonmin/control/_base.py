@@ -156,6 +156,21 @@ class ProjectedController(Controller):
         ev = evaluate(self.model, float(t), qv, v, act, self.rtol)
         return float(self.law(float(t), qv, v, ev, act).lyapunov)
 
+    def engine_controller(self, model: Any, program: Any, active: frozenset[str]) -> Any | None:
+        """The engine's compiled form for the active set ``active`` (Regulator with σ = 0, the
+        computed-torque Tracker, ForceControl over either; :mod:`nonmin.control._engine`), else
+        None (called back). See :meth:`nonmin.control.Controller.engine_controller`."""
+        from ._engine import compile_controller
+
+        return compile_controller(self, model, program, active)
+
+    def engine_state(self, state: Any, compiled: Any) -> Any:
+        """:class:`ControlState` after the steps the compiled controller took (what
+        ``ControlState.record`` over them gives)."""
+        from ._engine import merge_state
+
+        return merge_state(state, compiled, self.model.k)
+
     def initial_state(self) -> ControlState:
         """Fresh bookkeeping state (no step seen, no saturation)."""
         return ControlState.initial(self.model.k)

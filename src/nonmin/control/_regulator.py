@@ -31,7 +31,6 @@ from ..errors import InputError
 from ..model import Model
 from ._base import LawOutput, ProjectedController
 from ._common import (
-    ControlState,
     Evaluation,
     FloatArray,
     InfeasiblePolicy,
@@ -48,12 +47,6 @@ from ._targets import (
 )
 
 __all__ = ["Regulator"]
-
-
-def _engine() -> Any:
-    from .. import _engine as eng  # type: ignore[attr-defined]  # the compiled extension (no stubs)
-
-    return eng
 
 
 def _has_rheonomic(model: Model, active: frozenset[str]) -> bool:
@@ -192,48 +185,6 @@ class Regulator(ProjectedController):
         return out
 
     # ------------------------------------------------------------------ law
-    def engine_controller(self, model: Any, program: Any, active: frozenset[str]) -> Any | None:
-        """The engine's compiled regulator for the active set ``active`` (``sigma = 0`` and no
-        active rheonomic constraint, so that the target is fixed per active set), else None
-        (called back). See :meth:`nonmin.control.Controller.engine_controller`."""
-        if type(self) is not Regulator or self.sigma != 0.0 or self.model is not model:
-            return None
-        if _has_rheonomic(model, active):
-            return None
-        c: Any = self  # (its validated private fields)
-        q_star = np.ascontiguousarray(self.target_for(active), dtype=np.float64)
-        blocks = [tuple(int(i) for i in b) for b in c._qblocks]
-
-        def arr(x: Any) -> Any:
-            return np.ascontiguousarray(x, dtype=np.float64)
-
-        return _engine().SimRegulator(
-            program, q_star, arr(c._Kp), arr(c._Kd), blocks, arr(c._lo), arr(c._hi),
-            -1.0 if self.rtol is None else float(self.rtol), self.on_infeasible == "raise",
-        )  # fmt: skip
-
-    def engine_state(self, state: Any, compiled: Any) -> Any:
-        """:class:`ControlState` after the steps the compiled regulator took (what
-        ``ControlState.record`` over them gives)."""
-        from dataclasses import replace
-
-        k = self.model.k
-        st = state if isinstance(state, ControlState) else ControlState.initial(k)
-        d = compiled.stats
-        if d["steps"] == 0:
-            return st
-        sat_steps = st.saturated_steps or (0,) * k
-        max_u = st.max_abs_u or (0.0,) * k
-        return replace(
-            st,
-            steps=st.steps + int(d["steps"]),
-            saturated_steps=tuple(int(a + b) for a, b in zip(sat_steps, d["saturated_steps"], strict=True)),
-            saturated=tuple(bool(b) for b in d["saturated"]),
-            infeasible_steps=st.infeasible_steps + int(d["infeasible_steps"]),
-            min_sigma_pb=min(st.min_sigma_pb, float(d["min_sigma_pb"])),
-            max_abs_u=tuple(max(float(a), float(b)) for a, b in zip(max_u, d["max_abs_u"], strict=True)),
-        )
-
     def law(
         self, t: float, q: FloatArray, qd: FloatArray, ev: Evaluation, active: frozenset[str]
     ) -> LawOutput:

@@ -97,6 +97,19 @@ class Switched(Controller):
         new[i] = ctrl.update(t, q, qd, st[i], active=active)
         return tuple(new)
 
+    def engine_controller(self, model: Any, program: Any, active: frozenset[str]) -> Any | None:
+        """The compiled form of the controller in charge of ``active`` (each run of the engine
+        has one active set), or None (called back)."""
+        from ._engine import compile_controller
+
+        return compile_controller(self, model, program, active)
+
+    def engine_state(self, state: Any, compiled: Any) -> Any:
+        """The state tuple with the compiled mode's slot advanced over the steps it took."""
+        from ._engine import merge_state
+
+        return merge_state(state, compiled, self.model.k)
+
     def info(
         self, t: float, q: ArrayLike, qd: ArrayLike, state: Any = None, *, active: Iterable[str] | None = None
     ) -> ControlInfo:

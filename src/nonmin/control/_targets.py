@@ -26,7 +26,7 @@ Both are solved by Gauss–Newton iterations ``q ← q + Δ``,
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -240,9 +240,11 @@ def check_quaternion_blocks(blocks: Iterable[Iterable[int]], n: int) -> tuple[tu
 class Reference:
     """A desired motion ``t ↦ (q*(t), q̇*(t), q̈*(t))`` in dependent coordinates.
 
-    Build it with :meth:`constant`, :meth:`from_functions` or :meth:`spline`. Calling it returns
-    the three arrays. Derivatives not given are taken by central differences with step
-    :attr:`diff_step` (error ``O(h²)``).
+    Build it with :meth:`constant`, :meth:`polynomial`, :meth:`spline` or :meth:`from_functions`.
+    Calling it returns the three arrays. Derivatives not given are taken by central differences
+    with step :attr:`diff_step` (error ``O(h²)``). The first three are also values the compiled
+    engine evaluates itself (:attr:`piecewise`); a reference from Python functions is called back
+    by the engine (the rest of the controller stays compiled).
 
     Attributes
     ----------
@@ -251,12 +253,18 @@ class Reference:
     acceleration : callable ``t -> q̈*``, optional
     diff_step : float
         Step of the central differences.
+    piecewise : tuple (x, c, hold) or None
+        The same motion as a piecewise polynomial in scipy's ``PPoly`` layout (breakpoints ``x``
+        of shape (p + 1,), coefficients ``c`` of shape (order, p, n) of ``(t − x_i)^(order−1−j)``;
+        ``hold``: outside ``[x[0], x[-1]]`` the end value with zero derivatives, else the end
+        pieces extend), for the engine; None for functions.
     """
 
     position: Callable[[float], ArrayLike]
     velocity: Callable[[float], ArrayLike] | None = None
     acceleration: Callable[[float], ArrayLike] | None = None
     diff_step: float = 1e-4
+    piecewise: tuple[FloatArray, FloatArray, bool] | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def constant(cls, q_star: ArrayLike) -> Reference:
@@ -265,7 +273,35 @@ class Reference:
         if qs.ndim != 1 or not np.isfinite(qs).all():
             raise InputError(f"q_star must be a finite vector, got {qs!r}")
         z = np.zeros_like(qs)
-        return cls(lambda t: qs, lambda t: z, lambda t: z)
+        return cls(lambda t: qs, lambda t: z, lambda t: z, piecewise=(np.array([0.0, 1.0]), qs[None, None, :], False))
+
+    @classmethod
+    def polynomial(cls, coefficients: ArrayLike) -> Reference:
+        """``q*(t) = Σ_j c_j t^j`` with exact derivatives.
+
+        Parameters
+        ----------
+        coefficients : array_like, shape (d + 1, n)
+            ``c_0, …, c_d`` (increasing powers of t), one row per power.
+        """
+        c = np.asarray(coefficients, dtype=float)
+        if c.ndim != 2 or c.shape[0] < 1 or not np.isfinite(c).all():
+            raise ShapeError(f"coefficients must be a finite array of shape (d + 1, n), got {c!r}")
+        c = c.copy()
+        d = c.shape[0] - 1
+        p1 = np.arange(1, d + 1, dtype=float)[:, None] * c[1:]  # the derivative's coefficients
+        p2 = np.arange(1, d, dtype=float)[:, None] * p1[1:]
+
+        def horner(p: FloatArray) -> Callable[[float], FloatArray]:
+            def f(t: float) -> FloatArray:
+                out = np.zeros(c.shape[1])
+                for row in p[::-1]:
+                    out = out * t + row
+                return out
+
+            return f
+
+        return cls(horner(c), horner(p1), horner(p2), piecewise=(np.array([0.0, 1.0]), c[::-1, None, :].copy(), False))
 
     @classmethod
     def from_functions(
@@ -305,7 +341,8 @@ class Reference:
 
             return g
 
-        return cls(clamp(cs, False), clamp(d1, True), clamp(d2, True))
+        return cls(clamp(cs, False), clamp(d1, True), clamp(d2, True),
+                   piecewise=(np.asarray(cs.x, dtype=float), np.asarray(cs.c, dtype=float), True))  # fmt: skip
 
     def __call__(self, t: float) -> tuple[FloatArray, FloatArray, FloatArray]:
         """``(q*, q̇*, q̈*)`` at time ``t``."""

@@ -1,28 +1,94 @@
-// Built-in controllers compiled for the loop (nonmin.control). The Python classes stay the
-// specification and the fallback (called back) for what is not compiled.
+// Built-in controllers compiled for the loop (nonmin.control): the Regulator, the Tracker's
+// computed-torque law, and ForceControl over either, with their references as values the engine
+// evaluates (piecewise polynomials) or, as an escape hatch, a Python function called back. The
+// Python classes stay the specification (nonmin/control/*.py); every formula below names the one
+// it mirrors, in the same order of decisions, so the two agree to round-off.
+//
+// One law evaluation at (t, q, qd), given the loop's terms (M, h, f_p, B, A, γ of the active set):
+//   1. P = I − VᵀV from the rank policy of nonmin.core.range_basis(A, rtol) (Solver::range_basis:
+//      the certified LQ or the SVD rule), and Z, an orthonormal basis of N(A) (rows), from a
+//      Householder QR of Vᵀ;
+//   2. the law's f_∥ ∈ N(A) (regulator: −P(f_g + Kp e + Kd qd); computed torque:
+//      P(M(P a + w) − h − f_p), a = q̈* − Kd ė − Kp e, w = −(DA)⁺Dγ);
+//   3. u = (PB)⁺ f_∥ (_common.actuate): with PB = Zᵀ(ZB), u = (ZB)ᵀ((ZB)(ZB)ᵀ)⁻¹ Z f_∥ when the
+//      smallest singular value of ZB is certified far above the rank cutoff (then rank(PB) =
+//      n − r, feasible, and this is the SVD's truncated pseudo-inverse); otherwise the SVD of PB
+//      with the cutoff rtol·max(σ_max, max column norm of B), as the Python code;
+//      force control (ForceControl.actuation): the minimum-norm solution of [PB; EB] u =
+//      [f_∥; E(c₀ − S f_∥) − λ*] by SVD;
+//   4. u clipped to [u_min, u_max].
+// update() records what ControlState.record does (σ(PB) computed once per step there).
+// A failure (infeasible actuation with on_infeasible="raise", a reference off the manifold or
+// not converging, a non-finite value, a callback that raised) is a status: the loop hands over
+// and the Python controller raises the typed error at the same state.
 #pragma once
 #include <array>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include <Eigen/SVD>
 
+#include "../linalg.hpp"
 #include "../program.hpp"
+#include "../solver.hpp"
 #include "loop.hpp"
 
 namespace nonmin::sim {
 
-// nonmin.control.Regulator with σ = 0 (its default) for one active set: f_∥ = −P(f_g + Kp e +
-// Kd qd), e = q − q* (q* the target for the active set, quaternion blocks aligned to the
-// shortest rotation), u = (PB)⁺ f_∥ (rank of PB by σ > rtol·max(σ_max, max column norm of B)),
-// clipped to [u_min, u_max]. P from range_basis(A, rtol); f_g = h(q, 0). update() records what
-// ControlState.record does (steps, saturations, infeasible steps, min σ(PB), max |u_raw|).
-// An infeasible actuation with on_infeasible="raise", or a non-finite u, is a failure status:
-// the loop hands over and the Python controller raises the typed error.
-class Regulator final : public Controller {
+// A function of time with up to two derivatives: value (dim), first and second derivative.
+class Signal {
   public:
-    Regulator(const Program& prog, Vec q_star, Mat Kp, Mat Kd, std::vector<std::array<int, 4>> qblocks,
-              Vec u_min, Vec u_max, double rtol, bool raise_infeasible);
+    virtual ~Signal() = default;
+    virtual int dim() const = 0;
+    // v, a may be null (not wanted)
+    virtual Status eval(double t, double* x, double* v, double* a) = 0;
+};
+
+// scipy.interpolate.PPoly's layout: breakpoints x (p + 1, increasing), coefficients
+// c[(j·p + i)·dim + d] of (t − x_i)^(order−1−j) on [x_i, x_{i+1}). Outside [x_0, x_p]: `hold`
+// (nonmin.control.Reference.spline) keeps the end value with zero derivatives; otherwise the end
+// pieces extend (a polynomial).
+class PiecewisePolynomial final : public Signal {
+  public:
+    PiecewisePolynomial(std::vector<double> x, std::vector<double> c, int order, int dim, bool hold);
+    int dim() const override { return dim_; }
+    Status eval(double t, double* x, double* v, double* a) override;
+
+  private:
+    std::vector<double> x_, c_;
+    int order_, pieces_, dim_;
+    bool hold_;
+};
+
+enum class Law : int { regulator = 0, computed_torque = 1 };
+
+// The constant part of a compiled controller (validated by the Python classes).
+struct ControlSpec {
+    Law law = Law::regulator;
+    Vec q_star;  // regulator: the target (already projected for the active set when fixed)
+    Mat Kp, Kd;
+    std::vector<std::array<int, 4>> qblocks;
+    Vec u_min, u_max;
+    double rtol = -1.0;  // ≤ 0: DEFAULT_RTOL
+    bool raise_infeasible = true;
+    // the target on the manifold, at every call (tracker; a regulator under rheonomic constraints)
+    bool project_target = false;
+    bool reject = false;       // target_policy="reject": check instead of project
+    bool mass_metric = false;  // metric="mass"
+    std::vector<int> fixed;
+    Signal* reference = nullptr;  // tracker: (q*, q̇*, q̈*)(t); borrowed
+    // force control: (constraint index, desired force λ*(t) of its rows); borrowed signals
+    std::vector<std::pair<int, Signal*>> forces;
+    // evaluated instead of the compiled law when the loop's active set is no longer the one the
+    // controller was compiled for (the engine's event layer changed it; until the loop returns,
+    // e.g. the sample after an impact): the Python controller called back; borrowed, may be null
+    Controller* other_active_set = nullptr;
+};
+
+class Projected : public Controller {
+  public:
+    Projected(const Program& prog, ControlSpec spec);
 
     void attach(const Terms& T, const Mat& A, int m, const std::vector<int>& rows) override;
     Status control(double t, const double* q, const double* qd, const std::uint8_t* active, double* u) override;
@@ -35,35 +101,75 @@ class Regulator final : public Controller {
     std::vector<std::uint8_t> saturated;
     double min_sigma_pb = std::numeric_limits<double>::infinity();
     std::vector<double> max_abs_u;
+    long long fast_actuations = 0, svd_actuations = 0;  // which path step 3 took
 
   private:
-    Status law(double t, const double* q, const double* qd, const std::uint8_t* active, const Terms& T,
-               const Mat& A, int m, double* u);
+    Status law(double t, const double* q, const double* qd, const Terms& T, const Mat& A, double* u);
+    Status nullspace(const Mat& A);
+    void project(const double* x, double* out);
+    void ensure_pb(const Terms& T);
+    Status desired(double t, const double* q);
+    Status project_configuration(double t, double* x);
+    Status min_norm_true(const Mat& A, int m, const double* b, double* x);  // A⁺ b
+    Status actuate(const Terms& T);
+    Status actuate_force(double t, const Terms& T, const Mat& A);
     void record();
+    double sigma_min_pb();
 
     const Program* prog_;
+    ControlSpec s_;
+    std::vector<std::uint8_t> compiled_mask_;  // the active set of the first attach()
+    bool stale_ = false;                        // the loop's active set is another one
     int n_, k_;
-    Vec qs_, qsa_, lo_, hi_;
-    Mat Kp_, Kd_;
-    std::vector<std::array<int, 4>> qblocks_;
     double rtol_;
-    bool raise_;
+    std::vector<std::uint8_t> mask_;
     // the loop's evaluation
     const Terms* T_ = nullptr;
     const Mat* A_ = nullptr;
     int m_ = 0;
-    std::vector<int> rows_;
-    // own evaluations (f_g = h(q, 0); update's terms)
+    std::vector<int> rows_;     // stacked active rows
+    std::vector<int> hol_;      // positions (among the active rows) of position-level rows
+    std::vector<int> frows_;    // force control: positions of the commanded rows
+    std::vector<int> fdim_;     // their signals' dims, in order
+    // own evaluations
     std::unique_ptr<Workspace> ws_;
-    Terms Tg_, Tu_;
-    Mat Au_, DA_, P_, PB_;
-    Vec zero_, fpar_, w_, c_, uraw_, us_;
-    // the state of the last law evaluation and what record() needs from it
+    Solver solver_;
+    Terms Tg_, Tu_, Tr_;
+    Mat Au_;
+    // step 1
+    int rank_ = 0;
+    std::vector<double> Bq_, dq_, sq_, cq_;  // the certified LQ's input and scratch
+    linalg::LQWork lq_;
+    bool lq_valid_ = false;  // lq_ holds the certified LQ of D A of the last law evaluation
+    Mat V_, Z_, Hq_;  // V: r × n (P = I − VᵀV), Z: (n − r) × n (rows); Householder scratch
+    Vec hv_, hw_;    // Householder scratch
+    // step 2
+    Vec zero_, fpar_, w_, a_, e_, x_;
+    Vec qs_, vs_, as_;  // desired motion at the last time asked (projected)
+    struct Memo {
+        double t = std::numeric_limits<double>::quiet_NaN();
+        unsigned signs = 0;
+        Vec q, v, a;
+    };
+    std::array<Memo, 4> memo_;
+    int memo_next_ = 0;
+    Mat Ar_;
+    Vec br_, dr_, stepr_, xr_, tgt_;
+    // step 3
+    Mat ZB_, G_, PB_;
+    Vec zf_, y_, uraw_, us_;
+    bool last_feasible_ = true;
+    bool pb_valid_ = false;  // PB_ holds P B of the last law evaluation
+    Eigen::JacobiSVD<Mat> svd_pb_, svd_vals_, svd_a_, svd_g_;
+    // force control
+    Mat Mbar_L_, E_, Gf_, Atrue_;
+    Vec c0_, qtmp_, gtmp_, rhs_, lam_, sf_, pf_;
+    // the state of the last law evaluation
     double last_t_ = std::numeric_limits<double>::quiet_NaN();
     Vec last_q_, last_qd_;
-    bool last_feasible_ = true;
-    double last_smin_ = 0.0;
-    Eigen::JacobiSVD<Mat> svd_a_, svd_pb_;
 };
+
+// Regulator is the Projected controller with the regulator law (kept for the bindings' name).
+using Regulator = Projected;
 
 }  // namespace nonmin::sim
