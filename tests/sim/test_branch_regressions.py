@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import nonmin
-from nonmin.sim import Status, simulate
+from nonmin.sim import RK4, Status, simulate
 
 CASES = [
     (5.5718870706804555, -6.483511434888186),  # left the branch at t ≈ 0.575 s, "success"
@@ -68,3 +68,20 @@ def test_python_driver_stays_on_branch_and_agrees_with_the_engine(theta0, omega0
     _, eng = _run(theta0, omega0, "auto")
     assert np.max(np.abs(tr.q - eng.q)) < 1e-8
     assert np.max(np.abs(tr.qd - eng.qd)) < 1e-7
+
+
+@pytest.mark.parametrize("engine", ["auto", pytest.param("python", marks=pytest.mark.slow)])
+def test_a_kick_without_the_passage_placement_is_not_a_silent_success(engine):
+    # RK4(passages=False) still ends a step 1.5e-6 rad before the change point at t = 0.574 s
+    # and the next step reverses the crank: the run must not report "success" (KICK_RATIO)
+    theta0, omega0 = CASES[0]
+    mech = nonmin.library.get("crossed_four_bar", theta0=theta0, omega0=omega0)
+    with pytest.warns(RuntimeWarning, match="velocity jumped"):
+        tr = simulate(mech, (0.0, 2.0), method=RK4(dt=1e-3, passages=False), engine=engine)
+    assert tr.status is Status.FAILED
+    kicks = tr.metadata["velocity_kicks"]
+    assert kicks and kicks[0] == pytest.approx(0.573, abs=2e-3)
+    assert _branch_residual(mech, tr).max() > 1.0  # it did leave the branch
+    # the same run with the placement (default) passes the check
+    tr = simulate(mech, (0.0, 2.0), method="rk4", dt=1e-3, engine=engine)
+    assert tr.status is Status.SUCCESS and "velocity_kicks" not in tr.metadata
