@@ -5,7 +5,10 @@ initial states, RK4 at dt = 1e-3 over 2 s, let a step end fall within ~3e-7 s of
 (crank 1.5e-6 rad from collinear): the next RK4 step reversed the crank (θ̇ −4.75 → +15.6 rad/s,
 energy 90.4 → 325.8 J) and the run ended "success" 3.1 rad off the branch, or failed with a
 non-finite ``adot_qd`` at t = 0.891 s / 1.434 s. ``RK4(passages=False)`` still does that (the
-last test records it). Both drivers must stay on the branch, finite, with a small energy drift
+last test records the first; the cause, measured: that step end is 3e-7 s past the change point,
+1.48e-6 rad from collinear, σ_min(DA) 1.4e-6; its q is 1.1e-7 from the exact reduction but the
+velocity projection onto the tangent there, which that error tilts, leaves q̇ 4.3e-3 off and q̈ at
+1.9e4 instead of ~1e2). Both drivers must stay on the branch, finite, with a small energy drift
 (measured: 3.5e-6, 1.6e-5, 1.3e-7 J on either driver), and agree with each other and with the
 exact 1-DOF reduction.
 """
