@@ -370,6 +370,16 @@ void bind_sim(nb::module_& m) {
             nb::arg("t0"), nb::arg("q0"), nb::arg("qd0"),
             "Initial projection, evaluation and sample; returns SIM_DONE or SIM_HANDOVER.")
         .def(
+            "seed_passages",
+            [](SimLoop& s, CArr1 ts, CArr1 ys) {
+                const auto k = ts.shape(0);
+                if (ys.shape(0) != k * static_cast<std::size_t>(2 * s.loop->n))
+                    raise_typed("ShapeError", "ys must hold 2n values per time of ts");
+                sim::passage_seed(*s.loop, ts.data(), ys.data(), static_cast<int>(k));
+            },
+            nb::arg("ts"), nb::arg("ys"),
+            "The singular-passage history of a resumed run (earlier step ends, flattened (q, qd)).")
+        .def(
             "run",
             [](SimLoop& s, long long max_steps) {
                 sim::Outcome o;

@@ -468,6 +468,17 @@ void resume(Loop& L, double t, const double* y, double h, long long n_steps, std
     passage_restart(L);  // a state reached elsewhere: the history starts afresh, from this state
 }
 
+void passage_seed(Loop& L, const double* ts, const double* ys, int k) {
+    if (!L.opt.passages) return;
+    passage_reset(L);
+    const int n = L.n;
+    for (int i = 0; i < k; ++i) {
+        const double* y = ys + static_cast<std::ptrdiff_t>(2 * n) * i;
+        if (evaluate(L, ts[i], y, y + n, NEED_A) == Status::ok) passage_observe(L, ts[i], L.Ac, L.m);
+    }
+    if (evaluate(L, L.t, L.y.data(), L.y.data() + n, NEED_A) == Status::ok) passage_observe(L, L.t, L.Ac, L.m);
+}
+
 Outcome run(Loop& L, long long max_steps) {
     const int n = L.n;
     const int n2 = 2 * n;

@@ -309,6 +309,7 @@ def run(
     guards: list[tuple[bool, int, int, float]] | None = None,
     compiled: Any = None,
     contact: tuple[list[float], float] | None = None,
+    passage_seed: tuple[FloatArray, FloatArray] | None = None,
 ) -> EngineResult:
     """Run the engine loop to ``opts.t1``, a handover or a watched event.
 
@@ -340,6 +341,9 @@ def run(
         if code != eng.SIM_DONE:
             y0 = np.concatenate((q, qd))
             return EngineResult(False, t0, y0, 0.0, 0, 0, 0, 0, True, False, str(loop.message), [])
+        if passage_seed is not None and passage_seed[0].size:
+            loop.seed_passages(np.ascontiguousarray(passage_seed[0], dtype=float),
+                               np.ascontiguousarray(passage_seed[1], dtype=float).ravel())  # fmt: skip
         take()
     else:
         assert resume is not None

@@ -390,6 +390,30 @@ def _resolve_method(method: Integrator | str, dt: float | None, rtol: float, ato
     )
 
 
+#: Earlier step ends a resumed run observes for its singular-passage history.
+PASSAGE_HISTORY = 8
+
+
+def _passage_history(prev: Trajectory | None, active: frozenset[str], t_out: Any) -> tuple[FloatArray, FloatArray]:
+    """The step ends before a resumed run's start (its last ``PASSAGE_HISTORY`` samples under
+    the same active set, strictly earlier), so that its singular-passage placement continues
+    as the uninterrupted run's would: ``(t, y)`` of shapes (k,), (k, 2n). Empty unless every
+    step was recorded (no ``t_eval``: samples are then the step ends the history was made of)."""
+    if prev is None or t_out is not None or len(prev) < 2:
+        return np.zeros(0), np.zeros((0, 0))
+    t_end = float(prev.t[-1])
+    idx: list[int] = []
+    for i in range(len(prev) - 2, -1, -1):
+        if prev.active[i] != active or not float(prev.t[i]) < t_end or len(idx) == PASSAGE_HISTORY:
+            break
+        if idx and not prev.t[i] < prev.t[idx[-1]]:
+            break  # an event's pair of samples: the history restarted there
+        idx.append(i)
+    idx.reverse()
+    ys = np.concatenate((prev.q[idx], prev.qd[idx]), axis=1) if idx else np.zeros((0, 0))
+    return np.asarray(prev.t[idx], dtype=float), ys
+
+
 def _positive(x: Any, name: str) -> float:
     try:
         v = float(x)
@@ -681,6 +705,7 @@ def simulate(
     }
     rec = _Recorder(model)
     passages = SingularPassages(integ.passage_fractions) if getattr(integ, "passages", False) else None
+    seed = _passage_history(prev, act, t_out)
     records: list[EventRecord] = []
     status = Status.SUCCESS
     message = "reached the end of t_span"
@@ -727,6 +752,7 @@ def simulate(
             try:
                 er = _engine.run(eng_prog, opts=opts, active_mask=model_mask(model, act), t_out=t_out,
                                  sink=rec.extend, progress=bar, start=(t0, q, qd), controller=ccb,
+                                 passage_seed=seed,
                                  compiled=creg)  # fmt: skip
             finally:
                 if ccb is not None:
@@ -760,6 +786,8 @@ def simulate(
             gvals = [_guard_value(system, w, p) for w in watches]
             state = integ.init(system.rhs, t, np.concatenate((q, qd)), h_init)
             if passages is not None:
+                for ts, ys in zip(*seed, strict=True):
+                    passages.observe(float(ts), model.constraint_terms(float(ts), ys[:n], ys[n:], act).A)
                 passages.observe(t, p.A)
             engine_on = use_engine
         project_y = None

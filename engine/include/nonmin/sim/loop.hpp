@@ -267,6 +267,10 @@ Outcome start(Loop& L, double t0, const double* q0, const double* qd0);
 // Continue from a state reached elsewhere (after an event): no projection, no sample; F(t, y) is
 // evaluated afresh; `h` is the proposed step of adaptive methods; the counters continue.
 void resume(Loop& L, double t, const double* y, double h, long long n_steps, std::size_t out_i);
+// The singular-passage history of a resumed run: the indicator at the k earlier step ends
+// (ts[i], ys[i*2n .. (i+1)*2n)) under the current active set, then at the current state — what
+// the uninterrupted run had observed there (call after start()).
+void passage_seed(Loop& L, const double* ts, const double* ys, int k);
 
 // Advance by at most `max_steps` accepted steps (stops at t1).
 Outcome run(Loop& L, long long max_steps);
