@@ -22,9 +22,11 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 LAYERS: list[set[str]] = [
     {"nonmin.errors", "nonmin._version", "nonmin._engine"},
     {"nonmin._files", "nonmin._validation"},
+    {"nonmin._export"},
     {"nonmin.core"},
     {"nonmin.model"},
-    {"nonmin.library", "nonmin.control", "nonmin.viz"},
+    {"nonmin.library", "nonmin.control"},
+    {"nonmin.viz"},
     {"nonmin.analysis", "nonmin.linear"},
     {"nonmin.sim"},
     {"nonmin.io", "nonmin.validation"},

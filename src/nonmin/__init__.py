@@ -27,6 +27,8 @@ The most used names are re-exported here: :func:`simulate`, :class:`Trajectory`,
 :func:`inverse_dynamics`, :func:`reactions`.
 """
 
+from typing import TYPE_CHECKING, Any
+
 from . import analysis as analysis
 from . import control as control
 from . import core as core
@@ -67,16 +69,18 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str) -> object:
-    spec = _LAZY.get(name)
-    if spec is None:
-        raise AttributeError(f"module 'nonmin' has no attribute {name!r}")
-    from importlib import import_module
+if not TYPE_CHECKING:  # (mypy would read every unknown submodule, the compiled _engine too, through it)
 
-    mod = import_module(spec[0])
-    value = mod if spec[1] is None else getattr(mod, spec[1])
-    globals()[name] = value
-    return value
+    def __getattr__(name: str) -> Any:
+        spec = _LAZY.get(name)
+        if spec is None:
+            raise AttributeError(f"module 'nonmin' has no attribute {name!r}")
+        from importlib import import_module
+
+        mod = import_module(spec[0])
+        value = mod if spec[1] is None else getattr(mod, spec[1])
+        globals()[name] = value
+        return value
 
 
 __all__ = [

@@ -273,7 +273,7 @@ def cmd_animate(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from . import io
+    from . import _export, io
 
     traj = _load_result(args.result)
     model = None if args.model is None else _model_for_result(traj, args.model, args.allow_code, "export")
@@ -282,7 +282,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     if args.format == "csv":
         io.to_csv(traj, out, model)
         print(out)
-        print(io._export.sidecar(out))
+        print(_export.sidecar(out))
     elif args.format == "parquet":
         print(io.to_parquet(traj, out, model))
     else:

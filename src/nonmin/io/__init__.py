@@ -1,12 +1,12 @@
 """Scenario files (TOML) and their execution (used by the command line); exports of
 trajectories to CSV, Parquet and xarray/NetCDF."""
 
-from ._export import columns as columns
-from ._export import coordinate_units as coordinate_units
-from ._export import to_csv as to_csv
-from ._export import to_netcdf as to_netcdf
-from ._export import to_parquet as to_parquet
-from ._export import to_xarray as to_xarray
+from .._export import columns as columns
+from .._export import coordinate_units as coordinate_units
+from .._export import to_csv as to_csv
+from .._export import to_netcdf as to_netcdf
+from .._export import to_parquet as to_parquet
+from .._export import to_xarray as to_xarray
 from ._run import ScenarioResult as ScenarioResult
 from ._run import build_controller as build_controller
 from ._run import build_events as build_events

@@ -316,7 +316,7 @@ def write_outputs(result: ScenarioResult, out: Path, *, progress: bool | None = 
     result.timings["trajectory"] = clock() - t0
     if names["csv"] is not None:
         t0 = clock()
-        from ._export import to_csv
+        from .._export import to_csv
 
         to_csv(traj, names["csv"], model)
         files["csv"] = names["csv"]

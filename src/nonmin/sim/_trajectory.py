@@ -250,7 +250,7 @@ class Trajectory:
         ``pandas.read_csv(path)`` loads it; see :func:`nonmin.io.to_csv` (also Parquet and
         xarray/NetCDF there).
         """
-        from ..io._export import to_csv
+        from .._export import to_csv
 
         to_csv(self, path)
 

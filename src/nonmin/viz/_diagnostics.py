@@ -14,7 +14,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..io._export import coordinate_units as coordinate_units
+from .._export import coordinate_units as coordinate_units
 
 __all__ = ["EnergyBalance", "coordinate_units", "energy_balance", "singularity_distance"]
 

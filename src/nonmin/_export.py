@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from .._files import as_path, atomic_path, atomic_write
-from ..errors import missing_dependency
+from ._files import as_path, atomic_path, atomic_write
+from .errors import missing_dependency
 
 __all__ = ["columns", "coordinate_units", "to_csv", "to_netcdf", "to_parquet", "to_xarray"]
 
