@@ -493,7 +493,9 @@ double singular_indicator(Loop& L, const Mat& A, int m) {
 
 double passage_noise(const Loop& L) {
     if (!L.opt.passages || !std::isfinite(L.pas.sigma)) return 0.0;
-    return PASSAGE_NOISE * std::numeric_limits<double>::epsilon() / std::max(L.pas.sigma, PASSAGE_FLOOR);
+    // below the floor: a permanently redundant row (Bricard's mechanism), not a passage
+    if (!(L.pas.sigma >= PASSAGE_FLOOR && std::isfinite(L.pas.sigma))) return 0.0;
+    return PASSAGE_NOISE * std::numeric_limits<double>::epsilon() / L.pas.sigma;
 }
 
 void passage_reset(Loop& L) {

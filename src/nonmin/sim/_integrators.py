@@ -267,9 +267,9 @@ class SingularPassages:
     def noise(self) -> float:
         """Relative round-off level of a projected state at the last step end
         (:data:`PASSAGE_NOISE`)."""
-        if not math.isfinite(self.sigma):
-            return 0.0
-        return PASSAGE_NOISE * float(np.finfo(float).eps) / max(self.sigma, PASSAGE_FLOOR)
+        if not (math.isfinite(self.sigma) and self.sigma >= PASSAGE_FLOOR):
+            return 0.0  # below the floor: a permanently redundant row (Bricard), no passage
+        return PASSAGE_NOISE * float(np.finfo(float).eps) / self.sigma
 
     def __call__(self, t: float, h: float) -> float:
         """:meth:`place` (the object is the ``place`` argument of :meth:`Integrator.step`)."""
