@@ -18,6 +18,13 @@ contact (``EventSet(contact=False)``: no floor, no joint limits), RK4 dt = 1e-3,
 
     python benchmarks/loop_bench.py [--repeat 3] [--engines engine,python,compiled] [--json out.json]
     python benchmarks/loop_bench.py --contact-overhead [--repeat 15]
+
+``--planar`` times the planar settings of the issue's target 4 instead: the crossed four-bar and
+A02 N = 2, 40, 80 at RK4 dt 1e-3 with every step recorded and at dt 1e-3 … 5e-2 with samples
+every 0.01 s (the settings of sim_bench.py), engines interleaved run by run, medians of wall and
+of process CPU time per simulated second and their ratios to the first engine:
+
+    python benchmarks/loop_bench.py --planar [--repeat 5] [--engines engine,compiled]
 """
 
 from __future__ import annotations
@@ -211,6 +218,63 @@ def markdown(rows: list[dict[str, Any]], engines: list[str]) -> str:
     return "\n".join(lines)
 
 
+#: (case, N, simulated seconds) of the planar settings; (dt, sample spacing or None = every step).
+PLANAR_CASES = (("crossed_four_bar", 0, 2.0), ("A02_N2", 2, 2.0), ("A02_N40", 40, 0.5), ("A02_N80", 80, 0.25))
+PLANAR_SETTINGS = ((1e-3, None), (1e-3, 0.01), (1e-2, 0.01), (2e-2, 0.01), (5e-2, 0.01))
+
+
+def planar_rows(names: list[str], engines: list[str], repeat: int) -> list[dict[str, Any]]:
+    """Each planar case at each setting, the engines interleaved run by run (after one warm-up
+    run each): medians of wall and process CPU time per simulated second."""
+    rows = []
+    for name, N, T in PLANAR_CASES:
+        if names and name not in names:
+            continue
+        mech = library.get("crossed_four_bar") if N == 0 else library.get("A02_n_four_bar", N=N)
+        for dt, spacing in PLANAR_SETTINGS:
+            if dt >= T:
+                continue
+            kw: dict[str, Any] = {"dt": dt}
+            if spacing is not None:
+                kw["t_eval"] = np.linspace(0.0, T, round(T / spacing) + 1)
+            walls: dict[str, list[float]] = {e: [] for e in engines}
+            cpus: dict[str, list[float]] = {e: [] for e in engines}
+            trajs: dict[str, Any] = {}
+            for rep in range(repeat + 1):
+                for eng in engines:
+                    w, c = time.perf_counter(), time.process_time()
+                    tr = nonmin.simulate(mech, (0.0, T), engine=eng, progress=False, **kw)
+                    w, c = time.perf_counter() - w, time.process_time() - c
+                    if rep:  # (the first run of each engine is the warm-up)
+                        walls[eng].append(w)
+                        cpus[eng].append(c)
+                    trajs[eng] = tr
+            res: dict[str, Any] = {"case": name, "T": T, "dt": dt, "samples": "every step" if spacing is None
+                                   else f"every {spacing} s", "steps": trajs[engines[0]].n_steps}  # fmt: skip
+            for eng in engines:
+                res[eng] = {"wall_ms_per_s": 1e3 * statistics.median(walls[eng]) / T,
+                            "cpu_ms_per_s": 1e3 * statistics.median(cpus[eng]) / T,
+                            "ran": trajs[eng].metadata["engine"]}  # fmt: skip
+                if eng != engines[0]:
+                    res[eng]["max_q_diff"] = float(np.max(np.abs(trajs[eng].q - trajs[engines[0]].q)))
+            rows.append(res)
+            print(json.dumps(res), file=sys.stderr)
+    return rows
+
+
+def planar_markdown(rows: list[dict[str, Any]], engines: list[str]) -> str:
+    e0 = engines[0]
+    head = ("| case | dt | samples | " + " | ".join(f"{e} wall / CPU (ms per s)" for e in engines)
+            + " | " + " | ".join(f"{e0} / {e} wall, CPU" for e in engines[1:]) + " |")  # fmt: skip
+    lines = [head, "|" + "---|" * (3 + 2 * len(engines) - 1)]
+    for r in rows:
+        cells = [f"{r[e]['wall_ms_per_s']:.2f} / {r[e]['cpu_ms_per_s']:.2f}" for e in engines]
+        rat = [f"{r[e0]['wall_ms_per_s'] / r[e]['wall_ms_per_s']:.2f}, "
+               f"{r[e0]['cpu_ms_per_s'] / r[e]['cpu_ms_per_s']:.2f}" for e in engines[1:]]  # fmt: skip
+        lines.append(f"| {r['case']} | {r['dt']:g} | {r['samples']} | " + " | ".join(cells + rat) + " |")
+    return "\n".join(lines)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
@@ -218,6 +282,7 @@ def main() -> None:
     ap.add_argument("--cases", default="")
     ap.add_argument("--json", default="")
     ap.add_argument("--contact-overhead", action="store_true", help="the UR5 on the floor vs no contact")
+    ap.add_argument("--planar", action="store_true", help="the planar settings of target 4")
     a = ap.parse_args()
     if a.contact_overhead:
         res = contact_overhead(a.repeat)
@@ -227,6 +292,13 @@ def main() -> None:
                                                 "contact_overhead": res}, indent=1))  # fmt: skip
         return
     engines = [e for e in a.engines.split(",") if e]
+    if a.planar:
+        prow = planar_rows([c for c in a.cases.split(",") if c], engines, a.repeat)
+        print(planar_markdown(prow, engines))
+        if a.json:
+            Path(a.json).write_text(json.dumps({"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+                                                "planar": prow}, indent=1))  # fmt: skip
+        return
     rows = run([c for c in a.cases.split(",") if c], engines, a.repeat)
     print(markdown(rows, engines))
     if a.json:

@@ -184,6 +184,42 @@ int cholesky_spd(double* W, int n, double spd_rtol, double dmax, double* dinv, d
     return st;
 }
 
+void sym_eigenvalues(double* X, int k, double* ev) {
+    double total = 0.0;
+    for (int i = 0; i < k * k; ++i) total += X[i] * X[i];
+    for (int sweep = 0; sweep < MAX_SWEEPS; ++sweep) {
+        double off = 0.0;
+        for (int p = 0; p < k; ++p)
+            for (int q = p + 1; q < k; ++q) off += 2.0 * X[p * k + q] * X[p * k + q];
+        if (!(off > EPS * EPS * total)) break;
+        for (int p = 0; p < k - 1; ++p)
+            for (int q = p + 1; q < k; ++q) {
+                const double apq = X[p * k + q];
+                if (apq == 0.0) continue;
+                const double app = X[p * k + p], aqq = X[q * k + q];
+                const double theta = (aqq - app) / (2.0 * apq);
+                double t;
+                if (std::fabs(theta) > 1e150)
+                    t = 0.5 / theta;
+                else
+                    t = std::copysign(1.0, theta) / (std::fabs(theta) + std::sqrt(1.0 + theta * theta));
+                const double c = 1.0 / std::sqrt(1.0 + t * t);
+                const double s = t * c;
+                for (int r = 0; r < k; ++r) {  // columns p, q
+                    const double xp = X[r * k + p], xq = X[r * k + q];
+                    X[r * k + p] = c * xp - s * xq;
+                    X[r * k + q] = s * xp + c * xq;
+                }
+                for (int r = 0; r < k; ++r) {  // rows p, q
+                    const double xp = X[p * k + r], xq = X[q * k + r];
+                    X[p * k + r] = c * xp - s * xq;
+                    X[q * k + r] = s * xp + c * xq;
+                }
+            }
+    }
+    for (int i = 0; i < k; ++i) ev[i] = X[i * k + i];
+}
+
 void cholesky_solve(const double* W, int n, const double* dinv, double* x) {
     for (int k = 0; k < n; ++k) {  // L y = b, column-oriented
         const double y = x[k] * dinv[k];

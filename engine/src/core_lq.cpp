@@ -41,6 +41,17 @@ void row_pattern(const double* A, int m, int n, int lda, int* Ap) {
     }
 }
 
+// cv ← L⁻¹ cv by forward substitution over L's row profile (Li holds L, row i from Lf[i]).
+void lq_profile_solve(const LQWork& w, int m, double* cv) {
+    const int ld = w.m_max;
+    for (int i = 0; i < m; ++i) {
+        double s = cv[i];
+        const double* Li = w.Li.data() + static_cast<long>(i) * ld;
+        for (int k = w.Lf[i]; k < i; ++k) s -= Li[k] * cv[k];
+        cv[i] = s / Li[i];
+    }
+}
+
 namespace {
 
 // Row i of X (leading dimension n) times reflector j (I − β_j v vᵀ over its columns Hx[j]);
@@ -110,16 +121,6 @@ void pivot_order(LQWork& w, int m, int n) {
         if (w.Lr[k] != -2) w.Pc[c++] = k;
 }
 
-// cv ← L⁻¹ cv by forward substitution over L's row profile (Li holds L, row i from Lf[i]).
-void profile_solve(const LQWork& w, int m, double* cv) {
-    const int ld = w.m_max;
-    for (int i = 0; i < m; ++i) {
-        double s = cv[i];
-        const double* Li = w.Li.data() + static_cast<long>(i) * ld;
-        for (int k = w.Lf[i]; k < i; ++k) s -= Li[k] * cv[k];
-        cv[i] = s / Li[i];
-    }
-}
 
 // The profile certificate of lq_sparse: Cholesky of T − τI, T = L Lᵀ, over L's row profile.
 int certify_profile(const double* B, int m, int n, double rtol, LQWork& w, double* cv) {
@@ -160,7 +161,7 @@ int certify_profile(const double* B, int m, int n, double rtol, LQWork& w, doubl
         Gi[i] = std::sqrt(s);
     }
     for (int i = 0; i < m; ++i) cv[i] = B[static_cast<long>(w.Ro[i]) * (n + 1) + n];
-    profile_solve(w, m, cv);
+    lq_profile_solve(w, m, cv);
     return LQ_PROFILE;
 }
 

@@ -2,6 +2,7 @@
 // its Cholesky factorization, q̈ and f_c. Specified by nonmin.core.dynamics._solve_dynamics_numpy.
 #include <Eigen/SVD>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -27,6 +28,16 @@ struct Solver::Impl {
     int lqmode = linalg::LQ_NONE;  // what the last rank decision used
     bool zmode = false;            // null-space form: Z (rows of Kt, k = n − r ≤ r) spans N(A)
     int m_live = 0;                // rows of B the rank decision used (the live rows of A)
+    // The factorization of the last successful forward/solve call, for again(): its A had m
+    // rows (scales d, live rows compacted), rank r, M diagonal or not, μ; the SVD paths keep
+    // Σ⁻¹Uᵀ of the kept rows in Ui (r × m_live), the certified LQ its L⁻¹ (lq.Li); the range
+    // form keeps M̄'s Cholesky factor (W, dinv), the null-space form Z (Kt), S (G) and its
+    // factor (Ls).
+    bool held = false;
+    int h_m = 0, h_r = 0;
+    bool h_diag = false;
+    double h_mu = 0.0;
+    std::vector<double> Ui, Tj, db;
 
     Impl(int m_max_, int n_)
         : m_max(m_max_), n(n_) {
@@ -53,6 +64,17 @@ struct Solver::Impl {
             svd = Eigen::BDCSVD<Mat>(m_max, n, Eigen::ComputeThinU | Eigen::ComputeFullV);
         }
         if (m_max >= linalg::QR_MIN_ROWS) lq = linalg::LQWork(m_max, n);
+        Ui.assign(static_cast<long>(m_max) * m_max, 0.0);
+        const long mj = std::min(m_max, JACOBI_MAX_ROWS);
+        Tj.assign(mj * mj, 0.0);
+        db.assign(m_max + 1, 0.0);
+    }
+
+    double smax_of(int m) const {  // max_i sig[i] (keep_rows' σ_max)
+        double smax = 0.0;
+        for (int i = 0; i < m; ++i)
+            if (sig[i] > smax) smax = sig[i];
+        return smax;
     }
 
     // Rule 3: the rank r of D A (B holds [D A | D b], live rows of A: `live`; B is overwritten,
@@ -64,6 +86,7 @@ struct Solver::Impl {
     int rank_decision(int m, int live, double rtol) {
         lqmode = linalg::LQ_NONE;
         zmode = false;
+        held = false;
         if (live < m) {  // vanished rows are zero rows of D A: keep the live rows only (in order)
             const int ld = n + 1;
             int c = 0;
@@ -93,9 +116,21 @@ struct Solver::Impl {
                 return m;
             }
         }
-        if (m <= JACOBI_MAX_ROWS) {
-            linalg::jacobi_rows(B.data(), m, n, nullptr);
-            return linalg::keep_rows(B.data(), m, n, rtol, V.data(), cv.data(), sig.data());
+        if (m <= JACOBI_MAX_ROWS) {  // (T accumulates the rotations: Σ⁻¹Uᵀ for again())
+            double* T = Tj.data();
+            for (int i = 0; i < m; ++i)
+                for (int c = 0; c < m; ++c) T[i * m + c] = i == c ? 1.0 : 0.0;
+            linalg::jacobi_rows(B.data(), m, n, T);
+            const int r = linalg::keep_rows(B.data(), m, n, rtol, V.data(), cv.data(), sig.data());
+            const double cut = rtol * smax_of(m);
+            int a = 0;
+            for (int i = 0; i < m && a < r; ++i) {  // the kept rows, in keep_rows' order
+                if (!(sig[i] > cut)) continue;
+                const double inv = 1.0 / sig[i];
+                for (int c = 0; c < m; ++c) Ui[a * m + c] = T[i * m + c] * inv;
+                ++a;
+            }
+            return r;
         }
         const int ld = n + 1;
         auto Bm = big.topRows(m);
@@ -116,6 +151,7 @@ struct Solver::Impl {
             double t = 0.0;
             for (int c = 0; c < m; ++c) t += U(c, a) * B[c * ld + n];
             cv[a] = t * inv;
+            for (int c = 0; c < m; ++c) Ui[a * m + c] = U(c, a) * inv;
         }
         zmode = n - r <= r;
         if (zmode)
@@ -235,6 +271,77 @@ struct Solver::Impl {
         }
     }
 
+    // q̈ = w + Zᵀ S⁻¹ Z (g − M w) and f_c = M q̈ − g with the factor of S held (Ls).
+    void null_finish(const double* M, const double* gin, bool diag, int k, double* qdd, double* fc) {
+        for (int i = 0; i < n; ++i) {
+            g[i] = gin[i];
+            u[i] = gin[i];
+        }
+        add_m_times(M, diag, wv.data(), -1.0, u.data());  // u = g − M w
+        null_space_qdd(k, u.data(), wv.data(), qdd);
+        if (fc) {
+            for (int i = 0; i < n; ++i) cw[i] = 0.0;
+            add_m_times(M, diag, qdd, 1.0, cw.data());
+            for (int i = 0; i < n; ++i) fc[i] = cw[i] - g[i];
+        }
+    }
+
+    // Step 6 in the range form with M̄'s factor held (W, dinv): rhs = P(g − M w) + μ w,
+    // q̈ = M̄⁻¹ rhs, f_c = M q̈ − g.
+    void range_finish(const double* M, const double* gin, bool diag, int r, double mu, double* qdd,
+                      double* fc) {
+        for (int i = 0; i < n; ++i) {
+            g[i] = gin[i];
+            u[i] = gin[i];
+        }
+        add_m_times(M, diag, wv.data(), -1.0, u.data());  // u = g − M w
+        for (int k = 0; k < r; ++k) {  // cv ← V u
+            double s = 0.0;
+            const double* Vk = V.data() + static_cast<long>(k) * n;
+            for (int j = 0; j < n; ++j) s += Vk[j] * u[j];
+            cv[k] = s;
+        }
+        for (int i = 0; i < n; ++i) u[i] += mu * wv[i];
+        for (int k = 0; k < r; ++k) {
+            const double ck = cv[k];
+            const double* Vk = V.data() + static_cast<long>(k) * n;
+            for (int i = 0; i < n; ++i) u[i] -= Vk[i] * ck;
+        }
+        linalg::cholesky_solve(W.data(), n, dinv.data(), u.data());
+        for (int i = 0; i < n; ++i) qdd[i] = u[i];
+        if (fc) {
+            for (int i = 0; i < n; ++i) cw[i] = 0.0;
+            add_m_times(M, diag, qdd, 1.0, cw.data());
+            for (int i = 0; i < n; ++i) fc[i] = cw[i] - g[i];
+        }
+    }
+
+    // w = −(DA)⁺ D γ from cv (r entries): −Qᵀ cv through the reflectors (null-space form of the
+    // certified LQ), or −Σ_k v_k cv_k.
+    void min_norm_w(int r) {
+        if (zmode && lqmode != linalg::LQ_NONE) {
+            linalg::lq_min_norm(lq, m_live, n, cv.data(), wv.data());
+            return;
+        }
+        for (int j = 0; j < n; ++j) wv[j] = 0.0;
+        for (int k = 0; k < r; ++k) {
+            const double ck = cv[k];
+            const double* Vk = V.data() + static_cast<long>(k) * n;
+            for (int j = 0; j < n; ++j) wv[j] -= Vk[j] * ck;
+        }
+    }
+
+    SolveInfo again(const double* M, const double* gin, const double* gamma, double* qdd, double* fc);
+
+    // Keep the factorization just made for again() (when the solve succeeded).
+    void hold(const SolveInfo& info, int m, int r, bool diag) {
+        held = info.status == Status::ok;
+        h_m = m;
+        h_r = r;
+        h_diag = diag;
+        h_mu = info.mu;
+    }
+
     // M̄ = μI + Zᵀ(S − μI)Z (lower triangle of W) for the L output of the null-space form;
     // returns max_i M̄_ii.
     double mbar_from_s(int k, double mu) {
@@ -290,17 +397,7 @@ struct Solver::Impl {
             info.pivot_ratio = st == linalg::CHOL_SMALL_PIVOT ? ratio : 0.0;
             return info;
         }
-        for (int i = 0; i < n; ++i) {
-            g[i] = gin[i];
-            u[i] = gin[i];
-        }
-        add_m_times(M, diag, wv.data(), -1.0, u.data());  // u = g − M w
-        null_space_qdd(k, u.data(), wv.data(), qdd);
-        if (fc) {
-            for (int i = 0; i < n; ++i) cw[i] = 0.0;
-            add_m_times(M, diag, qdd, 1.0, cw.data());
-            for (int i = 0; i < n; ++i) fc[i] = cw[i] - g[i];
-        }
+        null_finish(M, gin, diag, k, qdd, fc);
         if (P) {  // P = ZᵀZ
             const double* Z = Kt.data();
             for (int i = 0; i < n; ++i)
@@ -325,6 +422,7 @@ SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* 
                               const double* gamma, const SolveOptions& opt, double* qdd,
                               double* fc, double* P, double* L, double* xmin) {
     SolveInfo info;
+    held = false;
     if (m < 0 || m > m_max) {
         info.status = Status::bad_shape;
         return info;
@@ -378,23 +476,16 @@ SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* 
     info.rank = r;
     info.method = lqmode;
     info.null_space_form = zmode;
-    // w = −(DA)⁺ D γ: −Qᵀ cv through the reflectors, or −Σ_k v_k cv_k
-    if (zmode && lqmode != linalg::LQ_NONE) {
-        linalg::lq_min_norm(lq, m_live, n, cv.data(), wv.data());
-    } else {
-        for (int j = 0; j < n; ++j) wv[j] = 0.0;
-        for (int k = 0; k < r; ++k) {
-            const double ck = cv[k];
-            const double* Vk = V.data() + static_cast<long>(k) * n;
-            for (int j = 0; j < n; ++j) wv[j] -= Vk[j] * ck;
-        }
-    }
+    min_norm_w(r);  // w = −(DA)⁺ D γ
     if (xmin) {  // min_norm: x = (DA)⁺ D b
         for (int j = 0; j < n; ++j) xmin[j] = -wv[j];
         return info;
     }
-    if (zmode)
-        return solve_null(M, gin, diag, n - r, opt, qdd, fc, P, L, info);
+    if (zmode) {
+        info = solve_null(M, gin, diag, n - r, opt, qdd, fc, P, L, info);
+        hold(info, m, r, diag);
+        return info;
+    }
     // ------------------------------------------------------------------ 4. PMP, μ, M̄
     // Q = VᵀV; Kt = V M, G = V M Vᵀ, Tt = G V: PMP = M − VᵀKt − KtᵀV + VᵀTt (rank-r updates).
     for (int k = 0; k < r; ++k) {
@@ -472,31 +563,8 @@ SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* 
         return info;
     }
     // ------------------------------------------------------------------ 6. q̈, f_c
-    // rhs = P(g − M w) + μ w; q̈ = M̄⁻¹ rhs; f_c = M q̈ − g
-    for (int i = 0; i < n; ++i) {
-        g[i] = gin[i];
-        u[i] = gin[i];
-    }
-    add_m_times(M, diag, wv.data(), -1.0, u.data());  // u = g − M w
-    for (int k = 0; k < r; ++k) {  // cv ← V u
-        double s = 0.0;
-        const double* Vk = V.data() + static_cast<long>(k) * n;
-        for (int j = 0; j < n; ++j) s += Vk[j] * u[j];
-        cv[k] = s;
-    }
-    for (int i = 0; i < n; ++i) u[i] += mu * wv[i];
-    for (int k = 0; k < r; ++k) {
-        const double ck = cv[k];
-        const double* Vk = V.data() + static_cast<long>(k) * n;
-        for (int i = 0; i < n; ++i) u[i] -= Vk[i] * ck;
-    }
-    linalg::cholesky_solve(W.data(), n, dinv.data(), u.data());
-    for (int i = 0; i < n; ++i) qdd[i] = u[i];
-    if (fc) {
-        for (int i = 0; i < n; ++i) cw[i] = 0.0;
-        add_m_times(M, diag, qdd, 1.0, cw.data());
-        for (int i = 0; i < n; ++i) fc[i] = cw[i] - g[i];
-    }
+    range_finish(M, gin, diag, r, mu, qdd, fc);
+    hold(info, m, r, diag);
     if (P) {
         for (int i = 0; i < n; ++i)
             for (int j = 0; j < n; ++j) {
@@ -509,6 +577,58 @@ SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* 
         for (int i = 0; i < n; ++i)
             for (int j = 0; j < n; ++j) L[i * n + j] = j <= i ? W[i * n + j] : 0.0;
     }
+    return info;
+}
+
+SolveInfo Solver::Impl::again(const double* M, const double* gin, const double* gamma, double* qdd,
+                              double* fc) {
+    SolveInfo info;
+    if (!held) {
+        info.status = Status::bad_shape;
+        return info;
+    }
+    const int r = h_r;
+    info.rank = r;
+    info.mu = h_mu;
+    info.method = lqmode;
+    info.null_space_form = zmode;
+    bool bad = false;  // (the checks of a fresh call on the new inputs; A and M are the held ones)
+    for (int i = 0; i < n; ++i) bad |= gin[i] * 0.0 != 0.0;
+    for (int i = 0; i < h_m; ++i) bad |= (gamma[i] - gamma[i]) != 0.0;
+    if (bad) {
+        info.status = Status::not_finite;
+        return info;
+    }
+    // D γ over the live rows, compacted as the rank decision took them (equilibrate's d_i b_i)
+    double* b = db.data();
+    int c = 0;
+    for (int i = 0; i < h_m; ++i)
+        if (d[i] != 0.0) b[c++] = d[i] * gamma[i];
+    const int ml = m_live;
+    if (lqmode == linalg::LQ_INVERSE) {  // cv = L⁻¹ D γ (lq_certified's product)
+        const int ld = lq.m_max;
+        for (int i = 0; i < ml; ++i) {
+            const double* Ri = lq.Li.data() + static_cast<long>(i) * ld;
+            double s = 0.0;
+            for (int k = 0; k <= i; ++k) s += Ri[k] * b[k];
+            cv[i] = s;
+        }
+    } else if (lqmode == linalg::LQ_PROFILE) {  // cv = L⁻¹ (D γ)[Ro] over L's profile
+        for (int i = 0; i < ml; ++i) cv[i] = b[lq.Ro[i]];
+        linalg::lq_profile_solve(lq, ml, cv.data());
+    } else {  // cv = Σ⁻¹Uᵀ D γ over the kept rows
+        for (int a = 0; a < r; ++a) {
+            const double* Ua = Ui.data() + static_cast<long>(a) * ml;
+            double s = 0.0;
+            for (int k = 0; k < ml; ++k) s += Ua[k] * b[k];
+            cv[a] = s;
+        }
+    }
+    min_norm_w(r);
+    if (zmode)
+        null_finish(M, gin, h_diag, n - r, qdd, fc);
+    else
+        range_finish(M, gin, h_diag, r, h_mu, qdd, fc);
     return info;
 }
 
@@ -546,6 +666,45 @@ int Solver::range_basis(const double* A, int m, double rtol, double* Vout) {
         linalg::lq_rows(s.lq, s.m_live, n, 0, s.m_live, s.V.data());
     for (long k = 0; k < static_cast<long>(r) * n; ++k) Vout[k] = s.V[k];
     return r;
+}
+
+SolveInfo Solver::again(const double* M, const double* g, const double* gamma, double* qdd,
+                        double* f_c) {
+    return impl_->again(M, g, gamma, qdd, f_c);
+}
+
+bool Solver::held() const { return impl_->held; }
+
+double Solver::cond_mbar() {
+    Impl& s = *impl_;
+    if (!s.held || !s.zmode) return std::numeric_limits<double>::quiet_NaN();
+    const int k = s.n - s.h_r;
+    const double mu = s.h_mu;
+    if (k <= 0) return 1.0;
+    double lo, hi;
+    if (k == 1) {
+        lo = hi = s.G[0];
+    } else {  // eigenvalues of the symmetric part of S (k × k, in G) on a copy
+        double* X = s.Tt.data();
+        for (int a = 0; a < k; ++a)
+            for (int c = 0; c < k; ++c) X[a * k + c] = 0.5 * (s.G[a * k + c] + s.G[c * k + a]);
+        linalg::sym_eigenvalues(X, k, s.cw.data());
+        lo = hi = s.cw[0];
+        for (int a = 1; a < k; ++a) {
+            lo = std::min(lo, s.cw[a]);
+            hi = std::max(hi, s.cw[a]);
+        }
+    }
+    return std::max(mu, hi) / std::min(mu, lo);
+}
+
+bool Solver::mbar_factor(double* L) const {
+    const Impl& s = *impl_;
+    if (!s.held || s.zmode) return false;
+    const int n = s.n;
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) L[i * n + j] = j <= i ? s.W[i * n + j] : 0.0;
+    return true;
 }
 
 SolveInfo Solver::min_norm(const double* A, int m, const double* b, double rtol, double* x) {

@@ -48,11 +48,28 @@ SolveOptions solve_options(const Loop& L, double rtol) {
 
 // _stabilization._correction: Δ = Sᵀ(−A⁺r) = forward dynamics with zero force and bias r.
 Status correction(Loop& L, const Mat& A, int m, const double* r, double rtol, double* out, int* rank) {
+    L.vheld = false;
     const SolveInfo info =
         L.solver.forward(L.Mq.data(), L.zero_n.data(), A.data(), m, r, solve_options(L, rtol), out, nullptr);
     if (rank) *rank = info.rank;
     if (info.status != Status::ok) return info.status;
     return Status::ok;
+}
+
+// Solver::forward at the evaluation just made at (t, q) (M = T.M, A = Ac, g, bias), or
+// Solver::again on the velocity correction's factorization when it was taken at this (t, q)
+// with the same M and rank tolerance: A is a function of (t, q), so the factorization is this
+// A's (certified LQ: bitwise the fresh result).
+SolveInfo dynamics_solve(Loop& L, double t, const double* q, double rtol, double* qdd, double* fc) {
+    if (L.vheld && t == L.vt && rtol == L.vrtol && L.solver.held()) {
+        bool same = true;
+        for (int i = 0; i < L.n && same; ++i) same = q[i] == L.vq[i];
+        if (same && (L.prog->constant_mass() || L.Mq == L.T.M))
+            return L.solver.again(L.T.M.data(), L.g.data(), L.bias.data(), qdd, fc);
+    }
+    L.vheld = false;
+    return L.solver.forward(L.T.M.data(), L.g.data(), L.Ac.data(), L.m, L.bias.data(), solve_options(L, rtol),
+                            qdd, fc);
 }
 
 }  // namespace
@@ -94,7 +111,7 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
     L.Ah = Mat::Zero(mr, n);
     L.Alin = Mat::Zero(mr, n);
     for (Vec* v : {&L.gam, &L.phi, &L.vel, &L.phih, &L.bias, &L.floor_, &L.rnorm}) *v = Vec::Zero(mr);
-    for (Vec* v : {&L.g, &L.qdd, &L.fc, &L.zero_n, &L.aq, &L.dq}) *v = Vec::Zero(n);
+    for (Vec* v : {&L.g, &L.qdd, &L.fc, &L.zero_n, &L.aq, &L.dq, &L.vq}) *v = Vec::Zero(n);
     L.u = Vec::Zero(L.k);
     L.Mq = Mat::Zero(n, n);
     L.L = Mat::Zero(n, n);
@@ -212,8 +229,7 @@ Status rhs(Loop& L, double t, const double* y, double* out) {
     s = forces_and_bias(L, t, q, qd);
     if (s != Status::ok) return s;
     const double rtol = drift_rank_rtol(L);
-    const SolveInfo info = L.solver.forward(L.T.M.data(), L.g.data(), L.Ac.data(), L.m, L.bias.data(),
-                                            solve_options(L, rtol), L.qdd.data(), nullptr);
+    const SolveInfo info = dynamics_solve(L, t, q, rtol, L.qdd.data(), nullptr);
     if (info.status != Status::ok) return info.status;
     if (!finite(L.qdd.data(), n)) return Status::not_finite;
     for (int i = 0; i < n; ++i) {
@@ -232,9 +248,7 @@ Status point(Loop& L, double t, const double* q, const double* qd, Point& p, boo
     s = forces_and_bias(L, t, q, qd);
     if (s != Status::ok) return s;
     const double rtol = drift_rank_rtol(L);
-    const SolveInfo info =
-        L.solver.solve(L.T.M.data(), L.g.data(), L.Ac.data(), L.m, L.bias.data(), solve_options(L, rtol),
-                       p.qdd.data(), p.f_c.data(), nullptr, diagnostics ? L.L.data() : nullptr);
+    const SolveInfo info = dynamics_solve(L, t, q, rtol, p.qdd.data(), p.f_c.data());
     if (info.status != Status::ok) return info.status;
     if (!finite(p.qdd.data(), n)) return Status::not_finite;
     p.t = t;
@@ -251,11 +265,14 @@ Status point(Loop& L, double t, const double* q, const double* qd, Point& p, boo
     for (int i = 0; i < L.m; ++i) vn = std::max(vn, std::abs(L.vel[i]));
     p.phi_norm = pn;
     p.vel_norm = vn;
-    if (diagnostics) {  // cond(M̄) = (σ_max(L)/σ_min(L))² of its Cholesky factor
-        L.svd.compute(L.L);
-        const auto& sv = L.svd.singularValues();
-        const double r = sv[0] / sv[n - 1];
-        p.cond = r * r;
+    if (diagnostics) {  // cond(M̄): from S in the null-space form, else (σ_max(L)/σ_min(L))²
+        p.cond = L.solver.cond_mbar();
+        if (std::isnan(p.cond) && L.solver.mbar_factor(L.L.data())) {
+            L.svd.compute(L.L);
+            const auto& sv = L.svd.singularValues();
+            const double r = sv[0] / sv[n - 1];
+            p.cond = r * r;
+        }
     } else {
         p.cond = std::numeric_limits<double>::quiet_NaN();
     }
@@ -355,8 +372,10 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
                     cut = std::max(POSITION_CUT_RTOL, full);
                     s = correction(L, L.Alin, mh, L.phih.data(), cut, L.dq.data(), nullptr);
                 }
-            } else {
+            } else if (fresh) {
                 s = correction(L, L.Alin, mh, L.phih.data(), cut, L.dq.data(), nullptr);
+            } else {  // a chord step: the last linearization's factorization, new residual
+                s = L.solver.again(L.Mq.data(), L.zero_n.data(), L.phih.data(), L.dq.data(), nullptr).status;
             }
             if (s != Status::ok) return s;
             for (int j = 0; j < n; ++j) q[j] = q[j] + L.dq[j];
@@ -365,9 +384,14 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
         }
     }
     if (po.velocity && L.m > 0) {
-        s = correction(L, L.Ac, L.m, L.vel.data(), velocity_rtol(L.opt, po), L.dq.data(), nullptr);
+        const double vr = velocity_rtol(L.opt, po);
+        s = correction(L, L.Ac, L.m, L.vel.data(), vr, L.dq.data(), nullptr);
         if (s != Status::ok) return s;
         for (int j = 0; j < n; ++j) qd[j] = qd[j] + L.dq[j];
+        L.vheld = !po.euclidean;  // (the Euclidean metric is not M)
+        L.vt = t;
+        L.vrtol = vr;
+        for (int j = 0; j < n; ++j) L.vq[j] = q[j];
     }
     return Status::ok;
 }

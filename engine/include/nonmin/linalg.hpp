@@ -53,6 +53,10 @@ int keep_rows(const double* B, int m, int n, double rtol, double* V, double* cv,
 int cholesky_spd(double* W, int n, double spd_rtol, double dmax, double* dinv, double* cw,
                  double* ratio);
 
+// Eigenvalues of the symmetric k × k X (row-major, destroyed) into ev (k), by cyclic Jacobi
+// rotations to round-off (off-diagonal mass ≤ eps² of the total).
+void sym_eigenvalues(double* X, int k, double* ev);
+
 // Solve L Lᵀ x = b in place (x = b on entry), L the lower triangle of W with reciprocal pivots
 // dinv (as cholesky_spd leaves them).
 void cholesky_solve(const double* W, int n, const double* dinv, double* x);
@@ -122,6 +126,9 @@ int lq_sparse(const double* B, int m, int n, double rtol, LQWork& w, double* cv)
 // Rows first … first + count − 1 of the orthogonal H_{m−1} ⋯ H_0 into E (count × n): rows
 // 0 … m − 1 are Q (a basis of R(Aᵀ)), rows m … n − 1 an orthonormal basis Z of N(A).
 void lq_rows(const LQWork& w, int m, int n, int first, int count, double* E);
+
+// cv ← L⁻¹ cv over L's row profile (as lq_sparse left it: LQ_PROFILE).
+void lq_profile_solve(const LQWork& w, int m, double* cv);
 
 // x = −Qᵀ cv (= −(DA)⁺ D b for cv = L⁻¹ D b), through the reflectors.
 void lq_min_norm(const LQWork& w, int m, int n, const double* cv, double* x);

@@ -56,6 +56,24 @@ class Solver {
     SolveInfo solve(const double* M, const double* g, const double* A, int m, const double* gamma,
                     const SolveOptions& opt, double* qdd, double* f_c, double* P, double* L);
 
+    // Solve again with the factorization of the last forward/solve call, which must have
+    // succeeded (held()): the same A, M, rank tolerance and μ option (the caller guarantees it),
+    // new g and γ (m entries, m of that call). Costs O(m² + mn + n²) instead of a factorization.
+    // Certified LQ: bitwise the result of a fresh call; SVD paths: the same to round-off (Σ⁻¹Uᵀ
+    // of the kept rows applied to D γ instead of rotating it with B). Status bad_shape when
+    // nothing is held. qdd, f_c as forward.
+    SolveInfo again(const double* M, const double* g, const double* gamma, double* qdd, double* f_c);
+    // Whether a factorization is held (the last forward/solve succeeded; any other call drops it).
+    bool held() const;
+    // cond(M̄) of the held factorization in the null-space form: M̄ acts as μ on R(Aᵀ) and as
+    // S = Z M Zᵀ on N(A), so cond = max(μ, λ_max(S)) / min(μ, λ_min(S)) (k × k eigenvalues, no
+    // n × n M̄); equals (σ_max(L)/σ_min(L))² of M̄'s Cholesky factor L to round-off. NaN when
+    // nothing is held or the form is the range form (then mbar_factor).
+    double cond_mbar();
+    // The held range form's Cholesky factor L of M̄ (n × n, zero above the diagonal) into L;
+    // false (nothing written) in the null-space form or when nothing is held.
+    bool mbar_factor(double* L) const;
+
     // The rank policy alone: r and an orthonormal basis of R(Aᵀ) in the rows of V (r × n,
     // V has room for min(m, n) rows), so that P = I − VᵀV (nonmin.core.range_basis).
     int range_basis(const double* A, int m, double rtol, double* V);

@@ -212,6 +212,12 @@ struct Loop {
     Vec gam, phi, vel, phih, bias, floor_, rnorm;
     Vec g, u, qdd, fc, zero_n, aq, dq;
     Mat Mq, L;  // the projection's metric (n × n), Cholesky factor of M̄
+    // The Solver holds the velocity correction's factorization (A at (vt, vq), metric Mq, rank
+    // tolerance vrtol): a dynamics solve at the same (t, q) with M = Mq and that tolerance has
+    // the same A and reuses it (Solver::again).
+    bool vheld = false;
+    double vt = 0.0, vrtol = 0.0;
+    Vec vq;
 
     // integration state
     double t = 0.0;
