@@ -34,6 +34,7 @@ struct Solver::Impl {
     // form keeps M̄'s Cholesky factor (W, dinv), the null-space form Z (Kt), S (G) and its
     // factor (Ls).
     bool held = false;
+    unsigned long long gen = 0;  // factorizations begun (Solver::generation)
     int h_m = 0, h_r = 0;
     bool h_diag = false;
     double h_mu = 0.0;
@@ -87,6 +88,7 @@ struct Solver::Impl {
         lqmode = linalg::LQ_NONE;
         zmode = false;
         held = false;
+        ++gen;
         if (live < m) {  // vanished rows are zero rows of D A: keep the live rows only (in order)
             const int ld = n + 1;
             int c = 0;
@@ -423,6 +425,7 @@ SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* 
                               double* fc, double* P, double* L, double* xmin) {
     SolveInfo info;
     held = false;
+    ++gen;
     if (m < 0 || m > m_max) {
         info.status = Status::bad_shape;
         return info;
@@ -674,6 +677,8 @@ SolveInfo Solver::again(const double* M, const double* g, const double* gamma, d
 }
 
 bool Solver::held() const { return impl_->held; }
+
+unsigned long long Solver::generation() const { return impl_->gen; }
 
 double Solver::cond_mbar() {
     Impl& s = *impl_;

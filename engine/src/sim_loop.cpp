@@ -61,7 +61,7 @@ Status correction(Loop& L, const Mat& A, int m, const double* r, double rtol, do
 // with the same M and rank tolerance: A is a function of (t, q), so the factorization is this
 // A's (certified LQ: bitwise the fresh result).
 SolveInfo dynamics_solve(Loop& L, double t, const double* q, double rtol, double* qdd, double* fc) {
-    if (L.vheld && t == L.vt && rtol == L.vrtol && L.solver.held()) {
+    if (L.vheld && L.solver.generation() == L.vgen && t == L.vt && rtol == L.vrtol && L.solver.held()) {
         bool same = true;
         for (int i = 0; i < L.n && same; ++i) same = q[i] == L.vq[i];
         if (same && (L.prog->constant_mass() || L.Mq == L.T.M))
@@ -389,6 +389,7 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
         if (s != Status::ok) return s;
         for (int j = 0; j < n; ++j) qd[j] = qd[j] + L.dq[j];
         L.vheld = !po.euclidean;  // (the Euclidean metric is not M)
+        L.vgen = L.solver.generation();
         L.vt = t;
         L.vrtol = vr;
         for (int j = 0; j < n; ++j) L.vq[j] = q[j];

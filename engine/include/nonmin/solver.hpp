@@ -65,6 +65,9 @@ class Solver {
     SolveInfo again(const double* M, const double* g, const double* gamma, double* qdd, double* f_c);
     // Whether a factorization is held (the last forward/solve succeeded; any other call drops it).
     bool held() const;
+    // Counts the calls that factorize (forward, solve, range_basis, min_norm; not again): a
+    // caller that keeps a factorization for later checks that no other call came in between.
+    unsigned long long generation() const;
     // cond(M̄) of the held factorization in the null-space form: M̄ acts as μ on R(Aᵀ) and as
     // S = Z M Zᵀ on N(A), so cond = max(μ, λ_max(S)) / min(μ, λ_min(S)) (k × k eigenvalues, no
     // n × n M̄); equals (σ_max(L)/σ_min(L))² of M̄'s Cholesky factor L to round-off. NaN when

@@ -212,10 +212,11 @@ struct Loop {
     Vec gam, phi, vel, phih, bias, floor_, rnorm;
     Vec g, u, qdd, fc, zero_n, aq, dq;
     Mat Mq, L;  // the projection's metric (n × n), Cholesky factor of M̄
-    // The Solver holds the velocity correction's factorization (A at (vt, vq), metric Mq, rank
-    // tolerance vrtol): a dynamics solve at the same (t, q) with M = Mq and that tolerance has
-    // the same A and reuses it (Solver::again).
+    // The Solver holds the velocity correction's factorization (its generation vgen; A at
+    // (vt, vq), metric Mq, rank tolerance vrtol): a dynamics solve at the same (t, q) with M = Mq
+    // and that tolerance has the same A and reuses it (Solver::again).
     bool vheld = false;
+    unsigned long long vgen = 0;
     double vt = 0.0, vrtol = 0.0;
     Vec vq;
 
