@@ -28,31 +28,10 @@ import numpy as np
 
 
 def _ur5() -> tuple[Any, np.ndarray, Any]:
-    import pinocchio as pin
+    from nonmin.model.robots import pinocchio_point_constraint, ur5_point_closure
 
-    from nonmin.model import assemble
-    from nonmin.model.robots import FrameConstraint, RobotModel
-
-    root = Path(pin.__file__).resolve().parents[4] / "share" / "example-robot-data" / "robots"
-    urdf = root / "ur_description" / "urdf" / "ur5_robot.urdf"
-    q_guess = np.array([0.2, -1.0, 1.3, -0.6, 0.9, 0.4])
-    free = RobotModel.from_urdf(urdf, joint_limits="ignore")
-    oMe = free.frame_placement(q_guess, "ee_link")
-    con = FrameConstraint.point("closure", "ee_link", placement_b=oMe)
-    model = RobotModel.from_urdf(urdf, constraints=[con], joint_limits="ignore")
-    q0 = assemble(model, q_guess).q
-    pm = model.pinocchio_model
-    fr = pm.frames[pm.getFrameId("ee_link")]
-    cm = pin.RigidConstraintModel(
-        pin.ContactType.CONTACT_3D,
-        pm,
-        fr.parentJoint,
-        fr.placement,
-        0,
-        pin.SE3(oMe),
-        pin.ReferenceFrame.LOCAL,
-    )
-    return model, q0, cm
+    model, state = ur5_point_closure()
+    return model, state.q, pinocchio_point_constraint(model)
 
 
 def _per_call(fn: Callable[[], Any], calls: int) -> float:

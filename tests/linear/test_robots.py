@@ -12,8 +12,6 @@
   nothing of nonmin's derivative code).
 """
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -27,31 +25,14 @@ PIN_RTOL = 1e-7
 
 
 def _ur5_point():
-    from nonmin.model import assemble
-    from nonmin.model.robots import FrameConstraint, RobotModel
+    from nonmin.errors import MissingDependencyError
+    from nonmin.model.robots import pinocchio_point_constraint, ur5_point_closure
 
-    root = Path(pin.__file__).resolve().parents[4] / "share" / "example-robot-data" / "robots"
-    urdf = root / "ur_description" / "urdf" / "ur5_robot.urdf"
-    if not urdf.exists():
-        pytest.skip("example-robot-data's UR5 is not installed")
-    q_guess = np.array([0.2, -1.0, 1.3, -0.6, 0.9, 0.4])
-    free = RobotModel.from_urdf(urdf)
-    oMe = free.frame_placement(q_guess, "ee_link")
-    con = FrameConstraint.point("closure", "ee_link", placement_b=oMe)
-    model = RobotModel.from_urdf(urdf, constraints=[con], joint_limits="ignore")
-    q0 = assemble(model, q_guess).q
-    pm = model.pinocchio_model
-    fr = pm.frames[pm.getFrameId("ee_link")]
-    cm = pin.RigidConstraintModel(
-        pin.ContactType.CONTACT_3D,
-        pm,
-        fr.parentJoint,
-        fr.placement,
-        0,
-        pin.SE3(oMe),
-        pin.ReferenceFrame.LOCAL,
-    )
-    return model, q0, cm
+    try:
+        model, state = ur5_point_closure()
+    except MissingDependencyError as exc:
+        pytest.skip(str(exc))
+    return model, state.q, pinocchio_point_constraint(model)
 
 
 def test_ur5_point_closure_derivatives_match_pinocchio():

@@ -12,7 +12,9 @@
   example robots built from them, each returning ``(model, state)``: :func:`serial_arm`
   (4-dof arm, unilateral end-effector contact), :func:`fourbar` (URDF four-bar + loop-closure
   constraint of a chosen type), :func:`fourbar_mjcf` (MJCF four-bar with ``<equality>``
-  connect/weld/joint) and :func:`two_arm_grasp` (two arms holding a free-floating box).
+  connect/weld/joint), :func:`two_arm_grasp` (two arms holding a free-floating box) and
+  :func:`ur5_point_closure` (example-robot-data's UR5 with its tool pinned to the world;
+  :func:`pinocchio_point_constraint` gives Pinocchio's form of that closure).
 
 The constraint values and :func:`data_path` need no optional dependency; :class:`RobotModel`
 is imported lazily, so ``import nonmin.model.robots`` never imports Pinocchio and a missing
@@ -34,8 +36,10 @@ from ._data import data_path as data_path
 if TYPE_CHECKING:
     from ._examples import fourbar as fourbar
     from ._examples import fourbar_mjcf as fourbar_mjcf
+    from ._examples import pinocchio_point_constraint as pinocchio_point_constraint
     from ._examples import serial_arm as serial_arm
     from ._examples import two_arm_grasp as two_arm_grasp
+    from ._examples import ur5_point_closure as ur5_point_closure
     from ._pinocchio import RobotModel as RobotModel
 
 __all__ = [
@@ -48,11 +52,20 @@ __all__ = [
     "data_path",
     "fourbar",
     "fourbar_mjcf",
+    "pinocchio_point_constraint",
     "serial_arm",
     "two_arm_grasp",
+    "ur5_point_closure",
 ]
 
-_EXAMPLES = ("fourbar", "fourbar_mjcf", "serial_arm", "two_arm_grasp")
+_EXAMPLES = (
+    "fourbar",
+    "fourbar_mjcf",
+    "pinocchio_point_constraint",
+    "serial_arm",
+    "two_arm_grasp",
+    "ur5_point_closure",
+)
 
 
 def __getattr__(name: str) -> Any:

@@ -10,11 +10,18 @@ import numpy as np
 
 from .._assembly import assemble
 from .._protocol import State
-from ._constraints import FrameConstraint
+from ._constraints import WORLD, FrameConstraint
 from ._data import data_path
 from ._pinocchio import RobotModel
 
-__all__ = ["fourbar", "fourbar_mjcf", "serial_arm", "two_arm_grasp"]
+__all__ = [
+    "fourbar",
+    "fourbar_mjcf",
+    "pinocchio_point_constraint",
+    "serial_arm",
+    "two_arm_grasp",
+    "ur5_point_closure",
+]
 
 FOURBAR_CLOSURES = ("point", "planar_point", "hinge", "weld", "planar_weld")
 
@@ -107,6 +114,82 @@ def two_arm_grasp() -> tuple[RobotModel, State]:
     q[box : box + 3] = oMbox[:3, 3]
     q[box + 3 : box + 7] = _rot_to_quat(oMbox[:3, :3])
     return model, assemble(model, q)
+
+
+#: Configuration at which :func:`ur5_point_closure` pins the tool frame (and its assembly guess).
+UR5_Q_GUESS = (0.2, -1.0, 1.3, -0.6, 0.9, 0.4)
+
+
+def ur5_point_closure() -> tuple[RobotModel, State]:
+    """UR5 (example-robot-data) whose tool frame ``"ee_link"`` is pinned to the world (3 rows).
+
+    The point is where ``ee_link`` is at :data:`UR5_Q_GUESS`; the model has a 3-row
+    :meth:`FrameConstraint.point` ``"closure"`` (joint limits ignored) and the returned state is
+    assembled from that configuration (at rest). Used by the derivative tests against
+    Pinocchio and by ``benchmarks/derivative_bench.py``; :func:`pinocchio_point_constraint`
+    builds Pinocchio's form of the same closure.
+
+    Raises
+    ------
+    MissingDependencyError
+        When Pinocchio or example-robot-data (extra ``test``) is not installed.
+    """
+    from pathlib import Path
+
+    from ...errors import MissingDependencyError
+
+    try:
+        import pinocchio as pin
+    except ImportError:
+        raise MissingDependencyError(
+            "ur5_point_closure needs Pinocchio: pip install 'nonmin[pin]'"
+        ) from None
+    root = Path(pin.__file__).resolve().parents[4] / "share" / "example-robot-data" / "robots"
+    urdf = root / "ur_description" / "urdf" / "ur5_robot.urdf"
+    if not urdf.exists():
+        raise MissingDependencyError(
+            f"ur5_point_closure needs example-robot-data's UR5 ({urdf} is missing): "
+            "pip install example-robot-data"
+        )
+    q_guess = np.array(UR5_Q_GUESS)
+    free = RobotModel.from_urdf(urdf, joint_limits="ignore")
+    oMe = free.frame_placement(q_guess, "ee_link")
+    con = FrameConstraint.point("closure", "ee_link", placement_b=oMe)
+    model = RobotModel.from_urdf(urdf, constraints=[con], joint_limits="ignore")
+    return model, assemble(model, q_guess)
+
+
+def pinocchio_point_constraint(model: RobotModel, name: str = "closure") -> object:
+    """Pinocchio's ``RigidConstraintModel`` (``CONTACT_3D``, LOCAL) of a 3D point constraint
+    of ``model`` that pins a frame to the world (``frame_b`` the world), for Pinocchio's
+    ``constraintDynamics`` and its derivatives.
+
+    Raises
+    ------
+    InputError
+        When ``name`` is not a point constraint of a frame to the world.
+    """
+    import pinocchio as pin
+
+    from ...errors import InputError
+
+    cons = {c.name: c for c in model.robot_constraints}
+    con = cons.get(name)
+    if not isinstance(con, FrameConstraint) or con.type != "point" or con.frame_b != WORLD:
+        raise InputError(
+            f"name must be a point constraint of a frame to the world in {sorted(cons)}, got {name!r}"
+        )
+    pm = model.pinocchio_model
+    fr = pm.frames[pm.getFrameId(con.frame_a)]
+    return pin.RigidConstraintModel(
+        pin.ContactType.CONTACT_3D,
+        pm,
+        fr.parentJoint,
+        fr.placement * pin.SE3(con.placement_a),
+        0,
+        pin.SE3(con.placement_b),
+        pin.ReferenceFrame.LOCAL,
+    )
 
 
 def _rot_to_quat(R: np.ndarray) -> np.ndarray:
