@@ -28,7 +28,7 @@ the kernel there) and says so (:attr:`LinearSystem.singular`, :attr:`LinearSyste
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -42,9 +42,11 @@ from ._derivatives import _kernel_point, _kernel_tangent, _vector, term_tangents
 FloatArray = NDArray[np.float64]
 
 __all__ = [
+    "BRANCH_STEP",
     "Equilibrium",
     "LinearSystem",
     "Modes",
+    "branch_tangent",
     "equilibrium",
     "linearize",
     "modes",
@@ -99,6 +101,9 @@ class LinearSystem:
         N(A(q₀)), larger than any branch's).
     note : str
         Which tangent space was used, in words.
+    branch : ndarray, shape (n,), or None
+        At a singular configuration linearized on one branch (``linearize(..., branch=d)``):
+        the unit tangent of that branch at q₀ found from ``d``; None otherwise.
     """
 
     A: FloatArray
@@ -120,6 +125,7 @@ class LinearSystem:
     generic_rank: int
     singular: bool
     note: str = field(default="")
+    branch: FloatArray | None = None
 
     @property
     def tangent_dim(self) -> int:
@@ -206,6 +212,7 @@ def linearize(
     t: float = 0.0,
     active: Iterable[str] | None = None,
     rtol: float | None = None,
+    branch: ArrayLike | None = None,
 ) -> LinearSystem:
     """Linearize the constrained dynamics at ``(q, q̇)`` in minimal tangent coordinates.
 
@@ -230,6 +237,17 @@ def linearize(
         Active constraints (default ``model.default_active``).
     rtol : float, optional
         Rank tolerance (default :data:`nonmin.core.DEFAULT_RTOL`).
+    branch : array_like, shape (n,), optional
+        At a singular configuration: a velocity direction choosing the branch through q to
+        linearize on (e.g. the velocity with which a motion arrives there). The tangent of the
+        branch nearest to it is found (:func:`branch_tangent`) and the result is the
+        linearization of the dynamics *on that branch* at q: the limit of the (exact)
+        linearizations at the branch's configurations ``q(±ε), q(±2ε)`` (ε =
+        :data:`BRANCH_STEP`), symmetric and Richardson-extrapolated (error O(ε⁴)), in the
+        branch's tangent coordinates; ``LinearSystem.branch`` is that tangent. Without it (the
+        default) a singular configuration is linearized on N(A(q)), the span of the tangents
+        of every branch (the kernel's rank-r solution there). Ignored at a regular
+        configuration (one branch).
 
     Returns
     -------
@@ -253,7 +271,45 @@ def linearize(
     tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
     act = model.resolve_active(active)
     t = float(t)
+    dv = None if branch is None else _vector(branch, "branch", n)
+    lin = _linearize_point(model, qv, vv, fv, uv, inputs, t, act, tol)
+    r, nz = lin.rank, lin.tangent_dim
+    generic = _generic_rank(model, qv, lin.Zq, t, act, tol, r)
+    if generic <= r:
+        note = f"regular configuration: tangent space N(A(q)) of dimension {nz} (rank A = {r})"
+        return replace(lin, generic_rank=r, singular=False, note=note)
+    if dv is None:
+        note = (
+            f"singular configuration: rank A = {r} here and {generic} at configurations "
+            f"{SINGULAR_PROBE:g} away along the tangent space; the tangent space used is N(A(q)) of "
+            f"dimension {nz}, the span of the tangents of every branch through q (the linearization "
+            f"of the kernel's rank-{r} solution there); pass branch= (a velocity direction) to "
+            "linearize on one branch"
+        )
+        return replace(lin, generic_rank=generic, singular=True, note=note)
+    return _branch_linearization(model, lin, dv, fv, inputs, tol, generic)
 
+
+def _linearize_point(
+    model: Model,
+    qv: FloatArray,
+    vv: FloatArray,
+    fv: FloatArray,
+    uv: FloatArray,
+    inputs: Any,
+    t: float,
+    act: frozenset[str],
+    tol: float,
+    chart: tuple[FloatArray, FloatArray] | None = None,
+) -> LinearSystem:
+    """The linearization at (q, q̇) on N(A(q)) (no singularity probe: ``generic_rank = rank``).
+
+    With ``chart = (Zb, Zvb)`` (bases near those of N(A_h(q)) and N(A(q))) the same dynamics is
+    linearized in the chart ``x = (Zbᵀ (q − q₀), Zvbᵀ q̇)`` instead: ``δq = W δz`` with
+    ``W = Zq (Zbᵀ Zq)⁻¹``, ``q̇ = U v`` with ``U = Zv (Zvbᵀ Zv)⁻¹``, whose derivative along δq
+    at fixed v is ``(I − U Zvbᵀ) K δq`` (δZv = −G δAe Zv); exact, no approximation — used to
+    express linearizations at nearby points in one chart (branches)."""
+    n = model.n
     base = term_tangents(model, qv, vv, np.zeros((0, n)), t=t, active=act)
     A_all = base["A"]
     pos = _position_rows(model, act)
@@ -287,31 +343,38 @@ def linearize(
         np.zeros((p, A_all.shape[0])),
     )
 
-    Asys = np.zeros((nz + nv, nz + nv))
-    Asys[:nz, :nz] = Zq.T @ Kq
-    Asys[:nz, nz:] = Zq.T @ Zv
-    Asys[nz:, :nz] = Zv.T @ (Fq + Fk).T
-    Asys[nz:, nz:] = Zv.T @ Fv.T
-    Bsys = np.vstack([np.zeros((nz, p)), Zv.T @ Fu.T])
-    C = np.block([[Zq, np.zeros((n, nv))], [Kq, Zv]])
-    D = np.zeros((2 * n, p))
-    drift = np.concatenate([Zq.T @ vv, Zv.T @ kp.qdd])
-
-    generic = _generic_rank(model, qv, Zq, t, act, tol, r)
-    singular = generic > r
-    if singular:
-        note = (
-            f"singular configuration: rank A = {r} here and {generic} at configurations "
-            f"{SINGULAR_PROBE:g} away along the tangent space; the tangent space used is N(A(q)) of "
-            f"dimension {nz}, the span of the tangents of every branch through q (the linearization "
-            f"of the kernel's rank-{r} solution there)"
-        )
+    if chart is None:
+        Zb, Zvb = Zq, Zv
+        W, U, KW = Zq, Zv, Kq
+        FW, FU = Fq.T + Fk.T, Fv.T
     else:
-        note = f"regular configuration: tangent space N(A(q)) of dimension {nz} (rank A = {r})"
+        Zb, Zvb = chart
+        if Zb.shape != Zq.shape or Zvb.shape != Zv.shape:
+            raise ModelError(
+                f"linearize: the tangent dimensions changed near the operating point ({Zq.shape[1]}, "
+                f"{Zv.shape[1]} here, {Zb.shape[1]}, {Zvb.shape[1]} expected); try a smaller rtol"
+            )
+        Mi = np.linalg.inv(Zb.T @ Zq)
+        Ni = np.linalg.inv(Zvb.T @ Zv)
+        W, U = Zq @ Mi, Zv @ Ni
+        KqW = Kq @ Mi  # K applied to the columns of W
+        corr = Zvb.T @ KqW
+        KW = KqW - U @ corr
+        FU = Fv.T @ Ni
+        FW = (Fq.T + Fk.T) @ Mi - FU @ corr
+    Asys = np.zeros((nz + nv, nz + nv))
+    Asys[:nz, :nz] = Zb.T @ KW
+    Asys[:nz, nz:] = Zb.T @ U
+    Asys[nz:, :nz] = Zvb.T @ FW
+    Asys[nz:, nz:] = Zvb.T @ FU
+    Bsys = np.vstack([np.zeros((nz, p)), Zvb.T @ Fu.T])
+    C = np.block([[W, np.zeros((n, nv))], [KW, U]])
+    D = np.zeros((2 * n, p))
+    drift = np.concatenate([Zb.T @ vv, Zvb.T @ kp.qdd])
+    Zq, Zv, Kq = Zb, Zvb, KW
     return LinearSystem(
         A=Asys, B=Bsys, C=C, D=D, q=qv, qd=vv, u=uv, t=t, active=act, inputs=kind, input_map=Bf,
-        Zq=Zq, Zv=Zv, Kq=Kq, drift=drift, rank=r, generic_rank=max(generic, r), singular=bool(singular),
-        note=note,
+        Zq=Zq, Zv=Zv, Kq=Kq, drift=drift, rank=r, generic_rank=r, singular=False,
     )  # fmt: skip
 
 
@@ -333,6 +396,217 @@ def _generic_rank(
         if A.shape[0]:
             best = max(best, int(range_basis(np.asarray(A, dtype=float), tol).rank))
     return best
+
+
+# --------------------------------------------------------------------------- branches
+#: Distance (relative to 1 + ‖q‖) of the branch configurations q(±ε), q(±2ε) whose exact
+#: linearizations give a branch's linearization at a singular configuration (the symmetric,
+#: Richardson-extrapolated limit has an error O(ε⁴); round-off grows like u/ε through the
+#: smallest singular value of A ~ ε there).
+BRANCH_STEP = 1e-2
+
+#: Multiples of the step at which the branch is sampled on both sides; the symmetric averages
+#: are extrapolated to step 0 by Lagrange interpolation in step² (error O(step^(2·levels))).
+BRANCH_LEVELS = (1, 2, 3, 4)
+
+
+def _richardson_weights(levels: tuple[int, ...]) -> list[float]:
+    x = [float(lev * lev) for lev in levels]
+    w = []
+    for i, xi in enumerate(x):
+        p = 1.0
+        for j, xj in enumerate(x):
+            if j != i:
+                p *= xj / (xj - xi)
+        w.append(p)
+    return w
+
+
+def _project(
+    model: Model, q: FloatArray, t: float, act: frozenset[str], pos: NDArray[np.bool_]
+) -> FloatArray:
+    """The configuration on the manifold of the active position-level rows nearest to q
+    (Gauss–Newton with minimal-norm steps)."""
+    zero = np.zeros_like(q)
+    scale = 1.0 + float(np.abs(q).max(initial=0.0))
+    for _ in range(50):
+        ct = model.constraint_terms(t, q, zero, act)
+        phi = np.asarray(ct.phi, dtype=float)[pos]
+        if float(np.abs(phi).max(initial=0.0)) <= 1e-15 * scale:
+            return q
+        A = np.asarray(ct.A, dtype=float)[pos]
+        step = np.linalg.lstsq(A, phi, rcond=None)[0]
+        q = q - step
+        if float(np.abs(step).max()) <= 1e-16 * scale:
+            return q
+    raise ModelError(
+        "linearize(branch=...): the configurations near q along the branch direction could not be "
+        f"assembled (max |φ| = {float(np.abs(phi).max()):.3g}); is q on the manifold?"
+    )
+
+
+def branch_tangent(
+    model: Model,
+    q: ArrayLike,
+    direction: ArrayLike,
+    *,
+    t: float = 0.0,
+    active: Iterable[str] | None = None,
+    rtol: float | None = None,
+) -> FloatArray:
+    """The unit tangent, at a singular configuration q, of the branch through q nearest to a
+    direction.
+
+    The direction is projected on N(A_h(q)) (A_h: the active position-level rows); the
+    configuration q + ε d is assembled onto the manifold (minimal-norm Gauss–Newton, which
+    lands on the branch nearest to it) and d is replaced by the direction of the chord
+    ``q(+ε) − q(−ε)`` through the assembled points, until it no longer changes: a fixed point is
+    a direction along which the manifold passes through q to second order, the tangent of a
+    branch (accurate to O(ε²), ε = :data:`BRANCH_STEP`·(1 + ‖q‖)). On a branch of dimension
+    > 1 the result is one tangent vector of it.
+
+    Parameters
+    ----------
+    model : Model
+    q : array_like, shape (n,)
+        A configuration on the manifold (typically a singular one).
+    direction : array_like, shape (n,)
+        A velocity direction (e.g. the velocity arriving at q), not in the range of A_hᵀ.
+    t : float
+    active : iterable of str, optional
+    rtol : float, optional
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Unit tangent, oriented like ``direction``.
+
+    Raises
+    ------
+    InputError
+        When the direction has no component in N(A_h(q)) or no branch tangent is found near it.
+    """
+    n = model.n
+    qv = _vector(q, "q", n)
+    d0 = _vector(direction, "direction", n)
+    tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
+    act = model.resolve_active(active)
+    pos = _position_rows(model, act)
+    A_h = np.asarray(model.constraint_terms(float(t), qv, np.zeros(n), act).A, dtype=float)[pos]
+    Zq, _ = _null_basis(A_h, tol) if A_h.shape[0] else (np.eye(n), 0)
+    return _branch_tangent(model, qv, d0, Zq, float(t), act, pos)
+
+
+def _branch_tangent(
+    model: Model,
+    q: FloatArray,
+    d0: FloatArray,
+    Zq: FloatArray,
+    t: float,
+    act: frozenset[str],
+    pos: NDArray[np.bool_],
+) -> FloatArray:
+    d = Zq @ (Zq.T @ d0)
+    nd = float(np.linalg.norm(d))
+    if nd <= 1e-12 * max(float(np.linalg.norm(d0)), 1e-300):
+        raise InputError(
+            "branch must be a velocity direction with a component in the tangent space N(A(q)) of the "
+            f"position-level constraints, got {d0.tolist()}"
+        )
+    d = d / nd
+    eps = BRANCH_STEP * (1.0 + float(np.linalg.norm(q)))
+    # one-sided first: q + ε d lands on the branch nearest to it
+    qp = _project(model, q + eps * d, t, act, pos)
+    d1 = Zq @ (Zq.T @ (qp - q))
+    d = d1 / float(np.linalg.norm(d1))
+    change = np.inf
+    for _ in range(30):
+        qp = _project(model, q + eps * d, t, act, pos)
+        qm = _project(model, q - eps * d, t, act, pos)
+        c = Zq @ (Zq.T @ (qp - qm))
+        c /= float(np.linalg.norm(c))
+        change = float(np.linalg.norm(c - d))
+        d = c
+        if change <= 1e-12:
+            break
+    off = float(np.linalg.norm(qp - q - eps * d))
+    if change > 1e-8 or off > 10.0 * eps * eps * (1.0 + float(np.linalg.norm(q))):
+        raise InputError(
+            f"branch: no branch through q was found along the given direction (last change "
+            f"{change:.2g}, distance of the branch point from the chord {off:.2g} at step {eps:.2g})"
+        )
+    return d if float(d @ d0) >= 0.0 else -d
+
+
+def _branch_linearization(
+    model: Model,
+    lin: LinearSystem,
+    d0: FloatArray,
+    fv: FloatArray,
+    inputs: Any,
+    tol: float,
+    generic: int,
+) -> LinearSystem:
+    q0, act, t = lin.q, lin.active, lin.t
+    pos = _position_rows(model, act)
+    d = _branch_tangent(model, q0, d0, lin.Zq, t, act, pos)
+    eps = BRANCH_STEP * (1.0 + float(np.linalg.norm(q0)))
+    levels = [sgn * lev for lev in BRANCH_LEVELS for sgn in (1, -1)]
+    weights = _richardson_weights(BRANCH_LEVELS)
+    states: dict[int, tuple[FloatArray, FloatArray]] = {}
+    proj_q: dict[int, FloatArray] = {}
+    proj_v: dict[int, FloatArray] = {}
+    for s in levels:
+        qs = _project(model, q0 + s * eps * d, t, act, pos)
+        A_all = np.asarray(model.constraint_terms(t, qs, np.zeros_like(qs), act).A, dtype=float)
+        Zs, _ = _null_basis(A_all, tol)
+        Zh, _ = _null_basis(A_all[pos], tol) if np.any(pos) else (np.eye(model.n), 0)
+        states[s] = (qs, Zs @ (Zs.T @ lin.qd))  # the operating velocity made admissible there
+        proj_q[s], proj_v[s] = Zh @ Zh.T, Zs @ Zs.T
+    dims = {(round(float(np.trace(proj_q[s]))), round(float(np.trace(proj_v[s])))) for s in levels}
+    if len(dims) != 1:
+        raise ModelError(
+            f"linearize(branch=...): the tangent dimensions differ along the branch {sorted(dims)}; "
+            "try a smaller rtol"
+        )
+    nz, nv = dims.pop()
+
+    def extrapolate(values: dict[int, FloatArray]) -> FloatArray:
+        return sum(  # type: ignore[return-value]
+            w * 0.5 * (values[lev] + values[-lev])
+            for lev, w in zip(BRANCH_LEVELS, weights, strict=True)
+        )
+
+    def top(P: FloatArray, k: int) -> FloatArray:
+        V = np.linalg.eigh(0.5 * (P + P.T))[1]
+        Zt = np.ascontiguousarray(V[:, ::-1][:, :k])
+        if k == 1 and float(Zt[:, 0] @ d) < 0:
+            Zt = -Zt
+        return Zt
+
+    # one chart for every point: the bases of the limit of N(A) along the branch
+    Zb, Zvb = top(extrapolate(proj_q), nz), top(extrapolate(proj_v), nv)
+    pts = {
+        s: _linearize_point(model, qs, qds, fv, lin.u, inputs, t, act, tol, chart=(Zb, Zvb))
+        for s, (qs, qds) in states.items()
+    }
+    Asys = extrapolate({s: p.A for s, p in pts.items()})
+    Bsys = extrapolate({s: p.B for s, p in pts.items()})
+    drift = extrapolate({s: p.drift for s, p in pts.items()})
+    C = extrapolate({s: p.C for s, p in pts.items()})
+    n = model.n
+    Kq = C[n:, :nz]
+    steps = ", ".join(f"±{lev * eps:.2g}" for lev in BRANCH_LEVELS)
+    note = (
+        f"singular configuration: rank A = {lin.rank} here and {generic} nearby; linearized on the "
+        f"branch through q with tangent `branch` (tangent space of dimension {nz}, the limit of "
+        f"N(A) along the branch): the exact linearizations, in one chart, at the branch's "
+        f"configurations {steps} away, extrapolated to q (error O(step^{2 * len(BRANCH_LEVELS)}))"
+    )
+    return replace(
+        lin, A=Asys, B=Bsys, C=C, D=np.zeros((2 * n, Bsys.shape[1])), Zq=Zb, Zv=Zvb, Kq=Kq,
+        drift=drift, generic_rank=generic, singular=True, note=note, branch=d,
+    )  # fmt: skip
 
 
 # --------------------------------------------------------------------------- equilibria
@@ -496,6 +770,7 @@ def modes(
     t: float = 0.0,
     active: Iterable[str] | None = None,
     rtol: float | None = None,
+    branch: ArrayLike | None = None,
 ) -> Modes:
     """Eigenfrequencies, damping ratios and mode shapes about the rest state ``(q_eq, 0)``.
 
@@ -516,12 +791,17 @@ def modes(
     t : float
     active : iterable of str, optional
     rtol : float, optional
+    branch : array_like, shape (n,), optional
+        At a singular configuration, the modes on the branch nearest to this velocity
+        direction (:func:`linearize`); default: on N(A(q)), the span of every branch's tangent.
 
     Returns
     -------
     Modes
     """
-    lin = linearize(model, q_eq, None, u=u, t=t, active=active, rtol=rtol, inputs="forces")
+    lin = linearize(
+        model, q_eq, None, u=u, t=t, active=active, rtol=rtol, inputs="forces", branch=branch
+    )
     lam, V = np.linalg.eig(lin.A)
     scale = float(np.abs(lam).max(initial=0.0))
     tiny = 1e-9 * max(scale, 1e-300)

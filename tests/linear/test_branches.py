@@ -1,0 +1,160 @@
+"""Linearization on one branch at a singular configuration, against exact 1-DOF reductions.
+
+At a singular configuration several branches of the configuration manifold cross; the
+dynamics on each is a smooth 1-DOF system there. ``linearize(..., branch=d)`` picks the branch
+whose tangent is nearest to the velocity direction d and must return the linearization of that
+branch's reduced dynamics θ̈ = F(θ, θ̇) written in the chart z = Zᵀ(Q(θ) − Q(θ₀)),
+v = Zᵀ Q1(θ) θ̇ (Q(θ) the branch, Q1, Q2, Q3 its θ-derivatives, Z the returned tangent):
+v̇ = G(z, v) = s1 θ̇² + s F with s = Zᵀ Q1, s1 = Zᵀ Q2, s2 = Zᵀ Q3, θ̇ = v/s, so
+
+    ∂G/∂v = 2 s1 θ̇ / s + F_ω,
+    ∂G/∂z = (s2 θ̇² − 2 s1² θ̇²/s + s1 F + s F_θ − s1 θ̇ F_ω) / s,
+    drift = (s θ̇, s1 θ̇² + s F).
+
+* IFToMM A02 (N four-bar) at the horizontal configuration (tangent space of dimension N + 1
+  when no branch is chosen): the parallelogram branch (every crank at the same angle θ,
+  reduction I θ̈ = −g c cos θ of shared/benchmarks/README.md) and, for N = 1, the folded
+  branch where crank 0 stays put and the coupler turns with crank 1 about the second ground
+  pivot (a rigid pair of two bars: I = 2/3, torque −g cos θ).
+* The crossed four-bar at its change point θ = 0: the anti-parallelogram branch (the
+  library's closed-form reduction) and the parallelogram branch (ψ = θ, the coupler
+  translates: I = 1/3 + 2 + 1/3, V = 3 g sin θ).
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+import nonmin
+from nonmin import library
+
+G = 9.81
+
+
+def _chart_reference(Z, Q1, Q2, Q3, omega, F, F_th, F_om):
+    s, s1, s2 = Z @ Q1, Z @ Q2, Z @ Q3
+    dG_dv = 2 * s1 * omega / s + F_om
+    dG_dz = (s2 * omega**2 - 2 * s1**2 * omega**2 / s + s1 * F + s * F_th - s1 * omega * F_om) / s
+    return np.array([[0.0, 1.0], [dG_dz, dG_dv]]), np.array([s * omega, s1 * omega**2 + s * F])
+
+
+# ------------------------------------------------------------------ A02 parallelogram branch
+def _a02(N, theta):
+    c, s = math.cos(theta), math.sin(theta)
+    q, Q1, Q2, Q3 = [], [], [], []
+    for i in range(N + 1):
+        q += [i + 0.5 * c, 0.5 * s, theta]
+        Q1 += [-0.5 * s, 0.5 * c, 1.0]
+        Q2 += [-0.5 * c, -0.5 * s, 0.0]
+        Q3 += [0.5 * s, -0.5 * c, 0.0]
+    for i in range(1, N + 1):
+        q += [i - 0.5 + c, s, 0.0]
+        Q1 += [-s, c, 0.0]
+        Q2 += [-c, -s, 0.0]
+        Q3 += [s, -c, 0.0]
+    return (np.array(x) for x in (q, Q1, Q2, Q3))
+
+
+@pytest.mark.parametrize("N", [1, 2, 3])
+@pytest.mark.parametrize("omega", [0.0, -1.3])
+def test_a02_parallelogram_branch_at_the_horizontal_configuration(N, omega):
+    model = library.a02_n_four_bar(N=N).model
+    q, Q1, Q2, Q3 = _a02(N, 0.0)
+    lin_all = nonmin.linearize(model, q, Q1 * omega)
+    assert lin_all.singular and lin_all.tangent_dim == N + 1 and lin_all.branch is None
+    lin = nonmin.linearize(model, q, Q1 * omega, branch=Q1)
+    assert lin.singular and lin.tangent_dim == 1 and lin.velocity_dim == 1
+    assert lin.generic_rank == 6 * N + 2 and lin.rank == 5 * N + 2
+    assert abs(abs(lin.branch @ Q1) / np.linalg.norm(Q1) - 1.0) <= 1e-9
+    kappa = G * ((N + 1) / 2 + N) / ((N + 1) / 3 + N)
+    A_ref, drift_ref = _chart_reference(lin.Zq[:, 0], Q1, Q2, Q3, omega, -kappa, 0.0, 0.0)
+    assert np.allclose(lin.A, A_ref, rtol=1e-8, atol=1e-8)
+    assert np.allclose(lin.drift, drift_ref, rtol=1e-8, atol=1e-8)
+    # an approximate direction (a velocity slightly off the branch) finds the same branch
+    rng = np.random.default_rng(N)
+    near = Q1 + 0.05 * lin_all.Zq @ rng.standard_normal(N + 1)
+    d = nonmin.linear.branch_tangent(model, q, near)
+    assert abs(abs(d @ lin.branch) - 1.0) <= 1e-9
+    # the modes on the branch: the 2 × 2 system, not the 2(N + 1) of the span of all branches
+    m = nonmin.modes(model, q, branch=Q1)
+    assert m.eigenvalues.size == 2 and nonmin.modes(model, q).eigenvalues.size == 2 * (N + 1)
+
+
+def test_a02_folded_branch_of_one_window():
+    """N = 1: crank 0 fixed horizontal, coupler and crank 1 turning together about (1, 0)."""
+    model = library.a02_n_four_bar(N=1).model
+    q, _, _, _ = _a02(1, 0.0)
+    # Q(θ): crank 0 (0.5, 0, 0); crank 1 and coupler both centred at (1 + cos θ/2, sin θ/2), angle θ
+    Q1 = np.array([0, 0, 0, 0.0, 0.5, 1.0, 0.0, 0.5, 1.0])
+    Q2 = np.array([0, 0, 0, -0.5, 0.0, 0.0, -0.5, 0.0, 0.0])
+    Q3 = np.array([0, 0, 0, 0.0, -0.5, 0.0, 0.0, -0.5, 0.0])
+    omega = 0.7
+    lin = nonmin.linearize(model, q, Q1 * omega, branch=Q1)
+    assert lin.tangent_dim == 1
+    F = -G * 1.0 / (2.0 / 3.0)  # −g cos θ / I at θ = 0
+    A_ref, drift_ref = _chart_reference(lin.Zq[:, 0], Q1, Q2, Q3, omega, F, 0.0, 0.0)
+    assert np.allclose(lin.A, A_ref, rtol=1e-8, atol=1e-8)
+    assert np.allclose(lin.drift, drift_ref, rtol=1e-8, atol=1e-8)
+    # the two branches give different systems at the same state (q, 0)
+    par = nonmin.linearize(model, q, branch=list(_a02(1, 0.0))[1])
+    fold = nonmin.linearize(model, q, branch=Q1)
+    assert not np.allclose(par.drift, fold.drift)
+
+
+# ------------------------------------------------------------------ crossed four-bar
+def _cfb_parallelogram(theta):
+    """Crank, coupler, rocker on the parallelogram branch ψ = θ (ground pivots (0,0), (2,0))."""
+    c, s = math.cos(theta), math.sin(theta)
+    Q1 = np.array([-0.5 * s, 0.5 * c, 1.0, -s, c, 0.0, -0.5 * s, 0.5 * c, 1.0])
+    Q2 = np.array([-0.5 * c, -0.5 * s, 0.0, -c, -s, 0.0, -0.5 * c, -0.5 * s, 0.0])
+    Q3 = np.array([0.5 * s, -0.5 * c, 0.0, s, -c, 0.0, 0.5 * s, -0.5 * c, 0.0])
+    return Q1, Q2, Q3
+
+
+def test_crossed_four_bar_branches_at_the_change_point():
+    from nonmin.library._planar import _cfb_branch, _cfb_coordinates, _cfb_reduced
+
+    model = library.crossed_four_bar().model
+    q0, _ = _cfb_coordinates(np.array(0.0), np.array(0.0))
+    q0 = np.asarray(q0, dtype=float)
+    lin_all = nonmin.linearize(model, q0)
+    assert lin_all.singular and lin_all.tangent_dim == 2
+
+    # anti-parallelogram branch at rest: F = −V'/m, F_θ from the closed form (central difference
+    # of the reference's own V' and m, which know nothing of nonmin)
+    mass_and_slope, _ = _cfb_reduced(G)
+    br = _cfb_branch(np.array(0.0))
+    Q1 = np.concatenate([np.append(br["dg"][k], br["dang"][k]) for k in range(3)])
+    Q2 = np.concatenate([np.append(br["ddg"][k], br["ddang"][k]) for k in range(3)])
+    m0, _, dV0 = mass_and_slope(0.0)
+    h = 1e-5
+    Fp = -mass_and_slope(h)[2] / mass_and_slope(h)[0]
+    Fm = -mass_and_slope(-h)[2] / mass_and_slope(-h)[0]
+    F, F_th = -dV0 / m0, (Fp - Fm) / (2 * h)
+    anti = nonmin.linearize(model, q0, branch=Q1)
+    A_ref, drift_ref = _chart_reference(anti.Zq[:, 0], Q1, Q2, 0 * Q1, 0.0, F, F_th, 0.0)
+    assert np.allclose(anti.A, A_ref, rtol=1e-7, atol=1e-7)
+    assert np.allclose(anti.drift, drift_ref, rtol=1e-8, atol=1e-8)
+
+    # parallelogram branch (moving): m = 8/3, V = 3 g sin θ
+    P1, P2, P3 = _cfb_parallelogram(0.0)
+    omega = 1.1
+    par = nonmin.linearize(model, q0, P1 * omega, branch=P1)
+    A_ref, drift_ref = _chart_reference(par.Zq[:, 0], P1, P2, P3, omega, -3 * G / (8 / 3), 0.0, 0.0)
+    assert np.allclose(par.A, A_ref, rtol=1e-8, atol=1e-8)
+    assert np.allclose(par.drift, drift_ref, rtol=1e-8, atol=1e-8)
+    assert abs(abs(par.branch @ anti.branch)) < 0.9  # two distinct tangents
+
+
+def test_branch_direction_must_lie_in_the_tangent_space():
+    model = library.a02_n_four_bar(N=1).model
+    q, _, _, _ = _a02(1, 0.0)
+    lin = nonmin.linearize(model, q)
+    A = model.constraint_jacobian(0.0, q)
+    normal = A.T @ np.ones(A.shape[0])
+    normal -= lin.Zq @ (lin.Zq.T @ normal)
+    with pytest.raises(nonmin.errors.InputError, match="branch"):
+        nonmin.linearize(model, q, branch=normal)
+    with pytest.raises(nonmin.errors.ShapeError, match="branch"):
+        nonmin.linearize(model, q, branch=np.ones(3))
