@@ -158,3 +158,44 @@ def test_branch_direction_must_lie_in_the_tangent_space():
         nonmin.linearize(model, q, branch=normal)
     with pytest.raises(nonmin.errors.ShapeError, match="branch"):
         nonmin.linearize(model, q, branch=np.ones(3))
+
+
+@pytest.mark.parametrize("N", [1, 2])
+def test_a02_has_N_plus_1_branches_at_the_horizontal_configuration(N):
+    """Each window is a rhombus: at the flat configuration it either stays a parallelogram
+    (both its cranks turn together) or folds (its left crank stays flat, its coupler turns with
+    the right crank about the right ground pivot). The branches through the flat configuration
+    are the crank-angle lines (0, …, 0, 1, …, 1): N + 1 of them."""
+    model = library.a02_n_four_bar(N=N).model
+    q, Q1, _, _ = _a02(N, 0.0)
+    found = nonmin.linear.branches(model, q)
+    A = model.constraint_jacobian(0.0, q)
+    cranks = []
+    for B in found:
+        assert B.shape == (model.n, 1)
+        assert np.abs(A @ B).max() <= 1e-10
+        c = B[2 : 3 * (N + 1) : 3, 0]
+        cranks.append(tuple(np.round(c / np.abs(c).max(), 8)))
+    expected = {tuple([0.0] * k + [1.0] * (N + 1 - k)) for k in range(N + 1)}
+    assert set(cranks) == expected
+    # a label selects the same branch as its velocity direction
+    label = cranks.index(tuple([1.0] * (N + 1)))
+    by_label = nonmin.linearize(model, q, Q1 * 0.5, branch=label)
+    by_direction = nonmin.linearize(model, q, Q1 * 0.5, branch=Q1)
+    assert np.allclose(by_label.A, by_direction.A, atol=1e-12)
+    with pytest.raises(nonmin.errors.InputError, match="label"):
+        nonmin.linearize(model, q, branch=N + 1)
+
+
+def test_crossed_four_bar_has_two_branches_at_the_change_point():
+    from nonmin.library._planar import _cfb_coordinates
+
+    model = library.crossed_four_bar().model
+    q0 = np.asarray(_cfb_coordinates(np.array(0.0), np.array(0.0))[0], dtype=float)
+    found = nonmin.linear.branches(model, q0)
+    ratios = sorted(float(B[8, 0] / B[2, 0]) for B in found)  # rocker rate / crank rate
+    assert np.allclose(ratios, [-3.0, 1.0], atol=1e-8)  # anti-parallelogram ψ' = −3, parallelogram
+    # at a regular configuration there is one branch: N(A)
+    q1 = np.asarray(_cfb_coordinates(np.array(1.0), np.array(0.0))[0], dtype=float)
+    (B,) = nonmin.linear.branches(model, q1)
+    assert B.shape == (9, 1)

@@ -7,7 +7,7 @@
 * :func:`linearize` — a :class:`LinearSystem` (A, B, C, D) in minimal tangent coordinates of
   the constraint manifold (holonomic and nonholonomic), with the maps back to the dependent
   coordinates, singular configurations reported (and linearized on one branch, chosen by a
-  velocity direction: ``branch=``, :func:`branch_tangent`); ``to_control()`` for python-control.
+  velocity direction or a label: ``branch=``, :func:`branch_tangent`, :func:`branches`); ``to_control()`` for python-control.
 * :func:`equilibrium`, :func:`modes` — static equilibria and small-oscillation modes (no
   spurious modes from the virtual mass or the constraint directions).
 * :class:`LQR` — a regulator designed on the linearization, run as a nonmin controller,
@@ -24,6 +24,7 @@ from ._linearize import Equilibrium as Equilibrium
 from ._linearize import LinearSystem as LinearSystem
 from ._linearize import Modes as Modes
 from ._linearize import branch_tangent as branch_tangent
+from ._linearize import branches as branches
 from ._linearize import equilibrium as equilibrium
 from ._linearize import linearize as linearize
 from ._linearize import modes as modes
@@ -39,6 +40,7 @@ __all__ = [
     "LinearSystem",
     "Modes",
     "branch_tangent",
+    "branches",
     "dynamics_derivatives",
     "equilibrium",
     "linearize",

@@ -47,6 +47,7 @@ __all__ = [
     "LinearSystem",
     "Modes",
     "branch_tangent",
+    "branches",
     "equilibrium",
     "linearize",
     "modes",
@@ -212,7 +213,7 @@ def linearize(
     t: float = 0.0,
     active: Iterable[str] | None = None,
     rtol: float | None = None,
-    branch: ArrayLike | None = None,
+    branch: ArrayLike | int | None = None,
 ) -> LinearSystem:
     """Linearize the constrained dynamics at ``(q, q̇)`` in minimal tangent coordinates.
 
@@ -237,9 +238,10 @@ def linearize(
         Active constraints (default ``model.default_active``).
     rtol : float, optional
         Rank tolerance (default :data:`nonmin.core.DEFAULT_RTOL`).
-    branch : array_like, shape (n,), optional
+    branch : array_like of shape (n,) or int, optional
         At a singular configuration: a velocity direction choosing the branch through q to
-        linearize on (e.g. the velocity with which a motion arrives there). The tangent of the
+        linearize on (e.g. the velocity with which a motion arrives there), or a branch label:
+        an index in :func:`branches` ``(model, q)``. The tangent of the
         branch nearest to it is found (:func:`branch_tangent`) and the result is the
         linearization of the dynamics *on that branch* at q: the limit of the (exact)
         linearizations at the branch's configurations ``q(±ε), q(±2ε)`` (ε =
@@ -271,6 +273,14 @@ def linearize(
     tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
     act = model.resolve_active(active)
     t = float(t)
+    if isinstance(branch, int | np.integer) and not isinstance(branch, bool):
+        found = branches(model, qv, t=t, active=act, rtol=rtol)
+        if not 0 <= int(branch) < len(found):
+            raise InputError(
+                f"branch must be a velocity direction or a label in range({len(found)}) (the branches "
+                f"found at q by nonmin.linear.branches), got {branch!r}"
+            )
+        branch = found[int(branch)][:, 0]
     dv = None if branch is None else _vector(branch, "branch", n)
     lin = _linearize_point(model, qv, vv, fv, uv, inputs, t, act, tol)
     r, nz = lin.rank, lin.tangent_dim
@@ -494,7 +504,93 @@ def branch_tangent(
     pos = _position_rows(model, act)
     A_h = np.asarray(model.constraint_terms(float(t), qv, np.zeros(n), act).A, dtype=float)[pos]
     Zq, _ = _null_basis(A_h, tol) if A_h.shape[0] else (np.eye(n), 0)
-    return _branch_tangent(model, qv, d0, Zq, float(t), act, pos)
+    d = _branch_tangent(model, qv, d0, Zq, float(t), act, pos)
+    Zb = _branch_bases(model, qv, np.zeros(n), d, float(t), act, pos, tol)[2]
+    d = Zb @ (Zb.T @ d)
+    return d / float(np.linalg.norm(d))
+
+
+def branches(
+    model: Model,
+    q: ArrayLike,
+    *,
+    t: float = 0.0,
+    active: Iterable[str] | None = None,
+    rtol: float | None = None,
+    starts: int = 8,
+) -> list[FloatArray]:
+    """The branches through a singular configuration, as orthonormal bases of their tangent
+    spaces (the labels ``branch=0, 1, …`` of :func:`linearize` are indices in this list).
+
+    Searched from the directions ±e_i and e_i ± e_j of a basis of N(A_h(q)) and ``starts``
+    fixed pseudo-random ones: each is snapped to the tangent of the branch nearest to it
+    (:func:`branch_tangent`); tangents lying in the tangent space of a branch already found
+    are the same branch. A branch no start direction is near can be missed (add starts).
+    Ordered by their first basis vector (largest component positive, then lexicographically).
+
+    Parameters
+    ----------
+    model : Model
+    q : array_like, shape (n,)
+        A configuration on the manifold.
+    t : float
+    active : iterable of str, optional
+    rtol : float, optional
+    starts : int
+        Number of pseudo-random start directions besides the basis combinations.
+
+    Returns
+    -------
+    list of ndarray, each of shape (n, k_b)
+        One orthonormal basis per branch (k_b = 1 for a curve). At a regular configuration the
+        single basis of N(A_h(q)).
+    """
+    n = model.n
+    qv = _vector(q, "q", n)
+    tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
+    act = model.resolve_active(active)
+    pos = _position_rows(model, act)
+    t = float(t)
+    zero = np.zeros(n)
+    A_h = np.asarray(model.constraint_terms(t, qv, zero, act).A, dtype=float)[pos]
+    Zq, r = _null_basis(A_h, tol) if A_h.shape[0] else (np.eye(n), 0)
+    nz = Zq.shape[1]
+    if nz == 0 or _generic_rank(model, qv, Zq, t, act, tol, r) <= r:
+        return [Zq]
+    dirs: list[FloatArray] = []
+    eye = np.eye(nz)
+    for i in range(nz):
+        dirs.append(eye[i])
+        for j in range(i + 1, nz):
+            dirs += [eye[i] + eye[j], eye[i] - eye[j]]
+    rng = np.random.default_rng(20261126)
+    dirs += list(rng.standard_normal((int(starts), nz)))
+    found: list[FloatArray] = []
+    for c in dirs:
+        d0 = Zq @ c
+        if any(
+            float(np.linalg.norm(B.T @ d0)) >= (1.0 - 1e-6) * float(np.linalg.norm(d0))
+            for B in found
+        ):
+            continue
+        try:
+            d = _branch_tangent(model, qv, d0, Zq, t, act, pos)
+        except (InputError, ModelError):
+            continue
+        if any(float(np.linalg.norm(B.T @ d)) >= 1.0 - 1e-6 for B in found):
+            continue
+        Zb = _branch_bases(model, qv, zero, d, t, act, pos, tol)[2]
+        found.append(Zb)
+
+    def key(B: FloatArray) -> tuple[float, ...]:
+        b = B[:, 0] * (1.0 if B[int(np.argmax(np.abs(B[:, 0]))), 0] > 0 else -1.0)
+        return tuple(-np.round(b, 6))
+
+    out = []
+    for B in sorted(found, key=key):
+        j = int(np.argmax(np.abs(B[:, 0])))
+        out.append(B if B[j, 0] > 0 else -B)
+    return out
 
 
 def _branch_tangent(
@@ -514,13 +610,13 @@ def _branch_tangent(
             f"position-level constraints, got {d0.tolist()}"
         )
     d = d / nd
-    eps = BRANCH_STEP * (1.0 + float(np.linalg.norm(q)))
+    eps = 0.1 * BRANCH_STEP * (1.0 + float(np.linalg.norm(q)))  # a chord: a small step
     # one-sided first: q + ε d lands on the branch nearest to it
     qp = _project(model, q + eps * d, t, act, pos)
     d1 = Zq @ (Zq.T @ (qp - q))
     d = d1 / float(np.linalg.norm(d1))
     change = np.inf
-    for _ in range(30):
+    for _ in range(50):
         qp = _project(model, q + eps * d, t, act, pos)
         qm = _project(model, q - eps * d, t, act, pos)
         c = Zq @ (Zq.T @ (qp - qm))
@@ -530,7 +626,7 @@ def _branch_tangent(
         if change <= 1e-12:
             break
     off = float(np.linalg.norm(qp - q - eps * d))
-    if change > 1e-8 or off > 10.0 * eps * eps * (1.0 + float(np.linalg.norm(q))):
+    if change > 1e-6 or off > 10.0 * eps * eps * (1.0 + float(np.linalg.norm(q))):
         raise InputError(
             f"branch: no branch through q was found along the given direction (last change "
             f"{change:.2g}, distance of the branch point from the chord {off:.2g} at step {eps:.2g})"
@@ -550,50 +646,18 @@ def _branch_linearization(
     q0, act, t = lin.q, lin.active, lin.t
     pos = _position_rows(model, act)
     d = _branch_tangent(model, q0, d0, lin.Zq, t, act, pos)
-    eps = BRANCH_STEP * (1.0 + float(np.linalg.norm(q0)))
-    levels = [sgn * lev for lev in BRANCH_LEVELS for sgn in (1, -1)]
-    weights = _richardson_weights(BRANCH_LEVELS)
-    states: dict[int, tuple[FloatArray, FloatArray]] = {}
-    proj_q: dict[int, FloatArray] = {}
-    proj_v: dict[int, FloatArray] = {}
-    for s in levels:
-        qs = _project(model, q0 + s * eps * d, t, act, pos)
-        A_all = np.asarray(model.constraint_terms(t, qs, np.zeros_like(qs), act).A, dtype=float)
-        Zs, _ = _null_basis(A_all, tol)
-        Zh, _ = _null_basis(A_all[pos], tol) if np.any(pos) else (np.eye(model.n), 0)
-        states[s] = (qs, Zs @ (Zs.T @ lin.qd))  # the operating velocity made admissible there
-        proj_q[s], proj_v[s] = Zh @ Zh.T, Zs @ Zs.T
-    dims = {(round(float(np.trace(proj_q[s]))), round(float(np.trace(proj_v[s])))) for s in levels}
-    if len(dims) != 1:
-        raise ModelError(
-            f"linearize(branch=...): the tangent dimensions differ along the branch {sorted(dims)}; "
-            "try a smaller rtol"
-        )
-    nz, nv = dims.pop()
-
-    def extrapolate(values: dict[int, FloatArray]) -> FloatArray:
-        return sum(  # type: ignore[return-value]
-            w * 0.5 * (values[lev] + values[-lev])
-            for lev, w in zip(BRANCH_LEVELS, weights, strict=True)
-        )
-
-    def top(P: FloatArray, k: int) -> FloatArray:
-        V = np.linalg.eigh(0.5 * (P + P.T))[1]
-        Zt = np.ascontiguousarray(V[:, ::-1][:, :k])
-        if k == 1 and float(Zt[:, 0] @ d) < 0:
-            Zt = -Zt
-        return Zt
-
-    # one chart for every point: the bases of the limit of N(A) along the branch
-    Zb, Zvb = top(extrapolate(proj_q), nz), top(extrapolate(proj_v), nv)
+    eps, states, Zb, Zvb = _branch_bases(model, q0, lin.qd, d, t, act, pos, tol)
+    nz = Zb.shape[1]
+    d = Zb @ (Zb.T @ d)
+    d /= float(np.linalg.norm(d))
     pts = {
         s: _linearize_point(model, qs, qds, fv, lin.u, inputs, t, act, tol, chart=(Zb, Zvb))
         for s, (qs, qds) in states.items()
     }
-    Asys = extrapolate({s: p.A for s, p in pts.items()})
-    Bsys = extrapolate({s: p.B for s, p in pts.items()})
-    drift = extrapolate({s: p.drift for s, p in pts.items()})
-    C = extrapolate({s: p.C for s, p in pts.items()})
+    Asys = _extrapolate({s: p.A for s, p in pts.items()})
+    Bsys = _extrapolate({s: p.B for s, p in pts.items()})
+    drift = _extrapolate({s: p.drift for s, p in pts.items()})
+    C = _extrapolate({s: p.C for s, p in pts.items()})
     n = model.n
     Kq = C[n:, :nz]
     steps = ", ".join(f"±{lev * eps:.2g}" for lev in BRANCH_LEVELS)
@@ -607,6 +671,57 @@ def _branch_linearization(
         lin, A=Asys, B=Bsys, C=C, D=np.zeros((2 * n, Bsys.shape[1])), Zq=Zb, Zv=Zvb, Kq=Kq,
         drift=drift, generic_rank=generic, singular=True, note=note, branch=d,
     )  # fmt: skip
+
+
+def _extrapolate(values: dict[int, FloatArray]) -> FloatArray:
+    """The limit at step 0 of values at ±lev·step (symmetric averages, Lagrange in step²)."""
+    weights = _richardson_weights(BRANCH_LEVELS)
+    return sum(  # type: ignore[return-value]
+        w * 0.5 * (values[lev] + values[-lev])
+        for lev, w in zip(BRANCH_LEVELS, weights, strict=True)
+    )
+
+
+def _branch_bases(
+    model: Model,
+    q0: FloatArray,
+    qd0: FloatArray,
+    d: FloatArray,
+    t: float,
+    act: frozenset[str],
+    pos: NDArray[np.bool_],
+    tol: float,
+) -> tuple[float, dict[int, tuple[FloatArray, FloatArray]], FloatArray, FloatArray]:
+    """The branch's states at ±lev·ε along d and the bases of the limit of N(A_h), N(A)."""
+    eps = BRANCH_STEP * (1.0 + float(np.linalg.norm(q0)))
+    levels = [sgn * lev for lev in BRANCH_LEVELS for sgn in (1, -1)]
+    states: dict[int, tuple[FloatArray, FloatArray]] = {}
+    proj_q: dict[int, FloatArray] = {}
+    proj_v: dict[int, FloatArray] = {}
+    for s in levels:
+        qs = _project(model, q0 + s * eps * d, t, act, pos)
+        A_all = np.asarray(model.constraint_terms(t, qs, np.zeros_like(qs), act).A, dtype=float)
+        Zs, _ = _null_basis(A_all, tol)
+        Zh, _ = _null_basis(A_all[pos], tol) if np.any(pos) else (np.eye(model.n), 0)
+        states[s] = (qs, Zs @ (Zs.T @ qd0))  # the operating velocity made admissible there
+        proj_q[s], proj_v[s] = Zh @ Zh.T, Zs @ Zs.T
+    dims = {(round(float(np.trace(proj_q[s]))), round(float(np.trace(proj_v[s])))) for s in levels}
+    if len(dims) != 1:
+        raise ModelError(
+            f"linearize(branch=...): the tangent dimensions differ along the branch {sorted(dims)}; "
+            "try a smaller rtol"
+        )
+    nz, nv = dims.pop()
+
+    def top(P: FloatArray, k: int) -> FloatArray:
+        V = np.linalg.eigh(0.5 * (P + P.T))[1]
+        Zt = np.ascontiguousarray(V[:, ::-1][:, :k])
+        if k == 1 and float(Zt[:, 0] @ d) < 0:
+            Zt = -Zt
+        return Zt
+
+    # one chart for every point: the bases of the limit of N(A) along the branch
+    return eps, states, top(_extrapolate(proj_q), nz), top(_extrapolate(proj_v), nv)
 
 
 # --------------------------------------------------------------------------- equilibria
@@ -770,7 +885,7 @@ def modes(
     t: float = 0.0,
     active: Iterable[str] | None = None,
     rtol: float | None = None,
-    branch: ArrayLike | None = None,
+    branch: ArrayLike | int | None = None,
 ) -> Modes:
     """Eigenfrequencies, damping ratios and mode shapes about the rest state ``(q_eq, 0)``.
 
