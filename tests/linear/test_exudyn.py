@@ -94,6 +94,8 @@ def test_iftomm_fourbar_equilibrium_and_mode_match_the_exact_reduction():
 # ------------------------------------------------------------------ Exudyn
 def _exudyn(q, gravity, free_length, damping):
     exu = pytest.importorskip("exudyn")
+    import inspect
+
     from exudyn.itemInterface import (
         LoadForceVector,
         MarkerBodyPosition,
@@ -104,13 +106,20 @@ def _exudyn(q, gravity, free_length, damping):
         SpringDamper,
     )  # fmt: skip
 
+    # Exudyn ≥ 1.12.258 names them mass/inertia (physicsMass/physicsInertia deprecated)
+    new_names = "mass" in inspect.signature(ObjectRigidBody2D.__init__).parameters
+    body_kw = (
+        {"mass": 1.0, "inertia": I_BAR}
+        if new_names
+        else {"physicsMass": 1.0, "physicsInertia": I_BAR}
+    )
     SC = exu.SystemContainer()
     mbs = SC.AddSystem()
     ground = mbs.AddObject(ObjectGround())
     bodies = []
     for i in range(3):
         n = mbs.AddNode(NodeRigidBody2D(referenceCoordinates=list(q[3 * i : 3 * i + 3])))
-        o = mbs.AddObject(ObjectRigidBody2D(nodeNumber=n, physicsMass=1.0, physicsInertia=I_BAR))
+        o = mbs.AddObject(ObjectRigidBody2D(nodeNumber=n, **body_kw))
         bodies.append(o)
         if gravity:
             mc = mbs.AddMarker(MarkerBodyPosition(bodyNumber=o, localPosition=[0.0, 0.0, 0.0]))
@@ -162,9 +171,14 @@ def test_iftomm_fourbar_matches_exudyn_ComputeODE2Eigenvalues():
     sims = exu.SimulationSettings()
     sims.staticSolver.newton.relativeTolerance = 1e-14
     sims.staticSolver.newton.absoluteTolerance = 1e-14
-    sims.linearSolverType = exu.LinearSolverType.EXUdense
-    sims.solutionSettings.writeSolutionToFile = False  # no solution/ folder in the cwd
-    sims.solutionSettings.writeInitialValues = False
+    if hasattr(sims, "solution"):  # Exudyn ≥ 1.13 names
+        sims.linearSolver.solverType = exu.LinearSolverType.EXUdense
+        sims.solution.file.write = False  # no solution/ folder in the cwd
+        sims.solution.file.writeInitialValues = False
+    else:
+        sims.linearSolverType = exu.LinearSolverType.EXUdense
+        sims.solutionSettings.writeSolutionToFile = False
+        sims.solutionSettings.writeInitialValues = False
     mbs.SolveStatic(sims)
     # at nonmin's equilibrium Exudyn's static solve stays put (ODE2 coordinates are displacements)
     assert np.abs(np.asarray(mbs.systemData.GetODE2Coordinates())).max() <= 1e-10

@@ -472,8 +472,10 @@ def branch_tangent(
     lands on the branch nearest to it) and d is replaced by the direction of the chord
     ``q(+ε) − q(−ε)`` through the assembled points, until it no longer changes: a fixed point is
     a direction along which the manifold passes through q to second order, the tangent of a
-    branch (accurate to O(ε²), ε = :data:`BRANCH_STEP`·(1 + ‖q‖)). On a branch of dimension
-    > 1 the result is one tangent vector of it.
+    branch (to O(ε²), ε = 0.1·:data:`BRANCH_STEP`·(1 + ‖q‖)); it is then projected on the
+    branch's limit tangent space, extrapolated from N(A_h) at the branch's configurations
+    ±k·:data:`BRANCH_STEP`·(1 + ‖q‖), k = 1…4 (``A_h t`` ~1e-12 on A02). On a branch of
+    dimension > 1 the result is one tangent vector of it.
 
     Parameters
     ----------
