@@ -293,8 +293,8 @@ def linearize(
             f"singular configuration: rank A = {r} here and {generic} at configurations "
             f"{SINGULAR_PROBE:g} away along the tangent space; the tangent space used is N(A(q)) of "
             f"dimension {nz}, the span of the tangents of every branch through q (the linearization "
-            f"of the kernel's rank-{r} solution there); pass branch= (a velocity direction) to "
-            "linearize on one branch"
+            f"of the kernel's rank-{r} solution there); pass branch= (a velocity direction, or a "
+            "label: an index in nonmin.linear.branches(model, q)) to linearize on one branch"
         )
         return replace(lin, generic_rank=generic, singular=True, note=note)
     return _branch_linearization(model, lin, dv, fv, inputs, tol, generic)
