@@ -162,3 +162,25 @@ def test_linearize_rejects_bad_inputs():
     with pytest.raises(nonmin.errors.ModelError, match="no static equilibrium"):
         nonmin.equilibrium(model, [0.5, 0.5], max_iter=1)
     assert not nonmin.equilibrium(model, [0.5, 0.5], max_iter=1, throw=False).converged
+
+
+def test_mode_motion_stays_on_the_manifold_and_animates(tmp_path):
+    """A01: mode 0's motion is the small swing x ≈ 0.1 cos ωt on the unit circle, with
+    admissible velocities, and goes through viz.animate."""
+    model = library.a01_pendulum().model
+    m = nonmin.modes(model, [0.0, -1.0])
+    mo = m.motion(0, amplitude=0.1, periods=2.0, samples=41)
+    assert mo.q.shape == (41, 2) and mo.qd.shape == (41, 2)
+    assert abs(mo.t[-1] - 2 * 2 * math.pi / OMEGA_A01) <= 1e-12
+    assert np.abs(np.linalg.norm(mo.q, axis=1) - 1.0).max() <= 1e-12  # on the rod's circle
+    x = mo.q[:, 0] * np.sign(m.shapes[0, 0].real)
+    # the linear motion assembled onto the circle (minimal-norm): x = 0.1 cos ωt / √(1 + x²)
+    assert np.abs(x - 0.1 * np.cos(OMEGA_A01 * mo.t)).max() <= 6e-4
+    assert np.abs((mo.q * mo.qd).sum(axis=1)).max() <= 1e-12  # admissible velocities
+    pytest.importorskip("matplotlib")
+    from nonmin.viz import animate
+
+    out = animate(mo, model, tmp_path / "mode.gif", max_frames=10, progress=False)
+    assert out.exists() and out.stat().st_size > 0
+    with pytest.raises(nonmin.errors.InputError, match="mode index"):
+        m.motion(3)

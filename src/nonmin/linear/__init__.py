@@ -22,6 +22,7 @@ from ._derivatives import term_tangents as term_tangents
 from ._linearize import BRANCH_STEP as BRANCH_STEP
 from ._linearize import Equilibrium as Equilibrium
 from ._linearize import LinearSystem as LinearSystem
+from ._linearize import ModeMotion as ModeMotion
 from ._linearize import Modes as Modes
 from ._linearize import branch_tangent as branch_tangent
 from ._linearize import branches as branches
@@ -38,6 +39,7 @@ __all__ = [
     "Equilibrium",
     "LQRDesign",
     "LinearSystem",
+    "ModeMotion",
     "Modes",
     "branch_tangent",
     "branches",

@@ -45,6 +45,7 @@ __all__ = [
     "BRANCH_STEP",
     "Equilibrium",
     "LinearSystem",
+    "ModeMotion",
     "Modes",
     "branch_tangent",
     "branches",
@@ -844,6 +845,15 @@ def equilibrium(
 
 # --------------------------------------------------------------------------- modes
 @dataclass(frozen=True)
+class ModeMotion:
+    """Samples of one mode's motion (:meth:`Modes.motion`): ``t`` (T,), ``q``, ``qd`` (T, n)."""
+
+    t: FloatArray
+    q: FloatArray
+    qd: FloatArray
+
+
+@dataclass(frozen=True)
 class Modes:
     """Small-oscillation modes about an equilibrium (:func:`modes`).
 
@@ -862,6 +872,10 @@ class Modes:
         largest entry of 1 (real for undamped modes).
     system : LinearSystem
         The linearization they come from.
+    mode_eigenvalues : ndarray of complex, shape (p,)
+        The eigenvalue of each mode (the one with Im λ ≥ 0 of a pair).
+    model : Model
+        The model (for :meth:`motion`).
     """
 
     eigenvalues: NDArray[np.complex128]
@@ -870,6 +884,64 @@ class Modes:
     damping_ratios: FloatArray
     shapes: NDArray[np.complex128]
     system: LinearSystem
+    mode_eigenvalues: NDArray[np.complex128] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.complex128)
+    )
+    model: Any = field(default=None, repr=False, compare=False)
+
+    def motion(
+        self, i: int = 0, amplitude: float = 0.1, periods: float = 2.0, samples: int = 80
+    ) -> ModeMotion:
+        """The motion of mode i, ready to animate (``nonmin.viz.animate(m.motion(0), model,
+        "mode.gif")``): ``q(t) = q_eq + amplitude · Re(shape e^{λt})`` assembled onto the
+        manifold of the active position-level constraints at every sample, ``q̇`` the
+        linear velocity made admissible there.
+
+        Parameters
+        ----------
+        i : int
+            Mode index (as in :attr:`frequencies`).
+        amplitude : float
+            Largest excursion of a dependent coordinate (shapes are scaled to a largest
+            entry of 1).
+        periods : float
+            Duration in periods ``2π/|Im λ|`` (or in time constants ``1/|λ|`` for a real λ).
+        samples : int
+            Number of samples.
+
+        Returns
+        -------
+        ModeMotion
+            ``t`` (T,), ``q`` and ``qd`` (T, n).
+        """
+        if self.model is None or self.mode_eigenvalues.size != self.frequencies.size:
+            raise InputError("Modes.motion needs the Modes returned by nonmin.modes")
+        if not (isinstance(i, int | np.integer) and 0 <= int(i) < self.frequencies.size):
+            raise InputError(f"i must be a mode index in range({self.frequencies.size}), got {i!r}")
+        if not (np.isfinite(amplitude) and np.isfinite(periods) and periods > 0 and samples >= 2):
+            raise InputError(
+                f"amplitude must be finite, periods > 0 and samples ≥ 2, got {amplitude!r}, "
+                f"{periods!r}, {samples!r}"
+            )
+        lam = complex(self.mode_eigenvalues[int(i)])
+        shape = self.shapes[:, int(i)]
+        scale = abs(lam.imag) if abs(lam.imag) > 0 else abs(lam)
+        span = periods * (2.0 * np.pi if abs(lam.imag) > 0 else 1.0) / max(scale, 1e-300)
+        t = np.linspace(0.0, span, int(samples))
+        lin = self.system
+        model = self.model
+        pos = _position_rows(model, lin.active)
+        qs, qds = [], []
+        for tk in t:
+            e = np.exp(lam * tk)
+            q = _project(model, lin.q + amplitude * np.real(shape * e), lin.t, lin.active, pos)
+            A = np.asarray(
+                model.constraint_terms(lin.t, q, np.zeros_like(q), lin.active).A, dtype=float
+            )
+            Z, _ = _null_basis(A, DEFAULT_RTOL)
+            qs.append(q)
+            qds.append(Z @ (Z.T @ (amplitude * np.real(lam * shape * e))))
+        return ModeMotion(t=t, q=np.array(qs), qd=np.array(qds))
 
     @property
     def stable(self) -> bool:
@@ -958,4 +1030,6 @@ def modes(
         damping_ratios=np.array(zeta, dtype=float),
         shapes=shp.astype(np.complex128),
         system=lin,
+        mode_eigenvalues=np.array([lam[i] for i in order], dtype=np.complex128),
+        model=model,
     )
