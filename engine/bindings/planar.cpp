@@ -90,15 +90,17 @@ void bind_planar(nb::module_& m) {
             nb::arg("constraint"), nb::arg("offset"), nb::arg("a"), nb::arg("b"))
         .def(
             "add_line",
-            [](PlanarDescription& d, int c, int off, PointT a, double ux, double uy, PointT b) {
+            [](PlanarDescription& d, int c, int off, PointT a, double ux, double uy, PointT b, double roll) {
                 PlanarPrim p = prim(PlanarPrimKind::line, c, off);
                 p.a = point(a);
                 p.b = point(b);
                 p.ux = ux;
                 p.uy = uy;
+                p.roll = roll;
                 d.prims.push_back(p);
             },
-            nb::arg("constraint"), nb::arg("offset"), nb::arg("a"), nb::arg("ux"), nb::arg("uy"), nb::arg("b"))
+            nb::arg("constraint"), nb::arg("offset"), nb::arg("a"), nb::arg("ux"), nb::arg("uy"), nb::arg("b"),
+            nb::arg("roll") = 0.0)
         .def(
             "add_rod",
             [](PlanarDescription& d, int c, int off, PointT a, PointT b, double length, double sign) {

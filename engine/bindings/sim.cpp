@@ -433,6 +433,45 @@ void bind_sim(nb::module_& m) {
             },
             nb::arg("restitution"), nb::arg("v_thresh"),
             "Newton's e of automatic impacts per constraint and the impact velocity threshold.")
+        .def(
+            "set_friction",
+            [](SimLoop& s, const std::vector<std::tuple<int, int, double, int>>& contacts) {
+                std::vector<sim::FrictionContact> fc;
+                const int c = static_cast<int>(s.program->constraints().size());
+                for (const auto& [normal, tangent, mu, slip] : contacts) {
+                    if (normal < 0 || normal >= c || tangent < 0 || tangent >= c)
+                        raise_typed("InputError", "friction contact: constraint index out of range");
+                    if (!(mu >= 0.0) || slip < -1 || slip > 1)
+                        raise_typed("InputError", "friction contact: mu must be >= 0 and slip in {-1, 0, 1}");
+                    fc.push_back({normal, tangent, mu, slip});
+                }
+                sim::set_friction(*s.loop, fc);
+            },
+            nb::arg("contacts"),
+            "Coulomb friction contacts (normal index, tangent index, mu, slip direction); before start/resume.")
+        .def(
+            "arm_friction",
+            [](SimLoop& s) {
+                if (sim::friction_arm(*s.loop) != Status::ok) return false;
+                return true;
+            },
+            "Append the friction guards at the current state (after start/resume); False when its "
+            "evaluation failed (message, painleve say why).")
+        .def_prop_ro(
+            "friction_slip",
+            [](const SimLoop& s) {
+                std::vector<int> v;
+                for (const sim::FrictionContact& f : s.loop->fric) v.push_back(f.slip);
+                return v;
+            },
+            "The slip direction of each friction contact (0: sticking or open).")
+        .def_prop_ro(
+            "painleve",
+            [](const SimLoop& s) -> nb::object {
+                if (s.loop->painleve < 0) return nb::none();
+                return nb::make_tuple(s.loop->painleve, s.loop->painleve_t, s.loop->painleve_den);
+            },
+            "(friction contact index, t, denominator) of Painlevé's inconsistency when it was met, else None.")
         .def_prop_ro(
             "events",
             [](const SimLoop& s) {

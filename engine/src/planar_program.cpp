@@ -458,6 +458,18 @@ Status PlanarProgram::eval(double t, const S* q, const S* qd, const std::uint8_t
                             add_DT(Ar, a, b, nx, ny);
                             add(Ar, a.ith, dnp);
                         }
+                        if (p.roll != 0.0) {  // + ρ (θ_b − θ_a): constant coefficients, γ unchanged
+                            if (b.ith >= 0) {
+                                phi[row] += p.roll * q[b.ith];
+                                vel[row] += p.roll * qd[b.ith];
+                                if (wantA) Ar[b.ith] += p.roll;
+                            }
+                            if (a.ith >= 0) {
+                                phi[row] -= p.roll * q[a.ith];
+                                vel[row] -= p.roll * qd[a.ith];
+                                if (wantA) Ar[a.ith] -= p.roll;
+                            }
+                        }
                         break;
                     }
                     case PlanarPrimKind::rod: {

@@ -194,6 +194,8 @@ void set_active(Loop& L, const std::uint8_t* active) {
     L.m = static_cast<int>(L.rows.size());
     L.m_hol = static_cast<int>(std::count(L.hol.begin(), L.hol.end(), 1));
     if (L.ctrl) L.ctrl->attach(L.T, L.Ac, L.m, L.rows);
+    L.vheld = false;  // a held velocity-correction factorization is the old rows'
+    friction_mask(L);
 }
 
 // ------------------------------------------------------------------------------ guards
@@ -245,9 +247,8 @@ void set_contact_options(Loop& L, const std::vector<double>& restitution, double
     for (std::size_t i = 0; i < restitution.size() && i < L.evs->restitution.size(); ++i)
         L.evs->restitution[i] = restitution[i];
     L.evs->v_thresh = v_thresh;
+    L.fr_vthresh = v_thresh;
 }
-
-namespace {
 
 // λ = ((DA)⁺ D)ᵀ f_c over the active rows (nonmin.core.linalg.range_basis(A, rtol).pinv().T @ f_c),
 // A = L.Ac at the point just evaluated; into L.lam_c (m).
@@ -309,6 +310,8 @@ void release_forces(Loop& L, const double* f_c) {
     }
 }
 
+namespace {
+
 // The gaps φ of the constraints flagged in `mask` at q (one evaluation; each constraint's rows
 // are its own), read from L.T.phi at their first rows.
 Status gaps(Loop& L, double t, const double* q, const double* qd, const std::uint8_t* mask) {
@@ -324,7 +327,7 @@ Status contact_guards(Loop& L, double t, const double* q, const double* qd, cons
     const auto& cons = L.prog->constraints();
     bool any_gap = false;
     for (const ContactGuard& G : L.guards)
-        if (!G.release) {
+        if (!G.release && G.fric < 0) {
             L.one_mask[static_cast<std::size_t>(G.constraint)] = 1;
             any_gap = true;
         }
@@ -337,7 +340,9 @@ Status contact_guards(Loop& L, double t, const double* q, const double* qd, cons
     for (std::size_t i = 0; i < L.guards.size(); ++i) {
         const ContactGuard& G = L.guards[i];
         double g1;
-        if (G.release) {
+        if (G.fric >= 0) {  // friction guards: below, once the gaps are read
+            continue;
+        } else if (G.release) {
             if (!lam_done) {
                 release_forces(L, f_c);
                 lam_done = true;
@@ -350,6 +355,19 @@ Status contact_guards(Loop& L, double t, const double* q, const double* qd, cons
         L.guard_new[i] = g1;
         const double g0 = G.g;
         if ((g0 > 0.0 && g1 <= 0.0) || (!G.release && g0 <= 0.0 && g1 < 0.0)) fired = true;
+    }
+    for (std::size_t i = 0; i < L.guards.size(); ++i) {  // friction (sim_friction.cpp)
+        const ContactGuard& G = L.guards[i];
+        if (G.fric < 0) continue;
+        if (!lam_done) {
+            release_forces(L, f_c);
+            lam_done = true;
+        }
+        double g1 = 0.0;
+        const Status s = friction_guard_value(L, G, t, q, qd, g1);
+        if (s != Status::ok) return s;
+        L.guard_new[i] = g1;
+        if ((G.g > 0.0 && g1 <= 0.0) || (G.g <= 0.0 && g1 < 0.0)) fired = true;
     }
     return Status::ok;
 }
@@ -370,9 +388,10 @@ Status at_point(Loop& L, const FiredStep& st, double s, Point& p, bool diagnosti
 Status guard_at(Loop& L, const FiredStep& st, const ContactGuard& G, double s, double& g) {
     EventScratch& E = *L.evs;
     Status r;
-    if (G.release) {
+    if (G.release || G.fric >= 0) {
         if ((r = at_point(L, st, s, E.pa, false)) != Status::ok) return r;
         release_forces(L, E.pa.f_c.data());
+        if (G.fric >= 0) return friction_guard_value(L, G, st.t_start + s, E.pa.q.data(), E.pa.qd.data(), g);
         g = L.lam_c[G.row];
         return Status::ok;
     }
@@ -727,8 +746,12 @@ Status apply_and_record(Loop& L, const FiredStep& st, double best_s, const std::
     }
     std::vector<int> impacts;
     std::vector<std::uint8_t> plastic;
+    const std::vector<std::uint8_t> act_start = L.active;
+    std::vector<int> fired_fric;  // friction contacts whose guard fired (sim_friction.cpp)
     for (int gi : group)
-        if (!L.guards[static_cast<std::size_t>(gi)].release) {
+        if (L.guards[static_cast<std::size_t>(gi)].fric >= 0) fired_fric.push_back(L.guards[static_cast<std::size_t>(gi)].fric);
+    for (int gi : group)
+        if (!L.guards[static_cast<std::size_t>(gi)].release && L.guards[static_cast<std::size_t>(gi)].fric < 0) {
             impacts.push_back(L.guards[static_cast<std::size_t>(gi)].constraint);
             plastic.push_back(L.guards[static_cast<std::size_t>(gi)].g <= 0.0);
         }
@@ -752,6 +775,7 @@ Status apply_and_record(Loop& L, const FiredStep& st, double best_s, const std::
         p = &E.pa;
     } else {
         for (int gi : group) {
+            if (L.guards[static_cast<std::size_t>(gi)].fric >= 0) continue;
             const int ic = L.guards[static_cast<std::size_t>(gi)].constraint;
             bool released = false;
             if ((r = release(L, te, E.y, ic, released)) != Status::ok) return r;
@@ -768,6 +792,27 @@ Status apply_and_record(Loop& L, const FiredStep& st, double best_s, const std::
             ev.name = (released ? "release:" : "release-refused:") + nm;
             ev.text = "release " + nm;
             L.events.push_back(std::move(ev));
+            if ((r = point(L, te, E.y.data(), E.y.data() + n, E.pa, true)) != Status::ok) return r;
+            p = &E.pa;
+        }
+    }
+    if (!L.fric.empty()) {  // Coulomb friction: the modes after the event (sim_friction.cpp)
+        std::vector<int> changed;
+        const std::vector<std::uint8_t> before = L.active;
+        if ((r = friction_transition(L, te, E.y, fired_fric, act_start, changed)) != Status::ok) return r;
+        if (!changed.empty()) {
+            if (L.any_active && (r = stabilize(L, te, E.y.data())) != Status::ok) return r;
+            for (int j : changed) {
+                const FrictionContact& f = L.fric[static_cast<std::size_t>(j)];
+                const std::string& nm = L.prog->constraints()[static_cast<std::size_t>(f.normal)].name;
+                EventInfo ev;
+                set_event(ev, L, te, *p, E.y, before);
+                const bool stick = L.active[static_cast<std::size_t>(f.tangent)] != 0;
+                ev.name = (stick ? "stick:" : (f.slip != 0 ? "slip:" : "open:")) + nm;
+                ev.text = stick ? nm + " sticks"
+                                : (f.slip != 0 ? nm + " slips (s = " + std::to_string(f.slip) + ")" : nm + " opens");
+                L.events.push_back(std::move(ev));
+            }
             if ((r = point(L, te, E.y.data(), E.y.data() + n, E.pa, true)) != Status::ok) return r;
             p = &E.pa;
         }
@@ -805,6 +850,9 @@ Status apply_and_record(Loop& L, const FiredStep& st, double best_s, const std::
         for (std::size_t i = 0; i < keep.size(); ++i)
             if (!keep[i].release) L.guards[i].g = L.T.phi[cons[static_cast<std::size_t>(keep[i].constraint)].row];
     }
+    if (!L.fric.empty()) {  // (L.lam_c: the release forces at the point after the event)
+        if ((r = friction_append_guards(L, te, E.y)) != Status::ok) return r;
+    }
     record_sample(L, pa, te);
     // leave the loop at the event
     while (out_i < L.t_out.size() && L.t_out[out_i] <= te) ++out_i;
@@ -825,6 +873,7 @@ Status contact_event(Loop& L, const FiredStep& st) {
     const std::size_t rec_mark = L.rec.size();
     const std::vector<std::uint8_t> active0 = L.active;
     const std::vector<ContactGuard> guards0 = L.guards;
+    const std::vector<FrictionContact> fric0 = L.fric;
     E.roots.clear();
     Status r = Status::ok;
     for (std::size_t i = 0; i < L.guards.size() && r == Status::ok; ++i) {
@@ -857,6 +906,7 @@ Status contact_event(Loop& L, const FiredStep& st) {
     }
     if (r != Status::ok) {  // nothing happened: the Python driver takes the step
         truncate(L.rec, rec_mark);
+        L.fric = fric0;
         set_active(L, active0.data());
         set_guards(L, guards0);
         L.events.clear();

@@ -138,7 +138,8 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
 // ------------------------------------------------------------------------------ evaluation
 
 Status evaluate(Loop& L, double t, const double* q, const double* qd, unsigned need) {
-    const Status s = L.prog->evaluate(t, q, qd, L.active.data(), need, L.T, *L.ws);
+    const std::uint8_t* mask = L.fric.empty() ? L.active.data() : L.eval_mask.data();  // + slipping rows
+    const Status s = L.prog->evaluate(t, q, qd, mask, need, L.T, *L.ws);
     if (s != Status::ok) return s;
     const int n = L.n;
     int ih = 0;
@@ -229,8 +230,10 @@ Status rhs(Loop& L, double t, const double* y, double* out) {
     s = forces_and_bias(L, t, q, qd);
     if (s != Status::ok) return s;
     const double rtol = drift_rank_rtol(L);
-    const SolveInfo info = dynamics_solve(L, t, q, rtol, L.qdd.data(), nullptr);
+    const bool fr = !L.fric.empty();
+    const SolveInfo info = dynamics_solve(L, t, q, rtol, L.qdd.data(), fr ? L.fc.data() : nullptr);
     if (info.status != Status::ok) return info.status;
+    if (fr && (s = friction_forces(L, t, L.qdd.data(), L.fc.data())) != Status::ok) return s;
     if (!finite(L.qdd.data(), n)) return Status::not_finite;
     for (int i = 0; i < n; ++i) {
         out[i] = qd[i];
@@ -250,6 +253,7 @@ Status point(Loop& L, double t, const double* q, const double* qd, Point& p, boo
     const double rtol = drift_rank_rtol(L);
     const SolveInfo info = dynamics_solve(L, t, q, rtol, p.qdd.data(), p.f_c.data());
     if (info.status != Status::ok) return info.status;
+    if (!L.fric.empty() && (s = friction_forces(L, t, p.qdd.data(), p.f_c.data())) != Status::ok) return s;
     if (!finite(p.qdd.data(), n)) return Status::not_finite;
     p.t = t;
     for (int i = 0; i < n; ++i) {

@@ -33,7 +33,7 @@ from .errors import InputError, MissingDependencyError, NonminError, OutputError
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_MISSING_DEP, EXIT_INTERNAL = 0, 1, 2, 3, 4
 EXIT_INTERRUPTED = 130
 
-DEMO_SCENARIOS = ("n_four_bar", "crossed_four_bar", "arm_wall")
+DEMO_SCENARIOS = ("n_four_bar", "crossed_four_bar", "arm_wall", "foot_friction")
 
 
 def _scenario_dir() -> Path:

@@ -42,6 +42,7 @@ __all__ = [
     "NotPositiveDefiniteError",
     "NotSymmetricError",
     "OutputError",
+    "PainleveError",
     "ScenarioError",
     "ShapeError",
     "SimulationError",
@@ -107,6 +108,21 @@ class SimulationError(NonminError, RuntimeError):
 
 class ZenoError(SimulationError):
     """An accumulation of impacts (Zeno behaviour) that the simulator refuses to follow."""
+
+
+class PainleveError(SimulationError):
+    """Sliding Coulomb friction is inconsistent at a contact (Painlevé's paradox): the normal
+    force sliding needs solves ``(1 + μ s ∂N/∂F) N = N0`` with a non-positive factor (a non-P
+    matrix with several slipping contacts). ``contact``, ``t`` and ``factor`` say where, when
+    and how much."""
+
+    def __init__(
+        self, message: str, *, contact: str = "", t: float = float("nan"), factor: float = float("nan")
+    ) -> None:
+        super().__init__(message)
+        self.contact = contact
+        self.t = t
+        self.factor = factor
 
 
 class ScenarioError(NonminError, ValueError):

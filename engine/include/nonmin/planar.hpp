@@ -10,6 +10,8 @@
 //
 //   pin    2 rows  φ = p_a − p_b                          (revolute; first two rows of a weld)
 //   line   1 row   φ = n·(p_b − p_a), n = R_a u^⊥          (point-on-line; prismatic's 2nd row)
+//                  + ρ (θ_b − θ_a) when roll ρ ≠ 0 (the tangential row of a frictional contact
+//                  of radius ρ: its velocity is the slip velocity; Ȧ gains nothing)
 //   rod    1 row   φ = σ (dᵀd − L²)/(2L), d = p_b − p_a     (σ = −1: rope, gap = −φ)
 //   angle  1 row   φ = Σ c_j θ_j − c0 − f(t)               (weld, prismatic, gear, angle driver)
 //   coord  1 row   φ = Σ c_j q_j − c0 − f(t)               (coordinate driver: any coordinate)
@@ -54,6 +56,7 @@ struct PlanarPrim {
     int offset = 0;      // first row within the constraint
     PlanarPoint a, b;
     double ux = 0.0, uy = 0.0;          // line: unit axis on body a
+    double roll = 0.0;                  // line: + roll (θ_b − θ_a) (a rolling contact's tangent row)
     double length = 1.0, sign = 1.0;    // rod
     std::vector<int> angle_bodies;      // angle: bodies (−1 ground) with their coefficients
     std::vector<double> angle_coefs;    // angle and coord: coefficients

@@ -24,6 +24,8 @@ from .dynamics import forward_dynamics as forward_dynamics
 from .dynamics import optimal_virtual_mass as optimal_virtual_mass
 from .dynamics import position_correction as position_correction
 from .dynamics import solve_dynamics as solve_dynamics
+from .friction import SlipDynamics as SlipDynamics
+from .friction import slip_dynamics as slip_dynamics
 from .impact import PolyhedralProjection as PolyhedralProjection
 from .impact import SimultaneousImpact as SimultaneousImpact
 from .impact import impact_map as impact_map
@@ -47,6 +49,7 @@ __all__ = [
     "PolyhedralProjection",
     "RangeBasis",
     "SimultaneousImpact",
+    "SlipDynamics",
     "actuation_projectors",
     "baumgarte_bias",
     "constraint_force",
@@ -66,6 +69,7 @@ __all__ = [
     "range_basis",
     "set_backend",
     "simultaneous_impact",
+    "slip_dynamics",
     "solve_dynamics",
     "use_backend",
 ]

@@ -16,6 +16,7 @@ from importlib.util import find_spec as _find_spec
 
 from ._andrews import AndrewsModel as AndrewsModel
 from ._andrews import a03_andrews as a03_andrews
+from ._friction import foot_friction as foot_friction
 from ._iftomm import a01_pendulum as a01_pendulum
 from ._iftomm import a02_n_four_bar as a02_n_four_bar
 from ._iftomm import n_four_bar_reference as n_four_bar_reference
@@ -41,6 +42,7 @@ __all__ = [
     "crossed_four_bar_reference",
     "dual_arm_grasp",
     "five_bar",
+    "foot_friction",
     "get",
     "n_four_bar_reference",
     "names",

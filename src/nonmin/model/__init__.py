@@ -14,6 +14,7 @@ from ._function import FunctionModel as FunctionModel
 from ._protocol import CONSTRAINT_KINDS as CONSTRAINT_KINDS
 from ._protocol import ConstraintSpec as ConstraintSpec
 from ._protocol import ConstraintTerms as ConstraintTerms
+from ._protocol import FrictionContact as FrictionContact
 from ._protocol import Geometry as Geometry
 from ._protocol import Model as Model
 from ._protocol import ModelTerms as ModelTerms
@@ -35,6 +36,7 @@ __all__ = [
     "ConstraintSpec",
     "ConstraintTerms",
     "Expression",
+    "FrictionContact",
     "FunctionConstraint",
     "FunctionModel",
     "Geometry",

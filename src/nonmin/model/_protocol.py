@@ -47,11 +47,37 @@ __all__ = [
     "ConstraintKind",
     "ConstraintSpec",
     "ConstraintTerms",
+    "FrictionContact",
     "Geometry",
     "Model",
     "ModelTerms",
     "State",
 ]
+
+
+@dataclass(frozen=True)
+class FrictionContact:
+    """A point contact with Coulomb friction: its unilateral normal constraint, its tangential
+    (sticking) constraint and the friction coefficient.
+
+    The tangential constraint is a one-row nonholonomic constraint whose velocity ``A_t q̇`` is
+    the slip velocity; it is active while the contact sticks. While the contact slips, the
+    simulator applies the force ``−μ s N`` along that row (``s`` the slip direction, ``N`` the
+    normal force from the projection; ``docs/theory.md`` "Coulomb friction").
+
+    Attributes
+    ----------
+    normal : str
+        The unilateral constraint (gap ≥ 0).
+    tangent : str
+        The tangential (sticking) constraint.
+    mu : float
+        Coulomb's coefficient μ_f ≥ 0 (static = kinetic).
+    """
+
+    normal: str
+    tangent: str
+    mu: float
 
 
 @dataclass(frozen=True)
@@ -261,6 +287,11 @@ class Model(ABC):
         raise UnknownNameError(
             f"model {self.name!r} has no constraint {name!r}; known: {list(self.constraint_names)}"
         )
+
+    @property
+    def friction_contacts(self) -> tuple[FrictionContact, ...]:
+        """The point contacts with Coulomb friction (none by default)."""
+        return ()
 
     def resolve_active(self, active: Iterable[str] | str | None) -> frozenset[str]:
         """Validate an active set; ``None`` means :attr:`default_active`.

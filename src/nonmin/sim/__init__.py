@@ -25,6 +25,8 @@ from ._events import Deactivate as Deactivate
 from ._events import Event as Event
 from ._events import EventRecord as EventRecord
 from ._events import Reset as Reset
+from ._friction import ContactState as ContactState
+from ._friction import friction_state as friction_state
 from ._integrators import METHODS as METHODS
 from ._integrators import RK4 as RK4
 from ._integrators import DormandPrince5 as DormandPrince5
@@ -57,6 +59,7 @@ __all__ = [
     "BatchTrajectory",
     "Baumgarte",
     "CheckItem",
+    "ContactState",
     "Deactivate",
     "DormandPrince5",
     "Event",
@@ -76,6 +79,7 @@ __all__ = [
     "StepperState",
     "Trajectory",
     "check_model",
+    "friction_state",
     "load_trajectory",
     "simulate",
     "simulate_batch",

@@ -292,6 +292,8 @@ class EngineResult(NamedTuple):
     guards: list[float]  # the contact guards' values at the last accepted step end (or event)
     transition: bool = False  # the engine located contact events and applied them (`events`)
     events: tuple[dict[str, Any], ...] = ()  # what the engine's event layer applied
+    slip: tuple[int, ...] = ()  # friction contacts' slip directions at the end (0: stick/open)
+    painleve: tuple[int, float, float] | None = None  # (friction contact, t, factor) when met
 
 
 def run(
@@ -310,6 +312,7 @@ def run(
     compiled: Any = None,
     contact: tuple[list[float], float] | None = None,
     passage_seed: tuple[FloatArray, FloatArray] | None = None,
+    friction: list[tuple[int, int, float, int]] | None = None,
 ) -> EngineResult:
     """Run the engine loop to ``opts.t1``, a handover or a watched event.
 
@@ -328,6 +331,11 @@ def run(
 
     if contact is not None and guards:
         loop.set_contact(contact[0], contact[1])
+    if friction:  # Coulomb friction (engine/src/sim_friction.cpp): (normal, tangent, mu, slip)
+        loop.set_friction(friction)
+
+    def fric_end() -> dict[str, Any]:
+        return {"slip": tuple(loop.friction_slip), "painleve": loop.painleve} if friction else {}
 
     def take() -> None:
         blk = loop.take()
@@ -340,7 +348,7 @@ def run(
         code = loop.start(t0, np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float))
         if code != eng.SIM_DONE:
             y0 = np.concatenate((q, qd))
-            return EngineResult(False, t0, y0, 0.0, 0, 0, 0, 0, True, False, str(loop.message), [])
+            return EngineResult(False, t0, y0, 0.0, 0, 0, 0, 0, True, False, str(loop.message), [], **fric_end())
         if passage_seed is not None and passage_seed[0].size:
             loop.seed_passages(np.ascontiguousarray(passage_seed[0], dtype=float),
                                np.ascontiguousarray(passage_seed[1], dtype=float).ravel())  # fmt: skip
@@ -349,6 +357,10 @@ def run(
         assert resume is not None
         t, y, h, steps, out_i = resume
         loop.resume(t, np.ascontiguousarray(y, dtype=float), float(h), int(steps), int(out_i))
+    if friction and not loop.arm_friction():  # the friction guards at the state reached
+        return EngineResult(True, float(loop.t), np.asarray(loop.y), float(loop.h), int(loop.n_steps), 0, 0,
+                            int(loop.out_i), True, False, str(loop.message), list(loop.guard_values),
+                            **fric_end())  # fmt: skip
     code = eng.SIM_DONE
     chunk = 16
     t1 = float(opts.t1)
@@ -367,4 +379,4 @@ def run(
                         int(loop.n_rhs), int(loop.n_rejected), int(loop.out_i),
                         code == eng.SIM_HANDOVER, code == eng.SIM_EVENT, str(loop.message),
                         list(loop.guard_values), code == eng.SIM_TRANSITION,
-                        tuple(loop.events) if code == eng.SIM_TRANSITION else ())  # fmt: skip
+                        tuple(loop.events) if code == eng.SIM_TRANSITION else (), **fric_end())  # fmt: skip

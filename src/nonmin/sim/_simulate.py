@@ -61,7 +61,7 @@ from ..errors import (
     ZenoError,
 )
 from ..model import ConstraintTerms, Model, State
-from . import _durable, _engine, _fastpath
+from . import _durable, _engine, _fastpath, _friction
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
 from ._integrators import METHODS, Integrator, SingularPassages, StepperState, hermite_quintic
 from ._options import EventSet, Output, Solver, resolve_options
@@ -675,11 +675,16 @@ def simulate(
     system = _System(model, controller, stab, rank_rtol, n, k, act, cstate, unilateral=unilateral)
     contact_opts = ([_restitution_of(restitution, c.name) for c in model.constraints], v_thresh)
     use_engine = False
+    why: str | None = None
+    fcs = model.friction_contacts if contact else ()
+    slip: dict[str, int] = {}  # friction: slip directions of the slipping contacts (by normal name)
     if engine in ("auto", "engine"):
         why = _engine.ineligible(integ, stab, events, unilateral, engine)
         if why is not None and engine == "engine":
             raise InputError(f"engine='engine' cannot run this simulation: {why}")
         use_engine = why is None
+    if fcs:
+        _friction.check_friction_run(model, engine, use_engine, why, events)
     # the numba loop only when asked for (engine="compiled"): "auto" takes the engine
     prog = _fastpath.program_for(engine, model, integ, stab, controller, events, unilateral, act) \
         if engine == "compiled" else None  # fmt: skip
@@ -778,7 +783,17 @@ def simulate(
                 q, qd = stab.project(model, t0, q, qd, act, rank_rtol) if isinstance(stab, Projection) \
                     else Projection().project(model, t0, q, qd, act, rank_rtol)
             t = t0
+            if fcs:  # the contacts' initial modes (stick or slip), projected onto a new sticking row
+                act_f, slip = _friction.initial_modes(model, t, q, qd, system.active, v_thresh=v_thresh,
+                                                      rank_rtol=rank_rtol, bias=stab.bias)  # fmt: skip
+                if act_f != system.active:
+                    system.active = act_f
+                    q, qd = stab.project(model, t0, q, qd, act_f, rank_rtol) if isinstance(stab, Projection) \
+                        else Projection().project(model, t0, q, qd, act_f, rank_rtol)  # fmt: skip
             p = system.point(t, q, qd)
+            if fcs:
+                p = _friction.first_point(model, p, system.active, slip, rank_rtol=rank_rtol, bias=stab.bias,
+                                          B_u=None if controller is None else model.input_matrix(q) @ p.u)  # fmt: skip
             if t_out is None or (t_out.size and t_out[0] == t0):
                 rec.add(p, system.active)
             out_i = 0 if t_out is None else int(np.searchsorted(t_out, t0, side="right"))
@@ -827,7 +842,7 @@ def simulate(
                         sink=rec.extend, progress=bar, controller=ccb, compiled=creg,
                         resume=(t, state.y, state.h if integ.adaptive else h_init, n_steps, out_i),
                         watch=_engine_watch(system, watches, gvals, disarmed, rearm_tol), guards=guards,
-                        contact=contact_opts,
+                        contact=contact_opts, friction=_friction.engine_contacts(model, slip) if fcs else None,
                     )  # fmt: skip
                 finally:
                     if ccb is not None:
@@ -836,6 +851,9 @@ def simulate(
                         system.cstate = _engine.merge_state(controller, system.cstate, creg)
                 for i, g in zip(g_idx, er.guards):
                     gvals[i] = g
+                if fcs:
+                    slip = {f.normal: int(s_) for f, s_ in zip(fcs, er.slip) if s_}
+                    _friction.check_engine_result(model, er, t)
                 n_rejected += er.n_rejected
                 system.n_rhs += er.n_rhs
                 n_steps = er.steps

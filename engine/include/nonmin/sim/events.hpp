@@ -86,4 +86,38 @@ Status stabilize_sample(Loop& L, double t, double* y);  // a sample from a conti
 // The active set of the loop (rows, position-level rows, controller attachment, guard buffers).
 void set_active(Loop& L, const std::uint8_t* active);
 
+// λ = ((DA)⁺ D)ᵀ f_c over the active rows of the point just evaluated, into L.lam_c (m): the
+// multiplier-free split of f_c that the release guards read (sim_events.cpp).
+void release_forces(Loop& L, const double* f_c);
+
+// ------------------------------------------------------------------------------ friction
+// Coulomb friction at point contacts (sim_friction.cpp; docs/theory.md "Coulomb friction").
+// A sticking contact has its tangential row active (a bilateral constraint); a slipping one
+// has it inactive and carries the force F = −μ s N along that row, with N its normal force
+// read from f_c (no multipliers): N = N0 − Σ_j λ_n(S a_tj) μ_j s_j N_j, solved exactly.
+
+// The contacts (slip directions as given), the evaluation mask, the scratch; before start/resume.
+void set_friction(Loop& L, const std::vector<FrictionContact>& contacts);
+// The evaluation mask: the active set plus the tangential rows of the slipping contacts.
+void friction_mask(Loop& L);
+// After the dynamics solve at the evaluation just made (qdd, f_c of the applied forces): add the
+// slipping contacts' friction forces' response. Painlevé's inconsistency (the normal-force
+// relation has no positive solution: a non-P matrix, for one contact 1 + μ s ∂N/∂F ≤ 0) sets
+// L.painleve, L.painleve_t, L.message and returns Status::not_finite.
+Status friction_forces(Loop& L, double t, double* qdd, double* fc);
+// Append the friction guards of the current active set with their values at (L.t, L.y).
+Status friction_arm(Loop& L);
+// The value of friction guard G at (t, q, qd); sticking guards read L.lam_c (release_forces of
+// the point just evaluated there).
+Status friction_guard_value(Loop& L, const ContactGuard& G, double t, const double* q, const double* qd,
+                            double& g);
+// At an event (t, y): the friction modes after it — the contacts whose guard fired (`fired`,
+// indices into L.fric), those whose normal opened or closed (against `act_start`) — decided
+// (slip by the tangential velocity, else stick when the sticking force lies in the cone, else
+// slip opposite to it). `changed`: the contacts whose mode changed or whose guard fired.
+Status friction_transition(Loop& L, double t, Vec& y, const std::vector<int>& fired,
+                           const std::vector<std::uint8_t>& act_start, std::vector<int>& changed);
+// Append the friction guards after an event (L.lam_c: release_forces of the point after it).
+Status friction_append_guards(Loop& L, double t, const Vec& y);
+
 }  // namespace nonmin::sim

@@ -147,6 +147,17 @@ struct ContactGuard {
     int constraint = 0;  // index in Program::constraints()
     int row = 0;         // release: the constraint's first row among the active rows
     double g = 0.0;
+    int fric = -1;       // ≥ 0: a friction guard of Loop::fric[fric] (sim_friction.cpp): sticking,
+                         // μ λ_n − |λ_t|; slipping, s·v_t (both fire on a crossing or below zero)
+};
+
+// A point contact with Coulomb friction (sim_friction.cpp): its unilateral normal constraint,
+// its tangential (sticking) constraint — active while the contact sticks —, the coefficient,
+// and the slip direction while it slips (±1; 0: sticking or open).
+struct FrictionContact {
+    int normal = 0, tangent = 0;
+    double mu = 0.0;
+    int slip = 0;
 };
 
 // Recorded samples (the arrays of nonmin.sim.Trajectory), row-major, appended in order.
@@ -251,6 +262,20 @@ struct Loop {
 
     Samples rec;
     Passages pas;
+
+    // Coulomb friction (sim_friction.cpp): the contacts, the evaluation mask (the active set
+    // plus the tangential rows of slipping contacts), the normal forces of the slipping ones,
+    // scratch, and Painlevé's inconsistency when it was met (contact index, time, denominator)
+    std::vector<FrictionContact> fric;
+    std::vector<std::uint8_t> eval_mask;
+    std::vector<int> fr_J, fr_rown;
+    std::vector<double> fr_N;
+    Vec fr_g, fr_zero, fr_N0, fr_W, fr_tmp;
+    Mat fr_rq, fr_rf;
+    Point fr_p;
+    double fr_vthresh = 1e-6;  // |v_t| at or below which a closing contact may stick
+    int painleve = -1;
+    double painleve_t = 0.0, painleve_den = 0.0;
 
     // the engine's event layer (sim/events.hpp, sim_events.cpp): what the last transition did
     std::vector<EventInfo> events;

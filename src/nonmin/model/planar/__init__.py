@@ -13,6 +13,7 @@ from ._elements import GROUND as GROUND
 from ._elements import AngleDriver as AngleDriver
 from ._elements import Body as Body
 from ._elements import ConstantSpeed as ConstantSpeed
+from ._elements import ContactTangent as ContactTangent
 from ._elements import Gear as Gear
 from ._elements import Joint as Joint
 from ._elements import JointActuator as JointActuator
@@ -33,6 +34,7 @@ __all__ = [
     "AngleDriver",
     "Body",
     "ConstantSpeed",
+    "ContactTangent",
     "Gear",
     "Joint",
     "JointActuator",

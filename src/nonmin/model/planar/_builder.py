@@ -13,6 +13,7 @@ from ._elements import (
     Body,
     CheckedProfile,
     ConstantSpeed,
+    ContactTangent,
     CoordinateDriver,
     DistanceDriver,
     Gear,
@@ -213,6 +214,50 @@ class PlanarBuilder:
             PointOnLine(name, self._ref(a, w), _unit(axis, f"{w}: axis"), self._ref(b, w), bool(unilateral)),
             act,
         )
+
+    def contact(
+        self,
+        name: str,
+        a: PointRef,
+        b: PointRef,
+        *,
+        axis: Iterable[float],
+        friction: float,
+        radius: float = 0.0,
+        active: bool = False,
+    ) -> str:
+        """A point contact with Coulomb friction: b on the left of the line through a along
+        ``axis`` (on a's body), friction coefficient ``friction`` (μ_f ≥ 0).
+
+        Two constraints: the unilateral ``name`` (``gap = n·(p_b − p_a) − radius ≥ 0``, ``n``
+        the axis's left normal) and its tangential row ``"<name>.stick"``
+        (:class:`ContactTangent`, active while the contact sticks). ``radius > 0`` is a disk
+        of that radius centred at b (b's body must be rigid): the contact point is
+        ``p_b − radius n`` and the slip velocity includes ``radius (θ̇_b − θ̇_a)``.
+        ``active=True`` starts with the contact closed; whether it sticks or slips at the
+        start is decided by :func:`~nonmin.simulate` (sticks when the tangential velocity is
+        zero and the sticking force lies in the friction cone).
+
+        Raises
+        ------
+        InputError
+            ``friction`` or ``radius`` negative or not finite (the message names them).
+        """
+        w = f"contact {name!r}"
+        mu = _finite(friction, f"{w}: friction")
+        if mu < 0.0:
+            raise InputError(f"{w}: friction must be >= 0, got {mu!r}")
+        rad = _finite(radius, f"{w}: radius")
+        if rad < 0.0:
+            raise InputError(f"{w}: radius must be >= 0, got {rad!r}")
+        u = _unit(axis, f"{w}: axis")
+        pa = self._ref(a, w)
+        pb = self._ref(b, w)
+        if rad > 0.0:  # the line through the disk's centre height: a + radius·axis^⊥ (a's frame)
+            pa = Point(pa.body, (pa.local[0] - rad * u[1], pa.local[1] + rad * u[0]))
+        self._add_joint(PointOnLine(name, pa, u, pb, True), bool(active))
+        self._add_joint(ContactTangent(f"{name}.stick", pa, u, pb, name, mu, rad), False)
+        return name
 
     def rod(
         self,

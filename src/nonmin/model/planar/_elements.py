@@ -25,6 +25,7 @@ __all__ = [
     "AngleDriver",
     "Body",
     "ConstantSpeed",
+    "ContactTangent",
     "CoordinateDriver",
     "DistanceDriver",
     "Gear",
@@ -303,6 +304,56 @@ class PointOnLine(Joint):
         Ad = np.zeros((1, kin.n))
         phi, gamma = _line_row(kin, self.a, self.axis, self.b, A, Ad, 0)
         return np.array([phi]), A, Ad, np.array([gamma]), np.zeros(1)
+
+
+@dataclass(frozen=True)
+class ContactTangent(Joint):
+    """The tangential (sticking) row of a frictional contact (nonholonomic, inactive by default).
+
+    Its velocity is the slip velocity of the contact ``normal`` (a unilateral
+    :class:`PointOnLine` through the same line point ``a`` and axis): with ``u = R_a axis``,
+
+    ``v_t = u·(ṗ_b − ṗ_a) + (θ̇_a (R_a axis^⊥))·(p_b − p_a) + roll (θ̇_b − θ̇_a)``
+
+    — the row of ``ψ = u·(p_b − p_a) + roll (θ_b − θ_a)`` — where ``roll`` is the radius of a disk
+    centred at ``b`` touching the line (0: a point contact). Active: the contact sticks (a
+    bilateral constraint); inactive while it slips, when the simulator applies the Coulomb force
+    ``−μ s N`` along this row (:mod:`nonmin.sim`, ``docs/theory.md`` "Coulomb friction").
+    """
+
+    a: Point
+    axis: Vec2
+    b: Point
+    normal: str = ""
+    mu: float = 0.0
+    roll: float = 0.0
+
+    @property
+    def kind(self) -> Literal["holonomic", "rheonomic", "nonholonomic", "unilateral"]:
+        return "nonholonomic"
+
+    @property
+    def dim(self) -> int:
+        return 1
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.a.body, self.b.body)
+
+    def needs_angle(self) -> tuple[str, ...]:
+        return (self.b.body,) if self.roll != 0.0 else ()
+
+    def terms(self, kin: _Kin, t: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        A = np.zeros((1, kin.n))
+        Ad = np.zeros((1, kin.n))
+        # a line whose left normal is u: axis' = (u_y, −u_x), since (axis')^⊥ = axis
+        psi, gamma = _line_row(kin, self.a, (self.axis[1], -self.axis[0]), self.b, A, Ad, 0)
+        if self.roll != 0.0:
+            R = np.zeros((1, kin.n))
+            rel, _ = _angle_rows(kin, self.a.body, self.b.body, R, 0)
+            A += self.roll * R
+            psi += self.roll * rel
+        return np.array([psi]), A, Ad, np.array([gamma]), np.zeros(1)
 
 
 @dataclass(frozen=True)

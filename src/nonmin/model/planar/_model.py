@@ -12,11 +12,20 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ...errors import InputError, ModelError, NonFiniteError, ShapeError, UnknownNameError
-from .._protocol import ConstraintSpec, ConstraintTerms, FloatArray, Geometry, Model, ModelTerms
+from .._protocol import (
+    ConstraintSpec,
+    ConstraintTerms,
+    FloatArray,
+    FrictionContact,
+    Geometry,
+    Model,
+    ModelTerms,
+)
 from . import _compiled
 from ._elements import (
     GROUND,
     Body,
+    ContactTangent,
     Joint,
     JointActuator,
     Point,
@@ -291,6 +300,14 @@ class PlanarModel(Model):
     @property
     def default_active(self) -> frozenset[str]:  # type: ignore[override]
         return self.default_active_names or frozenset()
+
+    @property
+    def friction_contacts(self) -> tuple[FrictionContact, ...]:
+        """The frictional contacts (:meth:`PlanarBuilder.contact`): one per
+        :class:`ContactTangent` joint."""
+        return tuple(
+            FrictionContact(j.normal, j.name, j.mu) for j in self.joints if isinstance(j, ContactTangent)
+        )
 
     @property
     def has_outputs(self) -> bool:  # type: ignore[override]

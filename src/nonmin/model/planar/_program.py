@@ -25,6 +25,7 @@ from ._elements import (
     GROUND,
     AngleDriver,
     ConstantSpeed,
+    ContactTangent,
     CoordinateDriver,
     DistanceDriver,
     Gear,
@@ -110,6 +111,9 @@ def description(model: PlanarModelLike) -> Any | None:
         elif tj is PointOnLine:
             assert isinstance(j, PointOnLine)
             d.add_line(c, 0, pt(j.a), j.axis[0], j.axis[1], pt(j.b))
+        elif tj is ContactTangent:
+            assert isinstance(j, ContactTangent)
+            d.add_line(c, 0, pt(j.a), j.axis[1], -j.axis[0], pt(j.b), j.roll)
         elif tj is Prismatic:
             assert isinstance(j, Prismatic)
             d.add_angle(c, 0, [body(j.b.body), body(j.a.body)], [1.0, -1.0], j.angle)
