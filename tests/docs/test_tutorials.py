@@ -118,3 +118,28 @@ def test_refresh_tool_rewrites_output_blocks(tmp_path: Path) -> None:
     new = mod.refresh(page, tmp_path)
     assert "```text\n42\n```" in new
     assert "```text\nkept\n```" in new and "stale" not in new
+
+
+#: docs/contact.md's friction section: the claims its prose makes (the page's other claims are
+#: checked by tests/analysis/test_contact_doc.py).
+CONTACT_CLAIMS = [
+    "mu = 0.3: slip, s(1 s) = -1.060220 m (closed form -1.060220)",
+    "mu = 0.6: stick, s(1 s) = 0.000000 m",
+    "stick:floor at t = 0.407747196738 s, v0/(3 mu g) = 0.407747196738 s",
+    "rolling: v = 2.000000000000 m/s (2 v0/3 = 2.000000000000)",
+    "PainleveError at contact 'floor', t = 0.0, factor -0.125000 (closed form 1 - 1.5*3/4 = -0.125000)",
+    "stick:heel@0.548 stick:toe@0.548",
+    "at rest: {'heel': ('stick', 5.886), 'toe': ('stick', 5.886)}",
+]
+
+
+def test_contact_page_output_is_current(tmp_path: Path) -> None:
+    """docs/contact.md (contact and friction tutorial): every shown output is what it prints."""
+    page = ROOT / "docs" / "contact.md"
+    proc = run_checked(page, tmp_path)
+    assert proc.returncode == 0, (
+        "docs/contact.md shows stale output (python docs/refresh_tutorials.py docs/contact.md):\n"
+        f"{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}"
+    )
+    for phrase in CONTACT_CLAIMS:
+        assert phrase in proc.stdout, f"docs/contact.md: output lacks {phrase!r}"
