@@ -1,4 +1,6 @@
-"""LQR through a switch of the active set inside one run.
+"""LQR through a switch of the active set inside one run: a pin released (below) and a contact
+closing (``test_lqr_redesigns_when_a_contact_closes_inside_a_run``, the 4-dof arm against
+Pinocchio-derived hand designs).
 
 A pole stands upright on a cart pushed along a rail by one force; a weld ``lock`` holds the
 pole to the cart. The run starts locked with the cart 0.3 m off target (2 tangent states:
@@ -20,6 +22,7 @@ weights projected the same way (Jᵀ W J); the Riccati gains must agree to 1e-9.
 """
 
 import numpy as np
+import pytest
 import scipy.linalg
 
 import nonmin
@@ -117,3 +120,82 @@ def test_lqr_redesigns_at_a_release_inside_a_run():
     K_lock_on_free[:, :2] = d_locked.K[:, :1] @ (Zl.T @ Zf)
     K_lock_on_free[:, 2:] = d_locked.K[:, 1:] @ (Zl.T @ Zf)
     assert np.linalg.eigvals(A - B @ K_lock_on_free).real.max() > 0
+
+
+def test_lqr_redesigns_when_a_contact_closes_inside_a_run():
+    """The 4-dof arm of ``serial_arm`` (all joints actuated) is regulated to a configuration
+    where its end effector rests on the ground (``ee_contact``, gap 0). It starts 1.5 cm above
+    and moving down: the free design (8 states) drives it, the contact closes by a plastic
+    impact, the one LQR re-designs for the contact set (6 states) and holds the arm there.
+
+    Hand designs from Pinocchio (nothing of nonmin's derivative code): free, M δq̈ = −G δq + δu
+    (G = ∂g/∂q, ``computeGeneralizedGravityDerivatives``; tangent basis I); in contact, on
+    y with δq = Z y (Z an orthonormal basis of N(a), a = ∂z_ee/∂q from the frame Jacobian):
+    ZᵀMZ ÿ = −Zᵀ(G − λ H)Z y + Zᵀ δu, with the contact force λ = (a aᵀ)⁻¹ a g at the
+    feed-forward u* = Z Zᵀ g and H = ∂aᵀ/∂q by a central difference of Pinocchio's Jacobian."""
+    pin = pytest.importorskip("pinocchio")
+    from nonmin.model.robots import serial_arm
+
+    model, state = serial_arm()
+    q_star = state.q.copy()
+    free = model.resolve_active(None)
+    contact = free | {"ee_contact"}
+    wq, wv, ru = 10.0, 1.0, 0.1
+    ctl = LQR(model, q_star, weight_q=wq, weight_qd=wv, weight_u=ru)
+
+    pm = model.pinocchio_model
+    pd = pm.createData()
+    fid = pm.getFrameId("ee")
+    n = pm.nv
+
+    def a_row(q):
+        pin.computeJointJacobians(pm, pd, q)
+        pin.updateFramePlacements(pm, pd)
+        J = pin.getFrameJacobian(pm, pd, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+        return np.array(J[2])
+
+    M = pin.crba(pm, pd, q_star)
+    M = np.triu(M) + np.triu(M, 1).T
+    g = np.array(pin.computeGeneralizedGravity(pm, pd, q_star))
+    G = np.array(pin.computeGeneralizedGravityDerivatives(pm, pd, q_star))
+
+    def hand_gain(M_r, K_r, B_r, k):
+        A = np.block(
+            [[np.zeros((k, k)), np.eye(k)], [-np.linalg.solve(M_r, K_r), np.zeros((k, k))]]
+        )
+        B = np.vstack([np.zeros((k, n)), np.linalg.solve(M_r, B_r)])
+        W = scipy.linalg.block_diag(wq * np.eye(k), wv * np.eye(k))
+        X = scipy.linalg.solve_continuous_are(A, B, W, ru * np.eye(n))
+        return np.linalg.solve(ru * np.eye(n), B.T @ X)
+
+    d_free = ctl.design(free)
+    assert np.allclose(d_free.system.Zq, np.eye(n))
+    K_free = hand_gain(M, G, np.eye(n), n)
+    assert np.allclose(d_free.K, K_free, rtol=1e-8, atol=1e-8 * np.abs(K_free).max())
+    assert np.allclose(d_free.u_ff, g, atol=1e-10)
+
+    a = a_row(q_star)
+    Z = np.linalg.svd(a[None, :])[2][1:].T
+    lam = float(a @ g / (a @ a))
+    h = 1e-6
+    H = np.array([(a_row(q_star + h * e) - a_row(q_star - h * e)) / (2 * h) for e in np.eye(n)])
+    H = 0.5 * (H + H.T)
+    K_hand_y = hand_gain(Z.T @ M @ Z, Z.T @ (G - lam * H) @ Z, Z.T, n - 1)
+    d_con = ctl.design(contact)
+    T = Z.T @ d_con.system.Zq  # y = T z
+    K_con = K_hand_y @ scipy.linalg.block_diag(T, T)
+    assert np.allclose(d_con.K, K_con, rtol=1e-6, atol=1e-6 * np.abs(K_con).max())
+    assert np.allclose(d_con.u_ff, Z @ (Z.T @ g), atol=1e-10)
+
+    # the run: 1.5 cm above, moving down; a fresh controller designs as the sets come
+    ctl = LQR(model, q_star, weight_q=wq, weight_qd=wv, weight_u=ru)
+    up = a / np.linalg.norm(a)
+    traj = nonmin.simulate(model, (0.0, 3.0), q_star + 0.05 * up, -1.0 * up, controller=ctl,
+                           method="rk4", dt=1e-3)  # fmt: skip
+    assert [e.name for e in traj.events] == ["impact:ee_contact"]
+    t_hit = traj.events[0].t
+    assert set(ctl._cache) == {free, contact}
+    err = np.abs(traj.q - q_star).max(axis=1)
+    assert err[-1] < 1e-4 * err[0]
+    i_end = traj.constraint_names.index("ee_contact")
+    assert traj.active_mask[-1, i_end] and traj.active_mask[traj.t > t_hit][:, i_end].all()
