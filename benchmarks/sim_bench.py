@@ -52,6 +52,7 @@ import argparse
 import json
 import math
 import platform
+import re
 import statistics
 import sys
 import time
@@ -875,7 +876,7 @@ def default_configs(mech: BarMechanism, quick: bool) -> list[PeerSpec]:
     cfg: list[PeerSpec] = []
     for dt in dts:
         cfg.append(("exudyn", {"dt": dt}))
-    for dt in ([2e-3, *dts] if not quick else dts):
+    for dt in ([*COARSE_DTS, 2e-3, *dts] if not quick else dts):
         cfg.append(("mujoco", {"dt": dt, "setting": "default"}))
         cfg.append(("mujoco", {"dt": dt, "setting": "stiff"}))
     for dt in dts:
@@ -884,6 +885,14 @@ def default_configs(mech: BarMechanism, quick: bool) -> list[PeerSpec]:
     return cfg
 
 
+#: MuJoCo's coarse steps (its range, as the SciML work–precision benchmarks cover each
+#: method's): it stays on the branch up to ~1e-2 s with the stiff setting.
+COARSE_DTS = (1e-2, 5e-3)
+
+#: The adaptive methods over their tolerances (issue 18's work–precision diagrams).
+ADAPTIVE = [("nonmin", {"method": m, "rtol": r, "atol": r * 1e-2})
+            for m in ("dopri5", "dop853") for r in (1e-6, 1e-8, 1e-10)]  # fmt: skip
+
 #: nonmin settings per mechanism: RK4 + mass-metric projection over a range of steps (the
 #: compiled engine runs these), and DOPRI5 (general driver) for comparison. The range spans the
 #: peers' accuracies, so every peer can be matched by a nonmin run of equal or better accuracy.
@@ -891,14 +900,16 @@ NONMIN_CONFIGS: dict[str, list[PeerSpec]] = {
     "crossed_four_bar": [
         *(("nonmin", {"method": "rk4", "dt": dt})
           for dt in (2.5e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 2.5e-2, 3e-2, 4e-2)),
-        ("nonmin", {"method": "dopri5", "rtol": 1e-8, "atol": 1e-10}),
+        *ADAPTIVE,
     ],
     "A02_N2": [
         *(("nonmin", {"method": "rk4", "dt": dt}) for dt in (1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 4e-2, 5e-2)),
+        *ADAPTIVE,
     ],
     # N = 40 (243 coordinates, 242 rows): the compiled engine with the sparse certified LQ
     "A02_N40": [
         *(("nonmin", {"method": "rk4", "dt": dt}) for dt in (1e-2, 2e-2, 5e-2, 1e-1)),
+        *ADAPTIVE,
     ],
 }
 
@@ -1117,6 +1128,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=3, help="timed runs per setting (median)")
     ap.add_argument("--mechanisms", default="crossed_four_bar,A02_N2,A02_N40")
     ap.add_argument("--engines", default="exudyn,mujoco,pinocchio,nonmin")
+    ap.add_argument("--only", default=None, metavar="REGEX",
+                    help="run only the settings whose 'engine {options}' matches (e.g. \"dop853|'dt': 0.01\")")
     ap.add_argument("--json", default=str(HERE / "results" / "sim_bench.json"))
     ap.add_argument("--markdown", default=str(HERE / "SIM.md"))
     ap.add_argument("--combine", nargs="+", default=None, metavar="JSON",
@@ -1174,7 +1187,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         "mechanisms": {}, "discussion": _discussion(),
     }
     for mech in mechs:
-        cfgs = [c for c in default_configs(mech, args.quick) if c[0] in engines]
+        cfgs = [c for c in default_configs(mech, args.quick) if c[0] in engines
+                and (args.only is None or re.search(args.only, f"{c[0]} {c[1]}"))]
         rows = run_mechanism(mech, cfgs, repeat)
         results["mechanisms"][mech.name] = {"t_final": mech.t_final, "notes": mech.notes,
                                             "rows": rows, "comparison": compare(rows)}

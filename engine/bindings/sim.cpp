@@ -252,7 +252,8 @@ void bind_sim(nb::module_& m) {
     nb::enum_<sim::Method>(m, "SimMethod")
         .value("rk4", sim::Method::rk4)
         .value("dopri5", sim::Method::dopri5)
-        .value("midpoint", sim::Method::midpoint);
+        .value("midpoint", sim::Method::midpoint)
+        .value("dop853", sim::Method::dop853);
     nb::enum_<sim::Stabilization>(m, "SimStabilization")
         .value("none", sim::Stabilization::none)
         .value("baumgarte", sim::Stabilization::baumgarte)
@@ -264,7 +265,8 @@ void bind_sim(nb::module_& m) {
         .def_rw("max_iter", &sim::ProjectionOptions::max_iter)
         .def_rw("velocity", &sim::ProjectionOptions::velocity)
         .def_rw("euclidean", &sim::ProjectionOptions::euclidean)
-        .def_rw("velocity_rtol", &sim::ProjectionOptions::velocity_rtol);
+        .def_rw("velocity_rtol", &sim::ProjectionOptions::velocity_rtol)
+        .def_rw("energy_level", &sim::ProjectionOptions::energy_level);
 
     nb::class_<sim::Options>(m, "SimOptions", "Settings of one run of the engine's loop.")
         .def(nb::init<>())

@@ -4,6 +4,7 @@
 // tolerance.
 #include "nonmin/sim/events.hpp"
 #include "nonmin/linalg.hpp"
+#include "sim_detail.hpp"
 
 #include <Eigen/Cholesky>
 
@@ -508,7 +509,7 @@ Status sample_until(Loop& L, const FiredStep& st, double te, std::size_t& out_i)
     EventScratch& E = *L.evs;
     const int n = L.n;
     const double end_tol = 1e-12 * std::max(1.0, std::abs(st.t_new));
-    const bool adapt = L.opt.method == Method::dopri5;
+    const bool adapt = detail::adaptive(L);
     Status r;
     while (out_i < L.t_out.size() && L.t_out[out_i] <= te) {
         const double tj = L.t_out[out_i];
@@ -762,7 +763,7 @@ Status apply_and_record(Loop& L, const FiredStep& st, double best_s, const std::
         std::vector<int> names;  // the fired contacts in declaration order
         for (int ic : E.unilateral)
             if (std::find(impacts.begin(), impacts.end(), ic) != impacts.end()) names.push_back(ic);
-        if ((r = set_impact(L, te, E.y, impacts, plastic, L.opt.method == Method::dopri5 ? 0.0 : L.opt.dt, h_cap)) !=
+        if ((r = set_impact(L, te, E.y, impacts, plastic, detail::adaptive(L) ? 0.0 : L.opt.dt, h_cap)) !=
             Status::ok)
             return r;
         if (L.any_active && (r = stabilize(L, te, E.y.data())) != Status::ok) return r;
@@ -860,7 +861,7 @@ Status apply_and_record(Loop& L, const FiredStep& st, double best_s, const std::
     L.t = te;
     L.y = E.y;
     L.have_f = false;
-    L.h = L.opt.method == Method::dopri5 ? (h_cap > 0.0 ? std::min(st.h_next, h_cap) : st.h_next) : L.opt.dt;
+    L.h = detail::adaptive(L) ? (h_cap > 0.0 ? std::min(st.h_next, h_cap) : st.h_next) : L.opt.dt;
     return Status::ok;
 }
 

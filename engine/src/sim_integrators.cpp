@@ -1,6 +1,6 @@
 // The integrators of the engine's simulation loop (see nonmin/sim/loop.hpp and sim_detail.hpp):
-// RK4, the implicit midpoint rule, Dormand–Prince 5(4) with its error control on projected
-// solutions and continuous extension, the quintic Hermite interpolant of fixed steps. Each
+// RK4, the implicit midpoint rule, Dormand–Prince 5(4) and 8(5,3) with their error control on
+// projected solutions and continuous extensions, the quintic Hermite interpolant of fixed steps. Each
 // function names the Python function it mirrors (nonmin/sim/_integrators.py).
 #include "nonmin/sim/loop.hpp"
 #include "nonmin/linalg.hpp"
@@ -148,7 +148,7 @@ double rms(const Vec& x, const Vec& scale, int n2) {
 }
 
 // DormandPrince5.initial_step (Hairer's heuristic)
-Status dp_initial_step(Loop& L, double t0, const Vec& y0, const Vec& f0, double t_bound, double& h_out) {
+Status dp_initial_step(Loop& L, double t0, const Vec& y0, const Vec& f0, double t_bound, int order, double& h_out) {
     const int n2 = 2 * L.n;
     for (int i = 0; i < n2; ++i) L.ev[i] = L.opt.atol + L.opt.rtol * std::abs(y0[i]);
     const double d0 = rms(y0, L.ev, n2);
@@ -161,7 +161,7 @@ Status dp_initial_step(Loop& L, double t0, const Vec& y0, const Vec& f0, double 
     for (int i = 0; i < n2; ++i) L.kn[i] = L.tmp2n[i] - f0[i];
     const double d2 = rms(L.kn, L.ev, n2) / h0;
     const double dm = std::max(d1, d2);
-    const double h1 = dm <= 1e-15 ? std::max(1e-6, h0 * 1e-3) : std::pow(0.01 / dm, 1.0 / 5);
+    const double h1 = dm <= 1e-15 ? std::max(1e-6, h0 * 1e-3) : std::pow(0.01 / dm, 1.0 / order);
     h_out = std::min(std::min(100 * h0, h1), L.opt.h_max);
     return Status::ok;
 }
@@ -203,7 +203,7 @@ Status dp_step(Loop& L, double& h_acc, double& t_new) {
     }
     double h = L.h;
     if (!std::isfinite(h) || h <= 0) {
-        if ((s = dp_initial_step(L, t, L.y, L.f, t_bound, h)) != Status::ok) return s;
+        if ((s = dp_initial_step(L, t, L.y, L.f, t_bound, 5, h)) != Status::ok) return s;
     }
     h = std::min(h, L.opt.h_max);
     long long rejected = 0;
@@ -277,7 +277,220 @@ Status dp_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& 
     return Status::ok;
 }
 
-bool adaptive(const Loop& L) { return L.opt.method == Method::dopri5; }
+// ------------------------------------------------------------------------------ DOP853
+
+namespace {
+
+// Dormand–Prince 8(5,3) with its 7th-order continuous extension (Hairer, Nørsett & Wanner,
+// Solving ODEs I, II.10; the coefficients of Hairer's DOP853): 12 stages, y1 = y + h Σ b_j k_j
+// (b = row 12 of A), error estimates of orders 5 and 3 (E5, E3; coefficient of F(t + h, y1) 0),
+// three more stages (rows 13–15) for the continuous extension. As _dop853.py.
+constexpr double D8_C[16] = {0.0, 0.05260015195876773, 0.0789002279381516, 0.1183503419072274, 0.2816496580927726, 0.3333333333333333, 0.25, 0.3076923076923077, 0.6512820512820513, 0.6, 0.8571428571428571, 1.0, 1.0, 0.1, 0.2, 0.7777777777777778};
+// A: row s holds a_sj, j < s (rows 12–15: b and the extension's stages)
+constexpr double D8_A[16][15] = {
+    {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0},
+    {0.05260015195876773, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0},
+    {0.0197250569845379, 0.0591751709536137, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0},
+    {0.02958758547680685, 0.0, 0.08876275643042054, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0},
+    {0.2413651341592667, 0.0, -0.8845494793282861, 0.924834003261792, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0},
+    {0.037037037037037035, 0.0, 0.0, 0.17082860872947386, 0.12546768756682242, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0},
+    {0.037109375, 0.0, 0.0, 0.17025221101954405, 0.06021653898045596, -0.017578125, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0},
+    {0.03709200011850479, 0.0, 0.0, 0.17038392571223998, 0.10726203044637328, -0.015319437748624402, 0.008273789163814023, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0},
+    {0.6241109587160757, 0.0, 0.0, -3.3608926294469414, -0.868219346841726, 27.59209969944671, 20.154067550477894, -43.48988418106996, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0},
+    {0.47766253643826434, 0.0, 0.0, -2.4881146199716677, -0.590290826836843, 21.230051448181193, 15.279233632882423, -33.28821096898486, -0.020331201708508627, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0},
+    {-0.9371424300859873, 0.0, 0.0, 5.186372428844064, 1.0914373489967295, -8.149787010746927, -18.52006565999696, 22.739487099350505, 2.4936055526796523, -3.0467644718982196, 0.0, 0.0, 0.0, 0.0, 0.0},
+    {2.273310147516538, 0.0, 0.0, -10.53449546673725, -2.0008720582248625, -17.9589318631188, 27.94888452941996, -2.8589982771350235, -8.87285693353063, 12.360567175794303, 0.6433927460157636, 0.0, 0.0, 0.0, 0.0},
+    {0.054293734116568765, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, 0.3111643669578199, -0.1521609496625161, 0.20136540080403034, 0.04471061572777259, 0.0, 0.0, 0.0},
+    {0.056167502283047954, 0.0, 0.0, 0.0, 0.0, 0.0, 0.25350021021662483, -0.2462390374708025, -0.12419142326381637, 0.15329179827876568, 0.00820105229563469, 0.007567897660545699, -0.008298, 0.0, 0.0},
+    {0.03183464816350214, 0.0, 0.0, 0.0, 0.0, 0.028300909672366776, 0.053541988307438566, -0.05492374857139099, 0.0, 0.0, -0.00010834732869724932, 0.0003825710908356584, -0.00034046500868740456, 0.1413124436746325, 0.0},
+    {-0.42889630158379194, 0.0, 0.0, 0.0, 0.0, -4.697621415361164, 7.683421196062599, 4.06898981839711, 0.3567271874552811, 0.0, 0.0, 0.0, -0.0013990241651590145, 2.9475147891527724, -9.15095847217987},
+};
+constexpr double D8_B[12] = {0.054293734116568765, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, 0.3111643669578199, -0.1521609496625161, 0.20136540080403034, 0.04471061572777259};
+constexpr double D8_E3[13] = {-0.18980075407240762, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, -0.4226823213237919, -0.1521609496625161, 0.20136540080403034, 0.02265179219836082, 0.0};
+constexpr double D8_E5[13] = {0.01312004499419488, 0.0, 0.0, 0.0, 0.0, -1.2251564463762044, -0.4957589496572502, 1.6643771824549864, -0.35032884874997366, 0.3341791187130175, 0.08192320648511571, -0.022355307863886294, 0.0};
+constexpr double D8_D[4][16] = {
+    {-8.428938276109013, 0.0, 0.0, 0.0, 0.0, 0.5667149535193777, -3.0689499459498917, 2.38466765651207, 2.117034582445028, -0.871391583777973, 2.2404374302607883, 0.6315787787694688, -0.08899033645133331, 18.148505520854727, -9.194632392478356, -4.436036387594894},
+    {10.427508642579134, 0.0, 0.0, 0.0, 0.0, 242.28349177525817, 165.20045171727028, -374.5467547226902, -22.113666853125306, 7.733432668472264, -30.674084731089398, -9.332130526430229, 15.697238121770845, -31.139403219565178, -9.35292435884448, 35.81684148639408},
+    {19.985053242002433, 0.0, 0.0, 0.0, 0.0, -387.0373087493518, -189.17813819516758, 527.8081592054236, -11.57390253995963, 6.8812326946963, -1.0006050966910838, 0.7777137798053443, -2.778205752353508, -60.19669523126412, 84.32040550667716, 11.99229113618279},
+    {-25.69393346270375, 0.0, 0.0, 0.0, 0.0, -154.18974869023643, -231.5293791760455, 357.6391179106141, 93.40532418362432, -37.45832313645163, 104.0996495089623, 29.8402934266605, -43.53345659001114, 96.32455395918828, -39.17726167561544, -149.72683625798564},
+};
+
+constexpr int D8_STAGES = 12;
+
+// DOP853._stages: rows 1 … last−1 of L.K8 from row 0 (= F(t, y)) at (t, y), step h
+Status d8_stages(Loop& L, double t, const Vec& y, double h, int first, int last) {
+    const int n2 = 2 * L.n;
+    for (int s = first; s < last; ++s) {
+        for (int i = 0; i < n2; ++i) {
+            double acc = 0.0;
+            for (int j = 0; j < s; ++j) acc += D8_A[s][j] * L.K8(j, i);
+            L.ys[i] = y[i] + h * acc;
+        }
+        const Status st = rhs(L, t + D8_C[s] * h, L.ys.data(), L.tmp2n.data());
+        if (st != Status::ok) return st;
+        L.K8.row(s) = L.tmp2n.transpose();
+    }
+    return Status::ok;
+}
+
+// y + h Σ_{j<12} b_j k_j into out
+void d8_combine(const Loop& L, const Vec& y, double h, Vec& out) {
+    const int n2 = 2 * L.n;
+    for (int i = 0; i < n2; ++i) {
+        double b = 0.0;
+        for (int j = 0; j < D8_STAGES; ++j) b += D8_B[j] * L.K8(j, i);
+        out[i] = y[i] + h * b;
+    }
+}
+
+}  // namespace
+
+// DOP853.step (error measured on projected solutions as dp_step): L.y1 the raw end, L.yq1 the
+// projected one, L.K8 the stages; F(t + h, y1) (row 12) is evaluated only without the
+// projection (the FSAL stage) or for the continuous extension (d8_dense_setup).
+Status d8_step(Loop& L, double& h_acc, double& t_new) {
+    const int n2 = 2 * L.n;
+    const double t = L.t;
+    const double t_bound = L.opt.t1;
+    Status s;
+    if (!L.have_f) {
+        if ((s = rhs(L, t, L.y.data(), L.f.data())) != Status::ok) return s;
+        L.have_f = true;
+    }
+    double h = L.h;
+    if (!std::isfinite(h) || h <= 0) {
+        if ((s = dp_initial_step(L, t, L.y, L.f, t_bound, 8, h)) != Status::ok) return s;
+    }
+    h = std::min(h, L.opt.h_max);
+    long long rejected = 0;
+    const double h_min = L.opt.h_min_factor * std::max(1.0, std::abs(t));
+    const bool proj = L.opt.stab == Stabilization::projection;
+    const double noise = passage_noise(L);
+    L.d8_fsal = L.d8_dense = false;
+    while (true) {
+        h = clip(t, passage_place(L, t, h), t_bound);
+        if (h < h_min) {
+            L.message = "dop853: step size underflow";
+            return Status::not_finite;
+        }
+        L.K8.row(0) = L.f.transpose();
+        if ((s = d8_stages(L, t, L.y, h, 1, D8_STAGES)) != Status::ok) return s;
+        d8_combine(L, L.y, h, L.y1);
+        for (int i = 0; i < n2; ++i) {
+            double e5 = 0.0, e3 = 0.0;
+            for (int j = 0; j < D8_STAGES; ++j) {
+                e5 += D8_E5[j] * L.K8(j, i);
+                e3 += D8_E3[j] * L.K8(j, i);
+            }
+            L.ev[i] = h * e5;
+            L.e3[i] = h * e3;
+        }
+        L.yq1 = L.y1;
+        if (proj) {  // each estimate: project(t + h, y1) − project(t + h, y1 − err)
+            if ((s = project(L, t + h, L.yq1.data(), L.opt.projection)) != Status::ok) return s;
+            for (Vec* e : {&L.ev, &L.e3}) {
+                for (int i = 0; i < n2; ++i) L.yp[i] = L.y1[i] - (*e)[i];
+                if ((s = project(L, t + h, L.yp.data(), L.opt.projection)) != Status::ok) return s;
+                for (int i = 0; i < n2; ++i) (*e)[i] = L.yq1[i] - L.yp[i];
+            }
+        }
+        // Hairer's norm: ‖e5‖² / √(N (‖e5‖² + 0.01 ‖e3‖²)), scaled componentwise
+        double s5 = 0.0, s3 = 0.0;
+        for (int i = 0; i < n2; ++i) {
+            const double big = std::max(std::abs(L.y[i]), std::abs(L.y1[i]));
+            const double sc = L.opt.atol + L.opt.rtol * big + noise * (1.0 + big);
+            const double a = L.ev[i] / sc, b = L.e3[i] / sc;
+            s5 += a * a;
+            s3 += b * b;
+        }
+        const double den = s5 + 0.01 * s3;
+        const double err = den > 0.0 ? s5 / std::sqrt(den * n2) : 0.0;
+        if (!std::isfinite(err)) {
+            ++rejected;
+            h *= 0.2;
+            continue;
+        }
+        if (err <= 1.0) {
+            double fac = err == 0.0 ? 6.0 : std::min(6.0, std::max(1.0 / 3.0, 0.9 * std::pow(err, -0.125)));
+            if (rejected) fac = std::min(fac, 1.0);
+            t_new = (h == t_bound - t) ? t_bound : t + h;
+            h_acc = h;
+            L.y0 = L.y;
+            L.d8_t0 = t;
+            L.d8_h = h;
+            L.h = std::min(h * fac, L.opt.h_max);
+            L.n_rejected += rejected;
+            if (!proj) {  // the FSAL stage: the next step's F(t, y)
+                if ((s = rhs(L, t + h, L.y1.data(), L.tmp2n.data())) != Status::ok) return s;
+                L.K8.row(12) = L.tmp2n.transpose();
+                L.d8_fsal = true;
+            }
+            return Status::ok;
+        }
+        ++rejected;
+        h *= std::max(1.0 / 3.0, 0.9 * std::pow(err, -0.125));
+    }
+}
+
+// The continuous extension of the accepted DOP853 step: F(t + h, y1) when not yet evaluated,
+// the three extra stages, and the coefficients F8 (once per step).
+Status d8_dense_setup(Loop& L) {
+    if (L.d8_dense) return Status::ok;
+    const int n2 = 2 * L.n;
+    const double t0 = L.d8_t0, h = L.d8_h;
+    Status s;
+    if (!L.d8_fsal) {
+        if ((s = rhs(L, t0 + h, L.y1.data(), L.tmp2n.data())) != Status::ok) return s;
+        L.K8.row(12) = L.tmp2n.transpose();
+        L.d8_fsal = true;
+    }
+    if ((s = d8_stages(L, t0, L.y0, h, 13, 16)) != Status::ok) return s;
+    for (int i = 0; i < n2; ++i) {
+        const double dy = L.y1[i] - L.y0[i];
+        L.F8(0, i) = dy;
+        L.F8(1, i) = h * L.K8(0, i) - dy;
+        L.F8(2, i) = 2.0 * dy - h * (L.K8(12, i) + L.K8(0, i));
+        for (int r = 0; r < 4; ++r) {
+            double acc = 0.0;
+            for (int j = 0; j < 16; ++j) acc += D8_D[r][j] * L.K8(j, i);
+            L.F8(3 + r, i) = h * acc;
+        }
+    }
+    L.d8_dense = true;
+    return Status::ok;
+}
+
+// y(t0 + x h) = y0 + x(F0 + (1−x)(F1 + x(F2 + (1−x)(F3 + x(F4 + (1−x)(F5 + x F6))))))
+void d8_dense(const Loop& L, double tt, double* out) {
+    const int n2 = 2 * L.n;
+    const double x = (tt - L.d8_t0) / L.d8_h;
+    const double x1 = 1.0 - x;
+    for (int i = 0; i < n2; ++i) {
+        double p = L.F8(6, i);
+        p = L.F8(5, i) + x * p;
+        p = L.F8(4, i) + x1 * p;
+        p = L.F8(3, i) + x * p;
+        p = L.F8(2, i) + x1 * p;
+        p = L.F8(1, i) + x * p;
+        p = L.F8(0, i) + x1 * p;
+        out[i] = L.y0[i] + x * p;
+    }
+}
+
+Status d8_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out) {
+    Status st;
+    if (f) {
+        L.K8.row(0) = f->transpose();
+    } else {
+        if ((st = rhs(L, t, y.data(), L.tmp2n.data())) != Status::ok) return st;
+        L.K8.row(0) = L.tmp2n.transpose();
+    }
+    if ((st = d8_stages(L, t, y, h, 1, D8_STAGES)) != Status::ok) return st;
+    d8_combine(L, y, h, out);
+    return Status::ok;
+}
+
+bool adaptive(const Loop& L) { return L.opt.method == Method::dopri5 || L.opt.method == Method::dop853; }
 
 // A raw step of size h of the fixed-step method from (t, y) (f: F(t, y) when known)
 Status fixed_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out) {
@@ -344,6 +557,9 @@ void passage_setup(Loop& L) {
     if (mr <= PASSAGE_DENSE_ROWS) P.eig = Eigen::SelfAdjointEigenSolver<Mat>(mr);
     if (L.opt.method == Method::dopri5) {  // DormandPrince5.passage_fractions: nodes 0.3 | 0.8
         P.frac[0] = 0.45, P.frac[1] = 0.55, P.frac[2] = 0.65;
+        P.n_frac = 3;
+    } else if (L.opt.method == Method::dop853) {  // DOP853.passage_fractions: nodes 1/3 | 0.6
+        P.frac[0] = 0.41, P.frac[1] = 0.465, P.frac[2] = 0.52;
         P.n_frac = 3;
     } else {  // Integrator.passage_fractions (RK4, implicit midpoint)
         P.frac[0] = 0.25, P.frac[1] = 0.75;

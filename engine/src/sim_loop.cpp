@@ -18,6 +18,10 @@ using detail::clip;
 using detail::dp_dense;
 using detail::dp_step;
 using detail::dp_advance;
+using detail::d8_advance;
+using detail::d8_dense;
+using detail::d8_dense_setup;
+using detail::d8_step;
 using detail::fixed_advance;
 
 namespace {
@@ -119,6 +123,11 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
                    &L.k3, &L.k4, &L.kn, &L.ev, &L.d_ydiff, &L.d_bspl, &L.d_r3, &L.d_r4})
         *v = Vec::Zero(2 * n);
     L.K = Mat::Zero(7, 2 * n);
+    if (opt.method == Method::dop853) {
+        L.K8 = Mat::Zero(16, 2 * n);
+        L.F8 = Mat::Zero(7, 2 * n);
+        L.e3 = Vec::Zero(2 * n);
+    }
     L.half.assign(static_cast<std::size_t>(std::max(opt.max_halvings, 0)) + 1, Vec::Zero(2 * n));
     for (Point* p : {&L.p1, &L.ps}) {
         p->q = p->qd = p->qdd = p->f_c = Vec::Zero(n);
@@ -398,6 +407,17 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
         L.vrtol = vr;
         for (int j = 0; j < n; ++j) L.vq[j] = q[j];
     }
+    if (std::isfinite(po.energy_level)) {  // _stabilization.energy_scale
+        if ((s = L.prog->evaluate(t, q, qd, L.active.data(), NEED_ENERGY, L.T, *L.ws)) != Status::ok) return s;
+        const double T = L.T.kinetic;
+        if (T > 0.0) {
+            const double a2 = (po.energy_level - L.T.potential) / T;
+            if (std::abs(a2 - 1.0) <= ENERGY_MAX_CHANGE) {
+                const double a = std::sqrt(a2);
+                for (int j = 0; j < n; ++j) qd[j] *= a;
+            }
+        }
+    }
     return Status::ok;
 }
 
@@ -442,6 +462,8 @@ Status partial_step(Loop& L, double t, const Vec& y, const Vec* f, double s, Vec
     Status st;
     if (s <= 0.0) {
         out = y;
+    } else if (L.opt.method == Method::dop853) {
+        if ((st = d8_advance(L, t, y, f, s, out)) != Status::ok) return st;
     } else if (adaptive(L)) {
         if ((st = dp_advance(L, t, y, f, s, out)) != Status::ok) return st;
     } else if ((st = fixed_advance(L, t, y, f, s, out)) != Status::ok) {
@@ -452,7 +474,12 @@ Status partial_step(Loop& L, double t, const Vec& y, const Vec* f, double s, Vec
 
 void record_sample(Loop& L, const Point& p, double t) { record(L, p, t); }
 
-void dense_output(const Loop& L, double t0, double h, double tt, double* out) { dp_dense(L, t0, h, tt, out); }
+void dense_output(const Loop& L, double t0, double h, double tt, double* out) {
+    if (L.opt.method == Method::dop853)
+        d8_dense(L, tt, out);  // (set up by run() when a sample falls inside the step)
+    else
+        dp_dense(L, t0, h, tt, out);
+}
 
 Status stabilize(Loop& L, double t, double* y) { return stab_project(L, t, y); }
 
@@ -513,6 +540,7 @@ Outcome run(Loop& L, long long max_steps) {
     const int n2 = 2 * n;
     const double t1 = L.opt.t1;
     const bool adapt = adaptive(L);
+    const bool dop853 = L.opt.method == Method::dop853;
     const std::size_t n_out = L.t_out.size();
     L.message.clear();
     long long taken = 0;
@@ -534,11 +562,16 @@ Outcome run(Loop& L, long long max_steps) {
         bool fsal = false;
         if (adapt) {
             const long long rej0 = L.n_rejected;
-            if ((s = dp_step(L, h, t_new)) != Status::ok) {
+            if ((s = dop853 ? d8_step(L, h, t_new) : dp_step(L, h, t_new)) != Status::ok) {
                 L.n_rejected = rej0;
                 return fail(L, s);
             }
-            fsal = true;  // L.K.row(6) = F(t_new, y1 raw); L.yq1 = projected y1 (at t + h)
+            // dopri5: L.K.row(6) = F(t_new, y1 raw); dop853: L.K8.row(12) when evaluated
+            fsal = !dop853 || L.d8_fsal;
+            if (dop853 && !L.every && L.out_i < n_out &&
+                L.t_out[L.out_i] < t_new - 1e-12 * std::max(1.0, std::abs(t_new)) &&
+                (s = d8_dense_setup(L)) != Status::ok)  // a sample inside the step
+                return fail(L, s);
             if (L.opt.stab == Stabilization::projection && t_new != t_start + h) {  // clipped to t1
                 L.yq1 = L.y1;
                 if ((s = stab_project(L, t_new, L.yq1.data())) != Status::ok) return fail(L, s);
@@ -632,7 +665,9 @@ Outcome run(Loop& L, long long max_steps) {
                     continue;
                 }
                 const double tt = t_start + sj;
-                if (adapt) {
+                if (dop853) {
+                    d8_dense(L, tt, L.yp.data());
+                } else if (adapt) {
                     dp_dense(L, t_start, h, tt, L.yp.data());
                 } else if (f_start && have_p1) {
                     hermite_quintic(n, L.y0.data(), L.f.data(), L.yq1.data(), L.fp1.data(), h, tt - t_start,
@@ -664,7 +699,7 @@ Outcome run(Loop& L, long long max_steps) {
                 break;
             }
         if (!changed && fsal) {
-            L.f = L.K.row(6).transpose();
+            L.f = dop853 ? L.K8.row(12).transpose() : L.K.row(6).transpose();
             L.have_f = true;
         } else if (have_p1 && (!L.ctrl || L.ctrl->stateless())) {
             for (int i = 0; i < n; ++i) {

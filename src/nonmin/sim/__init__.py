@@ -2,7 +2,7 @@
 
 One entry point, :func:`simulate`, whose options are values (:class:`Solver`,
 :class:`EventSet`, :class:`Output` and a stabilization), with pluggable integrators (:data:`METHODS`: ``"rk4"``,
-``"dopri5"``, ``"midpoint"``), stabilizations (:data:`STABILIZATIONS`: ``"none"``,
+``"dopri5"``, ``"dop853"``, ``"midpoint"``), stabilizations (:data:`STABILIZATIONS`: ``"none"``,
 ``"baumgarte"``, ``"projection"``), events with transitions as values (:class:`Event`,
 :class:`Activate`, :class:`Deactivate`, :class:`Reset`), automatic unilateral contact, and an
 immutable :class:`Trajectory` result that saves to one self-describing file.
@@ -27,6 +27,7 @@ from ._events import EventRecord as EventRecord
 from ._events import Reset as Reset
 from ._friction import ContactState as ContactState
 from ._friction import friction_state as friction_state
+from ._integrators import DOP853 as DOP853
 from ._integrators import METHODS as METHODS
 from ._integrators import RK4 as RK4
 from ._integrators import DormandPrince5 as DormandPrince5
@@ -52,6 +53,7 @@ from ._trajectory import load_trajectory as load_trajectory
 __all__ = [
     "ADAPTIVE_RANK_RTOL",
     "DEFAULT_DT",
+    "DOP853",
     "METHODS",
     "RK4",
     "STABILIZATIONS",

@@ -15,7 +15,7 @@ through :meth:`~nonmin.model.Model.evaluate` / ``mass_matrix`` / ``constraint_te
 taken only inside the callback). A controller is called back the same way (compiled
 controllers replace the callback later).
 
-Covered: the methods ``"rk4"``, ``"dopri5"``, ``"midpoint"`` (the three classes exactly), the
+Covered: the methods ``"rk4"``, ``"dopri5"``, ``"dop853"``, ``"midpoint"`` (the four classes exactly), the
 stabilizations ``"none"``, ``"baumgarte"``, ``"projection"`` (exactly those classes), ``t_eval``,
 ``project_initial``, ``rank_rtol``, ``max_steps``, ``h0``, controllers (Python callback), user
 events and automatic unilateral contact. The contact guards are evaluated, located and their
@@ -54,7 +54,7 @@ from ..core.linalg import SPD_RTOL
 from ..errors import InputError
 from ..model import Model
 from . import _durable
-from ._integrators import RK4, DormandPrince5, ImplicitMidpoint
+from ._integrators import DOP853, RK4, DormandPrince5, ImplicitMidpoint
 from ._stabilization import Baumgarte, NoStabilization, Projection
 
 FloatArray = NDArray[np.float64]
@@ -78,7 +78,7 @@ def ineligible(
     integ: Any, stab: Any, events: tuple[Any, ...], unilateral: tuple[str, ...], engine: str
 ) -> str | None:
     """Why the engine loop cannot run this simulation, or None when it covers it."""
-    if type(integ) not in (RK4, DormandPrince5, ImplicitMidpoint):
+    if type(integ) not in (RK4, DormandPrince5, DOP853, ImplicitMidpoint):
         return f"method {getattr(integ, 'name', '') or type(integ).__name__!r} is not one of the built-in integrators"
     if type(stab) not in (NoStabilization, Baumgarte, Projection):
         return f"stabilization {stab!r} is not one of the built-in stabilizations"
@@ -226,6 +226,8 @@ def _projection_options(stab: Projection) -> Any:
     po.velocity = bool(stab.velocity)
     po.euclidean = stab.metric == "euclidean"
     po.velocity_rtol = -1.0 if stab.velocity_rtol is None else float(stab.velocity_rtol)
+    if stab.energy and stab.energy_level is not None:
+        po.energy_level = float(stab.energy_level)
     return po
 
 
@@ -245,8 +247,8 @@ def options(
         o.xtol = float(integ.xtol)
         o.max_iter = int(integ.max_iter)
         o.max_halvings = int(integ.max_halvings)
-    elif type(integ) is DormandPrince5:
-        o.method = eng.SimMethod.dopri5
+    elif type(integ) in (DormandPrince5, DOP853):
+        o.method = eng.SimMethod.dopri5 if type(integ) is DormandPrince5 else eng.SimMethod.dop853
         o.rtol = float(integ.rtol)
         o.atol = float(integ.atol)
         o.h_max = float(integ.h_max)

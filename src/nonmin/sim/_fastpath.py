@@ -116,7 +116,7 @@ def _ineligible(
 ) -> str | None:  # fmt: skip
     if type(integ) is not RK4:
         return f"method must be 'rk4' (got {getattr(integ, 'name', type(integ).__name__)!r})"
-    if not (type(stab) is Projection and stab.metric == "mass" and stab.velocity):
+    if not (type(stab) is Projection and stab.metric == "mass" and stab.velocity and not stab.energy):
         return f"stabilization must be the mass-metric 'projection' (got {stab!r})"
     if controller is not None:
         return "a controller is given"

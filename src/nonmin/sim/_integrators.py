@@ -8,6 +8,8 @@ in and returned; the objects themselves are frozen and can be shared between run
 * :class:`DormandPrince5` — adaptive Dormand–Prince 5(4) with FSAL, PI-free standard step-size
   control and the continuous extension (``"dopri5"``); tableau from Dormand & Prince (1980),
   Hairer, Nørsett & Wanner, *Solving ODEs I*, Table II.5.2.
+* :class:`DOP853` — adaptive Dormand–Prince 8(5,3) with its 7th-order continuous extension
+  (``"dop853"``): fewer, longer steps at tight tolerances.
 * :class:`ImplicitMidpoint` — the symmetric, symplectic implicit midpoint rule, order 2
   (``"midpoint"``): bounded energy error over long runs.
 
@@ -26,8 +28,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..errors import InputError, NonminError, SimulationError
+from . import _dop853_tableau as _D8
 
 __all__ = [
+    "DOP853",
     "METHODS",
     "RK4",
     "DormandPrince5",
@@ -520,6 +524,23 @@ class ImplicitMidpoint(Integrator):
         return StepResult(StepperState(t1, y1, None, state.h), h, 0, None)
 
 
+def _initial_step(
+    fun: RHS, t0: float, y0: FloatArray, f0: FloatArray, t_bound: float, rtol: float, atol: float,
+    h_max: float, order: int,
+) -> float:  # fmt: skip
+    """Hairer's starting-step heuristic (Solving ODEs I, II.4) for a method of ``order``."""
+    scale = atol + rtol * np.abs(y0)
+    d0 = float(np.sqrt(np.mean((y0 / scale) ** 2)))
+    d1 = float(np.sqrt(np.mean((f0 / scale) ** 2)))
+    h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+    h0 = min(h0, abs(t_bound - t0))
+    y1 = y0 + h0 * f0
+    f1 = fun(t0 + h0, y1)
+    d2 = float(np.sqrt(np.mean(((f1 - f0) / scale) ** 2))) / h0
+    h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** (1 / order)
+    return float(min(100 * h0, h1, h_max))
+
+
 # Dormand–Prince 5(4) tableau (Hairer, Nørsett & Wanner, Solving ODEs I, Table II.5.2).
 _DP_C = np.array([0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0])
 _DP_A = [
@@ -619,16 +640,7 @@ class DormandPrince5(Integrator):
 
     def initial_step(self, fun: RHS, t0: float, y0: FloatArray, f0: FloatArray, t_bound: float) -> float:
         """Hairer's starting-step heuristic (Solving ODEs I, II.4)."""
-        scale = self.atol + self.rtol * np.abs(y0)
-        d0 = float(np.sqrt(np.mean((y0 / scale) ** 2)))
-        d1 = float(np.sqrt(np.mean((f0 / scale) ** 2)))
-        h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
-        h0 = min(h0, abs(t_bound - t0))
-        y1 = y0 + h0 * f0
-        f1 = fun(t0 + h0, y1)
-        d2 = float(np.sqrt(np.mean(((f1 - f0) / scale) ** 2))) / h0
-        h1 = max(1e-6, h0 * 1e-3) if max(d1, d2) <= 1e-15 else (0.01 / max(d1, d2)) ** (1 / 5)
-        return float(min(100 * h0, h1, self.h_max))
+        return _initial_step(fun, t0, y0, f0, t_bound, self.rtol, self.atol, self.h_max, 5)
 
     def step(
         self, fun: RHS, state: StepperState, t_bound: float, project: Projector | None = None,
@@ -690,9 +702,141 @@ def _dp_dense(t0: float, h: float, y0: FloatArray, y1: FloatArray, K: FloatArray
     return interp
 
 
+@dataclass(frozen=True)
+class DOP853(Integrator):
+    """Adaptive explicit Runge–Kutta 8(5,3) of Dormand & Prince with a 7th-order continuous
+    extension (``"dop853"``; Hairer, Nørsett & Wanner, *Solving ODEs I*, II.10).
+
+    Twelve stages per step; the error is Hairer's combination of the 5th- and 3rd-order
+    estimates, ``err = ‖e₅‖² / √(N (‖e₅‖² + 0.01‖e₃‖²))`` in the RMS-scaled norm of
+    :class:`DormandPrince5` (scale ``atol + rtol·max(|y0_i|, |y1_i|)``, widened by the
+    projection's round-off level near a singular passage), accepted when ≤ 1; the next step is
+    ``h·min(6, max(1/3, 0.9·err^(-1/8)))``. With a projection both estimates are measured on
+    projected solutions, as in :class:`DormandPrince5`. The continuous extension costs
+    ``F(t + h, y1)`` and three more stages, evaluated only for a step with an output sample
+    inside. Singular passages: every attempt is placed so that a predicted instant falls at
+    0.41–0.52 of it, inside the widest gap of the nodes (1/3 | 0.6).
+
+    Parameters
+    ----------
+    rtol, atol, h_max, h_min_factor, passages
+        As :class:`DormandPrince5`.
+    """
+
+    rtol: float = 1e-8
+    atol: float = 1e-10
+    h_max: float = np.inf
+    h_min_factor: float = 1e-14
+    passages: bool = True
+
+    name: ClassVar[str] = "dop853"
+    order: ClassVar[int] = 8
+    adaptive: ClassVar[bool] = True
+    passage_fractions: ClassVar[tuple[float, ...]] = (0.41, 0.465, 0.52)  # nodes 1/3 | 0.6
+
+    def __post_init__(self) -> None:
+        if not (self.rtol > 0 and self.atol >= 0):
+            raise InputError(f"dop853: need rtol > 0 and atol ≥ 0, got rtol={self.rtol}, atol={self.atol}")
+
+    @staticmethod
+    def _stages(fun: RHS, t: float, y: FloatArray, K: FloatArray, h: float, first: int, last: int) -> None:
+        for s in range(first, last):
+            K[s] = fun(t + _D8.C[s] * h, y + h * (_D8.A[s, :s] @ K[:s]))
+
+    def advance(self, fun: RHS, t: float, y: FloatArray, f: FloatArray | None, h: float) -> FloatArray:
+        K = np.empty((16, y.shape[0]))
+        K[0] = fun(t, y) if f is None else f
+        self._stages(fun, t, y, K, h, 1, 12)
+        return y + h * (_D8.B @ K[:12])
+
+    def step(
+        self, fun: RHS, state: StepperState, t_bound: float, project: Projector | None = None,
+        place: Placer | None = None,
+    ) -> StepResult:  # fmt: skip
+        t, y = state.t, state.y
+        f0 = fun(t, y) if state.f is None else state.f
+        h = state.h
+        if not np.isfinite(h) or h <= 0:
+            h = _initial_step(fun, t, y, f0, t_bound, self.rtol, self.atol, self.h_max, 8)
+        h = min(h, self.h_max)
+        rejected = 0
+        h_min = self.h_min_factor * max(1.0, abs(t))
+        noise = float(getattr(place, "noise", 0.0))
+        K = np.empty((16, y.shape[0]))
+        K[0] = f0
+        while True:
+            h = _clip(t, h if place is None else place(t, h), t_bound)
+            if h < h_min:
+                raise SimulationError(
+                    f"dop853: step size underflow at t = {t:.12g} (h = {h:.3g} < {h_min:.3g}); "
+                    "the problem may be stiff or the state non-smooth here"
+                )
+            self._stages(fun, t, y, K, h, 1, 12)
+            y1 = y + h * (_D8.B @ K[:12])
+            e5 = h * (_D8.E5[:12] @ K[:12])
+            e3 = h * (_D8.E3[:12] @ K[:12])
+            if project is not None:
+                yq = project(t + h, y1)
+                e5 = yq - project(t + h, y1 - e5)
+                e3 = yq - project(t + h, y1 - e3)
+            big = np.maximum(np.abs(y), np.abs(y1))
+            scale = self.atol + self.rtol * big + noise * (1.0 + big)
+            s5 = float(np.sum((e5 / scale) ** 2))
+            s3 = float(np.sum((e3 / scale) ** 2))
+            den = s5 + 0.01 * s3
+            err = s5 / math.sqrt(den * y.shape[0]) if den > 0.0 else 0.0
+            if not np.isfinite(err):
+                rejected += 1
+                h *= 0.2
+                continue
+            if err <= 1.0:
+                fac = 6.0 if err == 0.0 else min(6.0, max(1.0 / 3.0, 0.9 * err ** (-0.125)))
+                if rejected:
+                    fac = min(fac, 1.0)
+                t1 = t_bound if h == t_bound - t else t + h
+                f1 = None
+                if project is None:  # the FSAL stage (with a projection F is taken at the projected end)
+                    f1 = fun(t + h, y1)
+                    K[12] = f1
+                dense = _d8_dense(fun, t, h, y, y1, K.copy(), f1 is not None)
+                h_next = min(h * fac, self.h_max)
+                return StepResult(StepperState(t1, y1, f1, h_next), h, rejected, dense)
+            rejected += 1
+            h *= max(1.0 / 3.0, 0.9 * err ** (-0.125))
+
+
+def _d8_dense(
+    fun: RHS, t0: float, h: float, y0: FloatArray, y1: FloatArray, K: FloatArray, have_f1: bool
+) -> Callable[[float], FloatArray]:
+    """DOP853's 7th-order continuous extension on [t0, t0 + h]: F(t0 + h, y1) (unless known)
+    and the three extra stages are evaluated at the first call."""
+    F: list[FloatArray] = []
+
+    def setup() -> None:
+        if not have_f1:
+            K[12] = fun(t0 + h, y1)
+        DOP853._stages(fun, t0, y0, K, h, 13, 16)
+        dy = y1 - y0
+        F.extend([dy, h * K[0] - dy, 2.0 * dy - h * (K[12] + K[0])])
+        F.extend(h * (_D8.D @ K))
+
+    def interp(t: float) -> FloatArray:
+        if not F:
+            setup()
+        x = (t - t0) / h
+        x1 = 1.0 - x
+        p = F[6]
+        for c, w in ((F[5], x), (F[4], x1), (F[3], x), (F[2], x1), (F[1], x), (F[0], x1)):
+            p = c + w * p
+        return y0 + x * p
+
+    return interp
+
+
 #: Integrators by name (``method=`` of :func:`nonmin.sim.simulate`).
 METHODS: dict[str, type[Integrator]] = {
     "rk4": RK4,
     "dopri5": DormandPrince5,
     "midpoint": ImplicitMidpoint,
+    "dop853": DOP853,
 }

@@ -85,7 +85,8 @@ class Solver:
     ----------
     method : str or Integrator, default "rk4"
         ``"rk4"`` (fixed step ``dt``), ``"dopri5"`` (adaptive, ``rtol``/``atol``),
-        ``"midpoint"`` (implicit midpoint, fixed ``dt``), any name of
+        ``"dop853"`` (adaptive, order 8: tight tolerances, long runs), ``"midpoint"``
+        (implicit midpoint, fixed ``dt``), any name of
         :data:`nonmin.sim.METHODS`, or an :class:`~nonmin.sim.Integrator` value.
     dt : float, optional
         Step of fixed-step methods (default :data:`nonmin.sim.DEFAULT_DT`); for adaptive ones

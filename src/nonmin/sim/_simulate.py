@@ -42,7 +42,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any, NamedTuple
 
@@ -390,6 +390,25 @@ def _resolve_method(method: Integrator | str, dt: float | None, rtol: float, ato
     )
 
 
+def _energy_level(
+    stab: Projection, model: Model, t0: float, q: FloatArray, qd: FloatArray, act: frozenset[str],
+    rank_rtol: float | None, project_initial: bool, nonconservative: bool,
+) -> Projection:  # fmt: skip
+    """``Projection(energy=True)``: refuse what is visibly not conservative, fill in the level
+    (the energy of the projected initial state) when not given."""
+    kinds = {c.name: c.kind for c in model.constraints}
+    if nonconservative or any(kinds.get(c) == "rheonomic" for c in act):
+        raise InputError(
+            "stabilization: Projection(energy=True) holds the energy of a conservative system; "
+            "got a controller, events, unilateral contact or a driver (rheonomic constraint)"
+        )
+    if stab.energy_level is not None:
+        return stab
+    if project_initial and act:
+        q, qd = replace(stab, energy=False).project(model, t0, q, qd, act, rank_rtol)
+    return replace(stab, energy_level=float(model.energy(q, qd)))
+
+
 #: Earlier step ends a resumed run observes for its singular-passage history.
 PASSAGE_HISTORY = 8
 
@@ -518,7 +537,7 @@ def simulate(
         A :class:`nonmin.control.Controller` (``initial_state`` and ``update`` are used when
         present); ``u`` has shape (k,) and enters as ``B(q) u``.
     method, dt : shorthands of ``solver``
-        The integrator (``"rk4"``, ``"dopri5"``, ``"midpoint"`` or an :class:`Integrator`
+        The integrator (``"rk4"``, ``"dopri5"``, ``"dop853"``, ``"midpoint"`` or an :class:`Integrator`
         value) and its step: ``simulate(m, 1, method="rk4", dt=1e-3)`` is
         ``simulate(m, 1, solver=Solver("rk4", dt=1e-3))``.
     solver : Solver, optional
@@ -708,6 +727,9 @@ def simulate(
         "initial_state": {"t": t0, "q": q.tolist(), "qd": qd.tolist(), "active": sorted(act)},
         "engine": "compiled" if prog is not None else ("engine" if use_engine else "python"),
     }
+    if isinstance(stab, Projection) and stab.energy:
+        stab = _energy_level(stab, model, t0, q, qd, act, rank_rtol, project_initial,
+                             bool(controller is not None or events or unilateral))  # fmt: skip
     rec = _Recorder(model)
     passages = SingularPassages(integ.passage_fractions) if getattr(integ, "passages", False) else None
     seed = _passage_history(prev, act, t_out)

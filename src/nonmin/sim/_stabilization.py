@@ -23,6 +23,7 @@ remedies, given as objects or registered names (:data:`STABILIZATIONS`):
 
 from __future__ import annotations
 
+import math
 from abc import ABC
 from dataclasses import dataclass, replace
 from typing import ClassVar
@@ -241,6 +242,18 @@ class Projection(Stabilization):
         change point is passed in 72 steps with 6e-10 error; without, the step collapses to
         3e-11 s — the adaptive rank tolerance of :func:`simulate` now cures that too); harmful
         with fixed-step RK4 (2 J energy kick), so not the default.
+    energy : bool, default False
+        Also hold the total energy ``E = T(q, q̇) + V(q)`` at its initial value (conservative
+        systems only: no controller, input, damper, driver, event or contact; :func:`simulate`
+        refuses those it can see). After the velocity step q̇ is scaled by
+        ``α = √((E₀ − V(q))/T(q, q̇))``: the mass-metric projection of q̇ onto the energy level
+        set (the gradient of E in q̇ is M q̇), which keeps ``A q̇ = 0``. Skipped where it would
+        change T by more than :data:`ENERGY_MAX_CHANGE` (a turning point, T → 0): a later
+        step corrects it. The energy error then stays at round-off over any horizon (the
+        phase error still grows); measured in ``docs/theory.md``.
+    energy_level : float, optional
+        The level E₀ to hold (J); default: the energy of the projected initial state, which
+        :func:`simulate` fills in.
     """
 
     tol: float = 0.0
@@ -248,6 +261,8 @@ class Projection(Stabilization):
     velocity: bool = True
     metric: str = "mass"
     velocity_rtol: float | None = None
+    energy: bool = False
+    energy_level: float | None = None
 
     name: ClassVar[str] = "projection"
 
@@ -340,7 +355,26 @@ class Projection(Stabilization):
         if self.velocity and ct.A.shape[0]:
             qd = qd + _correction(M if eye is None else eye, ct.A, ct.velocity,
                                   self.velocity_rank_rtol(rtol))  # fmt: skip
+        if self.energy and self.energy_level is not None:
+            qd = energy_scale(float(self.energy_level), model.potential_energy(q), model.kinetic_energy(q, qd), qd)
         return q, qd
+
+
+#: :class:`Projection` with ``energy=True`` scales q̇ only when that changes the kinetic energy by
+#: at most this fraction (near a turning point, T → 0, the scaling is ill-conditioned).
+ENERGY_MAX_CHANGE = 1e-2
+
+
+def energy_scale(level: float, V: float, T: float, qd: FloatArray) -> FloatArray:
+    """q̇ scaled onto the energy level ``T + V = level`` (``α = √((level − V)/T)``), or q̇ itself
+    when ``|α² − 1| > ENERGY_MAX_CHANGE`` or T ≤ 0. The engine computes the same
+    (``engine/src/sim_loop.cpp``, ``project``)."""
+    if not (T > 0.0):
+        return qd
+    a2 = (level - V) / T
+    if not (abs(a2 - 1.0) <= ENERGY_MAX_CHANGE):
+        return qd
+    return qd * math.sqrt(a2)
 
 
 #: Constraint stabilizations by name (``stabilization=`` of :func:`nonmin.sim.simulate`).

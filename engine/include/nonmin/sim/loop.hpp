@@ -44,7 +44,7 @@ constexpr double CHORD_RATE = 0.1;
 constexpr double SAMPLE_VELOCITY_RTOL = SINGULAR_CUT_RTOL;
 constexpr double DRIFT_RTOL_CAP = 1e-2;                  // drift_rank_rtol's upper bound
 
-enum class Method : int { rk4 = 0, dopri5 = 1, midpoint = 2 };
+enum class Method : int { rk4 = 0, dopri5 = 1, midpoint = 2, dop853 = 3 };
 enum class Stabilization : int { none = 0, baumgarte = 1, projection = 2 };
 
 // nonmin.sim.Projection's parameters.
@@ -54,7 +54,12 @@ struct ProjectionOptions {
     bool velocity = true;
     bool euclidean = false;      // metric="euclidean"
     double velocity_rtol = -1.0;  // ≤ 0: None
+    // energy=True with its level (NaN: off): q̇ scaled onto T + V = energy_level
+    double energy_level = std::numeric_limits<double>::quiet_NaN();
 };
+
+// _stabilization.ENERGY_MAX_CHANGE
+constexpr double ENERGY_MAX_CHANGE = 1e-2;
 
 struct Options {
     Method method = Method::rk4;
@@ -246,6 +251,13 @@ struct Loop {
     Vec y0, f0, y1, yq1, ys, yp, fp1, tmp2n, k1, k2, k3, k4, kn, ev;
     Mat K;  // (7 × 2n) dopri5 stages
     Vec d_ydiff, d_bspl, d_r3, d_r4;  // dopri5 continuous extension
+    // dop853 (sized only for it): the 12 stages of a step, F(t + h, y1) (row 12) and the three
+    // stages of the continuous extension (rows 13–15); its 7 coefficient rows (F8); the
+    // third-order error estimate e3; what of the accepted step is evaluated already
+    Mat K8, F8;
+    Vec e3;
+    bool d8_fsal = false, d8_dense = false;
+    double d8_t0 = 0.0, d8_h = 0.0;
     std::vector<Vec> half;            // midpoint halving levels
     Point p1, ps;
 
