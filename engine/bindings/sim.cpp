@@ -437,20 +437,28 @@ void bind_sim(nb::module_& m) {
             "Newton's e of automatic impacts per constraint and the impact velocity threshold.")
         .def(
             "set_friction",
-            [](SimLoop& s, const std::vector<std::tuple<int, int, double, int>>& contacts) {
+            [](SimLoop& s, const std::vector<std::tuple<int, int, double, int, double, double>>& contacts) {
                 std::vector<sim::FrictionContact> fc;
                 const int c = static_cast<int>(s.program->constraints().size());
-                for (const auto& [normal, tangent, mu, slip] : contacts) {
+                for (const auto& [normal, tangent, mu, slip, d0, d1] : contacts) {
                     if (normal < 0 || normal >= c || tangent < 0 || tangent >= c)
                         raise_typed("InputError", "friction contact: constraint index out of range");
                     if (!(mu >= 0.0) || slip < -1 || slip > 1)
                         raise_typed("InputError", "friction contact: mu must be >= 0 and slip in {-1, 0, 1}");
-                    fc.push_back({normal, tangent, mu, slip});
+                    sim::FrictionContact f;
+                    f.normal = normal;
+                    f.tangent = tangent;
+                    f.mu = mu;
+                    f.slip = slip;
+                    f.dir[0] = d0;
+                    f.dir[1] = d1;
+                    fc.push_back(f);
                 }
                 sim::set_friction(*s.loop, fc);
             },
             nb::arg("contacts"),
-            "Coulomb friction contacts (normal index, tangent index, mu, slip direction); before start/resume.")
+            "Coulomb friction contacts (normal index, tangent index, mu, slip, direction d0, d1); before "
+            "start/resume.")
         .def(
             "arm_friction",
             [](SimLoop& s) {
@@ -462,11 +470,12 @@ void bind_sim(nb::module_& m) {
         .def_prop_ro(
             "friction_slip",
             [](const SimLoop& s) {
-                std::vector<int> v;
-                for (const sim::FrictionContact& f : s.loop->fric) v.push_back(f.slip);
+                std::vector<std::tuple<int, double, double>> v;
+                for (const sim::FrictionContact& f : s.loop->fric) v.emplace_back(f.slip, f.dir[0], f.dir[1]);
                 return v;
             },
-            "The slip direction of each friction contact (0: sticking or open).")
+            "(slip, d0, d1) of each friction contact (slip 0: sticking or open; d: the slip direction of "
+            "a two-row contact).")
         .def_prop_ro(
             "painleve",
             [](const SimLoop& s) -> nb::object {

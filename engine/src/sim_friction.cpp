@@ -101,8 +101,9 @@ double min_principal_minor(const double* W, int k, int& where) {
     return best;
 }
 
-// the tangential velocity v_t = a_t q̇ of contact j at (t, q, qd) (one evaluation of its row)
-Status tangent_velocity(Loop& L, int j, double t, const double* q, const double* qd, double& vt) {
+// the tangential velocity v_t = A_t q̇ of contact j at (t, q, qd) (one evaluation of its rows;
+// vt[0..dim))
+Status tangent_velocity(Loop& L, int j, double t, const double* q, const double* qd, double* vt) {
     const FrictionContact& f = L.fric[static_cast<std::size_t>(j)];
     const auto& cons = L.prog->constraints();
     L.one_mask[static_cast<std::size_t>(f.tangent)] = 1;
@@ -110,19 +111,37 @@ Status tangent_velocity(Loop& L, int j, double t, const double* q, const double*
     L.one_mask[static_cast<std::size_t>(f.tangent)] = 0;
     if (r != Status::ok) return r;
     const int row = cons[static_cast<std::size_t>(f.tangent)].row;
-    vt = 0.0;
-    for (int i = 0; i < L.n; ++i) vt += L.T.A(row, i) * qd[i];
-    return std::isfinite(vt) ? Status::ok : Status::not_finite;
+    for (int k = 0; k < f.dim; ++k) {
+        vt[k] = 0.0;
+        for (int i = 0; i < L.n; ++i) vt[k] += L.T.A(row + k, i) * qd[i];
+        if (!std::isfinite(vt[k])) return Status::not_finite;
+    }
+    return Status::ok;
 }
 
-// λ_n and λ_t of contact j at the point just evaluated (f_c), under the current active set
-void contact_lambda(Loop& L, int j, const double* fc, double& lam_n, double& lam_t) {
+double norm2(const double* v, int dim) { return dim == 1 ? std::abs(v[0]) : std::hypot(v[0], v[1]); }
+
+// λ_n and λ_t (dim entries) of contact j at the point just evaluated (f_c), current active set
+void contact_lambda(Loop& L, int j, const double* fc, double& lam_n, double* lam_t) {
     const FrictionContact& f = L.fric[static_cast<std::size_t>(j)];
     ensure_release(L);
     release_forces(L, fc);
     const int rn = active_row(L, f.normal), rt = active_row(L, f.tangent);
     lam_n = rn >= 0 ? L.lam_c[rn] : 0.0;
-    lam_t = rt >= 0 ? L.lam_c[rt] : 0.0;
+    for (int k = 0; k < f.dim; ++k) lam_t[k] = rt >= 0 ? L.lam_c[rt + k] : 0.0;
+}
+
+// slip along v (dim entries, |v| > 0): s = sign for one row, the unit direction for two
+void slip_along(FrictionContact& f, const double* v) {
+    if (f.dim == 1) {
+        f.slip = v[0] > 0.0 ? 1 : -1;
+        f.dir[0] = f.slip;
+        return;
+    }
+    const double nv = norm2(v, 2);
+    f.slip = 1;
+    f.dir[0] = v[0] / nv;
+    f.dir[1] = v[1] / nv;
 }
 
 void set_tangent(Loop& L, int j, bool on) {
@@ -148,26 +167,34 @@ Status decide(Loop& L, double t, const Vec& y, int j, int mode) {
         friction_mask(L);
         return Status::ok;
     }
-    if (mode == 0) {
-        double vt = 0.0;
+    if (mode == 0 || (mode == 2 && f.dim == 2)) {  // (two rows: the slip speed may not reach 0)
+        double vt[2] = {0.0, 0.0};
         if ((r = tangent_velocity(L, j, t, q, qd, vt)) != Status::ok) return r;
-        if (std::abs(vt) > L.fr_vthresh) {
+        if (norm2(vt, f.dim) > L.fr_vthresh) {
             set_tangent(L, j, false);
-            f.slip = vt > 0.0 ? 1 : -1;
+            slip_along(f, vt);
             friction_mask(L);
             return Status::ok;
         }
     }
     const int slip_before = f.slip;
+    const double dir_before[2] = {f.dir[0], f.dir[1]};
     f.slip = 0;
     set_tangent(L, j, true);
     friction_mask(L);
     if ((r = point(L, t, q, qd, L.fr_p, false)) != Status::ok) return r;
-    double lam_n = 0.0, lam_t = 0.0;
+    double lam_n = 0.0, lam_t[2] = {0.0, 0.0};
     contact_lambda(L, j, L.fr_p.f_c.data(), lam_n, lam_t);
-    if (mode != 1 && std::abs(lam_t) <= f.mu * lam_n) return Status::ok;  // sticks
+    if (mode != 1 && norm2(lam_t, f.dim) <= f.mu * lam_n) return Status::ok;  // sticks
     set_tangent(L, j, false);
-    f.slip = lam_t > 0.0 ? -1 : (lam_t < 0.0 ? 1 : (slip_before != 0 ? slip_before : 1));
+    if (norm2(lam_t, f.dim) > 0.0) {  // slip opposite to the sticking force
+        const double mv[2] = {-lam_t[0], -lam_t[1]};
+        slip_along(f, mv);
+    } else {
+        f.slip = slip_before != 0 ? slip_before : 1;
+        f.dir[0] = slip_before != 0 ? dir_before[0] : 1.0;
+        f.dir[1] = slip_before != 0 ? dir_before[1] : 0.0;
+    }
     friction_mask(L);
     return Status::ok;
 }
@@ -176,6 +203,10 @@ Status decide(Loop& L, double t, const Vec& y, int j, int mode) {
 
 void set_friction(Loop& L, const std::vector<FrictionContact>& contacts) {
     L.fric = contacts;
+    for (FrictionContact& f : L.fric) {
+        f.dim = std::min(L.prog->constraints()[static_cast<std::size_t>(f.tangent)].dim, 2);
+        if (f.dim == 1) f.dir[0] = f.slip;
+    }
     const int k = static_cast<int>(contacts.size());
     const int mr = std::max(L.m_all, 1);
     L.fr_J.reserve(static_cast<std::size_t>(k));
@@ -204,7 +235,7 @@ void friction_mask(Loop& L) {
             L.eval_mask[static_cast<std::size_t>(f.tangent)] = 1;
 }
 
-Status friction_forces(Loop& L, double t, double* qdd, double* fc) {
+Status friction_forces(Loop& L, double t, const double* qd, double* qdd, double* fc) {
     L.fr_J.clear();
     const int nf = static_cast<int>(L.fric.size());
     for (int j = 0; j < nf; ++j) {
@@ -217,11 +248,34 @@ Status friction_forces(Loop& L, double t, double* qdd, double* fc) {
     if (k > MAX_SLIP) return Status::bad_shape;
     const int n = L.n;
     const auto& cons = L.prog->constraints();
-    // responses to a unit force along each slipping contact's tangential row: q̈_j = M̄⁻¹P a_tᵀ,
-    // f_c,j = −S a_tᵀ (the held factorization, zero bias)
+    // responses to a unit force along each slipping contact's slip direction, g_j = A_tᵀ e_j
+    // (e = s for one row; the slip velocity's unit direction for two — the one at the last
+    // event when it vanishes): q̈_j = M̄⁻¹P g_j, f_c,j = −S g_j (the held factorization, zero bias)
     for (int b = 0; b < k; ++b) {
-        const int row = cons[static_cast<std::size_t>(L.fric[static_cast<std::size_t>(L.fr_J[b])].tangent)].row;
-        for (int i = 0; i < n; ++i) L.fr_g[i] = L.T.A(row, i);
+        const FrictionContact& fb = L.fric[static_cast<std::size_t>(L.fr_J[b])];
+        const int row = cons[static_cast<std::size_t>(fb.tangent)].row;
+        double e[2] = {static_cast<double>(fb.slip), 0.0};
+        if (fb.dim == 2) {
+            double v[2] = {0.0, 0.0};
+            for (int kk = 0; kk < 2; ++kk)
+                for (int i = 0; i < n; ++i) v[kk] += L.T.A(row + kk, i) * qd[i];
+            const double nv = norm2(v, 2);
+            // ahead of the direction of the last event: the exact cone (opposite to v_t); past the
+            // plane dir·v_t = 0 (where the guard locates the stop) the force keeps −dir, as s does
+            // for one row, so the crossing is not smeared over a step
+            if (nv > 0.0 && std::isfinite(nv) && v[0] * fb.dir[0] + v[1] * fb.dir[1] > 0.0) {
+                e[0] = v[0] / nv;
+                e[1] = v[1] / nv;
+            } else {
+                e[0] = fb.dir[0];
+                e[1] = fb.dir[1];
+            }
+        }
+        for (int i = 0; i < n; ++i) {
+            double gi = 0.0;
+            for (int kk = 0; kk < fb.dim; ++kk) gi += e[kk] * L.T.A(row + kk, i);
+            L.fr_g[i] = gi;
+        }
         const SolveInfo info = L.solver.again(L.T.M.data(), L.fr_g.data(), L.fr_zero.data(), &L.fr_rq(b, 0),
                                               &L.fr_rf(b, 0));
         if (info.status != Status::ok) return info.status;
@@ -235,7 +289,7 @@ Status friction_forces(Loop& L, double t, double* qdd, double* fc) {
         const FrictionContact& fb = L.fric[static_cast<std::size_t>(L.fr_J[b])];
         release_forces(L, &L.fr_rf(b, 0));
         for (int a = 0; a < k; ++a)
-            L.fr_W[a * k + b] = (a == b ? 1.0 : 0.0) + L.lam_c[L.fr_rown[a]] * fb.mu * fb.slip;
+            L.fr_W[a * k + b] = (a == b ? 1.0 : 0.0) + L.lam_c[L.fr_rown[a]] * fb.mu;
     }
     int where = 0;
     const double pmin = k == 1 ? L.fr_W[0] : min_principal_minor(L.fr_W.data(), k, where);
@@ -258,7 +312,7 @@ Status friction_forces(Loop& L, double t, double* qdd, double* fc) {
         const FrictionContact& fb = L.fric[static_cast<std::size_t>(L.fr_J[b])];
         const double N = L.fr_tmp[b];
         L.fr_N[static_cast<std::size_t>(L.fr_J[b])] = N;
-        const double F = -fb.mu * fb.slip * N;
+        const double F = -fb.mu * N;  // along g_b = A_tᵀ e_b
         for (int i = 0; i < n; ++i) {
             qdd[i] += F * L.fr_rq(b, i);
             fc[i] += F * L.fr_rf(b, i);
@@ -270,14 +324,16 @@ Status friction_forces(Loop& L, double t, double* qdd, double* fc) {
 Status friction_guard_value(Loop& L, const ContactGuard& G, double t, const double* q, const double* qd,
                             double& g) {
     const FrictionContact& f = L.fric[static_cast<std::size_t>(G.fric)];
-    if (f.slip != 0) {
-        double vt = 0.0;
+    if (f.slip != 0) {  // s·v_t (one row), dir·v_t (two rows)
+        double vt[2] = {0.0, 0.0};
         const Status r = tangent_velocity(L, G.fric, t, q, qd, vt);
-        g = f.slip * vt;
+        g = f.dim == 1 ? f.slip * vt[0] : f.dir[0] * vt[0] + f.dir[1] * vt[1];
         return r;
     }
     const int rn = active_row(L, f.normal), rt = active_row(L, f.tangent);
-    g = (rn >= 0 && rt >= 0) ? f.mu * L.lam_c[rn] - std::abs(L.lam_c[rt]) : 0.0;
+    double lt[2] = {0.0, 0.0};
+    for (int k = 0; k < f.dim && rt >= 0; ++k) lt[k] = L.lam_c[rt + k];
+    g = (rn >= 0 && rt >= 0) ? f.mu * L.lam_c[rn] - norm2(lt, f.dim) : 0.0;
     return std::isfinite(g) ? Status::ok : Status::not_finite;
 }
 
@@ -340,6 +396,7 @@ Status friction_transition(Loop& L, double t, Vec& y, const std::vector<int>& fi
         FrictionContact& f = L.fric[static_cast<std::size_t>(j)];
         const bool stick0 = L.active[static_cast<std::size_t>(f.tangent)] != 0;
         const int slip0 = f.slip;
+        const double d00 = f.dir[0], d01 = f.dir[1];
         const bool hit = std::find(fired.begin(), fired.end(), j) != fired.end();
         int mode = -1;
         if (!L.active[static_cast<std::size_t>(f.normal)]) {
@@ -352,7 +409,8 @@ Status friction_transition(Loop& L, double t, Vec& y, const std::vector<int>& fi
         if (mode < 0) continue;
         const Status r = decide(L, t, y, j, mode);
         if (r != Status::ok) return r;
-        if (hit || stick0 != (L.active[static_cast<std::size_t>(f.tangent)] != 0) || slip0 != f.slip)
+        if (hit || stick0 != (L.active[static_cast<std::size_t>(f.tangent)] != 0) || slip0 != f.slip ||
+            (f.dim == 2 && f.slip != 0 && (d00 != f.dir[0] || d01 != f.dir[1])))
             changed.push_back(j);
     }
     return Status::ok;

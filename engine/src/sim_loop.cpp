@@ -242,7 +242,7 @@ Status rhs(Loop& L, double t, const double* y, double* out) {
     const bool fr = !L.fric.empty();
     const SolveInfo info = dynamics_solve(L, t, q, rtol, L.qdd.data(), fr ? L.fc.data() : nullptr);
     if (info.status != Status::ok) return info.status;
-    if (fr && (s = friction_forces(L, t, L.qdd.data(), L.fc.data())) != Status::ok) return s;
+    if (fr && (s = friction_forces(L, t, qd, L.qdd.data(), L.fc.data())) != Status::ok) return s;
     if (!finite(L.qdd.data(), n)) return Status::not_finite;
     for (int i = 0; i < n; ++i) {
         out[i] = qd[i];
@@ -262,7 +262,7 @@ Status point(Loop& L, double t, const double* q, const double* qd, Point& p, boo
     const double rtol = drift_rank_rtol(L);
     const SolveInfo info = dynamics_solve(L, t, q, rtol, p.qdd.data(), p.f_c.data());
     if (info.status != Status::ok) return info.status;
-    if (!L.fric.empty() && (s = friction_forces(L, t, p.qdd.data(), p.f_c.data())) != Status::ok) return s;
+    if (!L.fric.empty() && (s = friction_forces(L, t, qd, p.qdd.data(), p.f_c.data())) != Status::ok) return s;
     if (!finite(p.qdd.data(), n)) return Status::not_finite;
     p.t = t;
     for (int i = 0; i < n; ++i) {

@@ -130,6 +130,7 @@ CONTACT_CLAIMS = [
     "PainleveError at contact 'floor', t = 0.0, factor -0.125000 (closed form 1 - 1.5*3/4 = -0.125000)",
     "stick:heel@0.548 stick:toe@0.548",
     "at rest: {'heel': ('stick', 5.886), 'toe': ('stick', 5.886)}",
+    "stick:floor at t = 0.6371049949 s (v0/(mu g) = 0.6371049949)",
 ]
 
 

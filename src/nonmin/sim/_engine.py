@@ -294,7 +294,7 @@ class EngineResult(NamedTuple):
     guards: list[float]  # the contact guards' values at the last accepted step end (or event)
     transition: bool = False  # the engine located contact events and applied them (`events`)
     events: tuple[dict[str, Any], ...] = ()  # what the engine's event layer applied
-    slip: tuple[int, ...] = ()  # friction contacts' slip directions at the end (0: stick/open)
+    slip: tuple[tuple[int, float, float], ...] = ()  # friction contacts' (slip, d0, d1) at the end
     painleve: tuple[int, float, float] | None = None  # (friction contact, t, factor) when met
 
 
@@ -314,7 +314,7 @@ def run(
     compiled: Any = None,
     contact: tuple[list[float], float] | None = None,
     passage_seed: tuple[FloatArray, FloatArray] | None = None,
-    friction: list[tuple[int, int, float, int]] | None = None,
+    friction: list[tuple[int, int, float, int, float, float]] | None = None,
 ) -> EngineResult:
     """Run the engine loop to ``opts.t1``, a handover or a watched event.
 

@@ -40,9 +40,10 @@ class ContactState(NamedTuple):
     N : float
         Normal force (``λ_n``; 0 when open).
     F : float
-        Tangential force along the tangential row (``λ_t`` sticking, ``−μ s N`` slipping).
+        Tangential force: one row, along the row (``λ_t`` sticking, ``−μ s N`` slipping); two
+        rows, its magnitude (``|λ_t|`` sticking; slipping ``−μ N``, opposite to the slip).
     v_t : float
-        Slip velocity ``a_t q̇``.
+        Slip velocity ``a_t q̇`` (two rows: its magnitude).
     s : int
         Slip direction (0 unless slipping).
     """
@@ -54,21 +55,54 @@ class ContactState(NamedTuple):
     s: int
 
 
-def engine_contacts(model: Model, slip: Mapping[str, int]) -> list[tuple[int, int, float, int]]:
-    """The engine's friction contacts ``(normal index, tangent index, μ, s)``."""
+#: A slipping contact's state: its direction ``e`` (one row: ``(s,)``, s = ±1; two rows: the unit
+#: direction of the slip velocity at the last event).
+Slip = tuple[float, ...]
+
+
+def engine_contacts(model: Model, slip: Mapping[str, Slip]) -> list[tuple[int, int, float, int, float, float]]:
+    """The engine's friction contacts ``(normal index, tangent index, μ, slip, d0, d1)``."""
     index = {c.name: i for i, c in enumerate(model.constraints)}
-    return [(index[f.normal], index[f.tangent], float(f.mu), int(slip.get(f.normal, 0)))
-            for f in model.friction_contacts]  # fmt: skip
+    out = []
+    for f in model.friction_contacts:
+        e = slip.get(f.normal)
+        if e is None:
+            out.append((index[f.normal], index[f.tangent], float(f.mu), 0, 0.0, 0.0))
+        elif len(e) == 1:
+            out.append((index[f.normal], index[f.tangent], float(f.mu), int(e[0]), float(e[0]), 0.0))
+        else:
+            out.append((index[f.normal], index[f.tangent], float(f.mu), 1, float(e[0]), float(e[1])))
+    return out
 
 
-def _tangent_row(model: Model, t: float, q: FloatArray, qd: FloatArray, fc: FrictionContact) -> FloatArray:
+def slip_from_engine(model: Model, states: Any) -> dict[str, Slip]:
+    """The slip states the engine returns (``(slip, d0, d1)`` per contact) by normal name."""
+    out: dict[str, Slip] = {}
+    for f, (s, d0, d1) in zip(model.friction_contacts, states, strict=True):
+        if s:
+            out[f.normal] = (float(s),) if model.constraint(f.tangent).dim == 1 else (float(d0), float(d1))
+    return out
+
+
+def _tangent_rows(model: Model, t: float, q: FloatArray, qd: FloatArray, fc: FrictionContact) -> FloatArray:
+    """The tangential constraint's rows A_t, shape (dim, n)."""
     act = frozenset({fc.tangent})
     ct = model.constraint_terms(t, q, qd, act)
-    return np.asarray(ct.A[model.row_slices(act)[fc.tangent].start])
+    return np.asarray(ct.A[model.row_slices(act)[fc.tangent]])
+
+
+def _direction(At: FloatArray, qd: FloatArray, e: Slip) -> FloatArray:
+    """The slip direction: ``(s,)`` for one row; v_t/|v_t| for two (``e`` when v_t vanishes)."""
+    if At.shape[0] == 1:
+        return np.array([float(e[0])])
+    v = At @ qd
+    nv = float(np.linalg.norm(v))
+    ev = np.asarray(e, dtype=float)
+    return v / nv if nv > 0.0 and float(v @ ev) > 0.0 else ev  # (past dir·v_t = 0: the event's direction)
 
 
 def _solve(
-    model: Model, t: float, q: FloatArray, qd: FloatArray, active: frozenset[str], slip: Mapping[str, int],
+    model: Model, t: float, q: FloatArray, qd: FloatArray, active: frozenset[str], slip: Mapping[str, Slip],
     g_extra: FloatArray | None, rank_rtol: float | None, bias: Any,
 ) -> tuple[SlipDynamics, FloatArray, dict[str, slice], list[FrictionContact]]:  # fmt: skip
     """slip_dynamics at a state, with the slipping contacts of ``slip`` (normal active, tangent
@@ -80,11 +114,15 @@ def _solve(
         g = g + g_extra
     rows = model.row_slices(active)
     sliding = [f for f in model.friction_contacts
-               if slip.get(f.normal, 0) and f.normal in active and f.tangent not in active]  # fmt: skip
-    A_t = np.array([_tangent_row(model, t, q, qd, f) for f in sliding]).reshape(len(sliding), model.n)
+               if f.normal in slip and f.normal in active and f.tangent not in active]  # fmt: skip
+    rows_t = []
+    for f in sliding:  # the force −μ N along g = A_tᵀ e
+        At = _tangent_rows(model, t, q, qd, f)
+        rows_t.append(_direction(At, qd, slip[f.normal]) @ At)
+    A_t = np.array(rows_t).reshape(len(sliding), model.n)
     b = ct.gamma if bias is None else bias(ct)
     sol = slip_dynamics(terms.M, g, ct.A, b, [rows[f.normal].start for f in sliding], A_t,
-                        [f.mu for f in sliding], [slip[f.normal] for f in sliding], rtol=rank_rtol)  # fmt: skip
+                        [f.mu for f in sliding], np.ones(len(sliding)), rtol=rank_rtol)  # fmt: skip
     lam = np.asarray(range_basis(ct.A, rank_rtol).pinv().T @ sol.f_c) if ct.A.shape[0] else np.zeros(0)
     return sol, lam, rows, sliding
 
@@ -95,7 +133,7 @@ def friction_state(
     q: ArrayLike,
     qd: ArrayLike,
     active: Iterable[str],
-    slip: Mapping[str, int] | None = None,
+    slip: Mapping[str, float | tuple[float, ...]] | None = None,
     *,
     f: ArrayLike | None = None,
     rank_rtol: float | None = None,
@@ -109,9 +147,10 @@ def friction_state(
     t, q, qd : float, array_like (n,), array_like (n,)
     active : iterable of str
         The active set (a sticking contact has its tangential constraint in it).
-    slip : mapping of normal name to ±1, optional
+    slip : mapping of normal name to ±1 (one tangential row) or a unit 2-vector (two), optional
         Slip directions of the slipping contacts (normal active, tangent not); by default
-        the sign of the slip velocity.
+        the direction of the slip velocity. (Two rows: the force is always opposite to the slip
+        velocity; the vector is used only where that velocity vanishes.)
     f : array_like (n,), optional
         Applied generalized force besides ``h`` and the model's passive forces.
     rank_rtol : float, optional
@@ -130,31 +169,38 @@ def friction_state(
     act = model.resolve_active(active)
     qv = np.asarray(q, dtype=float)
     qdv = np.asarray(qd, dtype=float)
-    vts = {fc.normal: float(_tangent_row(model, t, qv, qdv, fc) @ qdv) for fc in model.friction_contacts}
+    vts = {fc.normal: _tangent_rows(model, t, qv, qdv, fc) @ qdv for fc in model.friction_contacts}
+    slips: dict[str, Slip] = {}
     if slip is None:
-        slip = {
-            fc.normal: int(np.sign(vts[fc.normal]))
-            for fc in model.friction_contacts
-            if fc.normal in act and fc.tangent not in act
-        }
+        for fc in model.friction_contacts:
+            v = vts[fc.normal]
+            if fc.normal in act and fc.tangent not in act and np.any(v != 0.0):
+                slips[fc.normal] = (float(np.sign(v[0])),) if v.size == 1 else tuple(v / np.linalg.norm(v))
+    else:
+        for k, e in slip.items():
+            slips[k] = tuple(float(x) for x in np.ravel(np.asarray(e, dtype=float)))
     fx = None if f is None else np.asarray(f, dtype=float)
-    sol, lam, rows, sliding = _solve(model, t, qv, qdv, act, slip, fx, rank_rtol, None)
+    sol, lam, rows, sliding = _solve(model, t, qv, qdv, act, slips, fx, rank_rtol, None)
     if not sol.consistent:
         _raise_painleve(model, sliding, sol, t)
     out: dict[str, ContactState] = {}
     for fc in model.friction_contacts:
-        vt = vts[fc.normal]
+        v = vts[fc.normal]
+        vt = float(v[0]) if v.size == 1 else float(np.linalg.norm(v))
         if fc.normal not in act:
             out[fc.normal] = ContactState("open", 0.0, 0.0, vt, 0)
         elif fc.tangent in act:
+            lt = lam[rows[fc.tangent]]
             out[fc.normal] = ContactState("stick", float(lam[rows[fc.normal].start]),
-                                          float(lam[rows[fc.tangent].start]), vt, 0)  # fmt: skip
+                                          float(lt[0]) if lt.size == 1 else float(np.linalg.norm(lt)), vt, 0)  # fmt: skip
         else:
             j = next((i for i, g in enumerate(sliding) if g.normal == fc.normal), None)
             if j is None:  # closed, no direction: no friction force
                 out[fc.normal] = ContactState("slip", float(lam[rows[fc.normal].start]), 0.0, vt, 0)
             else:
-                out[fc.normal] = ContactState("slip", float(sol.N[j]), float(sol.F[j]), vt, int(slip[fc.normal]))
+                e = slips[fc.normal]
+                sgn = int(e[0]) if len(e) == 1 else 1
+                out[fc.normal] = ContactState("slip", float(sol.N[j]), float(sgn * sol.F[j]), vt, sgn)
     return sol.qdd, out
 
 
@@ -181,40 +227,41 @@ def initial_modes(
     rank_rtol: float | None,
     bias: Any = None,
     g_extra: FloatArray | None = None,
-) -> tuple[frozenset[str], dict[str, int]]:
+) -> tuple[frozenset[str], dict[str, Slip]]:
     """The contacts' modes at the start (the engine's decision ``mode 0``, in declaration
     order): open when the normal is inactive; slipping along the slip velocity when
     ``|v_t| > v_thresh``; else sticking when the sticking force lies in the cone
     (``|λ_t| ≤ μ λ_n``), else slipping opposite to it."""
     act = set(active)
-    slip: dict[str, int] = {}
+    slip: dict[str, Slip] = {}
     for fc in model.friction_contacts:
         if fc.normal not in act:
             act.discard(fc.tangent)
             continue
-        vt = float(_tangent_row(model, t, q, qd, fc) @ qd)
-        if fc.tangent not in act and abs(vt) > v_thresh:
-            slip[fc.normal] = 1 if vt > 0 else -1
+        v = _tangent_rows(model, t, q, qd, fc) @ qd
+        if fc.tangent not in act and float(np.linalg.norm(v)) > v_thresh:
+            slip[fc.normal] = (float(np.sign(v[0])),) if v.size == 1 else tuple(v / np.linalg.norm(v))
             continue
         trial = frozenset(act | {fc.tangent})
         sol, lam, rows, sliding = _solve(model, t, q, qd, trial, slip, g_extra, rank_rtol, bias)
         if not sol.consistent:
             _raise_painleve(model, sliding, sol, t)
-        lam_n, lam_t = float(lam[rows[fc.normal].start]), float(lam[rows[fc.tangent].start])
-        if abs(lam_t) <= fc.mu * lam_n:
+        lam_n, lam_t = float(lam[rows[fc.normal].start]), lam[rows[fc.tangent]]
+        nt = float(np.linalg.norm(lam_t))
+        if nt <= fc.mu * lam_n:
             act.add(fc.tangent)
         else:
             act.discard(fc.tangent)
-            slip[fc.normal] = -1 if lam_t > 0 else 1
+            slip[fc.normal] = (float(-np.sign(lam_t[0])),) if lam_t.size == 1 else tuple(-lam_t / nt)
     return frozenset(act), slip
 
 
 def first_point(
-    model: Model, p: Any, active: frozenset[str], slip: Mapping[str, int], *, rank_rtol: float | None,
+    model: Model, p: Any, active: frozenset[str], slip: Mapping[str, Slip], *, rank_rtol: float | None,
     bias: Any, B_u: FloatArray | None,
 ) -> Any:  # fmt: skip
     """The general driver's first sample with the slipping contacts' friction applied."""
-    if not any(slip.get(f.normal, 0) for f in model.friction_contacts):
+    if not slip:
         return p
     sol, lam, _, _ = _solve(model, p.t, p.q, p.qd, active, slip, B_u, rank_rtol, bias)
     if not sol.consistent:  # the engine's first evaluation reports it (PainleveError)

@@ -696,7 +696,7 @@ def simulate(
     use_engine = False
     why: str | None = None
     fcs = model.friction_contacts if contact else ()
-    slip: dict[str, int] = {}  # friction: slip directions of the slipping contacts (by normal name)
+    slip: dict[str, tuple[float, ...]] = {}  # friction: the slipping contacts' directions, by normal name
     if engine in ("auto", "engine"):
         why = _engine.ineligible(integ, stab, events, unilateral, engine)
         if why is not None and engine == "engine":
@@ -874,7 +874,7 @@ def simulate(
                 for i, g in zip(g_idx, er.guards):
                     gvals[i] = g
                 if fcs:
-                    slip = {f.normal: int(s_) for f, s_ in zip(fcs, er.slip) if s_}
+                    slip = _friction.slip_from_engine(model, er.slip)
                     _friction.check_engine_result(model, er, t)
                 n_rejected += er.n_rejected
                 system.n_rhs += er.n_rhs

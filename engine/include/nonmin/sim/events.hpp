@@ -104,7 +104,7 @@ void friction_mask(Loop& L);
 // slipping contacts' friction forces' response. Painlevé's inconsistency (the normal-force
 // relation has no positive solution: a non-P matrix, for one contact 1 + μ s ∂N/∂F ≤ 0) sets
 // L.painleve, L.painleve_t, L.message and returns Status::not_finite.
-Status friction_forces(Loop& L, double t, double* qdd, double* fc);
+Status friction_forces(Loop& L, double t, const double* qd, double* qdd, double* fc);
 // Append the friction guards of the current active set with their values at (L.t, L.y).
 Status friction_arm(Loop& L);
 // The value of friction guard G at (t, q, qd); sticking guards read L.lam_c (release_forces of

@@ -159,10 +159,15 @@ struct ContactGuard {
 // A point contact with Coulomb friction (sim_friction.cpp): its unilateral normal constraint,
 // its tangential (sticking) constraint — active while the contact sticks —, the coefficient,
 // and the slip direction while it slips (±1; 0: sticking or open).
+// A planar contact's tangential constraint has one row (slip direction s = ±1); a spatial one
+// two (slip = 1 while slipping, the friction force opposite to the slip velocity's direction:
+// the exact isotropic cone; dir: that direction at the last event, the guard's reference).
 struct FrictionContact {
     int normal = 0, tangent = 0;
     double mu = 0.0;
     int slip = 0;
+    double dir[2] = {0.0, 0.0};
+    int dim = 1;  // rows of the tangential constraint (1 or 2; set by set_friction)
 };
 
 // Recorded samples (the arrays of nonmin.sim.Trajectory), row-major, appended in order.

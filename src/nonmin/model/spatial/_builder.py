@@ -323,6 +323,51 @@ class SpatialBuilder:
             "point_on_plane", name, body_a, body_b, point, [nvec], [], nvec, active
         )
 
+    def add_contact(
+        self,
+        name: str,
+        body_a: str,
+        body_b: str,
+        *,
+        point: ArrayLike,
+        normal: ArrayLike,
+        friction: float,
+        active: bool = False,
+    ) -> SpatialBuilder:
+        """A point contact with Coulomb friction: b's point (``point`` at the reference) stays
+        on the side of a's plane through ``point`` that ``normal`` points to, with friction
+        coefficient ``friction`` (μ_f ≥ 0, an exact isotropic cone).
+
+        Two constraints: the unilateral ``name`` (``gap = n_a·(p_b − p_a) ≥ 0``) and the
+        two-row tangential ``"<name>.stick"`` (``t_i·(p_b − p_a)``, ``t_1, t_2 ⊥ n`` on a; its
+        velocity is the slip velocity of b's point), active while the contact sticks; while
+        it slips the force ``−μ_f N v_t/|v_t|`` acts along those rows (:func:`~nonmin.simulate`,
+        ``docs/theory.md`` "Coulomb friction").
+
+        Raises
+        ------
+        InputError
+            ``friction`` negative or not finite (the message names it).
+        """
+        from dataclasses import replace
+
+        w = f"contact {name!r}"
+        try:
+            mu = float(friction)
+        except (TypeError, ValueError):
+            raise InputError(f"{w}: friction must be a real number, got {friction!r}") from None
+        if not (np.isfinite(mu) and mu >= 0.0):
+            raise InputError(f"{w}: friction must be a finite number >= 0, got {mu!r}")
+        nvec = _unit(normal, f"{w}: normal")
+        helper = np.array([1.0, 0.0, 0.0]) if abs(nvec[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        t1 = np.cross(nvec, helper)
+        t1 /= np.linalg.norm(t1)
+        t2 = np.cross(nvec, t1)
+        self._add_joint("contact", name, body_a, body_b, point, [nvec], [], nvec, active)
+        self._add_joint("contact_tangent", f"{name}.stick", body_a, body_b, point, [t1, t2], [], nvec, False)
+        self._joints[-1] = replace(self._joints[-1], mu=mu, contact=name)
+        return self
+
     # ------------------------------------------------------------------ drivers
     # Drivers are rheonomic constraints that prescribe a motion: ``motion`` is a number, a time
     # function (nonmin.model.Polynomial, Spline, Sampled, Expression: evaluated by the engine)

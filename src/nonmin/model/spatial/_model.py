@@ -37,6 +37,7 @@ from .._protocol import (
     ConstraintSpec,
     ConstraintTerms,
     FloatArray,
+    FrictionContact,
     Geometry,
     Model,
     _as_vector,
@@ -62,6 +63,7 @@ GROUND = "ground"
 JointKind = Literal[
     "spherical", "revolute", "prismatic", "cylindrical", "universal", "weld", "point_on_plane",
     "coordinate_driver", "path_driver", "distance_driver", "angle_driver", "slide_driver",
+    "contact", "contact_tangent",
 ]
 #: The joint kinds of the spatial builder.
 JOINT_KINDS: tuple[str, ...] = (
@@ -84,6 +86,8 @@ _JOINT_ROWS = {
     "distance_driver": 1,
     "angle_driver": 1,
     "slide_driver": 1,
+    "contact": 1,  # unilateral n_a·(p_b − p_a) ≥ 0 (SpatialBuilder.add_contact)
+    "contact_tangent": 2,  # its tangential rows t_i·(p_b − p_a), velocity = the slip velocity
 }
 
 
@@ -154,11 +158,23 @@ class Joint:
     axis: FloatArray
     motions: tuple[Any, ...] = ()
     reference: float = 1.0
+    mu: float = 0.0  # contact_tangent: Coulomb's coefficient
+    contact: str = ""  # contact_tangent: the name of its unilateral normal constraint
 
     @property
     def dim(self) -> int:
         """Number of constraint rows."""
         return _JOINT_ROWS[self.kind]
+
+
+def _spec_kind(kind: str) -> Literal["holonomic", "rheonomic", "nonholonomic", "unilateral"]:
+    """The constraint kind of a joint kind: contacts unilateral, their tangential rows
+    nonholonomic, drivers rheonomic, the others holonomic."""
+    if kind == "contact":
+        return "unilateral"
+    if kind == "contact_tangent":
+        return "nonholonomic"
+    return "rheonomic" if kind in DRIVER_KINDS else "holonomic"
 
 
 @dataclass(frozen=True, eq=False)
@@ -319,8 +335,11 @@ class _RowPlan:
                 rows.append((A_(0), B_(1)))
                 rows.append((A_(1), B_(2)))
                 rows.append((A_(2), B_(0)))
-            if kind == "point_on_plane":
+            if kind in ("point_on_plane", "contact"):
                 rows.append((A_(0), d))
+            if kind == "contact_tangent":  # t_i·(p_b − p_a): its rate is t_i·(slip velocity)
+                rows.append((A_(0), d))
+                rows.append((A_(1), d))
             if kind in ("path_driver", "coordinate_driver"):
                 axes = np.eye(3) if kind == "path_driver" else j.vectors_a[:1]
                 for c, ax in enumerate(axes):
@@ -473,11 +492,8 @@ class SpatialModel(Model):
             ConstraintSpec(f"{b.name}.norm", "holonomic", 1, "unit quaternion ½(‖ε‖² − 1)")
             for b in self.bodies
         )
-        joints = tuple(
-            ConstraintSpec(j.name, "rheonomic" if j.kind in DRIVER_KINDS else "holonomic", j.dim,
-                           f"{j.kind} {j.body_a}–{j.body_b}")
-            for j in self.joints
-        )
+        joints = tuple(ConstraintSpec(j.name, _spec_kind(j.kind), j.dim, f"{j.kind} {j.body_a}–{j.body_b}")
+                       for j in self.joints)  # fmt: skip
         object.__setattr__(self, "_specs", norms + joints)
         for j in self.joints:
             self.body_index(j.body_a)
@@ -519,6 +535,11 @@ class SpatialModel(Model):
         if self.default_active_names is None:
             return frozenset(self.constraint_names)
         return frozenset(self.default_active_names)
+
+    @property
+    def friction_contacts(self) -> tuple[FrictionContact, ...]:
+        """The frictional point contacts (:meth:`SpatialBuilder.add_contact`)."""
+        return tuple(FrictionContact(j.contact, j.name, j.mu) for j in self.joints if j.kind == "contact_tangent")
 
     @property
     def body_names(self) -> tuple[str, ...]:
