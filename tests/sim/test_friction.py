@@ -112,7 +112,7 @@ def _disk(mu: float, R: float = 0.2, mass: float = 1.5):  # type: ignore[no-unty
     return b.build()
 
 
-@pytest.mark.parametrize("method", ["rk4", "dopri5"])
+@pytest.mark.parametrize("method", ["rk4", "dopri5", "dop853"])
 def test_disk_launched_without_spin_rolls_from_t_star(method: str) -> None:
     mu, R, v0 = 0.25, 0.2, 3.0
     m = _disk(mu, R)
