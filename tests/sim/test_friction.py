@@ -326,3 +326,26 @@ def test_scenario_files_declare_frictional_contacts(tmp_path) -> None:  # type: 
     path.write_text(SCENARIO.format(mu=-1.0), encoding="utf-8")
     with pytest.raises(NonminError, match="friction must be >= 0"):
         run_scenario(load_scenario(path), progress=False, write=False)
+
+
+def test_zeno_bouncing_then_sliding_then_sticking() -> None:
+    """A point dropped from h = 0.2 m moving at 1 m/s onto a floor with e = 0.5, μ_f = 0.3:
+    impacts accumulate at t∞ = t1 + 2 e v1 / (g (1 − e)) (Zeno: the bounces below two steps of
+    flight are made plastic), then the contact slips at μ_f g and sticks at t∞ + vx/(μ_f g),
+    x = vx t∞ + vx²/(2 μ_f g). The truncated bounces shift it by less than their remaining
+    flight time (≤ 2 dt/(1 − e) = 4e-3 s)."""
+    h, vx, e, mu = 0.2, 1.0, 0.5, 0.3
+    b = PlanarBuilder("ball")
+    b.point_mass("ball", mass=1.0, points=["p"])
+    b.contact("floor", ("ground", (0.0, 0.0)), "p", axis=(1.0, 0.0), friction=mu)
+    m = b.build()
+    tr = simulate(m, 1.5, [0.0, h], [vx, 0.0], restitution=e, dt=1e-3, progress=False)
+    t1, v1 = math.sqrt(2 * h / G), math.sqrt(2 * G * h)
+    t_inf = t1 + 2 * e * v1 / (G * (1 - e))
+    names = [ev.name for ev in tr.events]
+    assert names.count("slip:floor") == 1 and names[-1] == "stick:floor"
+    assert sum(n.startswith("impact:") for n in names) >= 5
+    t_stick = tr.events[-1].t
+    assert abs(t_stick - (t_inf + vx / (mu * G))) < 4e-3
+    assert abs(tr.q[-1, 0] - (vx * t_inf + vx**2 / (2 * mu * G))) < 4e-3 * vx
+    assert np.max(np.abs(tr.qd[-1])) < 1e-12
