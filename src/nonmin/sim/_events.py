@@ -133,7 +133,9 @@ class EventRecord:
         Event name; automatic contact events are ``"impact:<constraint>"`` (one impact over
         every contact closing at that instant: ``"impact:<c1>+<c2>+…"``, the contacts whose gap
         crossed, in declaration order; docs/theory.md "Simultaneous impacts"),
-        ``"release:<constraint>"`` and ``"release-refused:<constraint>"``.
+        ``"release:<constraint>"`` and ``"release-refused:<constraint>"``; frictional contacts
+        (docs/theory.md "Coulomb friction") add ``"stick:<contact>"``, ``"slip:<contact>"``
+        (the transition text gives the slip direction) and ``"open:<contact>"``.
     transition : str
         Human-readable description of the transition applied.
     q_before, qd_before, q_after, qd_after : ndarray, shape (n,)
