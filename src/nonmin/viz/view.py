@@ -8,10 +8,14 @@ server and (by default) opens the browser on it. The page shows
   spatial models, the *inertia box* of each body (the uniform box with the body's mass and
   principal inertias, at its centre of mass and principal axes); planar models are drawn in
   the x–z plane; links as line segments between joint origins;
-* the constraint frames (both sides of every frame constraint) and the contact planes;
-* the force carried by each active point or contact constraint as an arrow at its point
-  (``(Aᵀ)⁺ f_c`` read out of ``Trajectory.f_c`` by
-  :func:`~nonmin.control.constraint_force_components`; 1 N = ``force_scale`` m);
+* the constraint frames (both sides of every frame constraint), the contact planes, a ground
+  pin under every joint on the world and markers on both frames of every loop closure;
+* for planar models, every element their 2-D drawing has (walls, guides, slider blocks,
+  ground pins, point masses, rods, springs; :mod:`nonmin.viz._view_elements`);
+* the reaction of every active constraint: its force on one of the bodies it joins as a red
+  arrow at the attachment point and its moment as a purple arrow (weld, hinge, planar weld,
+  ...), read from :meth:`Trajectory.with_reactions` (``(Aᵀ)⁺ f_c`` split per constraint;
+  1 N = ``force_scale`` m);
 * a *Playback* panel: play/pause, a time slider to scrub, the playback speed, loop; the
   current time, the active constraint set and the last event, updated as it plays;
 * an *Active set over time* panel: the number of active constraints and the rank of A
@@ -26,7 +30,6 @@ from __future__ import annotations
 import os
 import threading
 import time
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,6 +43,7 @@ __all__ = ["Viewer", "view"]
 _BODY = (255, 140, 40)
 _LINK = (31, 119, 180)
 _ARROW = (214, 39, 40)
+_MOMENT = (148, 50, 190)
 _PLANE = (160, 160, 160)
 
 
@@ -116,6 +120,14 @@ class Viewer:
     _stop: threading.Event = field(default_factory=threading.Event, repr=False)
     _thread: threading.Thread | None = field(default=None, repr=False)
     _show: Any = field(default=None, repr=False)
+    _nodes: dict[str, Any] = field(default_factory=dict, repr=False)
+
+    def node(self, name: str) -> Any:
+        """The viser handle of a scene node (``"/forces"``, ``"/walls/wall"``, ...): what the
+        page shows of it (``points``, ``position``, ``visible``, ``opacity``)."""
+        if name not in self._nodes:
+            raise InputError(f"view: no scene node {name!r}; known: {sorted(self._nodes)}")
+        return self._nodes[name]
 
     def show_time(self, t: float) -> None:
         """Draw the frame at time ``t`` (the nearest earlier sample)."""
@@ -288,6 +300,10 @@ def _default_q(model: Any) -> np.ndarray:
     fn = getattr(model, "neutral_configuration", None)
     if callable(fn):
         q = np.asarray(fn(), dtype=float)
+    from ..model.spatial import SpatialModel
+
+    if isinstance(model, SpatialModel):  # unit quaternions (1, 0, 0, 0), not zeros
+        q[3::7] = 1.0
     from ..errors import NonminError
     from ..model import assemble
 
@@ -301,6 +317,7 @@ def _build(server: Any, model: Any, traj: Any, ts: np.ndarray, qs: np.ndarray, s
            autoplay: bool, force_scale: float | None, open_browser: bool) -> Viewer:
     from ..model.robots import RobotModel
     from ..model.spatial import SpatialModel
+    from ._view_elements import reaction_arrows, robot_markers
 
     port = server.get_port()
     url = f"http://{server.get_host() if server.get_host() not in ('0.0.0.0', '::') else '127.0.0.1'}:{port}"
@@ -340,12 +357,23 @@ def _build(server: Any, model: Any, traj: Any, ts: np.ndarray, qs: np.ndarray, s
             name = f"/bodies/{b.name}"
             spatial_boxes.append((name, i, (server.scene.add_box(name, color=_BODY, dimensions=tuple(dims)), R)))
             body_nodes.append(name)
-    link_handle = server.scene.add_line_segments(
-        "/links", np.zeros((1, 2, 3)), _LINK, thickness=0.012 * size)
-    joint_handle = server.scene.add_point_cloud(
-        "/joints", np.zeros((1, 3)), colors=(30, 30, 30), point_size=0.025 * size, point_shape="circle")
-    if not body_nodes:
-        body_nodes = ["/links", "/joints"]
+    planar = _planar_drawing(server, model, qs, size)
+    link_handle: Any = None
+    joint_handle: Any = None
+    if planar is not None:
+        body_nodes = list(planar.nodes)
+    else:
+        link_handle = server.scene.add_line_segments(
+            "/links", np.zeros((1, 2, 3)), _LINK, thickness=0.012 * size)
+        joint_handle = server.scene.add_point_cloud(
+            "/joints", np.zeros((1, 3)), colors=(30, 30, 30), point_size=0.025 * size, point_shape="circle")
+        if not body_nodes:
+            body_nodes = ["/links", "/joints"]
+    markers: Any = None
+    markers_handles: dict[str, Any] = {}
+    if isinstance(model, RobotModel):  # ground pins and loop-closure markers
+        markers_handles, markers = robot_markers(server, model, size)
+        body_nodes += list(markers_handles)
     # constraint frames and contact planes (robots)
     cframes = _constraint_frames(model)
     frame_handles = {fname: server.scene.add_frame(f"/constraints/{fname}", axes_length=0.12 * size,
@@ -356,17 +384,16 @@ def _build(server: Any, model: Any, traj: Any, ts: np.ndarray, qs: np.ndarray, s
             h = server.scene.add_box(f"/planes/{c.name}", color=_PLANE, dimensions=(2 * size, 2 * size, 0.002 * size),
                                      opacity=0.35)
             planes.append((c, h))
-    # forces of point and contact constraints
-    force_kinds = ("point", "contact", "point_on_plane")
-    force_cons = [c for c in getattr(model, "robot_constraints", ()) if getattr(c, "type", "") in force_kinds]
-    forces = _forces(model, traj, force_cons) if traj is not None and force_cons else None
-    if forces is not None:
-        fmax = max((float(np.linalg.norm(v[1])) for frame in forces for v in frame), default=0.0)
-        scale = force_scale if force_scale is not None else (0.25 * size / fmax if fmax > 0 else 0.0)
-    else:
-        scale = 0.0
+    # the reactions of every constraint with a wrench: forces (red) and moments (purple)
+    react = reaction_arrows(model, traj) if traj is not None else None
+    fmax = react.max_force() if react is not None else 0.0
+    mmax = react.max_moment() if react is not None else 0.0
+    scale = force_scale if force_scale is not None else (0.25 * size / fmax if fmax > 0 else 0.0)
+    mscale = 0.2 * size / mmax if mmax > 0 else 0.0
     arrows = server.scene.add_arrows("/forces", np.zeros((1, 2, 3)), _ARROW, shaft_radius=0.006 * size,
                                      head_radius=0.015 * size, head_length=0.03 * size, visible=False)
+    marrows = server.scene.add_arrows("/moments", np.zeros((1, 2, 3)), _MOMENT, shaft_radius=0.004 * size,
+                                      head_radius=0.012 * size, head_length=0.03 * size, visible=False)
     # GUI
     folder = server.gui.add_folder("Playback")
     with folder:
@@ -387,14 +414,21 @@ def _build(server: Any, model: Any, traj: Any, ts: np.ndarray, qs: np.ndarray, s
     def show(t: float) -> None:
         i = int(np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 1))
         q = qs[i]
-        g = model.geometry(q)
-        seg = to3(np.asarray(g.segments).reshape(-1, 2, dim))
-        jp = to3(np.asarray(g.points).reshape(-1, dim))
+        act_i = (frozenset(n for n, a in zip(names, mask[i], strict=True) if a)
+                 if mask is not None else None)
         with server.atomic():
-            if seg.size:
-                link_handle.points = seg
-            if jp.size:
-                joint_handle.points = jp.astype(np.float32)
+            if planar is not None:
+                planar.update(q, act_i)
+            else:
+                g = model.geometry(q)
+                seg = to3(np.asarray(g.segments).reshape(-1, 2, dim))
+                jp = to3(np.asarray(g.points).reshape(-1, dim))
+                if seg.size:
+                    link_handle.points = seg
+                if jp.size:
+                    joint_handle.points = jp.astype(np.float32)
+            if markers is not None:
+                markers(q, act_i)
             if is_robot and (visuals or frame_handles or planes):
                 oMi, _ = _placements(model, q)
                 for v in visuals:
@@ -416,21 +450,21 @@ def _build(server: Any, model: Any, traj: Any, ts: np.ndarray, qs: np.ndarray, s
                 Rb = model.rotation(q, model.bodies[k].name)
                 h.position = qb[:3]
                 h.wxyz = _wxyz(Rb @ R)
-            if forces is not None and scale > 0:
-                vecs = forces[i]
-                if vecs:
-                    arr = np.array([[p, p + scale * f] for p, f in vecs])
-                    arrows.points = arr
-                    arrows.visible = True
+            for node, vecs, sc in ((arrows, react.forces[i] if react else [], scale),
+                                   (marrows, react.moments[i] if react else [], mscale)):
+                if vecs and sc > 0:
+                    node.points = np.array([[p, p + sc * f] for p, f in vecs], dtype=np.float32)
+                    node.visible = True
                 else:
-                    arrows.visible = False
-            active = sorted(n for n, a in zip(names, mask[i], strict=True) if a) if mask is not None else []
+                    node.visible = False
+            active = sorted(act_i) if act_i is not None else []
             fired = [n for te, n in events if te <= ts[i]]
             info.content = (
                 f"**t = {ts[i]:.3f} s** (sample {i + 1}/{len(ts)})  \n"
                 f"active ({len(active)}): {', '.join(active) if active else '—'}  \n"
                 f"last event: {fired[-1] if fired else '—'}"
-                + (f"  \nforce arrows: {1 / scale:.3g} N per m" if forces is not None and scale > 0 else "")
+                + (f"  \nforce arrows (red): {1 / scale:.3g} N per m" if fmax > 0 and scale > 0 else "")
+                + (f"  \nmoment arrows (purple): {1 / mscale:.3g} N·m per m" if mmax > 0 else "")
             )
 
     show(float(ts[0]))
@@ -475,12 +509,34 @@ def _build(server: Any, model: Any, traj: Any, ts: np.ndarray, qs: np.ndarray, s
 
     thread = threading.Thread(target=run, name="nonmin-view", daemon=True)
     thread.start()
-    viewer = Viewer(url=url, server=server, body_nodes=body_nodes, _stop=stop, _thread=thread, _show=goto)
+    nodes: dict[str, Any] = {"/forces": arrows, "/moments": marrows}
+    if planar is not None:
+        nodes.update(planar.handles)
+    else:
+        nodes.update({"/links": link_handle, "/joints": joint_handle})
+    nodes.update({v.name: v.handle for v in visuals})
+    nodes.update({name: h for name, _, (h, _R) in spatial_boxes})
+    nodes.update({f"/planes/{c.name}": h for c, h in planes})
+    nodes.update({f"/constraints/{f}": h for f, h in frame_handles.items()})
+    if markers is not None:
+        nodes.update(markers_handles)
+    viewer = Viewer(url=url, server=server, body_nodes=body_nodes, _stop=stop, _thread=thread, _show=goto,
+                    _nodes=nodes)
     if open_browser and os.environ.get("NONMIN_NO_BROWSER", "") in ("", "0"):
         import webbrowser
 
         webbrowser.open(url)
     return viewer
+
+
+def _planar_drawing(server: Any, model: Any, qs: np.ndarray, size: float) -> Any:
+    """Every element of a planar model drawn in the x–z plane (None for other models)."""
+    from ..model.planar import PlanarModel
+    from ._view_elements import planar_drawing
+
+    if not isinstance(model, PlanarModel):
+        return None
+    return planar_drawing(server, model, qs, size)
 
 
 def _active_set_panel(server: Any, traj: Any) -> None:
@@ -533,37 +589,3 @@ def _placements(model: Any, q: np.ndarray) -> tuple[list[np.ndarray], Any]:
         data = pm.createData()
     pin.forwardKinematics(pm, data, model.pinocchio_configuration(q))
     return [np.array(data.oMi[j].homogeneous) for j in range(pm.njoints)], data
-
-
-def _forces(model: Any, traj: Any, cons: Sequence[Any]) -> list[list[tuple[np.ndarray, np.ndarray]]]:
-    """Per sample: (point, force vector) of every active point/contact constraint.
-
-    λ of each constraint is read out of ``f_c`` as ``(Aᵀ)⁺ f_c``; a point constraint's λ is the
-    world-aligned force on frame a, a contact's λ the normal force along the plane normal,
-    drawn at the contact point (frame b).
-    """
-    from ..control import constraint_force_components
-
-    names = tuple(traj.constraint_names)
-    out: list[list[tuple[np.ndarray, np.ndarray]]] = []
-    for i in range(len(traj)):
-        act = [n for n, a in zip(names, traj.active_mask[i], strict=True) if a]
-        mine = [c for c in cons if c.name in act]
-        if not mine:
-            out.append([])
-            continue
-        q = traj.q[i]
-        lam = constraint_force_components(model, float(traj.t[i]), q, traj.f_c[i], [c.name for c in mine], active=act)
-        vecs = []
-        for c in mine:
-            val = np.asarray(lam[c.name], dtype=float)
-            if c.type == "point" and val.size == 3:
-                H = model.frame_placement(q, f"{c.name}:a")
-                vecs.append((H[:3, 3], val))
-            elif val.size == 1:
-                Ha = model.frame_placement(q, f"{c.name}:a")
-                Hb = model.frame_placement(q, f"{c.name}:b")
-                n = Ha[:3, :3] @ np.asarray(c.axis, dtype=float)
-                vecs.append((Hb[:3, 3], float(val[0]) * n))
-        out.append(vecs)
-    return out
