@@ -171,3 +171,46 @@ def test_demo_scene_renders_fast_and_with_the_run_frame_count(tmp_path, arm_wall
     assert grey.sum() > 300
     # 2-D frames cost ~10 ms of CPU each (matplotlib only draws the axes once)
     assert cpu < 0.1 * frames + 3.0, (cpu, frames)
+
+
+def test_singularity_distance_after_a_pin_is_released():
+    """The issue's case: after a pin is released the curve read ~1e-17 (σ of the whole run's
+    rank on the smaller active A); it is σ_r/σ₁ of the active rows, r their own rank."""
+    from nonmin.sim import Deactivate, Event
+
+    mech = library.get("A02_n_four_bar", N=2)
+    pin = "A1"  # the middle ground pin
+    release = Event(lambda t, q, qd, f_c: t - 0.05, direction=1, transition=Deactivate(pin), name="release")
+    traj = nonmin.simulate(mech, (0.0, 0.1), dt=1e-3, events=[release], progress=False)
+    after = np.array([pin not in a for a in traj.active])
+    assert after.any() and (~after).any()
+    ratio = singularity_distance(traj, mech.model)
+    i = int(np.flatnonzero(after)[5])
+    A = mech.model.constraint_jacobian(float(traj.t[i]), traj.q[i], traj.active[i])
+    sv = np.linalg.svd(A / np.linalg.norm(A, axis=1, keepdims=True), compute_uv=False)
+    r = int(traj.rank[i])
+    assert ratio[i] == pytest.approx(sv[r - 1] / sv[0], rel=1e-6)
+    assert np.all(ratio[after] > 1e-3), ratio[after].min()
+
+
+def test_rendering_progress_after_two_seconds(capsys):
+    """Rendering that takes more than 2 s reports on stderr (every 2 s, and at the end);
+    quicker rendering stays silent. The clock is a list of readings."""
+    from nonmin.viz._animate import Progress
+
+    readings = iter([0.0, 0.5, 2.5, 3.0, 4.6, 5.0])
+    p = Progress("rendering a.gif", True)
+    p._clock = lambda: next(readings)
+    p.t0 = p._clock()
+    p._last = p.t0
+    p(10, 100)  # 0.5 s: silent
+    assert capsys.readouterr().err == ""
+    p(50, 100)  # 2.5 s: shown
+    assert "rendering a.gif: 50/100 frames, 2.5 s" in capsys.readouterr().err
+    p(60, 100)  # 3.0 s: within 2 s of the last line
+    assert capsys.readouterr().err == ""
+    p(90, 100)  # 4.6 s
+    assert "90/100" in capsys.readouterr().err
+    p(100, 100)  # the end is always reported once shown
+    assert "100/100" in capsys.readouterr().err
+    assert p.shown
