@@ -56,11 +56,18 @@ Status rk4_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec&
         return s;
     }
     const double hh = 0.5 * h;
+    // next to a singular passage the stage states are projected (RK4.step, stages=True): F's
+    // derivatives across the manifold grow like 1/σ_min, a stage off it by O(h²) would cost
+    // the step an O(h²) error instead of O(h⁵)
+    const bool sp = L.stage_proj && L.opt.stab == Stabilization::projection;
     for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k1[i];
+    if (sp && (s = project(L, t + 0.5 * h, L.ys.data(), L.opt.projection)) != Status::ok) return s;
     if ((s = rhs(L, t + 0.5 * h, L.ys.data(), L.k2.data())) != Status::ok) return s;
     for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k2[i];
+    if (sp && (s = project(L, t + 0.5 * h, L.ys.data(), L.opt.projection)) != Status::ok) return s;
     if ((s = rhs(L, t + 0.5 * h, L.ys.data(), L.k3.data())) != Status::ok) return s;
     for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + h * L.k3[i];
+    if (sp && (s = project(L, t + h, L.ys.data(), L.opt.projection)) != Status::ok) return s;
     if ((s = rhs(L, t + h, L.ys.data(), L.k4.data())) != Status::ok) return s;
     const double h6 = h / 6.0;
     for (int i = 0; i < n2; ++i) out[i] = y[i] + h6 * (((L.k1[i] + 2.0 * L.k2[i]) + 2.0 * L.k3[i]) + L.k4[i]);
@@ -514,6 +521,9 @@ constexpr double PASSAGE_ITER_RTOL = 1e-6;
 constexpr double PASSAGE_FLOOR = 1e-7;
 constexpr double PASSAGE_BAND = 0.05;
 constexpr double PASSAGE_NOISE = 100.0;
+constexpr double PASSAGE_STAGE_K = 30.0;
+constexpr double PASSAGE_SIGMA = 2e-4;
+constexpr double PASSAGE_WIDEN_MAX = 64.0;
 
 // _integrators.passage_time over the history ts, ss (count ≥ 2)
 bool passage_time(const Passages& P, double& out) {
@@ -565,6 +575,7 @@ void passage_setup(Loop& L) {
         P.frac[0] = 0.25, P.frac[1] = 0.75;
         P.n_frac = 2;
     }
+    P.widen = L.opt.method != Method::dopri5;
     passage_reset(L);
 }
 
@@ -715,6 +726,8 @@ double passage_noise(const Loop& L) {
 }
 
 void passage_reset(Loop& L) {
+    L.pas.have_last = false;
+    L.pas.rate = 0.0;
     L.pas.sigma = inf;
     L.pas.count = 0;
     L.pas.have_star = false;
@@ -728,8 +741,14 @@ void passage_observe(Loop& L, double t, const Mat& A, int m) {
     if (!(s >= PASSAGE_FLOOR && std::isfinite(s))) {
         P.count = 0;
         P.have_star = false;
+        P.have_last = false;
+        P.rate = 0.0;
         return;
     }
+    P.rate = (P.have_last && t > P.last_t) ? std::abs(s - P.ss_last) / (t - P.last_t) : 0.0;
+    P.have_last = true;
+    P.last_t = t;
+    P.ss_last = s;
     if ((P.count && !(t > P.ts[P.count - 1])) || (P.have_star && t >= P.t_star)) P.count = 0;
     if (P.count == 3) {
         for (int i = 0; i < 2; ++i) {
@@ -749,6 +768,30 @@ double passage_place(const Loop& L, double t, double h) {
     const Passages& P = L.pas;
     if (!L.opt.passages || !P.have_star) return h;
     const double g = P.t_star - t;
+    double H = h;
+    if (P.widen && P.rate > 0.0)
+        H = std::min(std::max(h, PASSAGE_SIGMA / (P.frac[0] * P.rate)), PASSAGE_WIDEN_MAX * h);
+    if (H > h) {  // the passage step H (place_step with H > h)
+        if (!(g > 0.0)) return h;
+        const double x = g / H;
+        for (int i = 0; i < P.n_frac; ++i)
+            if (std::abs(x - P.frac[i]) <= PASSAGE_BAND) return H;
+        double fit = -inf, dmin = inf;
+        for (int i = 0; i < P.n_frac; ++i) {
+            const double d = g - P.frac[i] * H;
+            if (!(d > 0.0)) continue;
+            if (d <= h) fit = std::max(fit, d);
+            dmin = std::min(dmin, d);
+        }
+        if (fit > -inf) return fit;
+        if (dmin < inf) return dmin - h >= 0.2 * h ? h : 0.5 * dmin;
+        double best = -inf;
+        for (int i = 0; i < P.n_frac; ++i) {
+            const double s = g / P.frac[i];
+            if (s <= H) best = std::max(best, s);
+        }
+        return best > -inf ? best : h;
+    }
     const double fmax = P.frac[P.n_frac - 1];
     if (!(g > 0.0) || g > (1.0 + fmax + PASSAGE_BAND) * h) return h;
     const double x = g / h;
@@ -765,6 +808,14 @@ double passage_place(const Loop& L, double t, double h) {
         if (0.2 * h <= s && s <= h) best = std::max(best, s);
     }
     return best > 0.0 ? best : h;
+}
+
+// _integrators.SingularPassages.stages
+bool passage_stages(const Loop& L, double t, double h) {
+    const Passages& P = L.pas;
+    if (!L.opt.passages || !std::isfinite(P.sigma) || !(P.sigma >= PASSAGE_FLOOR)) return false;
+    if (PASSAGE_STAGE_K * P.rate * h > P.sigma) return true;
+    return P.have_star && P.t_star > t && P.t_star - t <= (1.0 + PASSAGE_BAND) * h;
 }
 
 void hermite_quintic(int n, const double* y0, const double* f0, const double* y1, const double* f1,

@@ -579,8 +579,10 @@ Outcome run(Loop& L, long long max_steps) {
         } else {
             h = clip(L.t, passage_place(L, L.t, L.opt.dt), t1);
             L.y0 = L.y;
-            if ((s = fixed_advance(L, L.t, L.y, f_start ? &L.f : nullptr, h, L.y1)) != Status::ok)
-                return fail(L, s);
+            L.stage_proj = L.opt.method == Method::rk4 && L.any_active && passage_stages(L, L.t, h);
+            s = fixed_advance(L, L.t, L.y, f_start ? &L.f : nullptr, h, L.y1);
+            L.stage_proj = false;
+            if (s != Status::ok) return fail(L, s);
             t_new = (h == t1 - L.t) ? t1 : L.t + h;
             L.yq1 = L.y1;
             if ((s = stab_project(L, t_new, L.yq1.data())) != Status::ok) return fail(L, s);

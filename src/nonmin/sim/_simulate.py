@@ -63,7 +63,7 @@ from ..errors import (
 from ..model import ConstraintTerms, Model, State
 from . import _durable, _engine, _fastpath, _friction
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
-from ._integrators import METHODS, Integrator, SingularPassages, StepperState, hermite_quintic
+from ._integrators import METHODS, RK4, Integrator, SingularPassages, StepperState, hermite_quintic
 from ._options import EventSet, Output, Solver, resolve_options
 from ._progress import Progress
 from ._stabilization import Projection, Stabilization, resolve_stabilization
@@ -731,7 +731,8 @@ def simulate(
         stab = _energy_level(stab, model, t0, q, qd, act, rank_rtol, project_initial,
                              bool(controller is not None or events or unilateral))  # fmt: skip
     rec = _Recorder(model)
-    passages = SingularPassages(integ.passage_fractions) if getattr(integ, "passages", False) else None
+    passages = (SingularPassages(integ.passage_fractions, widen=not integ.adaptive)
+                 if getattr(integ, "passages", False) else None)  # fmt: skip
     seed = _passage_history(prev, act, t_out)
     records: list[EventRecord] = []
     status = Status.SUCCESS
@@ -828,7 +829,7 @@ def simulate(
                 passages.observe(t, p.A)
             engine_on = use_engine
         project_y = None
-        if isinstance(stab, Projection) and integ.adaptive:
+        if isinstance(stab, Projection) and (integ.adaptive or (passages is not None and type(integ) is RK4)):
 
             def project_y(tt: float, yy: FloatArray) -> FloatArray:
                 qq, vv = stab.project(model, tt, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)

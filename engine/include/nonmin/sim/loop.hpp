@@ -101,6 +101,11 @@ struct Passages {
     bool have_star = false;
     double t_star = 0.0;
     double sigma = std::numeric_limits<double>::infinity();  // the last indicator observed
+    // the indicator's rate |dσ/dt| between the last two observations on one time line (kept
+    // across a passage, unlike the history): passage_stages
+    double last_t = 0.0, ss_last = 0.0, rate = 0.0;
+    bool have_last = false;
+    bool widen = false;  // fixed-step methods: the passage step is ≥ PASSAGE_SIGMA wide
     // indicator scratch, sized from m_all and n at make_loop
     Mat B, G, C;                 // equilibrated live rows (k × n), Gram (k × k), its Cholesky
     Vec x, y, v, w;              // iteration vectors (k); v: the vector kept between calls
@@ -279,6 +284,7 @@ struct Loop {
 
     Samples rec;
     Passages pas;
+    bool stage_proj = false;  // RK4: project the stage states of the step being taken (passage_stages)
 
     // Coulomb friction (sim_friction.cpp): the contacts, the evaluation mask (the active set
     // plus the tangential rows of slipping contacts), the normal forces of the slipping ones,
@@ -343,6 +349,9 @@ void passage_setup(Loop& L);
 void passage_observe(Loop& L, double t, const Mat& A, int m);
 void passage_reset(Loop& L);
 double passage_place(const Loop& L, double t, double h);
+// Whether the RK4 step of size h from t projects its stage states: the indicator changes by
+// more than 1/PASSAGE_STAGE_K of itself within the step, or the predicted instant is inside it.
+bool passage_stages(const Loop& L, double t, double h);
 // SingularPassages.noise: PASSAGE_NOISE·eps/σ at the last step end (0 without one).
 double passage_noise(const Loop& L);
 
