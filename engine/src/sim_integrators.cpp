@@ -575,7 +575,7 @@ void passage_setup(Loop& L) {
         P.frac[0] = 0.25, P.frac[1] = 0.75;
         P.n_frac = 2;
     }
-    P.widen = L.opt.method != Method::dopri5;
+    P.widen = !detail::adaptive(L);  // fixed-step methods only
     passage_reset(L);
 }
 
