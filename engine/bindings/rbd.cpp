@@ -6,12 +6,14 @@
 // against Pinocchio and for kinematic queries.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/tuple.h>
 #include <nanobind/stl/vector.h>
 
 #include <cstring>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -89,7 +91,7 @@ void make_tree(
     CArr placements, CArr masses, CArr coms, CArr inertias, CArr gravity, CArr armature,
     IArr frame_joints, CArr frame_placements, std::vector<std::string> c_names, IArr c_types,
     IArr c_frames, CArr c_axes, CArr c_u, IArr c_iq, CArr c_coef, CArr c_ref, IArr actuated,
-    CArr damping, std::vector<TimeFunction> drivers) {
+    CArr damping, std::vector<TimeFunction> drivers, std::optional<IArr> c_drv) {
     const std::size_t nj = types.shape(0);
     expect(parents, nj, "parents");
     expect(axis_index, nj, "axis_index");
@@ -112,6 +114,7 @@ void make_tree(
     expect(c_iq, 2 * nc, "c_iq");
     expect(c_coef, 5 * nc, "c_coef");
     expect(c_ref, 2 * nc, "c_ref");
+    if (c_drv) expect(*c_drv, 3 * nc, "c_drv");
     expect(damping, static_cast<std::size_t>(nv), "damping");
 
     rbd::TreeDescription d;
@@ -142,7 +145,7 @@ void make_tree(
         rbd::TreeConstraint tc;
         tc.name = c_names[c];
         const auto t = c_types.data()[c];
-        if (t < 0 || t > 10) model_error("constraint '" + tc.name + "': unknown type " + std::to_string(t));
+        if (t < 0 || t > 12) model_error("constraint '" + tc.name + "': unknown type " + std::to_string(t));
         tc.type = static_cast<rbd::RowType>(t);
         tc.frame_a = static_cast<int>(c_frames.data()[2 * c]);
         tc.frame_b = static_cast<int>(c_frames.data()[2 * c + 1]);
@@ -154,6 +157,8 @@ void make_tree(
         for (int k = 0; k < 5; ++k) tc.coef[k] = c_coef.data()[5 * c + k];
         tc.ref1 = c_ref.data()[2 * c];
         tc.ref2 = c_ref.data()[2 * c + 1];
+        if (c_drv)
+            for (int k = 0; k < 3; ++k) tc.drv[k] = static_cast<int>(c_drv->data()[3 * c + k]);
         d.constraints.push_back(tc);
     }
     for (std::size_t k = 0; k < actuated.shape(0); ++k) d.actuated.push_back(static_cast<int>(actuated.data()[k]));
@@ -185,7 +190,8 @@ void bind_rbd(nb::module_& m) {
              nb::arg("frame_joints"), nb::arg("frame_placements"), nb::arg("c_names"),
              nb::arg("c_types"), nb::arg("c_frames"), nb::arg("c_axes"), nb::arg("c_u"),
              nb::arg("c_iq"), nb::arg("c_coef"), nb::arg("c_ref"), nb::arg("actuated"),
-             nb::arg("damping"), nb::arg("drivers") = std::vector<TimeFunction>{})
+             nb::arg("damping"), nb::arg("drivers") = std::vector<TimeFunction>{},
+             nb::arg("c_drv") = nb::none())
         .def_prop_ro("nv", [](const TreeProgram& p) { return p.description().model.nv; })
         .def_prop_ro("has_quaternions", &TreeProgram::has_quaternions)
         .def(

@@ -23,9 +23,16 @@ int row_count(RowType t) {
         case RowType::contact:
         case RowType::joint_coupling:
         case RowType::joint_limit:
-        case RowType::joint_driver: return 1;
+        case RowType::joint_driver:
+        case RowType::distance_driver: return 1;
+        case RowType::path_driver: return 3;
     }
     throw EngineError("unknown constraint row type");
+}
+
+int row_count(const TreeConstraint& c) {
+    if (c.type != RowType::path_driver) return row_count(c.type);
+    return static_cast<int>(std::count_if(c.drv.begin(), c.drv.end(), [](int i) { return i >= 0; }));
 }
 
 namespace {
@@ -51,7 +58,7 @@ TreeScratch<S>::TreeScratch(const TreeDescription& d)
       Tq(d.model.joints.size(), Mat34T<S>::Zero()),
       Y(MatS::Zero(7, d.model.nv)) {
     int m = 0;
-    for (const TreeConstraint& c : d.constraints) m += row_count(c.type);
+    for (const TreeConstraint& c : d.constraints) m += row_count(c);
     Av = MatS::Zero(m, d.model.nv);
     int regs = 0;
     for (const TimeFunction& f : d.drivers) regs = std::max(regs, f.scratch_size());
@@ -76,7 +83,7 @@ TreeProgram::TreeProgram(TreeDescription description) : d_(std::move(description
         if (f.joint < -1 || f.joint >= nj) throw EngineError("tree program: frame joint index out of range");
     int row = 0;
     for (const TreeConstraint& c : d_.constraints) {
-        const int dim = row_count(c.type);
+        const int dim = row_count(c);
         const std::string where = "tree program: constraint '" + c.name + "': ";
         switch (c.type) {
             case RowType::unit_quaternion: {
@@ -100,14 +107,30 @@ TreeProgram::TreeProgram(TreeDescription description) : d_(std::move(description
                 if (!(c.coef[0] == 1.0 || c.coef[0] == -1.0) || !std::isfinite(c.ref1))
                     throw EngineError(where + "joint limit needs a sign of ±1 and a finite bound");
                 break;
+            case RowType::path_driver:
+            case RowType::distance_driver: {
+                if (c.frame_a < 0 || c.frame_a >= nf || c.frame_b < 0 || c.frame_b >= nf)
+                    throw EngineError(where + "frame index out of range");
+                const int nd = c.type == RowType::path_driver ? 3 : 1;
+                for (int i = 0; i < 3; ++i)
+                    if (c.drv[i] < -1 || c.drv[i] >= static_cast<int>(d_.drivers.size()) || (i >= nd && c.drv[i] != -1))
+                        throw EngineError(where + "driver index out of range");
+                if (dim < 1 || (c.type == RowType::distance_driver && c.drv[0] < 0))
+                    throw EngineError(where + "a driver needs at least one prescribed motion");
+                if (c.type == RowType::distance_driver && !(c.ref1 > 0.0 && std::isfinite(c.ref1)))
+                    throw EngineError(where + "distance driver needs a finite reference length > 0");
+                break;
+            }
             default:
                 if (c.frame_a < 0 || c.frame_a >= nf || c.frame_b < 0 || c.frame_b >= nf)
                     throw EngineError(where + "frame index out of range");
         }
         const ConstraintKind kind =
             (c.type == RowType::contact || c.type == RowType::joint_limit) ? ConstraintKind::unilateral
-            : c.type == RowType::joint_driver                             ? ConstraintKind::rheonomic
-                                                                          : ConstraintKind::holonomic;
+            : (c.type == RowType::joint_driver || c.type == RowType::path_driver ||
+               c.type == RowType::distance_driver)
+                ? ConstraintKind::rheonomic
+                : ConstraintKind::holonomic;
         constraints_.push_back(ConstraintInfo{c.name, kind, row, dim});
         row += dim;
     }
@@ -349,6 +372,61 @@ void TreeProgram::frame_rows(const TreeConstraint& c, TreeScratch<S>& ws, bool r
     }
 }
 
+template <class S>
+Status TreeProgram::driver_rows(const TreeConstraint& c, double t, TreeScratch<S>& ws, bool rows, bool gamma,
+                                bool phi, S* A, S* g, S* p, double* phit) const {
+    using V3 = Vec3T<S>;
+    const TreeModel& model = d_.model;
+    const TreeDataT<S>& data = ws.data;
+    const Frame& fa = d_.frames[c.frame_a];
+    const Frame& fb = d_.frames[c.frame_b];
+    FrameKinematicsT<S>& ka = ws.ka;
+    FrameKinematicsT<S>& kb = ws.kb;
+    frame_kinematics(model, data, fa, gamma, ka);
+    frame_kinematics(model, data, fb, gamma, kb);
+    const int nv = model.nv;
+    const V3 zero = V3::Zero();
+    auto row = [&](int r, const V3& la, const V3& lb) {  // la·J_a + lb·J_b (position Jacobians)
+        S* a = A + static_cast<std::ptrdiff_t>(r) * nv;
+        for (int k = 0; k < nv; ++k) a[k] = S(0.0);
+        if (fa.joint >= 0) add_jacobian_row(model, data, fa.joint, ka.oMf.p, la, zero, a);
+        if (fb.joint >= 0) add_jacobian_row(model, data, fb.joint, kb.oMf.p, lb, zero, a);
+    };
+    double f[3];
+    auto motion = [&](int i) -> Status {
+        const int st = d_.drivers[static_cast<std::size_t>(i)].eval(t, f, ws.treg.data());
+        if (st == TimeFunction::EVAL_FAILED) return Status::callback_error;
+        return st == TimeFunction::EVAL_OK ? Status::ok : Status::not_finite;
+    };
+    const V3 d = kb.oMf.p - ka.oMf.p;
+    if (c.type == RowType::path_driver) {
+        int r = 0;
+        for (int i = 0; i < 3; ++i) {
+            if (c.drv[i] < 0) continue;
+            const Status st = motion(c.drv[i]);
+            if (st != Status::ok) return st;
+            const V3 e = V3::Unit(i);
+            if (rows) row(r, -e, e);
+            if (gamma) g[r] = (kb.a[i] - ka.a[i]) - f[2];
+            if (phi) p[r] = d[i] - f[0];
+            phit[r] = -f[1];
+            ++r;
+        }
+        return Status::ok;
+    }
+    const Status st = motion(c.drv[0]);  // distance_driver
+    if (st != Status::ok) return st;
+    const double L = c.ref1;
+    if (rows) row(0, -d / L, d / L);
+    if (gamma) {
+        const V3 dd = kb.v - ka.v;
+        g[0] = (dd.dot(dd) + d.dot(kb.a - ka.a) - f[1] * f[1] - f[0] * f[2]) / L;
+    }
+    if (phi) p[0] = (d.dot(d) - f[0] * f[0]) / (2.0 * L);
+    phit[0] = -f[0] * f[1] / L;
+    return Status::ok;
+}
+
 Status TreeProgram::evaluate(double t, const double* q, const double* qd,
                              const std::uint8_t* active, unsigned need, Terms& out,
                              Workspace& wsb) const {
@@ -503,6 +581,16 @@ Status TreeProgram::eval(double t, const S* q, const S* qd, const std::uint8_t* 
             if (want_gamma) g[0] = -f[2];
             if (want_phi) p[0] = q[c.iq] - f[0];
             if (need & NEED_VELOCITY) out.velocity[r0] = qd[c.iq] - f[1];
+            continue;
+        } else if (c.type == RowType::path_driver || c.type == RowType::distance_driver) {
+            double phit[3] = {0.0, 0.0, 0.0};
+            st = driver_rows(c, t, ws, want_rows, want_gamma, want_phi, target.row(r0).data(), g, p, phit);
+            if (st != Status::ok) return st;
+            if (want_rows && quat_)
+                for (int r = 0; r < dim; ++r) apply_Tt(ws, ws.Av.row(r0 + r).data(), out.A.row(r0 + r).data());
+            if (need & NEED_VELOCITY)
+                for (int r = 0; r < dim; ++r)
+                    out.velocity[r0 + r] = out.A.row(r0 + r).dot(Eigen::Map<const VecS>(qd, nq)) + phit[r];
             continue;
         } else {
             frame_rows(c, ws, want_rows, want_gamma, want_phi, target.row(r0).data(), g, p);
@@ -661,6 +749,22 @@ Status TreeProgram::jacobian_dot(const double* q, const double* qd, const std::u
                 const Vec3 Nd = ka.w.cross(N);
                 const Vec3 dd = kb.v - ka.v;
                 row(0, -N, N.cross(d), N, zero, -Nd, Nd.cross(d) + N.cross(dd), Nd, zero);
+                break;
+            }
+            case RowType::path_driver: {
+                int r = 0;
+                for (int i = 0; i < 3; ++i)
+                    if (c.drv[i] >= 0) {
+                        const Vec3 e = Vec3::Unit(i);
+                        row(r++, -e, zero, e, zero, zero, zero, zero, zero);
+                    }
+                break;
+            }
+            case RowType::distance_driver: {
+                const double L = c.ref1;
+                const Vec3 d = (kb.oMf.p - ka.oMf.p) / L;
+                const Vec3 dd = (kb.v - ka.v) / L;
+                row(0, -d, zero, d, zero, -dd, zero, dd, zero);
                 break;
             }
             default: break;

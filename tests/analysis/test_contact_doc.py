@@ -1,5 +1,6 @@
 """docs/contact.md runs: its ```python blocks, in order, form one script whose output carries the
-page's claims (reactions vs the closed form, undetermined redundant pins, a driven slider-crank
+page's claims (reactions vs the closed form, undetermined redundant pins, an impact's impulses
+by the lever rule, a driven slider-crank
 vs its closed form, driver torque = inverse dynamics, redundant actuation)."""
 
 from __future__ import annotations
@@ -19,6 +20,9 @@ CLAIMS = [
     "engine program: True",
     "all ok: True",
     "ok=True fully_actuated=True dof=2 redundancy=2",
+    "floor_l on the bar [0.       1.461643] N s, determined: True",
+    "floor_r on the bar [0.       2.923286] N s, determined: True",
+    "lever rule: 1.461643 and 2.923286 N s",
 ]
 #: printed residual -> bound it must meet
 BOUNDS = {

@@ -28,7 +28,8 @@ def test_library_public_names():
 
 def test_planar_public_names():
     assert set(planar.__all__) == {
-        "GROUND", "AngleDriver", "Body", "ConstantSpeed", "ContactTangent", "Gear", "Joint", "JointActuator",
+        "GROUND", "AngleDriver", "AngleLimit", "Body", "ConstantSpeed", "ContactTangent", "Gear", "Joint",
+        "JointActuator",
         "PlanarBuilder", "PlanarModel", "PlanarProgram", "Point", "PointForce", "PointOnLine", "PointRef",
         "Prismatic", "Revolute", "Rod", "RotationalSpring", "Spring", "Torque", "Weld",
     }

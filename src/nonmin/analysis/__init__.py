@@ -8,6 +8,9 @@
     The force and torque each named constraint exerts on the two bodies it joins, in the
     bodies' frames, read from the generalized constraint force ``f_c`` (eq. (fc_R)), with
     the components that redundant constraints leave undetermined marked as such.
+:func:`impulses`
+    The same read-out of an impact's impulse ``M (q̇⁺ − q̇⁻)``: each constraint's force and
+    torque impulse on its two bodies (what ``EventRecord.impulses`` holds).
 
 Both build on :mod:`nonmin.core` and a :class:`~nonmin.model.Model`; see ``docs/contact.md``.
 """
@@ -17,6 +20,7 @@ from ._inverse import InverseDynamics as InverseDynamics
 from ._inverse import inverse_dynamics as inverse_dynamics
 from ._reactions import DETERMINED_RTOL as DETERMINED_RTOL
 from ._reactions import Reaction as Reaction
+from ._reactions import impulses as impulses
 from ._reactions import reactions as reactions
 
 __all__ = [
@@ -24,6 +28,7 @@ __all__ = [
     "FEASIBILITY_RTOL",
     "InverseDynamics",
     "Reaction",
+    "impulses",
     "inverse_dynamics",
     "reactions",
 ]

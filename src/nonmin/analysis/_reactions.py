@@ -50,7 +50,7 @@ from ..model._protocol import Model
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-__all__ = ["DETERMINED_RTOL", "Reaction", "reactions"]
+__all__ = ["DETERMINED_RTOL", "Reaction", "impulses", "reactions"]
 
 #: A component is undetermined when its change along the left null space of A is larger than
 #: ``DETERMINED_RTOL`` times the size of the map from the multipliers to it.
@@ -275,10 +275,15 @@ def _spatial_ground(
 
 
 def _frame_sides(model: Any, name: str, q: FloatArray) -> tuple[str, list[_Side]] | None:
-    from ..model.robots._constraints import FrameConstraint, complete_basis
+    from ..model.robots._constraints import (
+        DistanceDriver,
+        FrameConstraint,
+        PathDriver,
+        complete_basis,
+    )
 
     c = next((c for c in model.robot_constraints if c.name == name), None)
-    if not isinstance(c, FrameConstraint):
+    if not isinstance(c, FrameConstraint | PathDriver | DistanceDriver):
         return None
     Ha = model.frame_placement(q, f"{name}:a")
     Hb = model.frame_placement(q, f"{name}:b")
@@ -286,6 +291,14 @@ def _frame_sides(model: Any, name: str, q: FloatArray) -> tuple[str, list[_Side]
     m = c.dim
     F = np.zeros((3, m))  # world force on a = F λ
     T = np.zeros((3, m))  # world moment on a about its origin = T λ
+    if isinstance(c, PathDriver | DistanceDriver):  # rows of p_b − p_a: λ is the force on b
+        if isinstance(c, PathDriver):
+            F[list(c.axes), range(m)] = -1.0
+        else:
+            F[:, 0] = -(Hb[:3, 3] - Ha[:3, 3]) / c.reference
+        Wa = np.vstack([Ra.T @ F, np.zeros((3, m))])
+        Wb = np.vstack([Rb.T @ -F, np.zeros((3, m))])
+        return "frame", [_Side(c.frame_a, np.zeros(3), Wa, None), _Side(c.frame_b, np.zeros(3), Wb, None)]
     if c.type in ("point", "weld", "hinge"):
         F[:, :3] = np.eye(3)
     if c.type == "weld":
@@ -555,3 +568,66 @@ def reactions(
             **arr,
         )
     return out
+
+
+def impulses(
+    model: Model,
+    q: ArrayLike,
+    qd_before: ArrayLike,
+    qd_after: ArrayLike,
+    *,
+    t: float = 0.0,
+    active: Iterable[str] | str | None = None,
+    names: Iterable[str] | None = None,
+    rtol: float | None = None,
+) -> dict[str, Reaction]:
+    """The impulse of an impact on every named constraint, as wrenches on the bodies it joins.
+
+    The velocity jump of an impact at ``q`` is caused by the impulse ``p = M (q̇⁺ − q̇⁻)``
+    (docs/theory.md, "Simultaneous impacts": ``p = A_bᵀΛ_b + Σ a_iᵀΛ_i`` over the rows that
+    carry it), read like a generalized constraint force by :func:`reactions`: each
+    constraint's force impulse (N·s) and torque impulse (N·m·s) on its two bodies, in their
+    frames, with ``determined`` masks where redundant rows leave the split undecided (three
+    contacts under a planar bar: only the sum and the moment are decided).
+
+    Parameters
+    ----------
+    model : Model
+    q : array_like, shape (n,)
+        Configuration of the impact.
+    qd_before, qd_after : array_like, shape (n,)
+        Velocities before and after it.
+    t : float
+        Time (rheonomic constraints).
+    active : iterable of str, optional
+        The constraints that carry the impulse (default: the model's default active set).
+        For a simulated impact, :attr:`nonmin.sim.EventRecord.impulses` uses the bilateral
+        constraints active across it and every contact in the impact set.
+    names : iterable of str, optional
+        Constraints to report (default: every constraint of the model).
+    rtol : float, optional
+        Rank tolerance of A.
+
+    Returns
+    -------
+    dict of str to Reaction
+        Fields as in :class:`Reaction`, read as impulses (``multipliers``: Λ of the rows;
+        ``generalized``: the constraint's part ``A_Iᵀ Λ_I`` of ``p``).
+
+    Raises
+    ------
+    ShapeError
+        A vector of the wrong shape.
+    UnknownNameError
+        A name that is not a constraint of the model.
+    """
+    n = model.n
+    vecs = []
+    for nm, x in (("q", q), ("qd_before", qd_before), ("qd_after", qd_after)):
+        a = np.asarray(x, dtype=np.float64)
+        if a.shape != (n,):
+            raise ShapeError(f"{nm} must have shape ({n},), got shape {a.shape}")
+        vecs.append(a)
+    qa, v0, v1 = vecs
+    p = model.mass_matrix(qa) @ (v1 - v0)
+    return reactions(model, qa, p, t=t, active=active, names=names, rtol=rtol)

@@ -140,6 +140,13 @@ class EventRecord:
         Human-readable description of the transition applied.
     q_before, qd_before, q_after, qd_after : ndarray, shape (n,)
     active_before, active_after : frozenset of str
+    impulses : dict of str to Reaction
+        For an impact (automatic contact, or an :class:`Activate` transition): the impulse
+        ``M (qd_after − qd_before)`` split over the constraints that carry it, by name, as force
+        and torque impulses (N·s, N·m·s) on the two bodies each joins, in their frames, with
+        ``determined`` masks for redundant sets (:func:`nonmin.analysis.impulses`). The set:
+        the constraints active before or after, the contacts of the impact (named, or touching
+        and approaching). Empty for other events. Saved and exported with the event.
     """
 
     t: float
@@ -151,10 +158,11 @@ class EventRecord:
     qd_after: FloatArray
     active_before: frozenset[str]
     active_after: frozenset[str]
+    impulses: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-serializable form."""
-        return {
+        out: dict[str, Any] = {
             "t": self.t,
             "name": self.name,
             "transition": self.transition,
@@ -165,6 +173,12 @@ class EventRecord:
             "active_before": sorted(self.active_before),
             "active_after": sorted(self.active_after),
         }
+        if self.impulses:
+            out["impulses"] = [
+                {**r.metadata(), **{k: v.tolist() for k, v in r.to_arrays("").items()}}
+                for r in self.impulses.values()
+            ]
+        return out
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> EventRecord:
@@ -179,7 +193,25 @@ class EventRecord:
             qd_after=np.asarray(d["qd_after"], float),
             active_before=frozenset(d["active_before"]),
             active_after=frozenset(d["active_after"]),
+            impulses=_impulses_from(d.get("impulses", [])),
         )
+
+
+def _impulses_from(raw: Any) -> dict[str, Any]:
+    """The impulses of :meth:`EventRecord.to_dict` back as Reactions."""
+    if not raw:
+        return {}
+    from ..analysis import Reaction
+
+    if not isinstance(raw, list):
+        raise TypeError(f"impulses must be a list, got {type(raw).__name__}")
+    out: dict[str, Any] = {}
+    for item in raw:
+        arrays = {k: np.asarray(v, dtype=bool if k.startswith(("determined", "multipliers_d", "active")) else float)
+                  for k, v in item.items() if k not in ("name", "kind", "body_a", "body_b", "point_a", "point_b", "frame")}
+        r = Reaction.from_arrays(item, arrays)
+        out[r.name] = r
+    return out
 
 
 def describe_transition(tr: Transition | None) -> str:

@@ -63,6 +63,7 @@ from ..errors import (
 from ..model import ConstraintTerms, Model, State
 from . import _durable, _engine, _fastpath, _friction
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
+from ._impulses import with_impulses
 from ._integrators import METHODS, RK4, Integrator, SingularPassages, StepperState, hermite_quintic
 from ._options import EventSet, Output, Solver, resolve_options
 from ._progress import Progress
@@ -1110,6 +1111,8 @@ def simulate(
     result = snapshot(status, message)
     if status is Status.SUCCESS and t_out is None and prev is None:
         result = _kick_check(result)
+    if any(e.name.startswith("impact:") or e.transition.startswith("activate") for e in result.events):
+        result = replace(result, events=with_impulses(model, result.events, rank_rtol))  # impulses by name
     if out.reactions and len(result):  # each constraint's wrench per sample (nonmin.analysis)
         result = result.with_reactions(model, None if out.reactions is True else out.reactions, rtol=rank_rtol)
     if ck_path is not None:  # the checkpoint ends as the whole run, whatever its status

@@ -24,6 +24,10 @@
 //   joint_limit      1  gap s (q₁ − r₁) ≥ 0, s = c₀ = ±1 (unilateral): A = s e₁ᵀ, γ = 0
 //   joint_driver     1  q₁ − f(t) (rheonomic; f = drivers[iq2], a TimeFunction): A = e₁ᵀ,
 //                       A q̇ + φ_t = q̇₁ − ḟ, γ = −f̈
+//   path_driver    1–3  e_i·(p_b − p_a) − f_i(t) for each axis i with drv[i] ≥ 0 (f_i = drivers[drv[i]]):
+//                       A = e_i·(J_b − J_a), φ_t = −ḟ_i, γ = e_i·(a_b − a_a) − f̈_i
+//   distance_driver  1  (dᵀd − f²)/(2L), d = p_b − p_a, f = drivers[drv[0]], L = ref1:
+//                       A = dᵀ(J_b − J_a)/L, φ_t = −f ḟ/L, γ = (ḋᵀḋ + dᵀ(a_b − a_a) − ḟ² − f f̈)/L
 #pragma once
 #include <array>
 #include <memory>
@@ -49,9 +53,13 @@ enum class RowType : int {
     joint_coupling = 8,
     joint_limit = 9,
     joint_driver = 10,
+    path_driver = 11,
+    distance_driver = 12,
 };
 
-int row_count(RowType t);
+struct TreeConstraint;
+int row_count(RowType t);            // fixed-size types (path_driver: 3, its largest)
+int row_count(const TreeConstraint& c);  // this constraint's rows
 
 struct TreeConstraint {
     std::string name;
@@ -64,6 +72,7 @@ struct TreeConstraint {
     int iq2 = -1;  // joint_coupling: joint 2's index (−1: none); joint_driver: index into drivers
     std::array<double, 5> coef{{0.0, 1.0, 0.0, 0.0, 0.0}};
     double ref1 = 0.0, ref2 = 0.0;
+    std::array<int, 3> drv{{-1, -1, -1}};  // path/distance drivers: indices into drivers (−1: none)
 };
 
 struct TreeDescription {
@@ -170,6 +179,10 @@ class TreeProgram : public Program {
     template <class S>
     void frame_rows(const TreeConstraint& c, TreeScratch<S>& ws, bool rows, bool gamma, bool phi, S* A,
                     S* g, S* p) const;
+    // Rows, γ, φ and φ_t of a path or distance driver at t (A rows in velocity space).
+    template <class S>
+    Status driver_rows(const TreeConstraint& c, double t, TreeScratch<S>& ws, bool rows, bool gamma, bool phi,
+                       S* A, S* g, S* p, double* phit) const;
 
     TreeDescription d_;
     bool quat_ = false;

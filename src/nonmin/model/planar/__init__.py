@@ -11,6 +11,7 @@ from ._builder import PointRef as PointRef
 from ._compiled import PlanarProgram as PlanarProgram
 from ._elements import GROUND as GROUND
 from ._elements import AngleDriver as AngleDriver
+from ._elements import AngleLimit as AngleLimit
 from ._elements import Body as Body
 from ._elements import ConstantSpeed as ConstantSpeed
 from ._elements import ContactTangent as ContactTangent
@@ -32,6 +33,7 @@ from ._model import PlanarModel as PlanarModel
 __all__ = [
     "GROUND",
     "AngleDriver",
+    "AngleLimit",
     "Body",
     "ConstantSpeed",
     "ContactTangent",

@@ -6,12 +6,12 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from ...errors import InputError, ModelError, UnknownNameError
-from .._timefn import TimeFunction, as_time_function
+from .._timefn import Callback, TimeFunction, as_time_function
 from ._elements import (
     GROUND,
     AngleDriver,
+    AngleLimit,
     Body,
-    CheckedProfile,
     ConstantSpeed,
     ContactTangent,
     CoordinateDriver,
@@ -295,6 +295,33 @@ class PlanarBuilder:
             active,
         )
 
+    def angle_limit(
+        self,
+        name: str,
+        body_b: str,
+        *,
+        body_a: str = GROUND,
+        lower: float | None = None,
+        upper: float | None = None,
+    ) -> tuple[str, ...]:
+        """Joint limits on the relative angle ``θ_b − θ_a``: unilateral constraints
+        ``"<name>.lower"`` (gap ``θ_b − θ_a − lower``) and ``"<name>.upper"`` (gap
+        ``upper − (θ_b − θ_a)``), inactive until the stop is reached; ``simulate`` then applies
+        the impact law (restitution from its ``restitution=`` dict, by these names).
+        Returns the names added."""
+        w = f"angle_limit {name!r}"
+        if lower is None and upper is None:
+            raise InputError(f"{w}: give lower, upper or both")
+        lo = None if lower is None else _finite(lower, f"{w}: lower")
+        hi = None if upper is None else _finite(upper, f"{w}: upper")
+        if lo is not None and hi is not None and not lo < hi:
+            raise ModelError(f"{w}: lower must be < upper, got {lo} and {hi}")
+        out = []
+        for side, bound in (("lower", lo), ("upper", hi)):
+            if bound is not None:
+                out.append(self._add_joint(AngleLimit(f"{name}.{side}", body_a, body_b, bound, side), False))  # type: ignore[arg-type]
+        return tuple(out)
+
     def drive_angle(
         self,
         name: str,
@@ -320,8 +347,8 @@ class PlanarBuilder:
             prof = as_time_function(prof, f"driver {name!r}")  # a constant, polynomial or expression
         if not callable(prof):
             raise InputError(f"drive_angle {name!r}: profile must be callable t -> (f, fd, fdd)")
-        if not isinstance(prof, ConstantSpeed | CheckedProfile | TimeFunction):
-            prof = CheckedProfile(prof, name)  # its failures name the driver and the time
+        if not isinstance(prof, TimeFunction):
+            prof = Callback(prof, f"driver {name!r}")  # its failures name the driver and the time
         return self._add_joint(AngleDriver(name, body_a, body_b, prof), active)
 
     def drive_coordinate(self, name: str, coordinate: str, motion: Any, *, active: bool = True) -> str:

@@ -13,16 +13,18 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Literal, Protocol
+from typing import Literal, Protocol
 
 import numpy as np
 
-from ...errors import InputError, ModelError, NonminError
+from ...errors import InputError, ModelError
 from .._protocol import FloatArray
+from .._timefn import PiecewisePolynomial, Polynomial
 
 __all__ = [
     "GROUND",
     "AngleDriver",
+    "AngleLimit",
     "Body",
     "ConstantSpeed",
     "ContactTangent",
@@ -418,23 +420,75 @@ class Rod(Joint):
         return (self.a.body, self.b.body)
 
     def terms(self, kin: _Kin, t: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-        pa, rsa, va, oma = kin.point(self.a)
-        pb, rsb, vb, omb = kin.point(self.b)
-        L = self.length
-        d = pb - pa
-        dd = vb - va
-        D = np.zeros((2, kin.n))
-        kin.add_jac(D, self.b.body, rsb, 1.0)
-        kin.add_jac(D, self.a.body, rsa, -1.0)
-        Dd = np.zeros((2, kin.n))
-        kin.add_jacdot(Dd, self.b.body, rsb, omb, 1.0)
-        kin.add_jacdot(Dd, self.a.body, rsa, oma, -1.0)
         s = -1.0 if self.unilateral else 1.0
-        A = (s / L) * (d @ D)[None, :]
-        Ad = (s / L) * (dd @ D + d @ Dd)[None, :]
-        gamma = (s / L) * (dd @ dd + d @ (Dd @ kin.qd))
-        phi = s * (d @ d - L * L) / (2.0 * L)
-        return np.array([phi]), A, Ad, np.array([gamma]), np.zeros(1)
+        phi, A, Ad, gamma, phit = _distance_terms(kin, self.a, self.b, self.length, (self.length, 0.0, 0.0))
+        return s * phi, s * A, s * Ad, s * gamma, phit
+
+
+def _distance_terms(
+    kin: _Kin, a: Point, b: Point, L: float, f: tuple[float, float, float]
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The distance row of two points, ``φ = (dᵀd − f²)/(2L)`` with ``d = p_b − p_a`` and the
+    prescribed distance ``f = (f, ḟ, f̈)`` (a rod: ``(L, 0, 0)``): ``A = dᵀD/L`` (D the relative
+    point Jacobian), ``Ȧ = (ḋᵀD + dᵀḊ)/L``, ``γ = (ḋᵀḋ + dᵀḊq̇ − ḟ² − f f̈)/L``, ``φ_t = −f ḟ/L``."""
+    pa, rsa, va, oma = kin.point(a)
+    pb, rsb, vb, omb = kin.point(b)
+    d = pb - pa
+    dd = vb - va
+    D = np.zeros((2, kin.n))
+    kin.add_jac(D, b.body, rsb, 1.0)
+    kin.add_jac(D, a.body, rsa, -1.0)
+    Dd = np.zeros((2, kin.n))
+    kin.add_jacdot(Dd, b.body, rsb, omb, 1.0)
+    kin.add_jacdot(Dd, a.body, rsa, oma, -1.0)
+    f0, f1, f2 = f
+    A = (d @ D)[None, :] / L
+    Ad = (dd @ D + d @ Dd)[None, :] / L
+    gamma = (dd @ dd + d @ (Dd @ kin.qd) - f1 * f1 - f0 * f2) / L
+    phi = (d @ d - f0 * f0) / (2.0 * L)
+    return np.array([phi]), A, Ad, np.array([gamma]), np.array([-f0 * f1 / L])
+
+
+@dataclass(frozen=True)
+class AngleLimit(Joint):
+    """One side of a relative angle's range, a unilateral constraint (1 row): gap
+    ``s (θ_b − θ_a − bound) ≥ 0`` with ``s = +1`` (``side="lower"``) or ``−1`` (``"upper"``);
+    ``A = s ∂(θ_b − θ_a)/∂q`` (constant), ``γ = 0``. Like a contact, inactive until the gap
+    closes; ``simulate`` then applies the impact law at the stop."""
+
+    body_a: str
+    body_b: str
+    bound: float
+    side: Literal["lower", "upper"]
+
+    @property
+    def kind(self) -> Literal["holonomic", "rheonomic", "nonholonomic", "unilateral"]:
+        return "unilateral"
+
+    @property
+    def sign(self) -> float:
+        return 1.0 if self.side == "lower" else -1.0
+
+    @property
+    def dim(self) -> int:
+        return 1
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.body_a, self.body_b)
+
+    def needs_angle(self) -> tuple[str, ...]:
+        return self.bodies
+
+    def describe(self) -> str:
+        rel = ">=" if self.side == "lower" else "<="
+        return f"angle limit θ_{self.body_b} − θ_{self.body_a} {rel} {self.bound:g}"
+
+    def terms(self, kin: _Kin, t: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+        A = np.zeros((1, kin.n))
+        rel, _ = _angle_rows(kin, self.body_a, self.body_b, A, 0)
+        s = self.sign
+        return np.array([s * (rel - self.bound)]), s * A, np.zeros((1, kin.n)), np.zeros(1), np.zeros(1)
 
 
 @dataclass(frozen=True)
@@ -474,45 +528,10 @@ class Gear(Joint):
 Profile = Callable[[float], tuple[float, float, float]]
 
 
-@dataclass(frozen=True)
-class ConstantSpeed:
-    """The profile ``f(t) = start + speed·t`` (a crank turned at constant speed)."""
-
-    start: float
-    speed: float
-
-    def __call__(self, t: float) -> tuple[float, float, float]:
-        return self.start + self.speed * t, self.speed, 0.0
-
-
-@dataclass(frozen=True)
-class CheckedProfile:
-    """A user profile whose failures are typed: an exception, a result that is not three
-    finite numbers ``(f, ḟ, f̈)`` becomes a :class:`~nonmin.errors.ModelError` naming the
-    driver and the time (a simulation reports it as a SimulationError at that time)."""
-
-    fn: Callable[[float], Any]
-    driver: str
-
-    def __call__(self, t: float) -> tuple[float, float, float]:
-        try:
-            out = self.fn(t)
-        except NonminError:
-            raise
-        except Exception as exc:
-            raise ModelError(
-                f"driver {self.driver!r}: profile raised {type(exc).__name__}: {exc} (at t = {t:.12g})"
-            ) from exc
-        try:
-            vals = tuple(float(v) for v in out)
-        except (TypeError, ValueError):
-            vals = ()
-        if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
-            raise ModelError(
-                f"driver {self.driver!r}: profile must return three finite numbers (f, ḟ, f̈), got "
-                f"{out!r} at t = {t:.12g}"
-            )
-        return vals  # type: ignore[return-value]
+def ConstantSpeed(start: float, speed: float) -> PiecewisePolynomial:
+    """The profile ``f(t) = start + speed·t`` (a crank turned at constant speed): the time
+    function ``Polynomial([start, speed])`` of :mod:`nonmin.model._timefn`."""
+    return Polynomial([float(start), float(speed)])
 
 
 @dataclass(frozen=True)
@@ -609,23 +628,8 @@ class DistanceDriver(Joint):
         return (self.a.body, self.b.body)
 
     def terms(self, kin: _Kin, t: float) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-        pa, rsa, va, oma = kin.point(self.a)
-        pb, rsb, vb, omb = kin.point(self.b)
-        L = self.reference
-        d = pb - pa
-        dd = vb - va
-        D = np.zeros((2, kin.n))
-        kin.add_jac(D, self.b.body, rsb, 1.0)
-        kin.add_jac(D, self.a.body, rsa, -1.0)
-        Dd = np.zeros((2, kin.n))
-        kin.add_jacdot(Dd, self.b.body, rsb, omb, 1.0)
-        kin.add_jacdot(Dd, self.a.body, rsa, oma, -1.0)
-        f, fd, fdd = (float(v) for v in self.profile(float(t)))
-        A = (d @ D)[None, :] / L
-        Ad = (dd @ D + d @ Dd)[None, :] / L
-        gamma = (dd @ dd + d @ (Dd @ kin.qd) - fd * fd - f * fdd) / L
-        phi = (d @ d - f * f) / (2.0 * L)
-        return np.array([phi]), A, Ad, np.array([gamma]), np.array([-f * fd / L])
+        f0, f1, f2 = (float(v) for v in self.profile(float(t)))
+        return _distance_terms(kin, self.a, self.b, self.reference, (f0, f1, f2))
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from .._timefn import Callback, TimeFunction
 from ._elements import (
     GROUND,
     AngleDriver,
-    ConstantSpeed,
+    AngleLimit,
     ContactTangent,
     CoordinateDriver,
     DistanceDriver,
@@ -92,8 +92,6 @@ def description(model: PlanarModelLike) -> Any | None:
     def driver(prof: Any) -> int:
         """Engine index of a prescribed motion: constant speed and time functions as data,
         other callables as a Python callback."""
-        if type(prof) is ConstantSpeed:
-            return int(d.add_driver(prof.start, prof.speed))
         if isinstance(prof, TimeFunction) and not isinstance(prof, Callback):
             return int(d.add_driver_function(prof.engine()))
         return int(d.add_driver_callback(prof))
@@ -127,6 +125,9 @@ def description(model: PlanarModelLike) -> Any | None:
                 c, 0, [body(j.body_b), body(j.carrier), body(j.body_a)],
                 [1.0, -1.0 + j.ratio, -j.ratio], j.offset,
             )  # fmt: skip
+        elif tj is AngleLimit:
+            assert isinstance(j, AngleLimit)  # s (θ_b − θ_a) − s·bound
+            d.add_angle(c, 0, [body(j.body_b), body(j.body_a)], [j.sign, -j.sign], j.sign * j.bound)
         elif tj is AngleDriver:
             assert isinstance(j, AngleDriver)
             d.add_angle(c, 0, [body(j.body_b), body(j.body_a)], [1.0, -1.0], 0.0, driver(j.profile))

@@ -7,7 +7,10 @@
   closure), ``weld`` (6D), ``hinge`` (5D), ``planar_point``, ``planar_weld``,
   ``point_on_plane`` and unilateral ``contact``; :class:`JointCoupling` — polynomial joint
   coupling; :class:`JointLimit` — one side of a joint's position limit (unilateral; made from
-  the file's limits by the constructors unless ``joint_limits=False``).
+  the file's limits by the constructors unless ``joint_limits=False``); drivers (rheonomic):
+  :class:`JointDriver` (a joint coordinate ``q = f(t)``), :class:`PathDriver` (a frame point
+  on a path ``(x(t), y(t), z(t))``, any subset of the axes) and :class:`DistanceDriver` (the
+  distance of two frame points), with time functions evaluated by the engine.
 * :func:`data_path` — path of a robot file shipped with nonmin (``nonmin/data/robots``);
   example robots built from them, each returning ``(model, state)``: :func:`serial_arm`
   (4-dof arm, unilateral end-effector contact), :func:`fourbar` (URDF four-bar + loop-closure
@@ -27,10 +30,12 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 from ._constraints import FRAME_CONSTRAINT_TYPES as FRAME_CONSTRAINT_TYPES
+from ._constraints import DistanceDriver as DistanceDriver
 from ._constraints import FrameConstraint as FrameConstraint
 from ._constraints import JointCoupling as JointCoupling
 from ._constraints import JointDriver as JointDriver
 from ._constraints import JointLimit as JointLimit
+from ._constraints import PathDriver as PathDriver
 from ._data import data_path as data_path
 
 if TYPE_CHECKING:
@@ -44,10 +49,12 @@ if TYPE_CHECKING:
 
 __all__ = [
     "FRAME_CONSTRAINT_TYPES",
+    "DistanceDriver",
     "FrameConstraint",
     "JointCoupling",
     "JointDriver",
     "JointLimit",
+    "PathDriver",
     "RobotModel",
     "data_path",
     "fourbar",

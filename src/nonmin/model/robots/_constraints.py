@@ -27,6 +27,11 @@ type               rows  residual φ                                          ho
                          (unilateral; URDF/MJCF position limits)
 ``joint_driver``   1     ``q − f(t)`` (rheonomic: a driven joint; f a time   yes
                          function, see :class:`JointDriver`)
+``path_driver``    1–3   ``e_i·(p_b − p_a) − f_i(t)`` for each given world   yes
+                         axis i (rheonomic: a frame point on a path, see
+                         :class:`PathDriver`)
+``distance_driver`` 1    ``(dᵀd − f(t)²)/(2L)``, ``d = p_b − p_a``, L =       yes
+                         ``f(0)`` (rheonomic, see :class:`DistanceDriver`)
 =================  ====  ==================================================  =================
 
 ``k`` is the hinge axis / plane normal *in frame a*; ``u₁, u₂`` complete it to an orthonormal
@@ -48,7 +53,8 @@ from ...errors import InputError, ShapeError
 from .._protocol import ConstraintKind, FloatArray
 
 __all__ = [
-    "FRAME_CONSTRAINT_TYPES", "FrameConstraint", "JointCoupling", "JointDriver", "JointLimit", "RobotConstraint",
+    "FRAME_CONSTRAINT_TYPES", "DistanceDriver", "FrameConstraint", "JointCoupling", "JointDriver", "JointLimit",
+    "PathDriver", "RobotConstraint",
 ]
 
 FrameConstraintType = Literal[
@@ -396,7 +402,122 @@ class JointDriver:
         return f"driver of joint {self.joint!r}"
 
 
-RobotConstraint = FrameConstraint | JointCoupling | JointLimit | JointDriver
+@dataclass(frozen=True, eq=False)
+class PathDriver:
+    """A frame point on a prescribed path: rheonomic rows ``e_i·(p_b − p_a) − f_i(t) = 0``
+    for each world axis ``i`` whose motion is given (``x``, ``y``, ``z``; None leaves that
+    axis free), ``A_i = e_i·(J_b − J_a)`` (position Jacobians, world-aligned),
+    ``φ_t = −ḟ_i``, ``γ_i = e_i·(a_b − a_a) − f̈_i`` (``a`` the point's acceleration at
+    ``q̈ = 0``).
+
+    Point b is ``frame`` (with ``point``: a translation or 4×4 placement in it); point a is
+    ``reference`` (default the world origin) with ``reference_point``. Each motion is a number,
+    a time function (:class:`~nonmin.model.Polynomial`, :class:`~nonmin.model.Spline`,
+    :class:`~nonmin.model.Sampled`, :class:`~nonmin.model.Expression`: evaluated by the engine)
+    or a callable ``t -> (f, ḟ, f̈)`` (called back). The reaction's multipliers are the world
+    force components on point b that impose the path (the force on a is their opposite).
+    """
+
+    name: str
+    frame: str
+    x: Any = None
+    y: Any = None
+    z: Any = None
+    point: ArrayLike | None = None
+    reference: str = WORLD
+    reference_point: ArrayLike | None = None
+    frame_a: str = field(init=False)
+    frame_b: str = field(init=False)
+    placement_a: FloatArray = field(init=False)
+    placement_b: FloatArray = field(init=False)
+    motions: tuple[Any, ...] = field(init=False)
+    axes: tuple[int, ...] = field(init=False)
+
+    def __post_init__(self) -> None:
+        from .._timefn import as_time_function
+
+        if not isinstance(self.name, str) or not self.name:
+            raise InputError(f"constraint name must be a non-empty string, got {self.name!r}")
+        for nm in ("frame", "reference"):
+            if not isinstance(getattr(self, nm), str) or not getattr(self, nm):
+                raise InputError(f"constraint {self.name!r}: {nm} must be a frame name (str)")
+        s = object.__setattr__
+        axes, motions = [], []
+        for i, ax in enumerate("xyz"):
+            m = getattr(self, ax)
+            if m is not None:
+                axes.append(i)
+                motions.append(as_time_function(m, f"driver {self.name!r} ({ax})"))
+        if not axes:
+            raise InputError(f"constraint {self.name!r}: give the motion of at least one of x, y, z")
+        s(self, "axes", tuple(axes))
+        s(self, "motions", tuple(motions))
+        s(self, "frame_a", self.reference)
+        s(self, "frame_b", self.frame)
+        s(self, "placement_a", _placement(self.reference_point, "reference_point"))
+        s(self, "placement_b", _placement(self.point, "point"))
+
+    @property
+    def dim(self) -> int:
+        return len(self.axes)
+
+    @property
+    def kind(self) -> ConstraintKind:
+        return "rheonomic"
+
+    @property
+    def description(self) -> str:
+        return f"path driver of a point of frame {self.frame!r} ({''.join('xyz'[i] for i in self.axes)})"
+
+
+@dataclass(frozen=True, eq=False)
+class DistanceDriver:
+    """A prescribed distance between two frame points, ``|p_b − p_a| = f(t)``: one rheonomic
+    row ``φ = (dᵀd − f²)/(2L)`` (``d = p_b − p_a``, L = ``|f(0)|``, as a rod of length L:
+    ``A = dᵀ(J_b − J_a)/L``), ``φ_t = −f ḟ/L``, ``γ = (ḋᵀḋ + dᵀ(a_b − a_a) − ḟ² − f f̈)/L``
+    — a linear actuator prescribing its length. ``motion`` as in :class:`PathDriver`.
+    """
+
+    name: str
+    frame_a: str
+    frame_b: str
+    motion: Any
+    placement_a: FloatArray = field(default_factory=lambda: np.eye(4))
+    placement_b: FloatArray = field(default_factory=lambda: np.eye(4))
+    reference: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        from .._timefn import as_time_function
+
+        if not isinstance(self.name, str) or not self.name:
+            raise InputError(f"constraint name must be a non-empty string, got {self.name!r}")
+        for nm in ("frame_a", "frame_b"):
+            if not isinstance(getattr(self, nm), str) or not getattr(self, nm):
+                raise InputError(f"constraint {self.name!r}: {nm} must be a frame name (str)")
+        s = object.__setattr__
+        fn = as_time_function(self.motion, f"driver {self.name!r}")
+        s(self, "motion", fn)
+        s(self, "placement_a", _placement(self.placement_a, "placement_a"))
+        s(self, "placement_b", _placement(self.placement_b, "placement_b"))
+        L = abs(float(fn(0.0)[0]))
+        if not L > 0.0:
+            raise InputError(f"constraint {self.name!r}: the prescribed distance at t = 0 must be > 0, got {L}")
+        s(self, "reference", L)
+
+    @property
+    def dim(self) -> int:
+        return 1
+
+    @property
+    def kind(self) -> ConstraintKind:
+        return "rheonomic"
+
+    @property
+    def description(self) -> str:
+        return f"distance driver between frames {self.frame_a!r} and {self.frame_b!r}"
+
+
+RobotConstraint = FrameConstraint | JointCoupling | JointLimit | JointDriver | PathDriver | DistanceDriver
 
 
 def _joint_limits_option(joint_limits: Any) -> bool | str:

@@ -73,10 +73,12 @@ from ...errors import (
 )
 from .._protocol import ConstraintSpec, ConstraintTerms, FloatArray, Geometry, Model, ModelTerms
 from ._constraints import (
+    DistanceDriver,
     FrameConstraint,
     JointCoupling,
     JointDriver,
     JointLimit,
+    PathDriver,
     RobotConstraint,
     _joint_limits_option,
     complete_basis,
@@ -348,10 +350,10 @@ class RobotModel(Model):
         blocks = _joint_blocks(pm)
         cons = tuple(self.robot_constraints)
         for c in cons:
-            if not isinstance(c, FrameConstraint | JointCoupling | JointLimit | JointDriver):
+            if not isinstance(c, RobotConstraint):
                 raise InputError(
-                    f"robot_constraints must be FrameConstraint, JointCoupling, JointLimit or JointDriver values, "
-                    f"got {type(c).__name__}"
+                    f"robot_constraints must be FrameConstraint, JointCoupling, JointLimit, JointDriver, "
+                    f"PathDriver or DistanceDriver values, got {type(c).__name__}"
                 )
         structural = [
             ConstraintSpec(f"{b.joint}.unit_quaternion", "holonomic", 1, "unit-norm quaternion")
@@ -936,6 +938,11 @@ class RobotModel(Model):
                 g, p, Ad, pt = np.array([-fdd]), np.array([q[i] - f]), np.zeros((1, n)), [-fd]
             elif isinstance(c, JointCoupling):
                 A, g, p, Ad = self._coupling_rows(c, q, qd)
+            elif isinstance(c, PathDriver | DistanceDriver):
+                Av, gv, p, Adv, pt = self._driver_rows(c, kin, qd, float(t))
+                A = Av @ kin.T
+                g = gv + Av @ (kin.Tdot @ qd)
+                Ad = None if Adv is None else Adv @ kin.T + Av @ kin.Tdot
             else:
                 Av, gv, p, Adv = self._frame_rows(c, kin)
                 A = Av @ kin.T
@@ -988,6 +995,37 @@ class RobotModel(Model):
             Ad[0, i2] = -d2 * qd[i2]
             gamma = -d2 * qd[i2] ** 2
         return A, np.array([gamma]), np.array([phi]), Ad
+
+    def _driver_rows(
+        self, c: PathDriver | DistanceDriver, kin: _Kin, qd: FloatArray, t: float
+    ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray | None, list[float]]:
+        """Rows of a path or distance driver in velocity space: A_v, γ_v, φ, Ȧ_v, φ_t."""
+        fa, fb = self._fids[c.name]
+        pa, _, Jpa, _, vpa, _, apa, _ = kin.frame(fa)
+        pb, _, Jpb, _, vpb, _, apb, _ = kin.frame(fb)
+        jd = kin.jdot
+        Jdpa, _ = kin.frame_dot(fa) if jd else (Jpa, None)
+        Jdpb, _ = kin.frame_dot(fb) if jd else (Jpb, None)
+        if isinstance(c, PathDriver):
+            f = np.array([[float(x) for x in m(t)] for m in c.motions])  # (dim, 3)
+            ax = list(c.axes)
+            return (
+                (Jpb - Jpa)[ax],
+                (apb - apa)[ax] - f[:, 2],
+                (pb - pa)[ax] - f[:, 0],
+                (Jdpb - Jdpa)[ax] if jd else None,
+                list(-f[:, 1]),
+            )
+        L = c.reference
+        d, dd = pb - pa, vpb - vpa
+        f0, f1, f2 = (float(x) for x in c.motion(t))
+        return (
+            (d @ (Jpb - Jpa))[None, :] / L,
+            np.array([(dd @ dd + d @ (apb - apa) - f1 * f1 - f0 * f2) / L]),
+            np.array([(d @ d - f0 * f0) / (2.0 * L)]),
+            ((dd @ (Jpb - Jpa) + d @ (Jdpb - Jdpa)) / L)[None, :] if jd else None,
+            [-f0 * f1 / L],
+        )
 
     def _frame_rows(
         self, c: FrameConstraint, kin: _Kin

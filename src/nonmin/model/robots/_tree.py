@@ -23,10 +23,12 @@ import numpy as np
 
 from .._protocol import FloatArray
 from ._constraints import (
+    DistanceDriver,
     FrameConstraint,
     JointCoupling,
     JointDriver,
     JointLimit,
+    PathDriver,
     RobotConstraint,
     complete_basis,
 )
@@ -61,6 +63,8 @@ ROW_TYPES: dict[str, int] = {
     "joint": 8,
     "joint_limit": 9,
     "joint_driver": 10,
+    "path_driver": 11,
+    "distance_driver": 12,
 }
 
 
@@ -81,7 +85,7 @@ def tree_arrays(
         The robot's tree, with the constraint frames already added.
     quaternion_starts : sequence of (name, int)
         The structural unit-quaternion constraints: name and first coordinate of the quaternion.
-    constraints : sequence of FrameConstraint, JointCoupling or JointLimit
+    constraints : sequence of RobotConstraint
         The user constraints, in row order (after the structural ones).
     frame_ids : mapping
         Constraint name -> (frame a, frame b) ids in ``pm``.
@@ -133,6 +137,7 @@ def tree_arrays(
     ciq: list[tuple[int, int]] = []
     ccoef: list[tuple[float, ...]] = []
     cref: list[tuple[float, float]] = []
+    cdrv: list[tuple[int, int, int]] = []
     z = np.array([0.0, 0.0, 1.0])
     basis = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     for name, start in quaternion_starts:
@@ -147,6 +152,24 @@ def tree_arrays(
     drivers: list[Any] = []
     for c in constraints:
         names.append(c.name)
+        drv = [-1, -1, -1]
+        if isinstance(c, PathDriver):  # e_i·(p_b − p_a) − f_i(t): driver indices per world axis
+            for i, fn in zip(c.axes, c.motions, strict=True):
+                drv[i] = len(drivers)
+                drivers.append(fn.engine())
+        elif isinstance(c, DistanceDriver):  # (dᵀd − f²)/(2L): reference length L in ref1
+            drv[0] = len(drivers)
+            drivers.append(c.motion.engine())
+        cdrv.append((drv[0], drv[1], drv[2]))
+        if isinstance(c, PathDriver | DistanceDriver):
+            ctypes.append(ROW_TYPES["path_driver" if isinstance(c, PathDriver) else "distance_driver"])
+            cframes.append(frame_ids[c.name])
+            caxes.append(z)
+            cu.append(basis)
+            ciq.append((-1, -1))
+            ccoef.append((0.0,) * 5)
+            cref.append((c.reference if isinstance(c, DistanceDriver) else 0.0, 0.0))
+            continue
         if isinstance(c, JointCoupling):
             ctypes.append(ROW_TYPES["joint"])
             cframes.append((-1, -1))
@@ -213,6 +236,7 @@ def tree_arrays(
         "actuated": np.array(actuated_v, dtype=np.int64),
         "damping": np.ascontiguousarray(damping, dtype=float),
         "drivers": drivers,
+        "c_drv": np.array([(-1, -1, -1)] * len(quaternion_starts) + cdrv, dtype=np.int64).reshape(nc, 3),
     }
 
 

@@ -1,0 +1,60 @@
+"""The impulses of a simulation's impacts, by constraint name (issue #22).
+
+After a run, every impact event (an automatic contact impact ``"impact:…"`` or an
+:class:`~nonmin.sim.Activate` transition) gets its impulse ``M (q̇⁺ − q̇⁻)`` split over the
+constraints that carry it (:func:`nonmin.analysis.impulses`): the bilateral constraints active
+across it and the contacts of the impact set, chosen as the event layer chose them
+(``_set_impact`` / ``engine/src/sim_events.cpp``: the contacts that fired, the active ones, and
+the touching ones, gap ≤ 0 with ``a q̇⁻ ≤ 0``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from ._events import EventRecord
+
+__all__ = ["impact_set", "with_impulses"]
+
+
+def _is_impact(ev: EventRecord) -> bool:
+    return ev.name.startswith("impact:") or ev.transition.startswith("activate")
+
+
+def impact_set(model: Any, ev: EventRecord) -> frozenset[str]:
+    """The constraints that carry the impulse of the impact ``ev``."""
+    uni = [c.name for c in model.constraints if c.kind == "unilateral"]
+    named = set(ev.name.partition(":")[2].split("+")) if ev.name.startswith("impact:") else set()
+    chosen = set(ev.active_before) | set(ev.active_after) | (named & set(uni))
+    rest = [nm for nm in uni if nm not in chosen]
+    if rest:
+        act = frozenset(rest)
+        ct = model.constraint_terms(ev.t, ev.q_before, ev.qd_before, act)
+        rows = model.row_slices(act)
+        for nm in rest:
+            i = rows[nm].start
+            if ct.phi[i] <= 0.0 and float(ct.A[i] @ ev.qd_before) <= 0.0:
+                chosen.add(nm)
+    return frozenset(chosen)
+
+
+def with_impulses(model: Any, events: tuple[EventRecord, ...], rtol: float | None) -> tuple[EventRecord, ...]:
+    """``events`` with :attr:`EventRecord.impulses` filled in for the impacts (finite states)."""
+    from ..analysis import impulses
+
+    out = []
+    for ev in events:
+        if (
+            _is_impact(ev)
+            and not ev.impulses
+            and all(np.isfinite(x).all() for x in (ev.q_before, ev.qd_before, ev.qd_after))
+        ):
+            act = impact_set(model, ev)
+            names = [c.name for c in model.constraints if c.name in act]
+            imp = impulses(model, ev.q_before, ev.qd_before, ev.qd_after, t=ev.t, active=act, names=names, rtol=rtol)
+            ev = dataclasses.replace(ev, impulses=imp)
+        out.append(ev)
+    return tuple(out)
