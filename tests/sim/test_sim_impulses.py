@@ -223,3 +223,28 @@ def test_planar_angle_limit_stops_the_pendulum_with_its_couple(engine: str) -> N
     lam = ev.impulses["stop.lower"].multipliers[0]
     assert abs(lam - I_O * (1 + e) * abs(ev.qd_before[2])) < 1e-9
     assert ev.impulses["stop.lower"].determined.all() and ev.impulses["pivot"].determined.all()
+
+
+@pytest.mark.parametrize("engine", ["python", "engine"])
+def test_robot_end_effector_impact_impulse_is_the_single_contact_law(engine: str) -> None:
+    """The 4-dof arm's end effector falls onto the floor (frame contact, e = 0.3, joint limits
+    not reached): the impulse is Λ = (1 + e)(−a q̇⁻)/(a M⁻¹ aᵀ) (one contact, a its gap row), on
+    the end-effector frame as the world force Λ n (n = +z), rotated into the frame's axes."""
+    pytest.importorskip("pinocchio")
+    from nonmin.model.robots import serial_arm
+
+    model, state = serial_arm()
+    q0 = np.array(state.q, dtype=float)
+    q0[1] -= 0.05  # lift the end effector
+    e = 0.3
+    tr = simulate(model, (0.0, 0.6), q0, np.zeros(model.n), dt=1e-3, restitution=e, engine=engine, progress=False)
+    ev = tr.events[0]
+    assert ev.name == "impact:ee_contact"
+    a = model.constraint_jacobian(ev.t, ev.q_before, {"ee_contact"})[0]
+    M = model.mass_matrix(ev.q_before)
+    lam = (1 + e) * (-a @ ev.qd_before) / (a @ np.linalg.solve(M, a))
+    r = ev.impulses["ee_contact"]
+    assert r.kind == "frame"
+    np.testing.assert_allclose(r.multipliers, [lam], rtol=1e-9)
+    R = model.frame_placement(ev.q_before, "ee_contact:b")[:3, :3]
+    np.testing.assert_allclose(r.force_b, R.T @ [0.0, 0.0, lam], atol=1e-9 * lam)

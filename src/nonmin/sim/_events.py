@@ -141,7 +141,8 @@ class EventRecord:
     q_before, qd_before, q_after, qd_after : ndarray, shape (n,)
     active_before, active_after : frozenset of str
     impulses : dict of str to Reaction
-        For an impact (automatic contact, or an :class:`Activate` transition): the impulse
+        For an impact (automatic contact, an :class:`Activate` transition, or another
+        constraint transition that changed the velocity, e.g. a contact that sticks): the impulse
         ``M (qd_after − qd_before)`` split over the constraints that carry it, by name, as force
         and torque impulses (N·s, N·m·s) on the two bodies each joins, in their frames, with
         ``determined`` masks for redundant sets (:func:`nonmin.analysis.impulses`). The set:

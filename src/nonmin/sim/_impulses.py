@@ -1,7 +1,8 @@
 """The impulses of a simulation's impacts, by constraint name (issue #22).
 
-After a run, every impact event (an automatic contact impact ``"impact:…"`` or an
-:class:`~nonmin.sim.Activate` transition) gets its impulse ``M (q̇⁺ − q̇⁻)`` split over the
+After a run, every impact event (an automatic contact impact ``"impact:…"``, an
+:class:`~nonmin.sim.Activate` transition, or another constraint transition that changed the
+velocity, such as a friction contact that sticks) gets its impulse ``M (q̇⁺ − q̇⁻)`` split over the
 constraints that carry it (:func:`nonmin.analysis.impulses`): the bilateral constraints active
 across it and the contacts of the impact set, chosen as the event layer chose them
 (``_set_impact`` / ``engine/src/sim_events.cpp``: the contacts that fired, the active ones, and
@@ -21,7 +22,11 @@ __all__ = ["impact_set", "with_impulses"]
 
 
 def _is_impact(ev: EventRecord) -> bool:
-    return ev.name.startswith("impact:") or ev.transition.startswith("activate")
+    """An impact, an activation, or any other constraint transition that changed the velocity
+    (a friction contact that sticks); not a user Reset (its jump is the user's map)."""
+    if ev.name.startswith("impact:") or ev.transition.startswith("activate"):
+        return True
+    return not ev.transition.startswith("reset") and not np.array_equal(ev.qd_before, ev.qd_after)
 
 
 def impact_set(model: Any, ev: EventRecord) -> frozenset[str]:

@@ -1111,8 +1111,8 @@ def simulate(
     result = snapshot(status, message)
     if status is Status.SUCCESS and t_out is None and prev is None:
         result = _kick_check(result)
-    if any(e.name.startswith("impact:") or e.transition.startswith("activate") for e in result.events):
-        result = replace(result, events=with_impulses(model, result.events, rank_rtol))  # impulses by name
+    if result.events:  # the impulses of the impacts, by constraint name (sim/_impulses.py)
+        result = replace(result, events=with_impulses(model, result.events, rank_rtol))
     if out.reactions and len(result):  # each constraint's wrench per sample (nonmin.analysis)
         result = result.with_reactions(model, None if out.reactions is True else out.reactions, rtol=rank_rtol)
     if ck_path is not None:  # the checkpoint ends as the whole run, whatever its status
