@@ -16,7 +16,7 @@ import pytest
 from nonmin.core import slip_dynamics
 from nonmin.errors import InputError, ModelError, PainleveError
 from nonmin.model.planar import PlanarBuilder
-from nonmin.sim import friction_state, simulate
+from nonmin.sim import Event, Reset, friction_state, simulate
 
 G = 9.81
 
@@ -349,3 +349,130 @@ def test_zeno_bouncing_then_sliding_then_sticking() -> None:
     assert abs(t_stick - (t_inf + vx / (mu * G))) < 4e-3
     assert abs(tr.q[-1, 0] - (vx * t_inf + vx**2 / (2 * mu * G))) < 4e-3 * vx
     assert np.max(np.abs(tr.qd[-1])) < 1e-12
+
+
+def _floor(mu: float):  # type: ignore[no-untyped-def]
+    b = PlanarBuilder("floor")
+    b.point_mass("block", mass=1.0, points=["p"])
+    b.contact("floor", ("ground", (0.0, 0.0)), "p", axis=(1.0, 0.0), friction=mu, active=True)
+    return b.build()
+
+
+@pytest.mark.parametrize("method", ["rk4", "dopri5"])
+def test_user_reset_mid_slide(method: str) -> None:
+    """A user Event with friction: a block sliding at v0 = 3 m/s (μ_f = 0.3) is set to v1 = 2 m/s
+    where it passes x1 = 0.5 m (a Reset, located on the engine's friction steps), then slides
+    to rest: t1 = (v0 − √(v0² − 2 a x1))/a, the stop at t1 + v1/a, at x1 + v1²/(2a), a = μ_f g."""
+    mu, v0, x1, v1 = 0.3, 3.0, 0.5, 2.0
+    a = mu * G
+    m = _floor(mu)
+
+    def kick(t, q, qd, active):  # type: ignore[no-untyped-def]
+        qd = qd.copy()
+        qd[0] = v1
+        return q, qd, active
+
+    ev = Event(lambda t, q, qd, fc: q[0] - x1, direction=1, transition=Reset(kick), name="kick")
+    tr = simulate(m, 1.2, [0.0, 0.0], [v0, 0.0], events=[ev], method=method, dt=1e-3, progress=False)
+    assert tr.status.name == "SUCCESS" and tr.metadata["engine"] == "engine"
+    assert [e.name for e in tr.events] == ["kick", "stick:floor"]
+    t1 = (v0 - math.sqrt(v0**2 - 2 * a * x1)) / a
+    assert abs(tr.events[0].t - t1) < 1e-12
+    assert abs(tr.events[0].qd_after[0] - v1) < 1e-12
+    assert abs(tr.events[1].t - (t1 + v1 / a)) < 1e-12
+    assert abs(tr.q[-1, 0] - (x1 + v1**2 / (2 * a))) < 1e-12
+    slide = (tr.t > t1 + 1e-9) & (tr.t < t1 + v1 / a - 1e-9)
+    assert np.max(np.abs(tr.qd[slide, 0] - (v1 - a * (tr.t[slide] - t1)))) < 1e-10
+
+
+@pytest.mark.parametrize("method", ["rk4", "dopri5"])
+def test_user_reset_while_sticking_slides_again(method: str) -> None:
+    """A block at rest (sticking) set moving at 1 m/s at t = 0.5 s (a time guard, t_eval given):
+    it slips from there and sticks again at 0.5 + 1/(μ_f g), x = (t−0.5) − a (t−0.5)²/2."""
+    mu = 0.3
+    a = mu * G
+    m = _floor(mu)
+
+    def kick(t, q, qd, active):  # type: ignore[no-untyped-def]
+        qd = qd.copy()
+        qd[0] = 1.0
+        return q, qd, active
+
+    ev = Event(lambda t, q, qd, fc: t - 0.5, direction=1, transition=Reset(kick), name="kick")
+    te = np.linspace(0.0, 1.2, 121)
+    tr = simulate(m, 1.2, [0.0, 0.0], [0.0, 0.0], events=[ev], method=method, dt=1e-3, t_eval=te,
+                  progress=False)  # fmt: skip
+    assert [e.name for e in tr.events] == ["kick", "stick:floor"]
+    assert abs(tr.events[0].t - 0.5) < 1e-12 and abs(tr.events[1].t - (0.5 + 1 / a)) < 1e-12
+    assert "floor.stick" in tr.events[0].active_before and "floor.stick" not in tr.events[0].active_after
+    s = np.clip(tr.t - 0.5, 0.0, 1 / a)
+    assert np.max(np.abs(tr.q[:, 0] - (s - 0.5 * a * s**2))) < 1e-12
+    assert np.all(np.isin(te, tr.t))
+
+
+def test_terminal_user_event_while_slipping() -> None:
+    """A terminal Event at x = 0.3 m of a block sliding from 3 m/s: it ends the run there."""
+    mu, v0, x1 = 0.3, 3.0, 0.3
+    a = mu * G
+    ev = Event(lambda t, q, qd, fc: q[0] - x1, direction=1, terminal=True, name="mark")
+    tr = simulate(_floor(mu), 1.0, [0.0, 0.0], [v0, 0.0], events=[ev], dt=1e-3, progress=False)
+    assert tr.status.name == "EVENT_TERMINATED"
+    assert abs(tr.t[-1] - (v0 - math.sqrt(v0**2 - 2 * a * x1)) / a) < 1e-12
+
+
+def _dropped_rod(mu: float, half: float, gap: float, vx: float):  # type: ignore[no-untyped-def]
+    """The rod of Painlevé's case at tan θ = 2, its end ``gap`` above the floor (contact open),
+    the rod translating at (vx, 0)."""
+    b = PlanarBuilder("painleve-drop")
+    b.body("rod", mass=1.0, inertia=half**2 / 3.0, points={"end": (-half, 0.0)})
+    b.contact("floor", ("ground", (0.0, 0.0)), "end", axis=(1.0, 0.0), friction=mu)
+    th = math.atan(2.0)
+    q0 = np.array([half * math.cos(th), gap + half * math.sin(th), th])
+    return b.build(), q0, np.array([vx, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("method", ["rk4", "dopri5"])
+def test_painleve_reached_during_the_run_at_touchdown(method: str) -> None:
+    """Painlevé's inconsistency met mid-run: the rod falls flat-free (θ fixed at tan θ = 2, ω = 0)
+    and its end lands at t = √(2 gap/g); the plastic, frictionless normal impact leaves the end
+    sliding at ẋ_c + 3 sin θ cos θ v_y/(1 + 3 cos² θ) < 0 (s = −1), where μ_f = 1.5 gives
+    1 + μ s K = 1 − 1.5·3/4 = −1/8. The run stops there with PainleveError (contact, t, factor);
+    throw=False returns the samples up to it as a FAILED Trajectory with that message. The
+    same drop translating the other way (s = +1, 1 + μ K = 2.125) is consistent and runs on."""
+    half, mu, gap = 0.5, 1.5, 0.05
+    t_land = math.sqrt(2 * gap / G)
+    m, q0, qd0 = _dropped_rod(mu, half, gap, -1.0)
+    with pytest.raises(PainleveError) as info:
+        simulate(m, 0.5, q0, qd0, dt=1e-3, method=method, progress=False)
+    err = info.value
+    assert err.contact == "floor"
+    assert abs(err.t - t_land) < 1e-12
+    assert abs(err.factor - (1.0 - mu * 0.75)) < 1e-12
+    tr = simulate(m, 0.5, q0, qd0, dt=1e-3, method=method, progress=False, throw=False)
+    assert tr.status.name == "FAILED" and "PainleveError" in tr.message and "'floor'" in tr.message
+    assert f"{t_land:.9f}" in tr.message and "-0.125" in tr.message
+    assert len(tr) > 10 and t_land - 2e-3 < tr.t[-1] <= t_land + 1e-12
+    m2, q2, qd2 = _dropped_rod(mu, half, gap, +1.0)
+    ok = simulate(m2, 0.2, q2, qd2, dt=1e-3, method=method, progress=False)
+    assert ok.status.name == "SUCCESS"
+    assert ok.events[0].name == "impact:floor" and abs(ok.events[0].t - t_land) < 1e-12
+
+
+def test_painleve_rod_jams_before_the_factor_vanishes() -> None:
+    """Why a slipping contact does not run into the inconsistency (Génot & Brogliato 1999): as
+    1 + μ s K → 0⁺ with N0 > 0, N = N0/(1 + μ s K) → ∞, and the friction impulse ∫μN dt
+    diverges (logarithmically) while it decelerates the slip at a rate μ N a_t M̄⁻¹P a_tᵀ, so the
+    slip stops first (dynamic jamming): the rod above the band 50.6°–73.0° where 1 − 1.5 K < 0,
+    sliding with s = −1 (θ0 = 80°, end at −10 m/s, θ̇ = −4 rad/s, N0 > 0) approaches it twice
+    (factor down to ≈ 0.15 and ≈ 0.08, N up to ≈ 57 and ≈ 92 N) and sticks at the second,
+    with no PainleveError."""
+    half, mu = 0.5, 1.5
+    m = _rod(mu, half)
+    q0, qd0 = _rod_state(math.radians(80.0), half, -10.0, omega=-4.0)
+    tr = simulate(m, 0.56, q0, qd0, dt=1e-4, progress=False)
+    assert tr.status.name == "SUCCESS"
+    assert [e.name for e in tr.events] == ["stick:floor"]
+    slipping = tr.t < tr.events[0].t
+    th = tr.q[slipping, 2]
+    factor = 1.0 - mu * 3 * np.sin(th) * np.cos(th) / (1 + 3 * np.cos(th) ** 2)  # s = −1
+    assert np.all(factor > 0.0) and np.min(factor) < 0.1

@@ -270,17 +270,13 @@ def first_point(
 
 
 def check_friction_run(model: Model, engine: str, use_engine: bool, why: str | None, events: tuple[Any, ...]) -> None:
-    """Friction runs need the engine's event layer and no user events."""
+    """Friction runs need the engine's event layer (user events are located on its partial
+    steps: ``_simulate._friction_step``)."""
     if not use_engine:
         raise InputError(
             f"model {model.name!r} has frictional contacts, which run on the compiled engine only "
             f"(engine='auto' or 'engine'); here: engine={engine!r}"
             + (f" ({why})" if why else "")
-        )
-    if events:
-        raise InputError(
-            "frictional contacts run in the engine's event layer, which does not take user events yet; "
-            f"got events {[e.name for e in events]}"
         )
 
 

@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import partial
 from typing import Any, NamedTuple
@@ -838,6 +838,12 @@ def simulate(
 
         recent_events: list[float] = []
         disarmed: set[int] = set()
+
+        def fpoint(tt: float, qq: FloatArray, vv: FloatArray, sl: Mapping[str, tuple[float, ...]]) -> _Point:
+            """The recorded point with the slipping contacts' friction applied."""
+            pp = system.point(tt, qq, vv)
+            return _friction.first_point(model, pp, system.active, sl, rank_rtol=rank_rtol, bias=stab.bias,
+                                         B_u=None if controller is None else model.input_matrix(qq) @ pp.u)  # fmt: skip
         if prog is not None and t < t1:
             assert isinstance(stab, Projection)
             fr = _fastpath.run(
@@ -873,6 +879,18 @@ def simulate(
                         system.cstate = ccb.state
                     if creg is not None:
                         system.cstate = _engine.merge_state(controller, system.cstate, creg)
+                fstep = None
+                if fcs and er.event and not er.handover:  # a guard crossed with user guards watched
+                    fstep = _friction_step(
+                        system, partial(_friction_run, er=er, guards=guards, slip=dict(slip), opts=opts, t1=t1,
+                                        run_kw=dict(program=eng_prog, t_out=t_out, contact=contact_opts,
+                                                    active_mask=model_mask(model, system.active)),
+                                        controller=controller, eng_prog=eng_prog, system=system,
+                                        h_fixed=None if integ.adaptive else h_init),
+                        partial(fpoint, sl=dict(slip)), watches, gvals, disarmed, er.t,
+                        min(er.h if integ.adaptive else h_init, t1 - er.t), n, rec.extend,
+                    )  # fmt: skip
+                    er = fstep.er
                 for i, g in zip(g_idx, er.guards):
                     gvals[i] = g
                 if fcs:
@@ -906,7 +924,43 @@ def simulate(
                         system.cstate = _durable.user_call("controller.update", t, controller.update, t, q, qd,
                                                            system.cstate, active=system.active)  # fmt: skip
                     watches = _watches(events, system.active, unilateral)
-                    gvals = list(er.guards)  # (contact watches only: no user events on this path)
+                    gvals = list(er.guards)  # the contact watches (in their order, after the user ones)
+                    if events:
+                        p_after = fpoint(t, q, qd, slip)
+                        gvals = [_guard_value(system, w2, p_after) for w2 in watches[: len(events)]] + gvals
+                    continue
+                if fstep is not None and fstep.p is not None:  # user events at fstep.te (friction run)
+                    te, p = fstep.te, fstep.p
+                    if t_out is not None:
+                        rec.add(p, system.active)
+                    terminal = False
+                    label = ""
+                    for i in fstep.group:
+                        w = watches[i]
+                        before_active = system.active
+                        qn, qdn, new_active, label, term_i, _cap = _apply(system, w, p)
+                        qn, qdn, slip = _friction_after_user(model, stab, te, qn, qdn, new_active, v_thresh,
+                                                             rank_rtol, system)  # fmt: skip
+                        records.append(EventRecord(te, label, _transition_text(w), p.q.copy(), p.qd.copy(),
+                                                   qn.copy(), qdn.copy(), before_active, system.active))  # fmt: skip
+                        disarmed.add(id(w.event))
+                        terminal = terminal or term_i
+                        recent_events.append(te)
+                        p = fpoint(te, qn, qdn, slip)
+                    _zeno_check(recent_events, te, zeno_window, zeno_max, label)
+                    rec.add(p, system.active)
+                    t, q, qd = te, p.q, p.qd
+                    state = StepperState(te, np.concatenate((q, qd)), None, er.h if integ.adaptive else h_init)
+                    if controller is not None and hasattr(controller, "update"):
+                        system.cstate = _durable.user_call("controller.update", te, controller.update, te, q, qd,
+                                                           system.cstate, active=system.active)  # fmt: skip
+                    watches = _watches(events, system.active, unilateral)
+                    gvals = [_guard_value(system, w2, p) for w2 in watches]
+                    bar.update(t)
+                    if terminal:
+                        status = Status.EVENT_TERMINATED
+                        message = f"terminal event {label!r} at t = {te:.12g}"
+                        break
                     continue
                 if t >= t1:
                     break
@@ -1445,3 +1499,143 @@ def _set_impact(
         new_act = bil
     label = "impact:" + "+".join(nm for nm in system.unilateral if nm in fired)
     return q, v, new_act, label, False, h_cap
+
+
+class _Quiet:
+    """A progress sink for the trial runs of :func:`_friction_step` (reports nothing)."""
+
+    def update(self, t: float) -> None:
+        pass
+
+
+class _FrictionStep(NamedTuple):
+    """What :func:`_friction_step` found in a step of a friction run with user events."""
+
+    er: Any  # the accepted engine run (its samples given to the recorder)
+    te: float  # the user events' instant (NaN: none; er is then a contact transition or the step)
+    group: list[int]  # the user watches firing at te
+    p: _Point | None  # the point at te before their transitions (friction applied)
+
+
+def _friction_step(
+    system: _System, run: Callable[[float, Callable[[dict[str, Any]], None]], Any],
+    point: Callable[[float, FloatArray, FloatArray], _Point], watches: list[_Watch], gvals: list[float],
+    disarmed: set[int], t0: float, h: float, n: int, sink: Callable[[dict[str, Any]], None],
+) -> _FrictionStep:  # fmt: skip
+    """The step from ``t0`` that the engine left to Python in a run with frictional contacts and
+    user events (a guard crossed: a user one, or a contact/friction one while user guards are
+    watched). The general driver has no friction, so the step is taken by the engine itself:
+    ``run(s, sink)`` is its run from the step start over ``s`` (one step of the fixed-step
+    methods, the partial step the event layer locates on; without user guards, so contact and
+    friction events are located and applied by the engine's event layer).
+
+    The whole step is run first. A contact/friction transition in it at ``te`` is accepted when
+    no user guard has crossed by then (read at the state before it); otherwise the earliest user
+    crossing before ``te`` (or in the step) is located by Brent's method on ``run(s)``'s end
+    state, nudged past the root as the driver does, and the run up to it is accepted."""
+    from scipy.optimize import brentq  # lazy: 0.4 s of import
+
+    user = [i for i, w in enumerate(watches) if w.kind == "user" and id(w.event) not in disarmed]
+
+    def crossed_at(pt: _Point) -> list[int]:
+        return [i for i in user if _crossed(gvals[i], _guard_value(system, watches[i], pt), watches[i].direction)]
+
+    blocks: list[dict[str, Any]] = []
+    full = run(h, blocks.append)
+    s_hi = h
+    if full.handover or full.painleve is not None:  # the caller reports it
+        for b in blocks:
+            sink(b)
+        return _FrictionStep(full, math.nan, [], None)
+    if full.transition:
+        d = full.events[0]
+        te = float(d["t"])
+        if not crossed_at(point(te, np.asarray(d["q_before"]), np.asarray(d["qd_before"]))):
+            for b in blocks:
+                sink(b)
+            return _FrictionStep(full, math.nan, [], None)
+        s_hi = te - t0
+    elif not full.event and not full.handover and full.t == t0 + h:
+        pe = point(full.t, full.y[:n], full.y[n:])
+        if not crossed_at(pe):  # re-run without user guards: nothing crossed (the step stands)
+            for b in blocks:
+                sink(b)
+            return _FrictionStep(full, math.nan, [], None)
+    cache: dict[float, _Point] = {}
+
+    def at(s: float) -> _Point:
+        if s not in cache:
+            r = run(s, lambda b: None)
+            cache[s] = point(r.t, r.y[:n], r.y[n:])
+        return cache[s]
+
+    roots: list[tuple[float, int]] = []
+    for i in crossed_at(at(s_hi)):
+
+        def gfun(s: float, _w: _Watch = watches[i]) -> float:
+            return _guard_value(system, _w, at(s))
+
+        try:
+            s_root = float(brentq(gfun, 0.0, s_hi, xtol=EVENT_XTOL, rtol=1e-15, maxiter=200))
+        except ValueError:  # the start value lost its sign against the end: the end
+            s_root = s_hi
+        roots.append((_past_root(gfun, s_root, s_hi, gvals[i]), i))
+    if not roots:  # not reproduced (a crossing and its return inside the step): the step stands
+        for b in blocks:
+            sink(b)
+        return _FrictionStep(full, math.nan, [], None)
+    roots.sort()
+    best = roots[0][0]
+    er = run(best, sink)
+    group = [i for s_i, i in roots if s_i <= best + 4 * EVENT_XTOL]
+    if er.transition or er.t != t0 + best:  # (a contact event inside the partial step after all)
+        return _FrictionStep(er, math.nan, [], None)
+    return _FrictionStep(er, er.t, group, point(er.t, er.y[:n], er.y[n:]))
+
+
+def _friction_run(
+    s: float, sink: Callable[[dict[str, Any]], None], *, er: Any, guards: list[tuple[bool, int, int, float]],
+    slip: dict[str, tuple[float, ...]], opts: Any, t1: float, run_kw: dict[str, Any], controller: Any,
+    eng_prog: Any, system: _System, h_fixed: float | None,
+) -> Any:  # fmt: skip
+    """The engine's run over ``s`` from the start ``(er.t, er.y)`` of the step a guard fired in,
+    with the contact and friction guards and no user guards (:func:`_friction_step`)."""
+    g0 = [(rel, c, row, float(er.guards[j])) for j, (rel, c, row, _) in enumerate(guards)]
+    opts.t1 = min(t1, er.t + s)
+    creg = _engine.compiled_controller(controller, system.model, eng_prog, system.active)
+    ccb = _engine.ControllerCallback(controller, system.cstate, system.model.k, None, system.model) \
+        if controller is not None and creg is None else None  # fmt: skip
+    try:
+        return _engine.run(
+            run_kw["program"], opts=opts, active_mask=run_kw["active_mask"], t_out=run_kw["t_out"], sink=sink,
+            progress=_Quiet(), controller=ccb, compiled=creg, guards=g0, contact=run_kw["contact"],
+            resume=(er.t, er.y, min(er.h, s) if h_fixed is None else h_fixed, er.steps, er.out_i),
+            friction=_friction.engine_contacts(system.model, slip),
+        )  # fmt: skip
+    finally:
+        opts.t1 = t1
+
+
+def _friction_after_user(
+    model: Model, stab: Any, t: float, q: FloatArray, qd: FloatArray, active: frozenset[str], v_thresh: float,
+    rank_rtol: float | None, system: _System,
+) -> tuple[FloatArray, FloatArray, dict[str, tuple[float, ...]]]:  # fmt: skip
+    """After a user transition in a friction run: the contacts' modes decided afresh (a sticking
+    contact the transition set moving slips; :func:`_friction.initial_modes`), the state
+    projected onto the active set; ``system.active`` set."""
+    proj = stab if isinstance(stab, Projection) else Projection()
+    act = set(active)
+    for fc in model.friction_contacts:  # moving at a sticking contact (a Reset): it slips
+        if fc.tangent in act and fc.normal in act:
+            At = model.constraint_terms(t, q, qd, frozenset({fc.tangent})).A
+            if float(np.linalg.norm(At @ qd)) > v_thresh:
+                act.discard(fc.tangent)
+    new = frozenset(act)
+    if new:
+        q, qd = proj.project(model, t, q, qd, new, rank_rtol)
+    act_f, slip = _friction.initial_modes(model, t, q, qd, new, v_thresh=v_thresh, rank_rtol=rank_rtol,
+                                          bias=stab.bias)  # fmt: skip
+    if act_f != new and act_f:
+        q, qd = proj.project(model, t, q, qd, act_f, rank_rtol)
+    system.active = act_f
+    return q, qd, dict(slip)
