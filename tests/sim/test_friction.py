@@ -16,7 +16,7 @@ import pytest
 from nonmin.core import slip_dynamics
 from nonmin.errors import InputError, ModelError, PainleveError
 from nonmin.model.planar import PlanarBuilder
-from nonmin.sim import Event, Reset, friction_state, simulate
+from nonmin.sim import Deactivate, Event, Reset, friction_state, simulate
 
 G = 9.81
 
@@ -476,3 +476,26 @@ def test_painleve_rod_jams_before_the_factor_vanishes() -> None:
     th = tr.q[slipping, 2]
     factor = 1.0 - mu * 3 * np.sin(th) * np.cos(th) / (1 + 3 * np.cos(th) ** 2)  # s = −1
     assert np.all(factor > 0.0) and np.min(factor) < 0.1
+
+
+@pytest.mark.parametrize("method", ["rk4", "dopri5"])
+def test_pin_released_by_a_user_event_lets_the_pushed_block_slip(method: str) -> None:
+    """A block on the floor (μ_f = 0.3) pushed by F = 5 N > μ_f m g and held by a pin, which a
+    user Event releases at t = 0.3 s (Deactivate): the contact's mode is decided again with the
+    push applied (slip, no tangential row after the event) and x = (F − μ_f m g)(t − 0.3)²/(2m)."""
+    mu, F, t_rel = 0.3, 5.0, 0.3
+    b = PlanarBuilder("pinned")
+    b.point_mass("block", mass=1.0, points=["p"])
+    b.contact("floor", ("ground", (0.0, 0.0)), "p", axis=(1.0, 0.0), friction=mu, active=True)
+    b.revolute("pin", ("ground", (0.0, 0.0)), "p")
+    b.force("push", "p", direction=(1.0, 0.0))
+    m = b.build()
+    ev = Event(lambda t, q, qd, fc: t - t_rel, direction=1, transition=Deactivate(["pin"]), name="release")
+    tr = simulate(m, 1.0, [0.0, 0.0], [0.0, 0.0], events=[ev], controller=lambda t, q, qd, s, active=None: np.array([F]),
+                  dt=1e-3, method=method, progress=False)  # fmt: skip
+    rel = [e for e in tr.events if e.name == "release"]
+    assert len(rel) == 1 and abs(rel[0].t - t_rel) < 1e-12
+    assert rel[0].active_after == frozenset({"floor"})
+    assert [e.name for e in tr.events if e.t > t_rel + 1e-9] == []
+    s = np.clip(tr.t - t_rel, 0.0, None)
+    assert np.max(np.abs(tr.q[:, 0] - 0.5 * (F - mu * G) * s**2)) < 1e-12

@@ -940,7 +940,8 @@ def simulate(
                         before_active = system.active
                         qn, qdn, new_active, label, term_i, _cap = _apply(system, w, p)
                         qn, qdn, slip = _friction_after_user(model, stab, te, qn, qdn, new_active, v_thresh,
-                                                             rank_rtol, system)  # fmt: skip
+                                                             rank_rtol, system,
+                                                             None if controller is None else p.u)  # fmt: skip
                         records.append(EventRecord(te, label, _transition_text(w), p.q.copy(), p.qd.copy(),
                                                    qn.copy(), qdn.copy(), before_active, system.active))  # fmt: skip
                         disarmed.add(id(w.event))
@@ -1618,11 +1619,12 @@ def _friction_run(
 
 def _friction_after_user(
     model: Model, stab: Any, t: float, q: FloatArray, qd: FloatArray, active: frozenset[str], v_thresh: float,
-    rank_rtol: float | None, system: _System,
+    rank_rtol: float | None, system: _System, u: FloatArray | None,
 ) -> tuple[FloatArray, FloatArray, dict[str, tuple[float, ...]]]:  # fmt: skip
     """After a user transition in a friction run: the contacts' modes decided afresh (a sticking
-    contact the transition set moving slips; :func:`_friction.initial_modes`), the state
-    projected onto the active set; ``system.active`` set."""
+    contact the transition set moving slips; :func:`_friction.initial_modes`, with the input
+    ``u`` of the event's instant applied), the state projected onto the active set;
+    ``system.active`` set."""
     proj = stab if isinstance(stab, Projection) else Projection()
     act = set(active)
     for fc in model.friction_contacts:  # moving at a sticking contact (a Reset): it slips
@@ -1634,7 +1636,8 @@ def _friction_after_user(
     if new:
         q, qd = proj.project(model, t, q, qd, new, rank_rtol)
     act_f, slip = _friction.initial_modes(model, t, q, qd, new, v_thresh=v_thresh, rank_rtol=rank_rtol,
-                                          bias=stab.bias)  # fmt: skip
+                                          bias=stab.bias,
+                                          g_extra=None if u is None else model.input_matrix(q) @ u)  # fmt: skip
     if act_f != new and act_f:
         q, qd = proj.project(model, t, q, qd, act_f, rank_rtol)
     system.active = act_f
