@@ -87,3 +87,39 @@ def test_errors() -> None:
     d.add_dot_row(c, 0, [(3, 1.0)], [])
     with pytest.raises(ModelError, match="attachment index"):
         _engine.SpatialProgram(d)
+
+
+@pytest.mark.parametrize("body_a", ["b0", "ground"])
+def test_joint_limits(body_a: str) -> None:
+    """Angle limits (revolute, cylindrical) and slide limits (prismatic) with both sides: the
+    engine's unilateral rows equal the NumPy ones, and at a rotation θ about the hinge the
+    NumPy gaps are ``sin(θ − lower)``, ``sin(upper − θ)`` (slide: ``s − lower``, ``upper − s``)."""
+    from nonmin.model.spatial import SpatialBuilder
+
+    b = SpatialBuilder("limits")
+    b.add_body("b0", mass=1.0, inertia=(0.1, 0.2, 0.25), position=(0.1, 0.0, 0.2))
+    b.add_body("b1", mass=1.3, inertia=(0.2, 0.15, 0.3), position=(0.5, 0.2, 0.0))
+    b.add_body("b2", mass=0.7, inertia=(0.1, 0.1, 0.1), position=(0.9, 0.3, -0.2))
+    if body_a == "ground":
+        b.add_spherical("fix", "ground", "b0", point=(0.1, 0.0, 0.2))
+    b.add_revolute("hinge", body_a, "b1", point=(0.3, 0.1, 0.0), axis=(0.3, -0.5, 0.8))
+    b.add_prismatic("rail", "b1", "b2", point=(0.7, 0.2, -0.1), axis=(1.0, 0.2, 0.1))
+    b.add_angle_limit("turn", "hinge", lower=-0.4, upper=1.1)
+    b.add_slide_limit("slide", "rail", lower=-0.2, upper=0.3)
+    model = b.build()
+    _random_checks(model, seed=7, count=4)
+
+    # rotate b1 (and b2 with it) by θ about the hinge axis through its point: the limit gaps
+    if body_a == "ground":
+        th, u = 0.6, np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+        q = model.reference_configuration().copy()
+        c = np.array([0.3, 0.1, 0.0])
+        K = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
+        R = np.eye(3) + np.sin(th) * K + (1 - np.cos(th)) * K @ K
+        eps = np.concatenate([[np.cos(th / 2)], np.sin(th / 2) * u])
+        for i in (1, 2):
+            q[7 * i:7 * i + 3] = c + R @ (q[7 * i:7 * i + 3] - c)
+            q[7 * i + 3:7 * i + 7] = eps  # reference orientations are the identity
+        names = ("turn.lower", "turn.upper", "slide.lower", "slide.upper")
+        phi = model.constraint_residual(0.0, q, names)[-4:]
+        np.testing.assert_allclose(phi, [np.sin(th + 0.4), np.sin(1.1 - th), 0.2, 0.3], atol=1e-14)

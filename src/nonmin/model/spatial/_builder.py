@@ -465,6 +465,96 @@ class SpatialBuilder:
             raise ModelError(f"driver {name!r}: the two points coincide at the reference configuration")
         return self._add_driver("distance_driver", name, body_a, body_b, pa, pb, [], (motion,), L, active)
 
+    # ------------------------------------------------------------------ joint limits
+    def _add_limits(
+        self, name: str, joint: str, lower: float | None, upper: float | None, kinds: tuple[str, ...],
+        kind: JointKind, what: str,
+    ) -> tuple[str, ...]:
+        from dataclasses import replace
+
+        from .._timefn import as_time_function
+
+        w = f"{what} {name!r}"
+        j = next((x for x in self._joints if x.name == joint), None)
+        if j is None:
+            raise UnknownNameError(f"{w}: unknown joint {joint!r}; known: {[x.name for x in self._joints]}")
+        if j.kind not in kinds:
+            raise ModelError(f"{w}: joint {joint!r} must be {' or '.join(kinds)}, got {j.kind}")
+        if lower is None and upper is None:
+            raise InputError(f"{w}: give lower, upper or both")
+        bounds: dict[str, float] = {}
+        for side, v in (("lower", lower), ("upper", upper)):
+            if v is None:
+                continue
+            try:
+                x = float(v)
+            except (TypeError, ValueError):
+                raise InputError(f"{w}: {side} must be a real number, got {v!r}") from None
+            if not np.isfinite(x):
+                raise InputError(f"{w}: {side} must be finite, got {x!r}")
+            bounds[side] = x
+        if len(bounds) == 2 and not bounds["lower"] < bounds["upper"]:
+            raise ModelError(f"{w}: lower must be < upper, got {bounds['lower']} and {bounds['upper']}")
+        if kind == "angle_limit" and len(bounds) == 2 and not bounds["upper"] - bounds["lower"] < np.pi:
+            raise ModelError(
+                f"{w}: upper − lower must be < π (each stop's gap is sin of the angle to it), got "
+                f"{bounds['upper'] - bounds['lower']:.6g}"
+            )
+        for n in (f"{name}.{side}" for side in bounds):
+            self._check_name(n)
+        out = []
+        for side, x in bounds.items():
+            s = 1.0 if side == "lower" else -1.0
+            n = f"{name}.{side}"
+            self._add_joint(kind, n, j.body_a, j.body_b, j.point, [], [], j.axis, False)
+            vecs_a = j.vectors_a[1:3] if kind == "angle_limit" else j.vectors_a[:1]
+            vecs_b = j.vectors_b[1:2] if kind == "angle_limit" else j.vectors_b[:0]
+            self._joints[-1] = replace(
+                self._joints[-1], point_a=j.point_a.copy(), point_b=j.point_b.copy(),
+                vectors_a=vecs_a.copy(), vectors_b=vecs_b.copy(),
+                motions=(as_time_function(s * x, w),), reference=s,
+            )
+            out.append(n)
+        return tuple(out)
+
+    def add_angle_limit(
+        self, name: str, joint: str, *, lower: float | None = None, upper: float | None = None
+    ) -> tuple[str, ...]:
+        """Joint limits on the relative angle θ of a revolute or cylindrical joint (the rotation
+        of ``body_b`` relative to ``body_a`` about the joint axis, right-handed, zero at the
+        reference configuration, as in :meth:`add_angle_driver`): unilateral constraints
+        ``"<name>.lower"`` (gap ``sin(θ − lower) ≥ 0``) and ``"<name>.upper"`` (gap
+        ``sin(upper − θ) ≥ 0``), inactive until the stop is reached; :func:`~nonmin.simulate`
+        then applies the impact law with the restitution of its ``EventSet``, by these names.
+        The sine gap is exact at the stop and keeps its sign within π of it, hence
+        ``upper − lower < π``. Returns the names added.
+
+        Raises
+        ------
+        UnknownNameError, ModelError
+            ``joint`` unknown or not revolute/cylindrical; ``lower ≥ upper``; ``upper − lower ≥ π``.
+        InputError
+            Neither bound given, or a bound not a finite number.
+        """
+        return self._add_limits(name, joint, lower, upper, ("revolute", "cylindrical"), "angle_limit", "angle limit")
+
+    def add_slide_limit(
+        self, name: str, joint: str, *, lower: float | None = None, upper: float | None = None
+    ) -> tuple[str, ...]:
+        """Joint limits on the slide s of a prismatic or cylindrical joint along its axis (as in
+        :meth:`add_slide_driver`, zero at the reference configuration): unilateral constraints
+        ``"<name>.lower"`` (gap ``s − lower ≥ 0``) and ``"<name>.upper"`` (gap
+        ``upper − s ≥ 0``), inactive until the stop is reached. Returns the names added.
+
+        Raises
+        ------
+        UnknownNameError, ModelError
+            ``joint`` unknown or not prismatic/cylindrical; ``lower ≥ upper``.
+        InputError
+            Neither bound given, or a bound not a finite number.
+        """
+        return self._add_limits(name, joint, lower, upper, ("prismatic", "cylindrical"), "slide_limit", "slide limit")
+
     # ------------------------------------------------------------------ forces, outputs
     def add_spring(
         self,

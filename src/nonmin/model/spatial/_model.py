@@ -63,7 +63,7 @@ GROUND = "ground"
 JointKind = Literal[
     "spherical", "revolute", "prismatic", "cylindrical", "universal", "weld", "point_on_plane",
     "coordinate_driver", "path_driver", "distance_driver", "angle_driver", "slide_driver",
-    "contact", "contact_tangent",
+    "contact", "contact_tangent", "angle_limit", "slide_limit",
 ]
 #: The joint kinds of the spatial builder.
 JOINT_KINDS: tuple[str, ...] = (
@@ -88,6 +88,8 @@ _JOINT_ROWS = {
     "slide_driver": 1,
     "contact": 1,  # unilateral n_a·(p_b − p_a) ≥ 0 (SpatialBuilder.add_contact)
     "contact_tangent": 2,  # its tangential rows t_i·(p_b − p_a), velocity = the slip velocity
+    "angle_limit": 1,  # unilateral sin(s (θ − bound)) ≥ 0, s = +1 lower / −1 upper
+    "slide_limit": 1,  # unilateral s ((R_a u)·(p_b − p_a) − bound) ≥ 0
 }
 
 
@@ -143,7 +145,8 @@ class Joint:
         Drivers only: the prescribed motions of the rows (coordinate: 1, path: 3 (x, y, z),
         distance: 1). A coordinate driver has ``vectors_a[0]`` the world axis of the coordinate.
     reference : float
-        Distance driver: the constant reference length L of ``φ = (|d|² − f²)/(2L)``.
+        Distance driver: the constant reference length L of ``φ = (|d|² − f²)/(2L)``. Angle
+        and slide limits: the side s (+1 lower, −1 upper; their motion is the constant s·bound).
     """
 
     name: str
@@ -170,7 +173,7 @@ class Joint:
 def _spec_kind(kind: str) -> Literal["holonomic", "rheonomic", "nonholonomic", "unilateral"]:
     """The constraint kind of a joint kind: contacts unilateral, their tangential rows
     nonholonomic, drivers rheonomic, the others holonomic."""
-    if kind == "contact":
+    if kind in ("contact", "angle_limit", "slide_limit"):
         return "unilateral"
     if kind == "contact_tangent":
         return "nonholonomic"
@@ -346,16 +349,19 @@ class _RowPlan:
                     rows.append(([(att(GROUND, ax, False), 1.0)], d))
                     drivers.append((len(motions), 0.0))
                     motions.append(j.motions[c])
-            if kind == "slide_driver":  # (R_a u)·(p_b − p_a) − f(t)
-                rows.append((A_(0), d))
+            if kind in ("slide_driver", "slide_limit"):  # s (R_a u)·(p_b − p_a) − f(t)
+                s = j.reference if kind == "slide_limit" else 1.0
+                rows.append(([(A_(0)[0][0], s)], d))
                 drivers.append((len(motions), 0.0))
                 motions.append(j.motions[0])
-            if kind == "angle_driver":
+            if kind in ("angle_driver", "angle_limit"):
                 # φ = sin(θ − f) = cos f·P2 − sin f·P1 with P1 = (R_a f_a)·(R_b f_b) = cos θ and
-                # P2 = (R_a g_a)·(R_b f_b) = sin θ: two auxiliary rows evaluated after the others
+                # P2 = (R_a g_a)·(R_b f_b) = sin θ: two auxiliary rows evaluated after the others.
+                # A limit's side s = −1 flips P2 (θ → −θ) with f = −bound: sin(bound − θ).
+                s = j.reference if kind == "angle_limit" else 1.0
                 rows.append(([], []))
                 drivers.append((-1, 0.0))
-                angles.append((len(rows) - 1, len(motions), (A_(0), B_(0)), (A_(1), B_(0))))
+                angles.append((len(rows) - 1, len(motions), (A_(0), B_(0)), ([(A_(1)[0][0], s)], B_(0))))
                 motions.append(j.motions[0])
             if kind == "distance_driver":
                 half = 0.5 / j.reference
