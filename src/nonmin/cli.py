@@ -309,8 +309,13 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 
 def _first_line(obj: Any) -> str:
+    """The first paragraph of a docstring as plain text (reST roles and literals unwrapped)."""
+    import re
+
     doc = (getattr(obj, "__doc__", None) or "").strip()
-    return " ".join(doc.split("\n\n", 1)[0].split())
+    text = " ".join(doc.split("\n\n", 1)[0].split())
+    text = re.sub(r":[a-z]+:`~?(?:[\w.]+\.)?([^`]+)`", r"\1", text)  # :class:`~a.B` -> B
+    return text.replace("``", "")
 
 
 def cmd_list(args: argparse.Namespace) -> int:

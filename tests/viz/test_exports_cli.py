@@ -93,6 +93,7 @@ def test_list_names_match_the_api_and_describe(capsys):
     assert "force_control" in out and "ForceControl" in out and "Switched" in out
     line = next(ln for ln in out.splitlines() if ln.strip().startswith("slider_crank"))
     assert len(line.split()) > 2  # a description follows the name
+    assert ":class:" not in out and "``" not in out  # plain text, not reST
     for name in DEMO_SCENARIOS:
         assert name in out
 

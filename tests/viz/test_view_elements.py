@@ -204,3 +204,25 @@ def test_robot_viewer_shows_ground_pin_and_loop_closure_markers():
         np.testing.assert_allclose(pts[0], pts[1], atol=1e-4)
     finally:
         v.stop()
+
+
+@pytest.mark.parametrize("which", ["slider_crank", "ur5"])
+def test_no_drawn_node_inherits_another_nodes_pose(which):
+    """viser nests nodes by name ("/a/b" moves with "/a"): every ancestor of a drawn node is
+    at the identity (the grid, placed at the scene's centre, once moved "/ground/pins/*")."""
+    if which == "ur5":
+        _, model, _ = _ur5("point")
+        v = _view(model)
+    else:
+        v = _view(library.get(which).model)
+    try:
+        nodes = v.server.scene._handle_from_node_name
+        for name in v.body_nodes:
+            parts = name.strip("/").split("/")
+            for k in range(1, len(parts)):
+                parent = "/" + "/".join(parts[:k])
+                if parent in nodes:
+                    h = nodes[parent]
+                    assert np.allclose(h.position, 0.0) and np.allclose(h.wxyz, [1, 0, 0, 0]), (name, parent)
+    finally:
+        v.stop()

@@ -103,7 +103,7 @@ def planar_drawing(server: Any, model: Any, qs: np.ndarray, size: float) -> Plan
     lo, hi = scene_bounds(scene, sample)
     pad = 0.15 * float(np.max(hi - lo))
     lo, hi = lo - pad, hi + pad
-    depth = 0.6 * size  # how far walls and pins reach across the plane (the viewer's y)
+    depth = 0.25 * size  # how far walls and pins reach across the plane (the viewer's y)
     nodes: list[str] = []
     handles: dict[str, Any] = {}
     # static: ground pins, walls, guides fixed to the ground

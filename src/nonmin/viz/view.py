@@ -339,10 +339,15 @@ def _build(server: Any, model: Any, traj: Any, ts: np.ndarray, qs: np.ndarray, s
     size = float(np.max(hi - lo)) if pts.size else 1.0
     size = size if size > 1e-9 else 1.0
     center = 0.5 * (lo + hi)
-    server.scene.add_grid("/ground", width=2 * size, height=2 * size, cell_size=size / 10,
-                          section_size=size / 2, plane="xy", position=(center[0], center[1], 0.0))
+    if dim == 2:  # a planar model moves in the x–z plane: the grid is the board behind it
+        server.scene.add_grid("/grid", width=2 * size, height=2 * size, cell_size=size / 10,
+                              section_size=size / 2, plane="xz", position=(center[0], 0.3 * size, center[2]))
+        server.initial_camera.position = tuple(center + size * np.array([0.35, -1.6, 0.45]))
+    else:
+        server.scene.add_grid("/grid", width=2 * size, height=2 * size, cell_size=size / 10,
+                              section_size=size / 2, plane="xy", position=(center[0], center[1], 0.0))
+        server.initial_camera.position = tuple(center + size * np.array([0.75, -1.05, 0.6]))
     server.initial_camera.look_at = tuple(center)
-    server.initial_camera.position = tuple(center + size * np.array([0.75, -1.05, 0.6]))
     body_nodes: list[str] = []
     visuals: list[_Visual] = []
     spatial_boxes: list[tuple[str, int, Any]] = []
