@@ -128,9 +128,21 @@ def _open_page(browser, viewer, seconds: float = 120.0):
     return page
 
 
-def _body_pixels(viewer) -> int:
-    """Pixels of the page's render that the bodies cover: the page renders the scene with and
-    without the body nodes (the server asks the connected page for each image)."""
+def _body_pixels(viewer, want: int, seconds: float = 120.0) -> int:
+    """Pixels of the page's render that the bodies cover, once more than ``want`` (or the
+    count when ``seconds`` have passed): meshes reach the page after its panels do, and
+    a loaded machine may take seconds to add them to the scene."""
+    deadline = time.time() + seconds
+    while True:
+        px = _body_pixels_now(viewer)
+        if px > want or time.time() > deadline:
+            return px
+        time.sleep(0.5)
+
+
+def _body_pixels_now(viewer) -> int:
+    """The page renders the scene with and without the body nodes (the server asks the
+    connected page for each image); the pixels that differ."""
     client = next(iter(viewer.server.get_clients().values()))
     with_bodies = client.get_render(240, 320, transport_format="png", timeout=120)
     for name in viewer.body_nodes:
@@ -150,7 +162,7 @@ def test_browser_shows_the_dual_arm_grasp(browser, grasp):
         page.wait_for_selector("text=Playback", timeout=120_000)
         page.wait_for_selector("text=grasp_left", timeout=120_000)  # the active set panel
         # the inertia boxes of the arms and of the grasped box
-        px = _body_pixels(v)
+        px = _body_pixels(v, 500)
         assert px > 500, px
         page.close()
     finally:
@@ -165,7 +177,7 @@ def test_browser_shows_a_urdf_robot_with_meshes_and_a_loop(browser):
         page = _open_page(browser, v)
         page.wait_for_selector("text=closure", timeout=120_000)
         # the UR5's meshes (and the loop closure's markers)
-        px = _body_pixels(v)
+        px = _body_pixels(v, 1000)
         assert px > 1000, px
         page.close()
     finally:
