@@ -28,6 +28,10 @@ namespace {
 
 constexpr double inf = std::numeric_limits<double>::infinity();
 
+// A run whose end lies within this fraction of the placed step from the predicted singular
+// instant ends by interpolation (run(): end_star).
+constexpr double PASSAGE_END_BAND = 0.05;
+
 bool finite(const double* x, int len) {
     for (int i = 0; i < len; ++i)
         if (!std::isfinite(x[i])) return false;
@@ -577,15 +581,44 @@ Outcome run(Loop& L, long long max_steps) {
                 if ((s = stab_project(L, t_new, L.yq1.data())) != Status::ok) return fail(L, s);
             }
         } else {
-            h = clip(L.t, passage_place(L, L.t, L.opt.dt), t1);
+            const double hp = passage_place(L, L.t, L.opt.dt);
+            h = clip(L.t, hp, t1);
             L.y0 = L.y;
-            L.stage_proj = L.opt.method == Method::rk4 && L.any_active && passage_stages(L, L.t, h);
-            s = fixed_advance(L, L.t, L.y, f_start ? &L.f : nullptr, h, L.y1);
+            // the run ends at (within PASSAGE_END_BAND of a step from) a predicted singular
+            // instant: a step ending there would evaluate F at the singular configuration (the
+            // Gauss solution, not the limit along the branch: measured, crossed four-bar ending
+            // at a change point, q̇ off by up to 5 m/s). The placed step is taken past it and
+            // the end state is the step's quintic Hermite interpolant at t1, projected as a
+            // sample (the samples at change points: ≤ 3e-9 m/s).
+            const bool end_star = L.opt.passages && L.any_active && L.opt.stab == Stabilization::projection &&
+                                  L.pas.have_star && h == t1 - L.t && L.t + hp > t1 && L.pas.t_star > L.t &&
+                                  std::abs(t1 - L.pas.t_star) <= PASSAGE_END_BAND * hp;
+            const double hs = end_star ? hp : h;
+            if (end_star && !f_start) {
+                if ((s = rhs(L, L.t, L.y.data(), L.f.data())) != Status::ok) return fail(L, s);
+                L.have_f = true;
+            }
+            L.stage_proj = L.opt.method == Method::rk4 && L.any_active && passage_stages(L, L.t, hs);
+            s = fixed_advance(L, L.t, L.y, (f_start || end_star) ? &L.f : nullptr, hs, L.y1);
             L.stage_proj = false;
             if (s != Status::ok) return fail(L, s);
             t_new = (h == t1 - L.t) ? t1 : L.t + h;
             L.yq1 = L.y1;
-            if ((s = stab_project(L, t_new, L.yq1.data())) != Status::ok) return fail(L, s);
+            if (end_star) {
+                const double tf = L.t + hs;
+                if ((s = stab_project(L, tf, L.yq1.data())) != Status::ok) return fail(L, s);
+                if ((s = point(L, tf, L.yq1.data(), L.yq1.data() + n, L.ps, false)) != Status::ok) return fail(L, s);
+                for (int i = 0; i < n; ++i) {
+                    L.fp1[i] = L.yq1[n + i];
+                    L.fp1[n + i] = L.ps.qdd[i];
+                }
+                hermite_quintic(n, L.y0.data(), L.f.data(), L.yq1.data(), L.fp1.data(), hs, t1 - L.t, L.yp.data());
+                if ((s = stab_project_sample(L, t1, L.yp.data())) != Status::ok) return fail(L, s);
+                L.yq1 = L.yp;
+                L.y1 = L.yp;
+            } else if ((s = stab_project(L, t_new, L.yq1.data())) != Status::ok) {
+                return fail(L, s);
+            }
         }
         const double end_tol = 1e-12 * std::max(1.0, std::abs(t_new));
         const bool inside = !adapt && f_start && !L.every && L.out_i < n_out && L.t_out[L.out_i] < t_new - end_tol;
