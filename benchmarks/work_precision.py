@@ -60,8 +60,8 @@ def gaps(rows: list[dict[str, Any]], closure_floor: float = 1e-13) -> list[dict[
             continue
         best = None
         for r in mine:
-            if all(float(r[k]) <= max(float(p[k]), closure_floor if k == "closure_max" else 0.0)
-                   for k, _ in MEASURES):  # fmt: skip
+            if all(p.get(k) is None or (r.get(k) is not None and float(r[k]) <= max(
+                    float(p[k]), closure_floor if k == "closure_max" else 0.0)) for k, _ in MEASURES):  # fmt: skip
                 if best is None or r["wall_per_sim_s"] < best["wall_per_sim_s"]:
                     best = r
         res.append({"peer": p, "nonmin": best,
@@ -85,7 +85,7 @@ def plot(mech: str, rows: list[dict[str, Any]], out: Path) -> None:
         rs = sorted(rs, key=lambda r: r["wall_per_sim_s"])
         style = "-" if fam.startswith("nonmin") else "--"
         for ax, (key, label) in zip(axes, MEASURES, strict=True):
-            good = [r for r in rs if _ok(r)]
+            good = [r for r in rs if _ok(r) and r.get(key) is not None]
             bad = [r for r in rs if not _ok(r)]
             x = [r["wall_per_sim_s"] for r in good]
             y = [min(CAP, max(FLOOR, float(r[key]))) for r in good]
@@ -116,7 +116,7 @@ def markdown(mechs: dict[str, list[dict[str, Any]]]) -> str:
             p, b = g["peer"], g["nonmin"]
             who = "none" if b is None else f"{b['setting']}" + (f" dt={b['dt']:g}" if b.get("dt") else "")
             lines.append(
-                f"| {p['engine']} {p['setting']} | {p.get('dt') or '-'} | {p['error_vs_reference_max']:.1e} | "
+                f"| {p['engine']} {p['setting']} | {p.get('dt') or '-'} | {p['error_vs_reference_max'] or float('nan'):.1e} | "
                 f"{p['energy_drift']:.1e} | {p['wall_per_sim_s']:.2e} | {who} | "
                 f"{'-' if b is None else format(b['wall_per_sim_s'], '.2e')} | "
                 f"{'-' if g['ratio'] is None else format(g['ratio'], '.2f')} |"

@@ -196,6 +196,33 @@ void dp_dense(const Loop& L, double t0, double h, double tt, double* out) {
         out[i] = L.y0[i] + s * (L.d_ydiff[i] + s1 * (L.d_bspl[i] + s * (L.d_r3[i] + s1 * L.d_r4[i])));
 }
 
+// _integrators.SingularPassages.zone: adaptive steps near a predicted passage end outside the
+// zone |t − t*| < d, d = PASSAGE_ZONE_SIGMA / |dσ/dt| (σ falls linearly into the instant): a
+// step end inside it gets its velocity from a projection whose tangent turns by (position
+// error)/σ, and an error control that shrinks the steps there walks them into it (measured,
+// crossed four-bar, DOP853 rtol 1e-10: steps down to 2e-8 s, ends at σ ~ 2e-6, 1.9e-5 J kicks).
+// A step that would end inside ends at its near edge, or, from there, crosses the zone to its
+// far edge: `forced`, the error control then accepts it (it cannot be shrunk without ending
+// inside). Returns the step to attempt.
+constexpr double PASSAGE_ZONE_SIGMA = 1e-3;
+
+double passage_zone(const Loop& L, double t, double h, bool& forced) {
+    forced = false;
+    const Passages& P = L.pas;
+    if (!L.opt.passages || !P.have_star || P.count < 2) return h;
+    const int c = P.count;
+    const double slope = (P.ss[c - 2] - P.ss[c - 1]) / (P.ts[c - 1] - P.ts[c - 2]);
+    if (!(slope > 0.0) || !std::isfinite(slope)) return h;
+    const double g = P.t_star - t;
+    const double d = PASSAGE_ZONE_SIGMA / slope;
+    if (!(g > 0.0)) return h;
+    const double end = g - h;  // the step end's distance before t* (negative: after)
+    if (end >= d || end <= -d) return h;  // ends outside the zone
+    if (g - d >= 0.2 * h) return g - d;   // end at the near edge
+    forced = true;
+    return g + d;  // from the near edge (or inside): across to the far edge
+}
+
 // DormandPrince5.step with the error measured on projected solutions (the driver's project_y
 // when the stabilization is the projection): the accepted projected end is kept in L.yq1.
 // Returns the accepted step size in h_acc, the new time in t_new.
@@ -217,8 +244,9 @@ Status dp_step(Loop& L, double& h_acc, double& t_new) {
     const double h_min = L.opt.h_min_factor * std::max(1.0, std::abs(t));
     const bool proj = L.opt.stab == Stabilization::projection;
     const double noise = passage_noise(L);
+    bool forced = false;
     while (true) {
-        h = clip(t, passage_place(L, t, h), t_bound);
+        h = clip(t, passage_zone(L, t, passage_place(L, t, h), forced), t_bound);
         if (h < h_min) {
             L.message = "dopri5: step size underflow";
             return Status::not_finite;
@@ -251,9 +279,9 @@ Status dp_step(Loop& L, double& h_acc, double& t_new) {
             h *= 0.2;
             continue;
         }
-        if (err <= 1.0) {
+        if (err <= 1.0 || forced) {
             double fac = err == 0.0 ? 5.0 : std::min(5.0, std::max(0.2, 0.9 * std::pow(err, -0.2)));
-            if (rejected) fac = std::min(fac, 1.0);
+            if (rejected || forced) fac = std::min(fac, 1.0);
             t_new = (h == t_bound - t) ? t_bound : t + h;
             h_acc = h;
             L.y0 = L.y;
@@ -374,8 +402,9 @@ Status d8_step(Loop& L, double& h_acc, double& t_new) {
     const bool proj = L.opt.stab == Stabilization::projection;
     const double noise = passage_noise(L);
     L.d8_fsal = L.d8_dense = false;
+    bool forced = false;
     while (true) {
-        h = clip(t, passage_place(L, t, h), t_bound);
+        h = clip(t, passage_zone(L, t, passage_place(L, t, h), forced), t_bound);
         if (h < h_min) {
             L.message = "dop853: step size underflow";
             return Status::not_finite;
@@ -417,9 +446,9 @@ Status d8_step(Loop& L, double& h_acc, double& t_new) {
             h *= 0.2;
             continue;
         }
-        if (err <= 1.0) {
+        if (err <= 1.0 || forced) {
             double fac = err == 0.0 ? 6.0 : std::min(6.0, std::max(1.0 / 3.0, 0.9 * std::pow(err, -0.125)));
-            if (rejected) fac = std::min(fac, 1.0);
+            if (rejected || forced) fac = std::min(fac, 1.0);
             t_new = (h == t_bound - t) ? t_bound : t + h;
             h_acc = h;
             L.y0 = L.y;

@@ -172,6 +172,13 @@ PASSAGE_ITER_RTOL = 1e-6
 #: least a quarter step from it, where the indicator is ≳ 1e-5 (A02 N = 2 at dt = 1e-4).
 PASSAGE_FLOOR = 1e-7
 
+#: Adaptive steps keep their ends out of ``|t − t*| < PASSAGE_ZONE_SIGMA/|dσ/dt|`` around a
+#: predicted singular instant (:meth:`SingularPassages.zone`). Measured on the crossed four-bar
+#: (4 s, rtol 1e-10, general driver): DOP853 energy drift 2.9e-5 / 3.1e-7 / 4.2e-7 / 9.5e-7 /
+#: 6.8e-4 J with 1e-4 / 3e-4 / 1e-3 / 3e-3 / 1e-2 (too small: the forced crossing's stages sit
+#: next to the instant; too large: long forced steps), DOPRI5 3.9e-7 / 4.2e-7 J with 1e-4 / 1e-3.
+PASSAGE_ZONE_SIGMA = 1e-3
+
 #: Round-off of a projected state near a singular configuration, relative to ``eps·(1 + |y|)``
 #: and divided by the indicator σ (the projection's sensitivity: the tangent space turns by
 #: δq/σ): :class:`DormandPrince5` adds ``noise = PASSAGE_NOISE·eps/σ`` (× (1 + |y_i|)) to its
@@ -346,6 +353,30 @@ class SingularPassages:
         if PASSAGE_STAGE_K * self.rate * h > self.sigma:
             return True
         return self.t_star is not None and t < self.t_star and self.t_star - t <= (1.0 + PASSAGE_BAND) * h
+
+    def zone(self, t: float, h: float) -> tuple[float, bool]:
+        """Adaptive methods: the step to attempt so that no step ends within the zone
+        ``|t − t*| < d`` of the predicted instant, ``d = PASSAGE_ZONE_SIGMA/|dσ/dt|``, and whether
+        it is *forced* (it crosses the zone from its near edge: the error control accepts it,
+        since any shorter attempt ends inside). A step end there gets its velocity from a
+        projection whose tangent turns by (position error)/σ, and an error control that shrinks
+        the steps walks them into it (measured, crossed four-bar, DOP853 at rtol 1e-10: steps
+        down to 2e-8 s, ends at σ ~ 2e-6, energy kicks of 1.9e-5 J; DOPRI5 on A02 N = 2, 10 s,
+        rtol 1e-10: B0 error 5.8e-7 m without, 1.6e-8 m with). The engine computes the same
+        (``passage_zone``)."""
+        if self.t_star is None or len(self._t) < 2:
+            return h, False
+        slope = (self._s[-2] - self._s[-1]) / (self._t[-1] - self._t[-2])
+        g = self.t_star - t
+        if not (slope > 0.0 and math.isfinite(slope)) or not g > 0.0:
+            return h, False
+        d = PASSAGE_ZONE_SIGMA / slope
+        end = g - h
+        if end >= d or end <= -d:
+            return h, False
+        if g - d >= 0.2 * h:
+            return g - d, False
+        return g + d, True
 
 
 def passage_time(ts: list[float], ss: list[float]) -> float | None:
@@ -752,8 +783,13 @@ class DormandPrince5(Integrator):
         rejected = 0
         h_min = self.h_min_factor * max(1.0, abs(t))
         noise = float(getattr(place, "noise", 0.0))
+        zone = getattr(place, "zone", None)
+        forced = False
         while True:
-            h = _clip(t, h if place is None else place(t, h), t_bound)
+            h = h if place is None else place(t, h)
+            if zone is not None:
+                h, forced = zone(t, h)
+            h = _clip(t, h, t_bound)
             if h < h_min:
                 raise SimulationError(
                     f"dopri5: step size underflow at t = {t:.12g} (h = {h:.3g} < {h_min:.3g}); "
@@ -771,9 +807,9 @@ class DormandPrince5(Integrator):
                 rejected += 1
                 h *= 0.2
                 continue
-            if err <= 1.0:
+            if err <= 1.0 or forced:
                 fac = 5.0 if err == 0.0 else min(5.0, max(0.2, 0.9 * err ** (-0.2)))
-                if rejected:
+                if rejected or forced:
                     fac = min(fac, 1.0)
                 t1 = t_bound if h == t_bound - t else t + h
                 f1 = K[6]  # FSAL: F(t + h, y1)
@@ -861,8 +897,13 @@ class DOP853(Integrator):
         noise = float(getattr(place, "noise", 0.0))
         K = np.empty((16, y.shape[0]))
         K[0] = f0
+        zone = getattr(place, "zone", None)
+        forced = False
         while True:
-            h = _clip(t, h if place is None else place(t, h), t_bound)
+            h = h if place is None else place(t, h)
+            if zone is not None:
+                h, forced = zone(t, h)
+            h = _clip(t, h, t_bound)
             if h < h_min:
                 raise SimulationError(
                     f"dop853: step size underflow at t = {t:.12g} (h = {h:.3g} < {h_min:.3g}); "
@@ -886,9 +927,9 @@ class DOP853(Integrator):
                 rejected += 1
                 h *= 0.2
                 continue
-            if err <= 1.0:
+            if err <= 1.0 or forced:
                 fac = 6.0 if err == 0.0 else min(6.0, max(1.0 / 3.0, 0.9 * err ** (-0.125)))
-                if rejected:
+                if rejected or forced:
                     fac = min(fac, 1.0)
                 t1 = t_bound if h == t_bound - t else t + h
                 f1 = None
