@@ -355,15 +355,15 @@ class SingularPassages:
         return self.t_star is not None and t < self.t_star and self.t_star - t <= (1.0 + PASSAGE_BAND) * h
 
     def zone(self, t: float, h: float) -> tuple[float, bool]:
-        """Adaptive methods: the step to attempt so that no step ends within the zone
+        """DOP853: the step to attempt so that no step ends within the zone
         ``|t − t*| < d`` of the predicted instant, ``d = PASSAGE_ZONE_SIGMA/|dσ/dt|``, and whether
         it is *forced* (it crosses the zone from its near edge: the error control accepts it,
         since any shorter attempt ends inside). A step end there gets its velocity from a
         projection whose tangent turns by (position error)/σ, and an error control that shrinks
         the steps walks them into it (measured, crossed four-bar, DOP853 at rtol 1e-10: steps
-        down to 2e-8 s, ends at σ ~ 2e-6, energy kicks of 1.9e-5 J; DOPRI5 on A02 N = 2, 10 s,
-        rtol 1e-10: B0 error 5.8e-7 m without, 1.6e-8 m with). The engine computes the same
-        (``passage_zone``)."""
+        down to 2e-8 s, ends at σ ~ 2e-6, energy kicks of 1.9e-5 J). With DOPRI5 it helped A02
+        N = 2 (B0 5.8e-7 → 1.5e-8 m at rtol 1e-10) but made A02 N = 40 fail (t = 4.54 s, rtol
+        1e-8), so DOPRI5 does not use it. The engine computes the same (``passage_zone``)."""
         if self.t_star is None or len(self._t) < 2:
             return h, False
         slope = (self._s[-2] - self._s[-1]) / (self._t[-1] - self._t[-2])
@@ -783,13 +783,9 @@ class DormandPrince5(Integrator):
         rejected = 0
         h_min = self.h_min_factor * max(1.0, abs(t))
         noise = float(getattr(place, "noise", 0.0))
-        zone = getattr(place, "zone", None)
-        forced = False
+        forced = False  # (the passage zone is DOP853's: with DOPRI5 it failed on A02 N = 40)
         while True:
-            h = h if place is None else place(t, h)
-            if zone is not None:
-                h, forced = zone(t, h)
-            h = _clip(t, h, t_bound)
+            h = _clip(t, h if place is None else place(t, h), t_bound)
             if h < h_min:
                 raise SimulationError(
                     f"dopri5: step size underflow at t = {t:.12g} (h = {h:.3g} < {h_min:.3g}); "
