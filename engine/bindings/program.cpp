@@ -183,6 +183,12 @@ void bind_program(nb::module_& m) {
                unsigned need) {
                 check_state(p, q.shape(0), qd.shape(0), active.shape(0));
                 check_terms(p, out);
+                if ((need & NEED_A) && p.a_pattern().known()) {
+                    // the program writes only A's pattern (program.hpp): rows written from
+                    // Python hold anything, so the active rows start from zeros here
+                    for (const ConstraintInfo& c : p.constraints())
+                        if (active.data()[&c - p.constraints().data()]) out.A.middleRows(c.row, c.dim).setZero();
+                }
                 Status s;
                 if (p.thread_safe()) {
                     nb::gil_scoped_release release;

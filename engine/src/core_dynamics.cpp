@@ -5,7 +5,7 @@
 #include "nonmin/dynamics.hpp"
 
 #include <Eigen/Dense>
-#include <Eigen/SVD>
+#include "nonmin/svd.hpp"
 
 #include <algorithm>
 #include <cmath>

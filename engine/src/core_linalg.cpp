@@ -40,6 +40,47 @@ double row_norm(const double* x, int n) {
     return std::sqrt(s);
 }
 
+double row_norm_pattern(const double* x, int n, const int* cols, int e) {
+    const int n4 = n - n % 4;
+    double sp[4] = {0.0, 0.0, 0.0, 0.0};
+    for (int t = 0; t < e; ++t) {
+        const int k = cols[t];
+        sp[k < n4 ? (k & 3) : 0] += x[k] * x[k];
+    }
+    const double s = (sp[0] + sp[1]) + (sp[2] + sp[3]);
+    if (s > 1e300 || s < 1e-290) return row_norm(x, n);  // the rare scaled recomputation
+    return std::sqrt(s);
+}
+
+int equilibrate_pattern(const double* A, int m, int n, const int* start, const int* cols,
+                        const double* b, double rtol, double* B, double* d, double* norms) {
+    const int ld = n + 1;
+    double big = 0.0;
+    for (int i = 0; i < m; ++i) {
+        const double nrm = row_norm_pattern(A + static_cast<long>(i) * n, n, cols + start[i],
+                                            start[i + 1] - start[i]);
+        norms[i] = nrm;
+        if (nrm > big) big = nrm;
+    }
+    const double thr = rtol * big;
+    int live = 0;
+    for (int i = 0; i < m; ++i) {
+        double* Bi = B + static_cast<long>(i) * ld;
+        const double* Ai = A + static_cast<long>(i) * n;
+        std::fill(Bi, Bi + ld, 0.0);
+        if (norms[i] > thr) {
+            const double di = 1.0 / norms[i];
+            for (int t = start[i]; t < start[i + 1]; ++t) Bi[cols[t]] = Ai[cols[t]] * di;
+            Bi[n] = b ? di * b[i] : 0.0;
+            d[i] = di;
+            ++live;
+        } else {
+            d[i] = 0.0;
+        }
+    }
+    return live;
+}
+
 int equilibrate(const double* A, int m, int n, const double* b, double rtol, double* B, double* d,
                 double* norms) {
     const int ld = n + 1;

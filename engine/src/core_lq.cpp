@@ -41,6 +41,16 @@ void row_pattern(const double* A, int m, int n, int lda, int* Ap) {
     }
 }
 
+void row_pattern_known(const int* start, const int* cols, const int* rows, int m, int n, int* Ap) {
+    for (int i = 0; i < m; ++i) {
+        int* P = Ap + static_cast<long>(i) * (n + 1);
+        const int r = rows[i];
+        const int e = start[r + 1] - start[r];
+        P[0] = e;
+        for (int t = 0; t < e; ++t) P[1 + t] = cols[start[r] + t];
+    }
+}
+
 // cv ← L⁻¹ cv by forward substitution over L's row profile (Li holds L, row i from Lf[i]).
 void lq_profile_solve(const LQWork& w, int m, double* cv) {
     const int ld = w.m_max;

@@ -1,6 +1,6 @@
 // The projection-dynamics solve (solver.hpp): input checks, the rank policy (linalg.hpp), M̄,
 // its Cholesky factorization, q̈ and f_c. Specified by nonmin.core.dynamics._solve_dynamics_numpy.
-#include <Eigen/SVD>
+#include "nonmin/svd.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -39,6 +39,7 @@ struct Solver::Impl {
     bool h_diag = false;
     double h_mu = 0.0;
     std::vector<double> Ui, Tj, db;
+    std::vector<int> lrows;  // the live rows (a known pattern's rows after compaction)
 
     Impl(int m_max_, int n_)
         : m_max(m_max_), n(n_) {
@@ -69,6 +70,7 @@ struct Solver::Impl {
         const long mj = std::min(m_max, JACOBI_MAX_ROWS);
         Tj.assign(mj * mj, 0.0);
         db.assign(m_max + 1, 0.0);
+        lrows.assign(m_max, 0);
     }
 
     double smax_of(int m) const {  // max_i sig[i] (keep_rows' σ_max)
@@ -84,11 +86,16 @@ struct Solver::Impl {
     // Certified LQ (lqmode ≠ LQ_NONE): cv = L⁻¹ D b and Q (rows of V) or Z (rows of Kt, zmode).
     // SVD: the kept right singular vectors V (r × n), cv_k = (u_kᵀ D b)/σ_k, and with many rows
     // and few degrees of freedom (zmode) the other right singular vectors in the rows of Kt.
-    int rank_decision(int m, int live, double rtol) {
+    int rank_decision(int m, int live, double rtol, const int* pst = nullptr, const int* pco = nullptr) {
         lqmode = linalg::LQ_NONE;
         zmode = false;
         held = false;
         ++gen;
+        if (pst) {  // the live rows, for the known pattern
+            int c = 0;
+            for (int i = 0; i < m; ++i)
+                if (d[i] != 0.0) lrows[c++] = i;
+        }
         if (live < m) {  // vanished rows are zero rows of D A: keep the live rows only (in order)
             const int ld = n + 1;
             int c = 0;
@@ -104,7 +111,10 @@ struct Solver::Impl {
         if (m == 0) return 0;
         if (linalg::QR_MIN_ROWS <= m && m <= n) {
             if (m > linalg::DENSE_INVERSE_MAX_ROWS) {
-                linalg::row_pattern(B.data(), m, n, n + 1, lq.Ap.data());
+                if (pst)
+                    linalg::row_pattern_known(pst, pco, lrows.data(), m, n, lq.Ap.data());
+                else
+                    linalg::row_pattern(B.data(), m, n, n + 1, lq.Ap.data());
                 lqmode = linalg::lq_sparse(B.data(), m, n, rtol, lq, cv.data());
             } else {
                 lqmode = linalg::lq_certified(B.data(), m, n, rtol, lq, cv.data());
@@ -439,8 +449,16 @@ SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* 
     if (M && !m_valid)
         for (int i = 0; i < n; ++i)
             for (int j = 0; j < n; ++j) c[j] += M[i * n + j] * 0.0;
-    for (int i = 0; i < m; ++i)
-        for (int j = 0; j < n; ++j) c[j] += A[static_cast<long>(i) * n + j] * 0.0;
+    const int* pst = opt.a_start;
+    const int* pco = opt.a_cols;
+    if (pst && pco) {  // a known pattern: the other entries are 0
+        for (int i = 0; i < m; ++i)
+            for (int t = pst[i]; t < pst[i + 1]; ++t) c[pco[t]] += A[static_cast<long>(i) * n + pco[t]] * 0.0;
+    } else {
+        pst = pco = nullptr;
+        for (int i = 0; i < m; ++i)
+            for (int j = 0; j < n; ++j) c[j] += A[static_cast<long>(i) * n + j] * 0.0;
+    }
     bool bad = false;
     for (int j = 0; j < n; ++j) bad |= c[j] != 0.0;
     for (int i = 0; i < m; ++i) bad |= (gamma[i] - gamma[i]) != 0.0;
@@ -474,8 +492,10 @@ SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* 
         }
     }
     // ------------------------------------------------------------------ 2.–3. rank policy
-    const int live = linalg::equilibrate(A, m, n, gamma, opt.rtol, B.data(), d.data(), sig.data());
-    const int r = rank_decision(m, live, opt.rtol);
+    const int live = pst ? linalg::equilibrate_pattern(A, m, n, pst, pco, gamma, opt.rtol, B.data(), d.data(),
+                                                       sig.data())
+                         : linalg::equilibrate(A, m, n, gamma, opt.rtol, B.data(), d.data(), sig.data());
+    const int r = rank_decision(m, live, opt.rtol, pst, pco);
     info.rank = r;
     info.method = lqmode;
     info.null_space_form = zmode;

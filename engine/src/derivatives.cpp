@@ -3,7 +3,7 @@
 #include "nonmin/derivatives.hpp"
 
 #include <Eigen/Cholesky>
-#include <Eigen/SVD>
+#include "nonmin/svd.hpp"
 
 #include <cmath>
 #include <vector>

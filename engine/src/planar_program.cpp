@@ -210,6 +210,50 @@ PlanarProgram::PlanarProgram(PlanarDescription desc) : d_(std::move(desc)) {
         if (!f.thread_safe()) thread_safe_ = false;  // a Python callable holds the GIL
         tape_size_ = std::max(tape_size_, f.scratch_size());
     }
+    // The row pattern of A (program.hpp): the columns each primitive's rows write (eval's
+    // `add` calls below; the ground and a point mass's rotation have none).
+    std::vector<std::vector<int>> rows(static_cast<std::size_t>(m_all_));
+    auto put = [&](int row, int col) {
+        if (col >= 0) rows[static_cast<std::size_t>(row)].push_back(col);
+    };
+    auto put_point = [&](int row, const PlanarPoint& pt, bool x, bool y) {
+        if (pt.body < 0) return;
+        const PlanarBody& B = d_.bodies[static_cast<std::size_t>(pt.body)];
+        if (x) put(row, B.ix);
+        if (y) put(row, B.iy);
+        put(row, B.ith);
+    };
+    for (const PlanarPrim& p : d_.prims) {
+        const int row = d_.constraints[static_cast<std::size_t>(p.constraint)].row + p.offset;
+        switch (p.kind) {
+            case PlanarPrimKind::pin:
+                put_point(row, p.a, true, false);
+                put_point(row, p.b, true, false);
+                put_point(row + 1, p.a, false, true);
+                put_point(row + 1, p.b, false, true);
+                break;
+            case PlanarPrimKind::line:
+            case PlanarPrimKind::rod:
+                put_point(row, p.a, true, true);
+                put_point(row, p.b, true, true);
+                break;
+            case PlanarPrimKind::angle:
+                for (int b : p.angle_bodies)
+                    if (b >= 0) put(row, d_.bodies[static_cast<std::size_t>(b)].ith);
+                break;
+            case PlanarPrimKind::coord:
+                for (int j : p.coords) put(row, j);
+                break;
+        }
+    }
+    a_pattern_.start.assign(static_cast<std::size_t>(m_all_) + 1, 0);
+    for (int r = 0; r < m_all_; ++r) {
+        std::vector<int>& c = rows[static_cast<std::size_t>(r)];
+        std::sort(c.begin(), c.end());
+        c.erase(std::unique(c.begin(), c.end()), c.end());
+        a_pattern_.cols.insert(a_pattern_.cols.end(), c.begin(), c.end());
+        a_pattern_.start[static_cast<std::size_t>(r) + 1] = static_cast<int>(a_pattern_.cols.size());
+    }
 }
 
 std::unique_ptr<Workspace> PlanarProgram::make_workspace() const {
@@ -396,8 +440,12 @@ Status PlanarProgram::eval(double t, const S* q, const S* qd, const std::uint8_t
         for (std::size_t ci = 0; ci < nc; ++ci) {
             if (!active[ci]) continue;
             const ConstraintInfo& c = d_.constraints[ci];
-            if (wantA) std::fill(A + static_cast<std::ptrdiff_t>(c.row) * n,
-                                 A + static_cast<std::ptrdiff_t>(c.row + c.dim) * n, 0.0);
+            if (wantA)  // only the pattern's entries: the others stay 0 (program.hpp)
+                for (int r = c.row; r < c.row + c.dim; ++r) {
+                    S* Ar = A + static_cast<std::ptrdiff_t>(r) * n;
+                    const int* cols = a_pattern_.row(r);
+                    for (int t = 0, e = a_pattern_.count(r); t < e; ++t) Ar[cols[t]] = S(0.0);
+                }
             for (int pi : prims_of_[ci]) {
                 const PlanarPrim& p = d_.prims[static_cast<std::size_t>(pi)];
                 const int row = c.row + p.offset;

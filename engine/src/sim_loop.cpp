@@ -46,19 +46,27 @@ double velocity_rtol(const Options& o, const ProjectionOptions& po) {
     return std::max(po.velocity_rtol, o.rank_rtol > 0.0 ? o.rank_rtol : 0.0);
 }
 
-SolveOptions solve_options(const Loop& L, double rtol) {
+SolveOptions solve_options(const Loop& L, double rtol, const std::vector<int>* pst = nullptr,
+                           const std::vector<int>* pco = nullptr) {
     SolveOptions so;
     so.rtol = rtol;
     so.spd_rtol = L.opt.spd_rtol;
     so.sym_rtol = L.opt.sym_rtol;
+    if (pst && !pst->empty() && !L.gathered.empty() && L.gathered == L.rows) {  // A's known pattern
+        so.a_start = pst->data();
+        so.a_cols = pco->data();
+    }
     return so;
 }
 
 // _stabilization._correction: Δ = Sᵀ(−A⁺r) = forward dynamics with zero force and bias r.
+// A: L.Ac (its m rows) or L.Alin (the m_hol position-level rows), with their known pattern.
 Status correction(Loop& L, const Mat& A, int m, const double* r, double rtol, double* out, int* rank) {
     L.vheld = false;
-    const SolveInfo info =
-        L.solver.forward(L.Mq.data(), L.zero_n.data(), A.data(), m, r, solve_options(L, rtol), out, nullptr);
+    const bool hol = &A == &L.Alin;
+    const SolveOptions so = hol ? solve_options(L, rtol, &L.ph_start, &L.ph_cols)
+                                : solve_options(L, rtol, &L.pc_start, &L.pc_cols);
+    const SolveInfo info = L.solver.forward(L.Mq.data(), L.zero_n.data(), A.data(), m, r, so, out, nullptr);
     if (rank) *rank = info.rank;
     if (info.status != Status::ok) return info.status;
     return Status::ok;
@@ -76,8 +84,8 @@ SolveInfo dynamics_solve(Loop& L, double t, const double* q, double rtol, double
             return L.solver.again(L.T.M.data(), L.g.data(), L.bias.data(), qdd, fc);
     }
     L.vheld = false;
-    return L.solver.forward(L.T.M.data(), L.g.data(), L.Ac.data(), L.m, L.bias.data(), solve_options(L, rtol),
-                            qdd, fc);
+    return L.solver.forward(L.T.M.data(), L.g.data(), L.Ac.data(), L.m, L.bias.data(),
+                            solve_options(L, rtol, &L.pc_start, &L.pc_cols), qdd, fc);
 }
 
 }  // namespace
@@ -155,31 +163,73 @@ Status evaluate(Loop& L, double t, const double* q, const double* qd, unsigned n
     const Status s = L.prog->evaluate(t, q, qd, mask, need, L.T, *L.ws);
     if (s != Status::ok) return s;
     const int n = L.n;
+    const RowPattern& pat = L.prog->a_pattern();
+    // A: the pattern's entries only, once the rows were gathered in full for this active set
+    const bool sparse = (need & NEED_A) && pat.known() && L.gathered == L.rows;
+    if ((need & NEED_A) && !sparse) {  // a new active set: its rows in full, and their pattern
+        L.gathered.clear();
+        for (auto* v : {&L.pc_start, &L.pc_cols, &L.ph_start, &L.ph_cols}) v->clear();
+        if (pat.known()) {
+            L.gathered = L.rows;
+            L.pc_start.push_back(0);
+            L.ph_start.push_back(0);
+            for (int i = 0; i < L.m; ++i) {
+                const int r = L.rows[i];
+                L.pc_cols.insert(L.pc_cols.end(), pat.row(r), pat.row(r) + pat.count(r));
+                L.pc_start.push_back(static_cast<int>(L.pc_cols.size()));
+                if (L.hol[i]) {
+                    L.ph_cols.insert(L.ph_cols.end(), pat.row(r), pat.row(r) + pat.count(r));
+                    L.ph_start.push_back(static_cast<int>(L.ph_cols.size()));
+                }
+            }
+        }
+    }
+    const double* TA = L.T.A.data();
     int ih = 0;
     for (int i = 0; i < L.m; ++i) {
         const int r = L.rows[i];
-        if (need & NEED_A) L.Ac.row(i) = L.T.A.row(r);
+        if (sparse) {
+            const int* cols = pat.row(r);
+            const int e = pat.count(r);
+            double* Aci = L.Ac.data() + static_cast<std::ptrdiff_t>(i) * n;
+            const double* Ar = TA + static_cast<std::ptrdiff_t>(r) * n;
+            for (int t = 0; t < e; ++t) Aci[cols[t]] = Ar[cols[t]];
+            if (L.hol[i]) {
+                double* Ahi = L.Ah.data() + static_cast<std::ptrdiff_t>(ih) * n;
+                for (int t = 0; t < e; ++t) Ahi[cols[t]] = Ar[cols[t]];
+            }
+        } else if (need & NEED_A) {
+            L.Ac.row(i) = L.T.A.row(r);
+            if (L.hol[i]) L.Ah.row(ih) = L.T.A.row(r);
+        }
         if (need & NEED_GAMMA) L.gam[i] = L.T.gamma[r];
         if (need & NEED_PHI) L.phi[i] = L.T.phi[r];
         if (need & NEED_VELOCITY) L.vel[i] = L.T.velocity[r];
         if (L.hol[i]) {
-            if (need & NEED_A) L.Ah.row(ih) = L.T.A.row(r);
             if (need & NEED_PHI) L.phih[ih] = L.T.phi[r];
             ++ih;
         }
     }
-    (void)n;
     return Status::ok;
 }
+
+namespace {
+// Whether Ah (and Ac) hold the gathered rows of the current active set with their pattern
+bool hol_pattern(const Loop& L) { return !L.gathered.empty() && L.gathered == L.rows; }
+}  // namespace
 
 // _simulate.drift_rank_rtol over the gathered A and φ (position-level rows)
 double drift_rank_rtol(Loop& L) {
     const double base = base_rtol(L.opt);
     if (L.m == 0 || L.m_hol == 0) return base;
     double big = 0.0;
+    const bool pat = hol_pattern(L);
     for (int i = 0; i < L.m_hol; ++i) {
         double s = 0.0;
-        for (int j = 0; j < L.n; ++j) s += L.Ah(i, j) * L.Ah(i, j);
+        if (pat)  // the pattern's entries, in the same order (the others add zeros)
+            for (int t = L.ph_start[i]; t < L.ph_start[i + 1]; ++t) s += L.Ah(i, L.ph_cols[t]) * L.Ah(i, L.ph_cols[t]);
+        else
+            for (int j = 0; j < L.n; ++j) s += L.Ah(i, j) * L.Ah(i, j);
         const double nr = std::sqrt(s);
         L.rnorm[i] = nr;
         big = std::max(big, nr);
@@ -345,9 +395,14 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
             for (int i = 0; i < mh; ++i) err = std::max(err, std::abs(L.phih[i]));
             if (err <= po.tol || err == 0.0) break;  // converged
             bool at_floor = true;
+            const bool pat = hol_pattern(L);
             for (int i = 0; i < mh; ++i) {
                 double sa = 0.0;
-                for (int j = 0; j < n; ++j) sa += std::abs(L.Ah(i, j)) * L.aq[j];
+                if (pat)  // the pattern's entries, in the same order (the others add zeros)
+                    for (int t = L.ph_start[i]; t < L.ph_start[i + 1]; ++t)
+                        sa += std::abs(L.Ah(i, L.ph_cols[t])) * L.aq[L.ph_cols[t]];
+                else
+                    for (int j = 0; j < n; ++j) sa += std::abs(L.Ah(i, j)) * L.aq[j];
                 L.floor_[i] = ROUNDOFF_FLOOR * (1.0 + sa);
                 if (!(std::abs(L.phih[i]) <= L.floor_[i])) at_floor = false;
             }

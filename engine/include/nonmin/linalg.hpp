@@ -34,6 +34,16 @@ double row_norm(const double* x, int n);
 int equilibrate(const double* A, int m, int n, const double* b, double rtol, double* B, double* d,
                 double* norms);
 
+// row_norm over the entries cols[0 … e−1] (sorted) of x, the others 0: bitwise row_norm(x, n)
+// (each entry goes to the partial sum row_norm gives it; adding a zero square changes no sum).
+double row_norm_pattern(const double* x, int n, const int* cols, int e);
+
+// equilibrate for an A whose row i is 0 outside the columns cols[start[i]] … cols[start[i+1]−1]
+// (a RowPattern of A's m rows, program.hpp): reads only those entries, writes the same B, d and
+// norms bitwise.
+int equilibrate_pattern(const double* A, int m, int n, const int* start, const int* cols,
+                        const double* b, double rtol, double* B, double* d, double* norms);
+
 // Rule 3 for few rows: one-sided (Hestenes) Jacobi SVD of the rows of B (m × (n + 1),
 // augmented: the rotations act on the last column too). At convergence the rows are mutually
 // orthogonal in their first n entries: their norms are the singular values of D A and their
@@ -112,6 +122,9 @@ struct LQWork {
 // The row pattern of A (m × n, leading dimension lda): Ap[i] = [count, columns with a nonzero
 // entry (NaN counts)…] (Ap: m × (n + 1)).
 void row_pattern(const double* A, int m, int n, int lda, int* Ap);
+// The same from a known pattern (start, cols as equilibrate_pattern) of the rows rows[0 … m−1]
+// of A: a superset of the nonzeros, which lq_sparse filters by value (the same result).
+void row_pattern_known(const int* start, const int* cols, const int* rows, int m, int n, int* Ap);
 
 // Few rows (m ≤ DENSE_INVERSE_MAX_ROWS, m ≤ n, every row of B = [D A | D b] live): reflector j
 // pivots on column j. On LQ_INVERSE: cv = L⁻¹ D b (m), the reflectors in w.

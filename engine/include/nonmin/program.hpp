@@ -19,6 +19,16 @@ namespace nonmin {
 
 enum class ConstraintKind : int { holonomic = 0, rheonomic = 1, nonholonomic = 2, unilateral = 3 };
 
+// The structural row pattern of A (compressed rows): the columns of row r are
+// cols[start[r]] … cols[start[r + 1] − 1], sorted, unique. Empty (start.empty()) when unknown.
+struct RowPattern {
+    std::vector<int> start;  // m_all + 1 offsets (empty: pattern unknown)
+    std::vector<int> cols;
+    bool known() const { return !start.empty(); }
+    int count(int r) const { return start[static_cast<std::size_t>(r) + 1] - start[static_cast<std::size_t>(r)]; }
+    const int* row(int r) const { return cols.data() + start[static_cast<std::size_t>(r)]; }
+};
+
 struct ConstraintInfo {
     std::string name;
     ConstraintKind kind;
@@ -112,6 +122,13 @@ class Program {
     }
     virtual bool differentiable() const { return false; }
 
+    // The row pattern of A, fixed at load (programs that know it: PlanarProgram). Every entry of
+    // A outside it is 0 at every state, and evaluate() writes only the pattern's entries of the
+    // rows it writes: the other entries keep the zeros of make_terms(), so callers must not
+    // write into a Terms' A themselves. Callers use it to copy, scan and check only those
+    // entries (the loop's gathering of the active rows, the solver's row norms and profile).
+    const RowPattern& a_pattern() const { return a_pattern_; }
+
     // True when M does not depend on q (planar absolute coordinates): the loop may validate and
     // factor it once.
     virtual bool constant_mass() const { return false; }
@@ -125,6 +142,7 @@ class Program {
     int k_ = 0;
     int m_all_ = 0;
     std::vector<ConstraintInfo> constraints_;
+    RowPattern a_pattern_;
 };
 
 }  // namespace nonmin

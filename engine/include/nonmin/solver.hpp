@@ -21,6 +21,12 @@ struct SolveOptions {
     double mu = 0.0;          // virtual mass; ≤ 0 means the optimal tr(PMP)/(n − r)
     double sym_rtol = 1e-9;   // SYMMETRY_RTOL: max|M − Mᵀ| ≤ sym_rtol · max|M|
     unsigned known = 0;       // Known bits (0: check everything)
+    // The row pattern of A's m rows when known (program.hpp's RowPattern restricted to them:
+    // row i's columns a_cols[a_start[i]] … a_cols[a_start[i+1] − 1], every other entry 0): the
+    // checks, row norms and the sparse LQ's profile read only those entries (results bitwise
+    // unchanged). Null: A is scanned.
+    const int* a_start = nullptr;
+    const int* a_cols = nullptr;
 };
 
 struct SolveInfo {

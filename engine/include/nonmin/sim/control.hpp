@@ -27,7 +27,7 @@
 #include <memory>
 #include <vector>
 
-#include <Eigen/SVD>
+#include "nonmin/svd.hpp"
 
 #include "../linalg.hpp"
 #include "../program.hpp"

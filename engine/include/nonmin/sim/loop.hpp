@@ -26,7 +26,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Eigenvalues>
-#include <Eigen/SVD>
+#include "nonmin/svd.hpp"
 
 #include "../program.hpp"
 #include "../solver.hpp"
@@ -235,6 +235,12 @@ struct Loop {
 
     // gathered terms of the active rows
     Mat Ac, Ah, Alin;  // (m_all × n): active rows, position-level rows, last linearization
+    // The rows Ac and Ah were last gathered for in full: while `rows` is the same, evaluate()
+    // copies only the program's row pattern (Program::a_pattern; the other entries are 0).
+    std::vector<int> gathered;
+    // That pattern for the gathered rows (RowPattern's compressed rows; empty: unknown): of
+    // Ac's m rows (pc_*) and of Ah's m_hol rows (ph_*, also Alin's), as the Solver takes them.
+    std::vector<int> pc_start, pc_cols, ph_start, ph_cols;
     Vec gam, phi, vel, phih, bias, floor_, rnorm;
     Vec g, u, qdd, fc, zero_n, aq, dq;
     Mat Mq, L;  // the projection's metric (n × n), Cholesky factor of M̄
