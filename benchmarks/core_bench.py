@@ -14,7 +14,7 @@ Pinocchio once (setup, not timed). Timed, each from Python, in the same run:
 
 * ``nonmin.core.forward_dynamics(M, h, A, γ, τ)`` and ``constraint_force(...)`` — single call
   and batched over N states (one call with arrays of leading dimension N), with the compiled
-  (numba) backend and the NumPy backend;
+  (C++ engine) backend and the NumPy backend;
 * ``pinocchio.constraintDynamics(model, data, q, v, τ, cmodels, cdatas, prox)`` — proximal
   solver; it computes M, h, J itself, so it does more work than nonmin's kernel;
 * ``pinocchio.forwardDynamics(model, data, τ, J, γ, 0)`` — Pinocchio's KKT solve on the M and
@@ -213,7 +213,6 @@ def _us(t: dict[str, float], per: int = 1) -> dict[str, float]:
 
 def machine_info() -> dict[str, Any]:
     """Machine, versions and load (recorded with every run)."""
-    import numba
     import scipy
 
     pin = _pin()
@@ -240,8 +239,7 @@ def machine_info() -> dict[str, Any]:
         "python": sys.version.split()[0],
         "numpy": np.__version__,
         "scipy": scipy.__version__,
-        "numba": numba.__version__,
-        "numba_threads": numba.get_num_threads(),
+        "threads": len(os.sched_getaffinity(0)),
         "pinocchio": pin.__version__,
         "nonmin_commit": commit,
         "loadavg_start": list(os.getloadavg()),
@@ -264,12 +262,13 @@ print(t1 - t0, t2 - t1, t3 - t2)
 
 
 def jit_times() -> dict[str, float]:
-    """First-call times in fresh processes: cold (empty numba cache) and warm (cache on disk)."""
+    """First-call times in two fresh processes ("cold", "warm"; the engine compiles nothing at run
+    time, so the two differ only by the file cache)."""
     import tempfile
 
     out: dict[str, float] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        env = dict(os.environ, NUMBA_CACHE_DIR=tmp, NONMIN_BACKEND="numba")
+        env = dict(os.environ, NONMIN_BACKEND="engine", TMPDIR=tmp)
         for label in ("cold", "warm"):
             res = subprocess.run(
                 [sys.executable, "-c", JIT_SCRIPT], env=env, capture_output=True, text=True,
@@ -313,7 +312,7 @@ def bench_mechanism(
         ref = np.array(ref)
         iters.append(prox.iter)
         scale = max(float(np.max(np.abs(ref))), 1.0)
-        with core.use_backend("numba"):
+        with core.use_backend("engine"):
             a = core.forward_dynamics(M[k], h[k], A[k], gam[k], tau[k])
         with core.use_backend("numpy"):
             b = core.forward_dynamics(M[k], h[k], A[k], gam[k], tau[k])
@@ -323,15 +322,15 @@ def bench_mechanism(
         err_np = max(err_np, float(np.max(np.abs(b - ref))) / scale)
         kkt = float(np.max(np.abs(c - ref))) / scale if np.all(np.isfinite(c)) else float("inf")
         err_kkt = max(err_kkt, kkt)
-    with core.use_backend("numba"):
+    with core.use_backend("engine"):
         qb = core.forward_dynamics(M[:n_check], h[:n_check], A[:n_check], gam[:n_check], tau[:n_check])
         q1 = np.array([core.forward_dynamics(M[k], h[k], A[k], gam[k], tau[k]) for k in range(n_check)])
     rec["accuracy"] = {
         "states_checked": n_check,
-        "max_rel_diff_numba_vs_pin_constraintDynamics": err_nb,
+        "max_rel_diff_engine_vs_pin_constraintDynamics": err_nb,
         "max_rel_diff_numpy_vs_pin_constraintDynamics": err_np,
         "max_rel_diff_pin_kkt_vs_pin_constraintDynamics": err_kkt,
-        "numba_batch_equals_single_bitwise": bool(np.array_equal(qb, q1)),
+        "engine_batch_equals_single_bitwise": bool(np.array_equal(qb, q1)),
         "pin_prox_iterations_max": int(max(iters)),
         "pin_prox_settings": PROX,
     }
@@ -343,12 +342,12 @@ def bench_mechanism(
     data_kkt = model.createData()
     pin.computeAllTerms(model, data_kkt, q0, v0)
 
-    # The backend is numba for the whole run (set in main); the NumPy backend is timed through
+    # The backend is the engine for the whole run (set in main); the NumPy backend is timed through
     # the function forward_dynamics itself falls back to, so no backend switch is timed.
-    def numba_fd() -> Any:
+    def engine_fd() -> Any:
         return core.forward_dynamics(M0, h0, A0, g0, t0)
 
-    def numba_fc() -> Any:
+    def engine_fc() -> Any:
         return core.constraint_force(M0, h0, A0, g0, t0)
 
     def numpy_fd() -> Any:
@@ -356,8 +355,8 @@ def bench_mechanism(
 
     group = time_group(
         {
-            "nonmin_numba_forward_dynamics": numba_fd,
-            "nonmin_numba_constraint_force": numba_fc,
+            "nonmin_engine_forward_dynamics": engine_fd,
+            "nonmin_engine_constraint_force": engine_fc,
             "nonmin_numpy_forward_dynamics": numpy_fd,
             "pin_constraintDynamics": lambda: pin.constraintDynamics(
                 model, data, q0, v0, t0, cms, cds, prox
@@ -377,10 +376,10 @@ def bench_mechanism(
         Mb, hb, Ab, gb, tb = M[:N], h[:N], A[:N], gam[:N], tau[:N]
         qs, vs = mech.q[:N], mech.v[:N]
 
-        def b_numba_fd() -> Any:
+        def b_engine_fd() -> Any:
             return core.forward_dynamics(Mb, hb, Ab, gb, tb)  # noqa: B023
 
-        def b_numba_fc() -> Any:
+        def b_engine_fc() -> Any:
             return core.constraint_force(Mb, hb, Ab, gb, tb)  # noqa: B023
 
         def b_numpy_fd() -> Any:
@@ -392,8 +391,8 @@ def bench_mechanism(
 
         group = time_group(
             {
-                "nonmin_numba_forward_dynamics": b_numba_fd,
-                "nonmin_numba_constraint_force": b_numba_fc,
+                "nonmin_engine_forward_dynamics": b_engine_fd,
+                "nonmin_engine_constraint_force": b_engine_fc,
                 "nonmin_numpy_forward_dynamics": b_numpy_fd,
                 "pin_constraintDynamics_loop": pin_loop,
             },
@@ -419,63 +418,63 @@ def markdown(results: dict[str, Any]) -> str:
     info = results["machine"]
     lines = [
         f"Run {info['date_utc']} UTC on {info['cpu']} ({info['logical_cpus']} logical CPUs, "
-        f"numba threads {info['numba_threads']}), Python {info['python']}, NumPy {info['numpy']}, "
-        f"numba {info['numba']}, Pinocchio {info['pinocchio']}, nonmin {info['nonmin_commit']}. "
+        f"threads {info['threads']}), Python {info['python']}, NumPy {info['numpy']}, "
+        f"Pinocchio {info['pinocchio']}, nonmin {info['nonmin_commit']}. "
         f"Load average (1/5/15 min) at start {', '.join(f'{x:.2f}' for x in info['loadavg_start'])}"
         f", at end {', '.join(f'{x:.2f}' for x in info['loadavg_end'])} — the machine is shared, "
         "so absolute times are noisy; ratios come from the same run.",
         "",
         "**Single call** (µs of wall time, median over repeats interleaved between the methods; "
         "state 0 of each mechanism). "
-        "`ratio` = nonmin (numba) forward_dynamics / Pinocchio constraintDynamics from the wall "
+        "`ratio` = nonmin (engine) forward_dynamics / Pinocchio constraintDynamics from the wall "
         "medians; `ratio CPU` from the medians of process CPU time; `ratio min` from the "
         "fastest repeats (the two last are less disturbed by other jobs on a shared machine). "
         "`max rel. Δq̈` = largest difference to Pinocchio's q̈ over the checked states.",
         "",
-        "| mechanism | n | rank A | nonmin fd (numba) | nonmin f_c (numba) | nonmin fd (NumPy) "
+        "| mechanism | n | rank A | nonmin fd (engine) | nonmin f_c (engine) | nonmin fd (NumPy) "
         "| pin constraintDynamics | pin KKT forwardDynamics | ratio | ratio CPU | ratio min "
         "| max rel. Δq̈ vs pin |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in results["mechanisms"]:
         s = r["single"]
-        nb = s["nonmin_numba_forward_dynamics"]["median_us"]
+        nb = s["nonmin_engine_forward_dynamics"]["median_us"]
         pc = s["pin_constraintDynamics"]["median_us"]
         cpu_ratio = (
-            s["nonmin_numba_forward_dynamics"]["cpu_median_us"]
+            s["nonmin_engine_forward_dynamics"]["cpu_median_us"]
             / s["pin_constraintDynamics"]["cpu_median_us"]
         )
         min_ratio = (
-            s["nonmin_numba_forward_dynamics"]["min_us"] / s["pin_constraintDynamics"]["min_us"]
+            s["nonmin_engine_forward_dynamics"]["min_us"] / s["pin_constraintDynamics"]["min_us"]
         )
         lines.append(
             f"| {r['mechanism']} | {r['n']} | {r['rank']} | {_f(nb)} | "
-            f"{_f(s['nonmin_numba_constraint_force']['median_us'])} | "
+            f"{_f(s['nonmin_engine_constraint_force']['median_us'])} | "
             f"{_f(s['nonmin_numpy_forward_dynamics']['median_us'])} | {_f(pc)} | "
             f"{_f(s['pin_kkt_forwardDynamics']['median_us'])} | {nb / pc:.2f} | {cpu_ratio:.2f} | "
             f"{min_ratio:.2f} | "
-            f"{r['accuracy']['max_rel_diff_numba_vs_pin_constraintDynamics']:.1e} |"
+            f"{r['accuracy']['max_rel_diff_engine_vs_pin_constraintDynamics']:.1e} |"
         )
     lines += [
         "",
         "**Batched** (µs per state, median of wall time): nonmin = one call on arrays of N "
-        "states (numba: parallel over the 2 cores for N ≥ 4096); Pinocchio = Python loop of "
+        "states (engine: threads over the cores for N ≥ 2048); Pinocchio = Python loop of "
         "constraintDynamics over the N states. `CPU` = process CPU time per state (summed over "
-        "threads: the work done, whatever the load). `ratio` = nonmin (numba) forward_dynamics "
+        "threads: the work done, whatever the load). `ratio` = nonmin (engine) forward_dynamics "
         "/ Pinocchio loop (wall).",
         "",
-        "| mechanism | N | nonmin fd (numba) | CPU | nonmin f_c (numba) | nonmin fd (NumPy) "
+        "| mechanism | N | nonmin fd (engine) | CPU | nonmin f_c (engine) | nonmin fd (NumPy) "
         "| pin constraintDynamics loop | CPU | ratio |",
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in results["mechanisms"]:
         for b in r["batched"]:
-            nb = b["nonmin_numba_forward_dynamics"]["median_us"]
+            nb = b["nonmin_engine_forward_dynamics"]["median_us"]
             pl = b["pin_constraintDynamics_loop"]["median_us"]
             lines.append(
                 f"| {r['mechanism']} | {b['N']} | {_f(nb)} | "
-                f"{_f(b['nonmin_numba_forward_dynamics']['cpu_median_us'])} | "
-                f"{_f(b['nonmin_numba_constraint_force']['median_us'])} | "
+                f"{_f(b['nonmin_engine_forward_dynamics']['cpu_median_us'])} | "
+                f"{_f(b['nonmin_engine_constraint_force']['median_us'])} | "
                 f"{_f(b['nonmin_numpy_forward_dynamics']['median_us'])} | {_f(pl)} | "
                 f"{_f(b['pin_constraintDynamics_loop']['cpu_median_us'])} | {nb / pl:.2f} |"
             )
@@ -483,9 +482,9 @@ def markdown(results: dict[str, Any]) -> str:
     if jit:
         lines += [
             "",
-            "**First call** (fresh process, s): cold numba cache — import "
+            "**First call** (fresh process, s): first process — import "
             f"{jit['cold_import_s']:.2f}, first single call {jit['cold_first_single_s']:.2f}, "
-            f"first batched call {jit['cold_first_batch_s']:.2f}; with the on-disk cache — "
+            f"first batched call {jit['cold_first_batch_s']:.2f}; a second process — "
             f"import {jit['warm_import_s']:.2f}, first single call "
             f"{jit['warm_first_single_s']:.2f}, first batched call {jit['warm_first_batch_s']:.2f}.",
         ]
@@ -534,24 +533,24 @@ def batch_n12(n_states: int = 10_000, repeats: int = 15) -> dict[str, Any]:
     import nonmin.core as core
     from nonmin.core import _fast
 
-    core.set_backend("numba")
+    core.set_backend("engine")
     out: dict[str, Any] = {"machine": machine_info(), "N": n_states, "results": []}
     for kind in ("planar", "spatial"):
         T = terms(build_chain(kind, 12, n_states))
         M, h, A, gam, tau = T["M"], T["h"], T["A"], T["gamma"], T["tau"]
         for fn_name in ("forward_dynamics", "constraint_force"):
             fn = getattr(core, fn_name)
-            drivers = {"default": _fast.PARALLEL_MIN_BATCH, "serial": 1 << 62}
+            drivers = {"default": _fast.ENGINE_PARALLEL_MIN_BATCH, "serial": 1 << 62}
             fns = {}
             for drv, threshold in drivers.items():
 
                 def call(threshold: int = threshold, fn: Any = fn, a: Any = (M, h, A, gam, tau)) -> Any:
-                    old = _fast.PARALLEL_MIN_BATCH
-                    _fast.PARALLEL_MIN_BATCH = threshold
+                    old = _fast.ENGINE_PARALLEL_MIN_BATCH
+                    _fast.ENGINE_PARALLEL_MIN_BATCH = threshold
                     try:
                         return fn(*a)
                     finally:
-                        _fast.PARALLEL_MIN_BATCH = old
+                        _fast.ENGINE_PARALLEL_MIN_BATCH = old
 
                 fns[drv] = call
             group = time_group(fns, target_s=0.05, repeats=repeats)
@@ -566,7 +565,7 @@ def batch_n12(n_states: int = 10_000, repeats: int = 15) -> dict[str, Any]:
                 )  # fmt: skip
     out["machine"]["loadavg_end"] = list(os.getloadavg())
     print("load average start", out["machine"]["loadavg_start"], "end",
-          out["machine"]["loadavg_end"], "threads", out["machine"]["numba_threads"])  # fmt: skip
+          out["machine"]["loadavg_end"], "threads", out["machine"]["threads"])  # fmt: skip
     return out
 
 
@@ -610,7 +609,7 @@ def large() -> None:
     print("| case | compiled median (min) [ms] | NumPy median (min) [ms] | NumPy / compiled |")
     print("|---|---|---|---|")
     for name, (M, h, A, g), rtol in cases:
-        times: dict[str, list[float]] = {"numba": [], "numpy": []}
+        times: dict[str, list[float]] = {"engine": [], "numpy": []}
         for b in times:
             with use_backend(b):
                 forward_dynamics(M, h, A, g, rtol=rtol)  # compile / warm up
@@ -621,8 +620,8 @@ def large() -> None:
                     forward_dynamics(M, h, A, g, rtol=rtol)
                     times[b].append((time.perf_counter() - t0) * 1e3)
         med = {b: float(np.median(v)) for b, v in times.items()}
-        print(f"| {name} | {med['numba']:.2f} ({min(times['numba']):.2f}) | "
-              f"{med['numpy']:.2f} ({min(times['numpy']):.2f}) | {med['numpy'] / med['numba']:.1f} |",
+        print(f"| {name} | {med['engine']:.2f} ({min(times['engine']):.2f}) | "
+              f"{med['numpy']:.2f} ({min(times['numpy']):.2f}) | {med['numpy'] / med['engine']:.1f} |",
               flush=True)  # fmt: skip
     print("load average", os.getloadavg())
 
@@ -681,12 +680,7 @@ def engine_bench(quick: bool = False) -> dict[str, Any]:
     from nonmin.core import _fast
 
     pin = _pin()
-    try:
-        import numba  # noqa: F401
-
-        have_numba = True
-    except ImportError:
-        have_numba = False
+    have_numba = False  # the core's numba backend is gone (issue 17): its columns stay empty
     n_batch = 1000 if quick else 10_000
     target_s, repeats = (0.01, 3) if quick else (0.05, 9)
     out: dict[str, Any] = {"machine": machine_info(), "quick": quick, "chains": [], "large": []}
@@ -716,7 +710,7 @@ def engine_bench(quick: bool = False) -> dict[str, Any]:
                                "max_rel_diff_vs_pin_kkt": rel,
                                "single": {k: _us(v) for k, v in group.items()}}  # fmt: skip
         if have_numba:
-            core.set_backend("numba")
+            core.set_backend("engine")
             g2 = time_group({"numba_forward_dynamics": lambda: core.forward_dynamics(M0, h0, J0, g0, t0)},  # noqa: B023
                             target_s=target_s, repeats=repeats)  # fmt: skip
             core.set_backend("engine")
@@ -786,7 +780,7 @@ def engine_bench(quick: bool = False) -> dict[str, Any]:
             qe = eng()
             rec["max_rel_diff_vs_numpy_kkt"] = float(np.max(np.abs(qe - qn)) / np.max(np.abs(qn)))
         if have_numba:
-            core.set_backend("numba")
+            core.set_backend("engine")
             g2 = time_group({"numba_forward_dynamics": eng}, target_s=target_s * 4,
                             repeats=max(3, repeats // 2))  # fmt: skip
             core.set_backend("engine")
@@ -927,7 +921,7 @@ def main(argv: list[str] | None = None) -> int:
         sizes, target_s, repeats, n_check = [1, 10, 100, 1000, 10000], 0.05, 7, 200
     import nonmin.core as core
 
-    core.set_backend("numba")
+    core.set_backend("engine")
     info = machine_info()
     results: dict[str, Any] = {"machine": info, "quick": args.quick, "mechanisms": []}
     print("first-call (JIT) times ...", flush=True)
@@ -938,9 +932,9 @@ def main(argv: list[str] | None = None) -> int:
         results["mechanisms"].append(rec)
         s = rec["single"]
         print(
-            f"  single: numba {s['nonmin_numba_forward_dynamics']['median_us']:.2f} us, "
+            f"  single: engine {s['nonmin_engine_forward_dynamics']['median_us']:.2f} us, "
             f"pin {s['pin_constraintDynamics']['median_us']:.2f} us; max rel diff "
-            f"{rec['accuracy']['max_rel_diff_numba_vs_pin_constraintDynamics']:.1e}",
+            f"{rec['accuracy']['max_rel_diff_engine_vs_pin_constraintDynamics']:.1e}",
             flush=True,
         )
     info["loadavg_end"] = list(os.getloadavg())

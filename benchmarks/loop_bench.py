@@ -16,15 +16,18 @@ one warm-up (which includes any compilation).
 contact (``EventSet(contact=False)``: no floor, no joint limits), RK4 dt = 1e-3, 3 s sampled every
 10 ms, runs interleaved, ratio of the medians.
 
-    python benchmarks/loop_bench.py [--repeat 3] [--engines engine,python,compiled] [--json out.json]
+    python benchmarks/loop_bench.py [--repeat 3] [--engines engine,python] [--json out.json]
     python benchmarks/loop_bench.py --contact-overhead [--repeat 15]
 
 ``--planar`` times the planar settings of the issue's target 4 instead: the crossed four-bar and
 A02 N = 2, 40, 80 at RK4 dt 1e-3 with every step recorded and at dt 1e-3 … 5e-2 with samples
 every 0.01 s (the settings of sim_bench.py), engines interleaved run by run, medians of wall and
-of process CPU time per simulated second and their ratios to the first engine:
+of process CPU time per simulated second and their ratios to the first engine. The engine
+``numba`` is the numba loop of nonmin ≤ 0.1 (``simulate(engine="compiled")``), frozen in
+``benchmarks/numba_baseline`` (needs ``pip install numba``): it runs from the engine's first
+sample to the end (its setup outside the timing; the engine's whole ``simulate`` call is timed):
 
-    python benchmarks/loop_bench.py --planar [--repeat 5] [--engines engine,compiled]
+    python benchmarks/loop_bench.py --planar [--repeat 5] [--engines engine,numba]
 """
 
 from __future__ import annotations
@@ -223,6 +226,13 @@ PLANAR_CASES = (("crossed_four_bar", 0, 2.0), ("A02_N2", 2, 2.0), ("A02_N40", 40
 PLANAR_SETTINGS = ((1e-3, None), (1e-3, 0.01), (1e-2, 0.01), (2e-2, 0.01), (5e-2, 0.01))
 
 
+class _Ran:
+    """What planar_rows reads of a run: samples q, steps, metadata."""
+
+    def __init__(self, q: Any, n_steps: int, metadata: dict[str, Any]) -> None:
+        self.q, self.n_steps, self.metadata = q, n_steps, metadata
+
+
 def planar_rows(names: list[str], engines: list[str], repeat: int) -> list[dict[str, Any]]:
     """Each planar case at each setting, the engines interleaved run by run (after one warm-up
     run each): medians of wall and process CPU time per simulated second."""
@@ -240,11 +250,26 @@ def planar_rows(names: list[str], engines: list[str], repeat: int) -> list[dict[
             walls: dict[str, list[float]] = {e: [] for e in engines}
             cpus: dict[str, list[float]] = {e: [] for e in engines}
             trajs: dict[str, Any] = {}
+            nprog = None
+            if "numba" in engines:
+                from numba_baseline import fastpath as nb
+
+                nprog = nb.program(mech.model, mech.state.active)
             for rep in range(repeat + 1):
                 for eng in engines:
-                    w, c = time.perf_counter(), time.process_time()
-                    tr = nonmin.simulate(mech, (0.0, T), engine=eng, progress=False, **kw)
-                    w, c = time.perf_counter() - w, time.process_time() - c
+                    if eng == "numba":
+                        first = trajs[engines[0]]
+                        tv = kw.get("t_eval")
+                        w, c = time.perf_counter(), time.process_time()
+                        fr = nb.simulate(nprog, 0.0, T, dt, first.q[0], first.qd[0], tv)
+                        w, c = time.perf_counter() - w, time.process_time() - c
+                        qs = np.concatenate([first.q[:1]] + [b["q"] for b in fr.blocks])
+                        tr = _Ran(qs, first.n_steps if fr.failed else fr.steps,
+                                  {"engine": "numba" + (" (failed)" if fr.failed else "")})  # fmt: skip
+                    else:
+                        w, c = time.perf_counter(), time.process_time()
+                        tr = nonmin.simulate(mech, (0.0, T), engine=eng, progress=False, **kw)
+                        w, c = time.perf_counter() - w, time.process_time() - c
                     if rep:  # (the first run of each engine is the warm-up)
                         walls[eng].append(w)
                         cpus[eng].append(c)
@@ -255,7 +280,7 @@ def planar_rows(names: list[str], engines: list[str], repeat: int) -> list[dict[
                 res[eng] = {"wall_ms_per_s": 1e3 * statistics.median(walls[eng]) / T,
                             "cpu_ms_per_s": 1e3 * statistics.median(cpus[eng]) / T,
                             "ran": trajs[eng].metadata["engine"]}  # fmt: skip
-                if eng != engines[0]:
+                if eng != engines[0] and np.shape(trajs[eng].q) == np.shape(trajs[engines[0]].q):
                     res[eng]["max_q_diff"] = float(np.max(np.abs(trajs[eng].q - trajs[engines[0]].q)))
             rows.append(res)
             print(json.dumps(res), file=sys.stderr)
@@ -278,7 +303,7 @@ def planar_markdown(rows: list[dict[str, Any]], engines: list[str]) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--engines", default="engine,python,compiled")
+    ap.add_argument("--engines", default="engine,python")
     ap.add_argument("--cases", default="")
     ap.add_argument("--json", default="")
     ap.add_argument("--contact-overhead", action="store_true", help="the UR5 on the floor vs no contact")

@@ -833,7 +833,7 @@ def run_nonmin(bar: BarMechanism, method: str, *, dt: float | None = None,
     status = "ok"
     traj = None
     note = ""
-    if warmup:  # setup: compile (or load from numba's cache) before the runs, so that a long
+    if warmup:  # setup: a short run first (imports, caches, first-use costs), so that a long
         # run timed once (below) is not timed with the compilation
         simulate(mech, (0.0, min(bar.t_final, 20.0 * (dt or 1e-3))), throw=False, progress=False,
                  **{**kw, "t_eval": None})  # fmt: skip

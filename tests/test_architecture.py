@@ -11,6 +11,7 @@ functions and under ``TYPE_CHECKING`` alike), so a lazy import cannot hide a cir
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 import pytest
@@ -35,10 +36,7 @@ LAYERS: list[set[str]] = [
 ]
 
 #: Known circles, each with the reason it is still there (empty when the house is straight).
-KNOWN_CIRCLES: dict[frozenset[str], str] = {
-    frozenset({"nonmin.model.planar._compiled", "nonmin.model.planar._model"}):
-        "the numba program (_compiled) goes with numba (issue 17)",
-}
+KNOWN_CIRCLES: dict[frozenset[str], str] = {}
 
 
 def _modules() -> dict[str, Path]:
@@ -55,6 +53,7 @@ def _modules() -> dict[str, Path]:
 EXTENSION = "nonmin._engine"
 
 
+@functools.cache  # read once per process: every test below walks the same graph
 def _graph() -> dict[str, set[str]]:
     mods = _modules()
     edges: dict[str, set[str]] = {m: set() for m in mods}

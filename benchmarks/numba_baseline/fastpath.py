@@ -1,24 +1,15 @@
-"""The compiled engine of :func:`nonmin.sim.simulate`: eligibility and the chunked driver.
+"""The numba loop of nonmin ≤ 0.1 (``simulate(engine="compiled")``), frozen as the baseline of
+issue 17's target 4 ("planar: no regression against today's compiled loop").
 
-``simulate(..., engine="auto")`` runs a fixed-step RK4 simulation with the mass-metric
-projection in one compiled loop (:mod:`._fast_kernels`) when nothing in it needs Python:
+The package dropped numba (its first use compiled for minutes; the C++ engine covers every run).
+This directory keeps that loop unchanged, outside ``src``, so ``loop_bench.py --planar`` can still
+time the engine against it: ``core_kernels.py`` (the core's numba kernels), ``planar_kernels.py``
+(the pin/line/rod block), ``loop_kernels.py`` (RK4 + mass-metric projection + samples),
+``borrow.py`` (reference-count-free views) and this driver. Needs ``pip install numba``.
 
-* the method is :class:`~nonmin.sim.RK4` and the stabilization a mass-metric
-  :class:`~nonmin.sim.Projection` (the defaults);
-* no controller, no events, no automatic contact (no unilateral constraint with
-  ``contact=True``);
-* the model returns a program from :meth:`nonmin.model.Model.fast_program` for the active set
-  (planar models without springs, dampers, drivers or user-defined joints);
-* the compiled backend of :mod:`nonmin.core` is in use (numba installed, backend not
-  ``"numpy"``; with ``"auto"`` up to :data:`nonmin.core._fast.AUTO_NUMBA_MAX_N` coordinates or
-  degrees of freedom ``n − m``, :func:`nonmin.core._fast.auto_compiled`; with more of both,
-  LAPACK is faster).
-
-The loop runs in chunks of steps (about :data:`CHUNK_SECONDS` of wall time each) so the progress
-bar moves, ``KeyboardInterrupt`` is honoured between chunks and ``max_steps`` is checked. When a
-kernel reports a failure the chunk ends at the last accepted step and the general driver
-continues from there, so errors are raised by the same code, with the same types and messages,
-as with ``engine="python"``.
+:func:`simulate` runs the loop from a given state (the engine's first sample, so both start from
+the same projected state) to ``t1``; it builds the program data the way
+``PlanarModel.fast_program`` did (constant M and gravity, the layout's pin/line/rod inputs).
 """
 
 from __future__ import annotations
@@ -29,12 +20,10 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from .._validation import SYMMETRY_RTOL
-from ..core._fast import AUTO_NUMBA_MAX_N, auto_compiled, backend_setting, get_backend
-from ..core.linalg import DEFAULT_RTOL, SPD_RTOL
-from ..errors import InputError, MissingDependencyError
-from ._integrators import RK4
-from ._stabilization import (
+from nonmin._validation import SYMMETRY_RTOL
+from nonmin.core.linalg import DEFAULT_RTOL, SPD_RTOL
+from nonmin.sim._simulate import DRIFT_RANK_FACTOR
+from nonmin.sim._stabilization import (
     CHORD_RATE,
     POSITION_CUT_RTOL,
     ROUNDOFF_FLOOR,
@@ -43,99 +32,70 @@ from ._stabilization import (
     Projection,
 )
 
+from . import loop_kernels
+
 FloatArray = NDArray[np.float64]
 
-#: Engines accepted by ``simulate(engine=...)``.
-ENGINES = ("auto", "compiled", "engine", "python")
-
-#: Target wall time (s) of one compiled chunk (progress, interrupts, step budget in between).
+#: Target wall time (s) of one compiled chunk.
 CHUNK_SECONDS = 0.25
-
-_KERNELS: dict[str, Any] = {}
 
 
 def _kernels() -> Any:
-    """The compiled loop module, or None when numba is missing."""
-    if "mod" not in _KERNELS:
-        try:
-            from . import _fast_kernels
-        except ImportError:
-            _KERNELS["mod"] = None
-        else:
-            _KERNELS["mod"] = _fast_kernels
-    return _KERNELS["mod"]
+    return loop_kernels
 
 
-def check_engine(engine: object) -> str:
-    if not isinstance(engine, str) or engine not in ENGINES:
-        raise InputError(f"engine must be one of {ENGINES}, got {engine!r}")
-    return engine
+class PlanarProgram(NamedTuple):
+    """A planar model's dynamics under one active set, as the numba loop reads it."""
+
+    n: int
+    m: int
+    M: FloatArray
+    f: FloatArray
+    A0: FloatArray
+    I6: Any
+    SL: FloatArray
+    prm: FloatArray
+    rows: Any
+    var_idx: Any
+    counts: Any
+    angle_rows: Any
+    G: FloatArray
+    angle_const: FloatArray
 
 
-def program_for(
-    engine: str,
-    model: Any,
-    integ: Any,
-    stab: Any,
-    controller: Any,
-    events: tuple[Any, ...],
-    unilateral: tuple[str, ...],
-    active: frozenset[str],
-) -> Any | None:
-    """The model's compiled program when the compiled engine applies, else None.
+def program(model: Any, active: frozenset[str]) -> PlanarProgram:
+    """The program of a planar model (no springs, dampers, drivers or user-defined joints)."""
+    lay = model._layout(active)
+    if lay.m == 0 or lay.drivers or lay.generic or model._stiff or model._damped:
+        raise ValueError("the numba loop covers pin/line/rod/angle models without forces")
 
-    With ``engine="compiled"`` a run that cannot use it raises :class:`InputError` naming the
-    reason (``MissingDependencyError`` when numba is missing); with ``"auto"`` it returns None.
-    """
-    if engine in ("python", "engine"):
-        return None
-    reason = _ineligible(model, integ, stab, controller, events, unilateral, active)
-    prog = None
-    if reason is None:
-        prog = model.fast_program(active)
-        if prog is None:
-            reason = (f"model {model.name!r} ({type(model).__name__}) has no compiled program for "
-                      f"the active set (planar models without springs, dampers, drivers or "
-                      f"user-defined joints have one)")
-        elif not hasattr(prog, "I6"):
-            reason = f"unknown compiled program type {type(prog).__name__}"
-    if reason is not None:
-        if engine == "compiled":
-            if reason == "numba":
-                raise MissingDependencyError(
-                    "engine='compiled' needs numba: pip install 'nonmin[fast]'"
-                )
-            raise InputError(f"engine='compiled' cannot run this simulation: {reason}")
-        return None
-    return prog
+    def c(x: Any, dtype: Any = None) -> Any:
+        return np.array(x, dtype=dtype, order="C", copy=True)
+
+    return PlanarProgram(
+        n=lay.n, m=lay.m, M=c(model._M, dtype=np.float64), f=c(model._fg, dtype=np.float64),
+        A0=c(lay.A0), I6=c(lay.I6, dtype=np.intp), SL=c(lay.SL), prm=c(lay.k_prm),
+        rows=c(lay.k_rows, dtype=np.intp), var_idx=c(lay.var_idx, dtype=np.intp),
+        counts=np.array([lay.P, lay.NL, lay.NR], dtype=np.intp),
+        angle_rows=c(lay.angle_rows, dtype=np.intp), G=c(lay.G, dtype=np.float64).reshape(-1, lay.n),
+        angle_const=c(lay.angle_const, dtype=np.float64),
+    )  # fmt: skip
 
 
-def _ineligible(
-    model: Any, integ: Any, stab: Any, controller: Any, events: tuple[Any, ...],
-    unilateral: tuple[str, ...], active: frozenset[str],
-) -> str | None:  # fmt: skip
-    if type(integ) is not RK4:
-        return f"method must be 'rk4' (got {getattr(integ, 'name', type(integ).__name__)!r})"
-    if not (type(stab) is Projection and stab.metric == "mass" and stab.velocity and not stab.energy):
-        return f"stabilization must be the mass-metric 'projection' (got {stab!r})"
-    if controller is not None:
-        return "a controller is given"
-    if events:
-        return "events are given"
-    if unilateral:
-        return f"automatic contact is on for unilateral constraints {list(unilateral)} (contact=True)"
-    if not active:
-        return "no constraint is active"
-    if get_backend() == "numpy":
-        return "the nonmin.core backend is 'numpy' (set_backend('auto') or 'numba')"
-    m = int(model.num_rows(active))
-    if backend_setting() == "auto" and not auto_compiled(model.n, m):
-        return (f"n = {model.n} coordinates and n − m = {model.n - m} > {AUTO_NUMBA_MAX_N} degrees "
-                "of freedom with backend 'auto' (LAPACK is faster there; set_backend('numba') "
-                "forces it)")
-    if _kernels() is None:
-        return "numba"
-    return None
+class _NoBar:
+    def update(self, t: float) -> None:
+        pass
+
+
+def simulate(prog: PlanarProgram, t0: float, t1: float, dt: float, q: FloatArray, qd: FloatArray,
+             t_out: FloatArray | None) -> FastResult:  # fmt: skip
+    """RK4 at ``dt`` with the mass-metric projection from ``(t0, q, qd)`` to ``t1``; samples at
+    ``t_out`` after ``t0`` (None: every step), as ``simulate(engine="compiled")`` ran it."""
+    out_i = 0 if t_out is None else int(np.searchsorted(t_out, t0, side="right"))
+    return run(prog, t=t0, t1=t1, dt=dt, q=np.array(q, dtype=float), qd=np.array(qd, dtype=float),
+               t_out=t_out, out_i=out_i, rank_rtol=None, drift_factor=DRIFT_RANK_FACTOR,
+               stab=Projection(), max_steps=10**9, active_row=np.ones(0, dtype=bool), k=0,
+               progress=_NoBar())  # fmt: skip
 
 
 class FastResult(NamedTuple):

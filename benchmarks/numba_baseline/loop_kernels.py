@@ -38,8 +38,10 @@ import math
 import numpy as np
 from numba import njit
 
-from ..core._borrow import borrow
-from ..core._fast_kernels import (
+from nonmin.sim._integrators import hermite_into
+
+from .borrow import borrow
+from .core_kernels import (
     KNOWN_M_DIAGONAL,
     KNOWN_M_VALID,
     KNOWN_PATTERN,
@@ -51,8 +53,7 @@ from ..core._fast_kernels import (
     solve_near,
     solve_work,
 )
-from ..model.planar._fast_kernels import pin_line_rod_work
-from ._integrators import hermite_into
+from .planar_kernels import pin_line_rod_work
 
 #: Return codes of :func:`rk4_planar`.
 DONE = 0  # reached t1 or the step budget of the call

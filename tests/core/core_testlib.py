@@ -24,13 +24,8 @@ REF_RTOL = 1e-10
 MU_RTOL = 1e-8
 
 def available_backends() -> tuple[str, ...]:
-    """The dynamics backends of nonmin.core that can run here (numpy and the C++ engine always;
-    numba if present)."""
-    try:
-        import numba  # noqa: F401
-    except ImportError:
-        return ("numpy", "engine")
-    return ("numpy", "engine", "numba")
+    """The dynamics backends of nonmin.core: the NumPy reference and the C++ engine."""
+    return ("numpy", "engine")
 
 
 KINDS = ("full", "deficient", "duplicated", "zero_rows", "all_zero", "wide", "empty")

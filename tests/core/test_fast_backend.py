@@ -1,9 +1,9 @@
-"""The compiled backends (the C++ engine, and numba while it exists) against the NumPy reference.
+"""The compiled backend (the C++ engine) against the NumPy reference.
 
 * both backends agree to 1e-12 (relative) on random full-rank, rank-deficient, duplicated-row,
   zero-row, all-zero, wide (m > n) and empty constraint matrices, with and without f, μ, rtol;
 * on the compiled backend, a single call and the same state inside a batch agree bitwise
-  (serial and parallel batch drivers);
+  (serial and threaded batches);
 * invalid input and M not positive definite on N(A) raise the same typed errors.
 """
 
@@ -29,16 +29,8 @@ from nonmin.errors import (
     ShapeError,
 )
 
-try:
-    import numba  # noqa: F401
-
-    HAVE_NUMBA = True
-except ImportError:
-    HAVE_NUMBA = False
-
 #: The compiled backends under test (each test that takes ``backend`` runs on each).
-COMPILED = ("engine", "numba") if HAVE_NUMBA else ("engine",)
-needs_numba = pytest.mark.skipif(not HAVE_NUMBA, reason="numba not installed (extra fast)")
+COMPILED = ("engine",)
 
 
 @pytest.fixture(params=COMPILED)
@@ -203,37 +195,6 @@ def test_engine_threaded_batch_bitwise():
             assert int(one.rank) == int(sol.rank[i]) and float(one.mu) == float(sol.mu[i])
 
 
-@needs_numba
-def test_parallel_driver_bitwise():
-    """The parallel driver (used for N ≥ PARALLEL_MIN_BATCH) on uneven chunks equals the serial
-    one and the single calls bitwise."""
-    from nonmin.core import _fast_kernels as K
-    from nonmin.core.linalg import DEFAULT_RTOL, SPD_RTOL
-
-    M, h, A, g, f = _batch(5, 3, 41, seed=8)
-    outs = []
-    for nchunks in (None, 3, 2):
-        N = M.shape[0]
-        qdd, fc = np.empty((N, 5)), np.empty((N, 5))
-        P, L = np.empty((N, 5, 5)), np.empty((N, 5, 5))
-        st, rk, mu, ra = np.empty(N, np.int64), np.empty(N, np.intp), np.empty(N), np.empty(N)
-        args = (M, h, f, True, A, g, np.ones(1), False, DEFAULT_RTOL, SPD_RTOL, 1e-9, qdd, fc,
-                P, L, True, st, rk, mu, ra)  # fmt: skip
-        if nchunks is None:
-            K.solve_batch_serial(*args)
-        else:
-            K.solve_batch_parallel(*args, nchunks)
-        assert not st.any()
-        outs.append((qdd, fc, P, L, rk, mu))
-    for other in outs[1:]:
-        for a, b in zip(outs[0], other):
-            assert np.array_equal(a, b)
-    with use_backend("numba"):
-        for i in (0, 13, 14, 27, 40):
-            one = solve_dynamics(M[i], h[i], A[i], g[i], f[i])
-            assert np.array_equal(one.qdd, outs[0][0][i]) and np.array_equal(one.L, outs[0][3][i])
-
-
 def test_batch_shapes_and_broadcasting(backend):
     M, h, A, g, _ = _batch(5, 3, 12)
     M4, h4, A4, g4 = M.reshape(3, 4, 5, 5), h.reshape(3, 4, 5), A.reshape(3, 4, 3, 5), g.reshape(3, 4, 3)
@@ -309,7 +270,7 @@ def test_invalid_inputs_same_errors(args, err, backend):
 
 def test_backend_selection():
     before = get_backend()
-    assert before in ("numpy", "numba", "engine")
+    assert before in ("numpy", "engine")
     old = set_backend("numpy")
     try:
         assert get_backend() == "numpy"
@@ -324,99 +285,5 @@ def test_backend_selection():
     assert get_backend() == before
     with pytest.raises(InputError, match="backend must be one of"):
         set_backend("cuda")
-
-
-@needs_numba
-@pytest.mark.parametrize("kind", [k for k in KINDS if k != "empty"])
-@pytest.mark.parametrize("shape", [(9, 8), (12, 5), (7, 3)])
-@pytest.mark.parametrize("diag", [False, True])
-def test_solve_again_reuses_the_factorization(kind, shape, diag):
-    """``solve_again`` (new h, f, γ on the factorization of the last ``solve_work``) equals a
-    fresh ``solve_work``, in every mode (certified LQ with V or with Z, warm Jacobi SVD), and
-    refuses a cold-started Jacobi factorization."""
-    from nonmin.core._fast_kernels import NO_FACTOR, OK, scratch, solve_again, solve_work
-
-    n, m = shape
-    rng = np.random.default_rng(n * 100 + m + 7 * diag)
-    A, _ = random_A(rng, kind, n, m)
-    A = np.ascontiguousarray(A)
-    M = np.diag(rng.uniform(0.5, 3.0, n)) if diag else random_spd(rng, n)
-    mm = A.shape[0]
-    for warm in (True, False):
-        work = scratch(n, mm)
-        T = np.eye(mm)
-        out = np.empty(2 * n + 3)
-        P = np.empty((n, n))
-        L = np.empty((n, n))
-        h0, g0 = rng.standard_normal(n), A @ rng.standard_normal(n)
-        assert solve_work(M, h0, h0, False, A, g0, 1.0, False, 1e-10, 1e-13, 1e-12, False, out, P, L,
-                          work, T, warm) == OK  # fmt: skip
-        h1, f1, g1 = rng.standard_normal(n), rng.standard_normal(n), A @ rng.standard_normal(n)
-        again = np.empty(2 * n + 3)
-        P2 = np.empty((n, n))
-        L2 = np.empty((n, n))
-        st = solve_again(M, h1, f1, True, g1, True, again, P2, L2, work)
-        if st == NO_FACTOR:
-            assert not warm  # only a cold Jacobi call leaves nothing to reuse
-            continue
-        assert st == OK
-        ref = np.empty(2 * n + 3)
-        assert solve_work(M, h1, f1, True, A, g1, 1.0, False, 1e-10, 1e-13, 1e-12, True, ref, P, L,
-                          scratch(n, mm), np.eye(mm), False) == OK  # fmt: skip
-        scale = float(np.max(np.abs(ref[:n]))) + 1.0
-        assert np.max(np.abs(again[:n] - ref[:n])) <= 1e-11 * scale, kind
-        assert np.max(np.abs(again[n : 2 * n] - ref[n : 2 * n])) <= 1e-11 * scale * np.max(np.abs(M))
-        assert again[2 * n] == ref[2 * n] and again[2 * n + 1] == pytest.approx(ref[2 * n + 1])
-        assert np.allclose(P2, P, atol=1e-12) and np.allclose(L2, L, atol=1e-12 * np.max(np.abs(L)))
-
-
-@needs_numba
-@pytest.mark.parametrize(("n", "m", "diag"), [(9, 8, True), (15, 14, True), (15, 14, False), (12, 7, False)])
-def test_solve_near_equals_a_fresh_factorization(n, m, diag):
-    """``solve_near`` (a nearby A on the held certified LQ, with the refined null-space basis)
-    gives the fresh factorization's q̈, f_c, rank and μ to round-off for a projection-sized
-    change of A, declines a far one, and declines when no null-space-form LQ is held."""
-    from nonmin.core._fast_kernels import NO_FACTOR, OK, scratch, solve_near, solve_work
-
-    rng = np.random.default_rng(100 * n + m + diag)
-    A = rng.standard_normal((m, n))
-    M = np.diag(rng.uniform(0.5, 3.0, n)) if diag else random_spd(rng, n)
-    args = (1.0, False, 1e-10, 1e-13, 1e-12, False)
-    none = np.empty((0, 0))
-    work = scratch(n, m)
-    h = rng.standard_normal(n)
-    assert solve_work(M, h, h, False, A, rng.standard_normal(m), *args, np.empty(2 * n + 3), none,
-                      none, work, np.eye(m), True) == OK  # fmt: skip
-    for eps, close in ((1e-9, True), (1e-6, True), (1e-2, False)):
-        A2 = A + eps * rng.standard_normal((m, n))
-        h2, g2 = rng.standard_normal(n), rng.standard_normal(m)
-        got = np.empty(2 * n + 3)
-        st = solve_near(M, h2, h2, False, A2, g2, 1e-13, got, work, False)  # a new A
-        if not close:
-            assert st == NO_FACTOR
-            continue
-        assert st == OK
-        # a second call at the same A reuses the refined basis, S and μ: bitwise what a full
-        # call gives (the refinement is deterministic)
-        h3, g3 = rng.standard_normal(n), rng.standard_normal(m)
-        reused, full = np.empty(2 * n + 3), np.empty(2 * n + 3)
-        assert solve_near(M, h3, h3, False, A2, g3, 1e-13, reused, work, True) == OK
-        assert solve_near(M, h3, h3, False, A2, g3, 1e-13, full, work, False) == OK
-        assert np.array_equal(reused, full)
-        # a new factorization in between (its S replaces the near one's): nothing is reused
-        assert solve_work(M, h, h, False, A, rng.standard_normal(m), *args, np.empty(2 * n + 3),
-                          none, none, work, np.eye(m), True) == OK  # fmt: skip
-        assert solve_near(M, h2, h2, False, A2, g2, 1e-13, got, work, True) == OK
-        ref = np.empty(2 * n + 3)
-        assert solve_work(M, h2, h2, False, A2, g2, *args, ref, none, none, scratch(n, m),
-                          np.eye(m), False) == OK  # fmt: skip
-        assert np.max(np.abs(got[:n] - ref[:n])) <= 1e-13 * np.max(np.abs(ref[:n]))
-        assert np.max(np.abs(got[n : 2 * n] - ref[n : 2 * n])) <= 1e-13 * np.max(np.abs(ref[n : 2 * n]))
-        assert got[2 * n] == ref[2 * n] == m and got[2 * n + 1] == pytest.approx(ref[2 * n + 1], rel=1e-12)
-    # few constraints (V form, not the null-space form) and a redundant row (Jacobi): declined
-    for Ab in (rng.standard_normal((2, n)), np.vstack([A, A[:1]])):
-        w2 = scratch(n, Ab.shape[0])
-        solve_work(M, h, h, False, Ab, np.zeros(Ab.shape[0]), *args, np.empty(2 * n + 3), none, none,
-                   w2, np.eye(Ab.shape[0]), True)  # fmt: skip
-        assert solve_near(M, h, h, False, Ab, np.zeros(Ab.shape[0]), 1e-13, np.empty(2 * n + 3),
-                          w2, False) == NO_FACTOR  # fmt: skip
+    with pytest.raises(InputError, match="backend must be one of"):  # gone with numba (issue 17)
+        set_backend("numba")

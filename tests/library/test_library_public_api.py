@@ -30,7 +30,7 @@ def test_planar_public_names():
     assert set(planar.__all__) == {
         "GROUND", "AngleDriver", "AngleLimit", "Body", "ConstantSpeed", "ContactTangent", "Gear", "Joint",
         "JointActuator",
-        "PlanarBuilder", "PlanarModel", "PlanarProgram", "Point", "PointForce", "PointOnLine", "PointRef",
+        "PlanarBuilder", "PlanarModel", "Point", "PointForce", "PointOnLine", "PointRef",
         "Prismatic", "Revolute", "Rod", "RotationalSpring", "Spring", "Torque", "Weld",
     }
     for name in planar.__all__:

@@ -19,7 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from program_check import active_rows as _rows
 from program_check import check_terms, close
-from test_planar_compiled import XFix, every_element_model
+from test_planar_vectorized import XFix, every_element_model
 
 from nonmin import _engine, library
 from nonmin.errors import ModelError, NonFiniteError, ShapeError

@@ -1,4 +1,4 @@
-"""The compiled (vectorized) planar evaluation equals the per-element reference formulas.
+"""The vectorized planar evaluation equals the per-element reference formulas.
 
 ``PlanarModel.evaluate`` / ``constraint_terms`` / ``constraint_jacobian_dot`` /
 ``conservative_force`` / ``passive_force`` / ``input_matrix`` / ``potential_energy`` use index
@@ -6,13 +6,11 @@ arrays built once per model and per active set; ``_reference_*`` evaluate the sa
 joint by joint and element by element with :meth:`Joint.terms` (the formulas of
 ``_elements.py``, themselves checked against finite differences in ``test_planar_builder.py``).
 Agreement is demanded to ``REL_TOL`` (round-off: the two paths sum the same terms in another
-order). Every comparison runs with both backends of the pin/line/rod block: NumPy and the
-optional numba kernel (``nonmin.core.use_backend``).
+order). (The engine's evaluation of the same primitives: test_planar_program.py.)
 """
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import pickle
 from dataclasses import dataclass
@@ -24,7 +22,6 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from nonmin import library
-from nonmin.core import use_backend
 from nonmin.errors import NonFiniteError, ShapeError, UnknownNameError
 from nonmin.model.planar import (
     Body,
@@ -38,7 +35,6 @@ from nonmin.model.planar._model import _Kin
 
 #: agreement of the compiled and the reference evaluation (relative to max(1, |reference|))
 REL_TOL = 1e-13
-_HAS_NUMBA = importlib.util.find_spec("numba") is not None
 
 
 def _profile(t: float) -> tuple[float, float, float]:
@@ -136,9 +132,7 @@ def _close(a: np.ndarray, b: np.ndarray, what: str) -> None:
 
 
 def _check_state(model: PlanarModel, t: float, q: np.ndarray, qd: np.ndarray, active: frozenset[str]) -> None:
-    for name in ("numpy", "numba") if _HAS_NUMBA else ("numpy",):
-        with use_backend(name):
-            _check_state_once(model, t, q, qd, active)
+    _check_state_once(model, t, q, qd, active)
 
 
 def _check_state_once(
@@ -306,19 +300,3 @@ def test_revolute_only_model_built_directly() -> None:
     c1, s1 = math.cos(q[2]), math.sin(q[2])
     assert ct.phi[0] == pytest.approx(0.0 - (q[0] - 0.5 * c1), abs=1e-15)
     assert ct.phi[1] == pytest.approx(0.0 - (q[1] - 0.5 * s1), abs=1e-15)
-
-
-def test_backend_switch_selects_the_kernel() -> None:
-    from nonmin.model.planar import _compiled
-
-    with use_backend("numpy"):
-        assert _compiled._kernel() is None
-    if _HAS_NUMBA:
-        with use_backend("numba"):
-            assert _compiled._kernel() is not None
-            t, q, qd = _state(MODEL, 9)
-            fast = MODEL.constraint_terms(t, q, qd, frozenset(NAMES))
-        with use_backend("numpy"):
-            slow = MODEL.constraint_terms(t, q, qd, frozenset(NAMES))
-        for a, b in zip(fast, slow, strict=True):
-            _close(a, b, "numba vs numpy")

@@ -6,10 +6,10 @@ NumPy and SciPy. Conventions (paper): ``M qdd + C qd = f_g + f_c + f``, ``h = f_
 ``A qd = 0``, ``adot_qd = Ȧ qd``. Pinocchio: ``nle = C qd − f_g = −h``; ``J qdd + γ = 0``, so
 ``adot_qd = γ``.
 
-:func:`forward_dynamics`, :func:`constraint_force` and :func:`solve_dynamics` run on numba-compiled
-kernels when numba is installed (extra ``fast``) and on NumPy otherwise; :func:`set_backend`,
-:func:`use_backend` or the environment variable ``NONMIN_BACKEND`` (``auto``/``numpy``/``numba``)
-choose explicitly. Both backends agree to round-off.
+:func:`forward_dynamics`, :func:`constraint_force` and :func:`solve_dynamics` run on the C++ engine
+(``nonmin._engine``, built with the package) and on these NumPy kernels with the backend
+``"numpy"``; :func:`set_backend`, :func:`use_backend` or the environment variable
+``NONMIN_BACKEND`` (``auto``/``engine``/``numpy``) choose explicitly. Both agree to round-off.
 """
 
 from ._fast import get_backend as get_backend

@@ -2,17 +2,15 @@
 
 :func:`nonmin.core.forward_dynamics`, :func:`~nonmin.core.constraint_force` and
 :func:`~nonmin.core.solve_dynamics` evaluate with the ahead-of-time compiled C++ engine
-(``nonmin._engine``, the core layer ``engine/src/core_*.cpp``), with the reference NumPy kernels,
-or with the older numba-compiled kernels (:mod:`nonmin.core._fast_kernels`, optional extra
-``fast``; kept while the numba simulation loop uses them). All give the same results to round-off
-(tests demand 1e-12 relative); a single call and the same state inside a batch give bitwise
-identical results on each compiled backend.
+(``nonmin._engine``, the core layer ``engine/src/core_*.cpp``) or with the reference NumPy
+kernels. Both give the same results to round-off (tests demand 1e-12 relative); a single call
+and the same state inside a batch give bitwise identical results on the engine.
 
 Choosing the backend
 --------------------
 ``"auto"`` (default) and ``"engine"`` use the C++ engine (built with the package), ``"numpy"``
-always uses NumPy, ``"numba"`` demands numba (``MissingDependencyError`` naming the extra
-``fast`` otherwise). The initial choice comes from the environment variable ``NONMIN_BACKEND``
+always uses NumPy. (The numba kernels of nonmin ≤ 0.1 are gone: see ``benchmarks/numba_baseline``.)
+The initial choice comes from the environment variable ``NONMIN_BACKEND``
 (read at import); :func:`set_backend` changes it for the process, :func:`use_backend` for a
 ``with`` block (the setting is process-wide, not per thread).
 
@@ -20,8 +18,7 @@ The compiled paths keep the boundary contract: they accept the same inputs, chec
 the symmetry of M inside the kernel with the same decision rule, and whenever a state is not
 regular (invalid input, M̄ not positive definite, shapes they do not handle) the NumPy path is
 re-run, which raises the typed error (or, in a round-off borderline case of the SPD test,
-returns the NumPy result). The engine needs no compilation at run time; numba's first call
-compiles its kernels (cached on disk afterwards).
+returns the NumPy result). The engine needs no compilation at run time.
 """
 
 from __future__ import annotations
@@ -29,34 +26,27 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
-from types import ModuleType
 from typing import Any
 
 import numpy as np
 
 from .. import _engine  # type: ignore[attr-defined]  # the compiled extension (no stubs)
 from .. import _validation as V
-from ..errors import InputError, missing_dependency
+from ..errors import InputError
 from .linalg import DEFAULT_RTOL, SPD_RTOL, FloatArray, resolve_rtol
 
 __all__ = ["BACKENDS", "get_backend", "set_backend", "use_backend"]
 
 #: Accepted backend names.
-BACKENDS = ("auto", "numpy", "numba", "engine")
+BACKENDS = ("auto", "numpy", "engine")
 
 #: Batches at least this large run on several threads of the engine (one per core; smaller
 #: batches on the calling thread). See :func:`engine_threads`.
 ENGINE_PARALLEL_MIN_BATCH = 2048
 
-#: Batches at least this large run on numba's parallel driver (smaller ones serially): below, the
-#: fork/join cost is not amortized, and on a loaded machine the parallel region waits for a thread
-#: that is not scheduled (measured: 8 µs/state at N = 1000 against 1.5 µs serially under load).
-#: ``numba.set_num_threads(1)`` (or ``NUMBA_NUM_THREADS=1``) makes every batch serial.
-PARALLEL_MIN_BATCH = 4096
-
-_state: dict[str, Any] = {"name": "auto", "kernels": None, "tried": False}
+_state: dict[str, Any] = {"name": "auto"}
 _UNRESOLVED = object()
-#: The kernels module when the compiled backend is in use, None for NumPy (resolved lazily).
+#: The engine marker when the engine is in use, None for NumPy (resolved lazily).
 _active: Any = _UNRESOLVED
 
 
@@ -66,38 +56,21 @@ def _check_name(name: object) -> str:
     return name.lower()
 
 
-def _load() -> ModuleType | None:
-    """Import the compiled kernels once; None if numba is not importable."""
-    if not _state["tried"]:
-        _state["tried"] = True
-        try:
-            from . import _fast_kernels
-        except ImportError:
-            _fast_kernels = None  # type: ignore[assignment]
-        _state["kernels"] = _fast_kernels
-    kernels: ModuleType | None = _state["kernels"]
-    return kernels
-
-
 def set_backend(name: str) -> str:
     """Select the backend of the dynamics kernels; returns the previous setting.
 
     Parameters
     ----------
-    name : {"auto", "numpy", "numba", "engine"}
-        ``"auto"`` and ``"engine"``: the compiled C++ engine; ``"numba"``: the numba kernels
-        (extra ``fast``); ``"numpy"``: the NumPy reference kernels.
+    name : {"auto", "numpy", "engine"}
+        ``"auto"`` and ``"engine"``: the compiled C++ engine; ``"numpy"``: the NumPy reference
+        kernels.
 
     Raises
     ------
     InputError
         Unknown name.
-    MissingDependencyError
-        ``"numba"`` requested but numba is not installed (extra ``fast``).
     """
     new = _check_name(name)
-    if new == "numba" and _load() is None:
-        raise missing_dependency("numba", "fast", "the compiled backend of nonmin.core")
     old: str = _state["name"]
     _set(new)
     return old
@@ -117,18 +90,13 @@ def _set(name: str) -> None:
 
 
 def backend_setting() -> str:
-    """The backend as set (``"auto"``, ``"numpy"``, ``"numba"`` or ``"engine"``)."""
+    """The backend as set (``"auto"``, ``"numpy"`` or ``"engine"``)."""
     return str(_state["name"])
 
 
 def get_backend() -> str:
-    """The backend actually used now: ``"engine"``, ``"numpy"`` or ``"numba"``."""
-    name = str(_state["name"])
-    if name in ("auto", "engine"):
-        return "engine"
-    if name == "numpy":
-        return "numpy"
-    return "numba" if _load() is not None else "numpy"
+    """The backend actually used now: ``"engine"`` or ``"numpy"``."""
+    return "numpy" if _state["name"] == "numpy" else "engine"
 
 
 @contextmanager
@@ -137,7 +105,7 @@ def use_backend(name: str) -> Iterator[None]:
 
     Parameters
     ----------
-    name : {"auto", "numpy", "numba", "engine"}
+    name : {"auto", "numpy", "engine"}
         Backend used inside the ``with`` block (see :func:`set_backend`).
     """
     old = set_backend(name)
@@ -179,47 +147,9 @@ def _resolve() -> Any:
     if name in ("auto", "engine"):
         _active = _ENGINE
         return _active
-    _active = None if name == "numpy" else _load()
-    if _active is None and _state["name"] == "numba":  # NONMIN_BACKEND=numba without numba
-        raise missing_dependency("numba", "fast", "NONMIN_BACKEND=numba (compiled nonmin.core)")
+    _active = None
     return _active
 
-
-_NO_MU = np.ones(1)
-_PARAMS: dict[tuple[bool, float, bool], FloatArray] = {}
-
-
-def _params(has_f: bool, tol: float, want_pl: bool) -> FloatArray:
-    """Cached ``[has_f, mu, has_mu, rtol, spd_rtol, sym_rtol, want_pl]`` (mu not given)."""
-    key = (has_f, tol, want_pl)
-    p = _PARAMS.get(key)
-    if p is None:
-        p = np.array([float(has_f), 1.0, 0.0, tol, SPD_RTOL, V.SYMMETRY_RTOL, float(want_pl)])
-        if len(_PARAMS) < 64:
-            _PARAMS[key] = p
-    return p
-
-
-#: Parameter vectors for the default rtol and no μ, indexed ``[has_f][want_pl]``.
-_DEFAULT_PARAMS = tuple(
-    tuple(_params(bool(hf), DEFAULT_RTOL, bool(pl)) for pl in (0, 1)) for hf in (0, 1)
-)
-
-#: In ``"auto"`` mode the compiled path is used up to this n, and above it when the constraints
-#: leave at most this many degrees of freedom (``n − m``, see :func:`auto_compiled`); otherwise
-#: the NumPy path (LAPACK) is used. Measured (one BLAS thread, ``benchmarks/core_bench.py
-#: --large``, medians, 00:11 UTC): an A02 N = 40 evaluation (n = 243, A 242 × 243, one degree of
-#: freedom) takes 0.52 ms compiled (certified sparse LQ, null-space form) against 15.3 ms with
-#: NumPy's SVD, and 11–12.5 ms against 17–19 ms where the compiled path also needs LAPACK's SVD
-#: (near a singular configuration); with many degrees of freedom the compiled path forms and
-#: factorizes the n × n M̄ in scalar loops (random sparse n = 243, m = 121: 11.3 against
-#: 10.9 ms). ``set_backend("numba")`` forces the compiled path at any size.
-AUTO_NUMBA_MAX_N = 64
-
-
-def auto_compiled(n: int, m: int) -> bool:
-    """Whether ``"auto"`` takes the compiled path for n coordinates and m constraint rows."""
-    return n <= AUTO_NUMBA_MAX_N or n - m <= AUTO_NUMBA_MAX_N
 
 #: ``what`` codes of :func:`solve` (``QDD_RANK``: ``(qdd, rank)``, single states only).
 QDD, FC, ALL, QDD_RANK = 0, 1, 2, 3
@@ -240,140 +170,7 @@ def solve(M: Any, h: Any, A: Any, adot_qd: Any, f: Any, mu: Any, rtol: float | N
         kern = _resolve()
     if kern is None:
         return None
-    if kern is _ENGINE:
-        return engine_solve(M, h, A, adot_qd, f, mu, rtol, what)
-    # Coerce once (no copy for float64 C-contiguous arrays); finiteness and symmetry are checked
-    # inside the kernel.
-    Mm = M if type(M) is _ND and M.dtype is _F64 and M.flags.c_contiguous else _prep(M, "M")
-    hv = h if type(h) is _ND and h.dtype is _F64 and h.flags.c_contiguous else _prep(h, "h")
-    Am = A if type(A) is _ND and A.dtype is _F64 and A.flags.c_contiguous else _prep(A, "A")
-    if (Mm.ndim and Am.ndim >= 2 and _state["name"] == "auto"
-            and not auto_compiled(Mm.shape[-1], Am.shape[-2])):
-        return None  # many coordinates and degrees of freedom: LAPACK is faster (measured)
-    gv = (
-        adot_qd
-        if type(adot_qd) is _ND and adot_qd.dtype is _F64 and adot_qd.flags.c_contiguous
-        else _prep(adot_qd, "adot_qd")
-    )
-    has_f = f is not None
-    if has_f:
-        fv = f if type(f) is _ND and f.dtype is _F64 and f.flags.c_contiguous else _prep(f, "f")
-    else:
-        fv = hv
-    has_mu = mu is not None
-    if Mm.ndim == 2 and hv.ndim == 1 and Am.ndim == 2 and gv.ndim == 1 and fv.ndim == 1:
-        # ------------------------------------------------------------ single state
-        n, n2 = Mm.shape
-        m, nA = Am.shape
-        if n2 != n or hv.shape[0] != n or nA != n or gv.shape[0] != m or n == 0:
-            return None
-        if has_f and fv.shape[0] != n:
-            return None
-        want_pl = what == ALL
-        if rtol is None and not has_mu:
-            params = _DEFAULT_PARAMS[has_f][want_pl]
-        elif has_mu:
-            tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
-            mu_v = V.positive_scalar_or_batch(mu, "mu")
-            if mu_v.ndim:
-                return None
-            params = np.array([float(has_f), float(mu_v), 1.0, tol, SPD_RTOL, V.SYMMETRY_RTOL,
-                               float(want_pl)])  # fmt: skip
-        else:
-            params = _params(has_f, resolve_rtol(rtol), want_pl)
-        if not want_pl:
-            out = np.empty(2 * n + 3)
-            if kern.solve_one(Mm, hv, fv, Am, gv, params, out):
-                return None
-            if what == QDD_RANK:
-                return out[:n], int(out[2 * n])
-            return out[:n] if what == QDD else out[n : 2 * n]
-        out = np.empty(2 * n + 3 + 2 * n * n)  # P and L follow the scalars
-        if kern.solve_one(Mm, hv, fv, Am, gv, params, out):
-            return None
-        o = 2 * n + 3
-        P = out[o : o + n * n].reshape(n, n)
-        L = out[o + n * n :].reshape(n, n)
-        rank = np.asarray(int(out[2 * n]), dtype=np.intp)
-        mu_used = mu_v if has_mu else np.asarray(out[2 * n + 1])
-        return out[:n], out[n : 2 * n], P, L, rank, mu_used
-    if what == QDD_RANK:
-        return None  # (single states only)
-    if (
-        Mm.ndim == 3 and hv.ndim == 2 and Am.ndim == 3 and gv.ndim == 2 and fv.ndim == 2
-        and Mm.shape[0] == hv.shape[0] == Am.shape[0] == gv.shape[0] == fv.shape[0] == 1
-        and (not has_mu or np.ndim(mu) == 0)
-    ):  # a batch of one state: the (cheaper) single-state path  # fmt: skip
-        one = solve(Mm[0], hv[0], Am[0], gv[0], fv[0] if has_f else None, mu, rtol, what)
-        if one is None or what != ALL:
-            return None if one is None else one[None]
-        return (one[0][None], one[1][None], one[2][None], one[3][None], one[4][None],
-                one[5] if has_mu else one[5][None])  # fmt: skip
-    return _solve_batch(kern, Mm, hv, Am, gv, fv, has_f, mu, rtol, what)
-
-
-def _solve_batch(kern: ModuleType, Mm: FloatArray, hv: FloatArray, Am: FloatArray,
-                 gv: FloatArray, fv: FloatArray, has_f: bool, mu: Any, rtol: float | None,
-                 what: int) -> Any:  # fmt: skip
-    if Mm.ndim < 2 or Am.ndim < 2 or hv.ndim < 1 or gv.ndim < 1 or fv.ndim < 1:
-        return None
-    n = Mm.shape[-1]
-    m = Am.shape[-2]
-    if Mm.shape[-2] != n or hv.shape[-1] != n or Am.shape[-1] != n or gv.shape[-1] != m:
-        return None
-    if n == 0 or fv.shape[-1] != n:
-        return None
-    tol = resolve_rtol(rtol)
-    has_mu = mu is not None
-    mu_v = V.positive_scalar_or_batch(mu, "mu") if has_mu else _NO_MU
-    shapes = [Mm.shape[:-2], hv.shape[:-1], Am.shape[:-2], gv.shape[:-1]]
-    if has_f:
-        shapes.append(fv.shape[:-1])
-    if has_mu:
-        shapes.append(mu_v.shape)
-    bshape = shapes[0]
-    if any(s != bshape for s in shapes[1:]):
-        try:
-            bshape = tuple(np.broadcast_shapes(*shapes))
-        except ValueError:
-            return None
-    N = 1
-    for s in bshape:
-        N *= s
-
-    def flat(x: FloatArray, core: tuple[int, ...]) -> FloatArray:
-        if x.shape[: x.ndim - len(core)] != bshape:
-            x = np.broadcast_to(x, bshape + core)
-        return np.ascontiguousarray(x.reshape((N, *core)))
-
-    Mb = flat(Mm, (n, n))
-    hb = flat(hv, (n,))
-    Ab = flat(Am, (m, n))
-    gb = flat(gv, (m,))
-    fb = flat(fv, (n,)) if has_f else hb
-    mub = flat(mu_v, ()) if has_mu else _NO_MU
-    want_pl = what == ALL
-    qdd = np.empty((N, n))
-    fc = np.empty((0 if what == QDD else N, n))  # empty: the kernel skips f_c
-    if want_pl:
-        P = np.empty((N, n, n))
-        L = np.empty((N, n, n))
-    else:
-        P = L = np.empty((1, 1, 1))
-    status = np.empty(N, dtype=np.int64)
-    rank = np.empty(N, dtype=np.intp)
-    mu_out = np.empty(N)
-    ratio = np.empty(N)
-    args = (Mb, hb, fb, has_f, Ab, gb, mub, has_mu, tol, SPD_RTOL, V.SYMMETRY_RTOL, qdd, fc, P, L,
-            want_pl, status, rank, mu_out, ratio)  # fmt: skip
-    nthreads = kern.num_threads() if N >= PARALLEL_MIN_BATCH else 1
-    if nthreads > 1:
-        kern.solve_batch_parallel(*args, nthreads)
-    else:
-        kern.solve_batch_serial(*args)
-    if status.any():
-        return None
-    return _batch_result(what, bshape, n, qdd, fc, P, L, rank, mu_v if has_mu else None, mu_out)
+    return engine_solve(M, h, A, adot_qd, f, mu, rtol, what)
 
 
 # --------------------------------------------------------------------------- the C++ engine

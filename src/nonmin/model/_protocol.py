@@ -439,20 +439,6 @@ class Model(ABC):
             constraints=self.constraint_terms(t, qv, v, active),
         )
 
-    def fast_program(self, active: frozenset[str]) -> Any | None:
-        """A compiled description of the dynamics for the simulator's compiled loop, or None.
-
-        Optional acceleration hook. A source whose whole evaluation (``M``, ``h``, ``A``,
-        ``γ``, ``φ``, energy) under the active set ``active`` can be expressed as data that
-        :mod:`nonmin.sim`'s compiled integration loop understands returns it here; the
-        simulator then runs eligible fixed-step runs without calling back into Python (see
-        ``engine=`` of :func:`nonmin.sim.simulate`). The only program kind so far is
-        :class:`nonmin.model.planar.PlanarProgram` (planar absolute coordinates). The default,
-        None, means "evaluate through the methods above"; results never depend on the choice
-        beyond round-off.
-        """
-        return None
-
     def engine_program(self) -> Any | None:
         """The model compiled once to a program of the engine (``nonmin._engine.Program``), or
         None.

@@ -114,8 +114,8 @@ def hermite_into(
     y0: FloatArray, f0: FloatArray, y1: FloatArray, f1: FloatArray, h: float, s: float,
     out: FloatArray,
 ) -> None:  # fmt: skip
-    """:func:`hermite_quintic` into ``out``; plain loops, so the compiled engine compiles this
-    very function (``nonmin.sim._fast_kernels._hermite``)."""
+    """:func:`hermite_quintic` into ``out`` (plain loops: the engine's ``hermite_quintic`` in
+    ``engine/src/sim_integrators.cpp`` is this function in C++)."""
     n = y0.shape[0] // 2
     t = s / h
     t2 = t * t

@@ -61,7 +61,7 @@ from ..errors import (
     ZenoError,
 )
 from ..model import ConstraintTerms, Model, State
-from . import _durable, _engine, _fastpath, _friction
+from . import _durable, _engine, _friction
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
 from ._impulses import with_impulses
 from ._integrators import METHODS, RK4, Integrator, SingularPassages, StepperState, hermite_quintic
@@ -121,6 +121,9 @@ class _Point(NamedTuple):
 #: 0.42 s of wall time per simulated second; the library's small mechanisms and the validation
 #: suite give the same results with either.)
 DRIFT_RANK_FACTOR = 1.0
+
+#: Engines accepted by ``simulate(engine=...)``.
+ENGINES = ("auto", "engine", "python")
 
 #: Relative round-off level of the free gap acceleration at a located release: at the zero of
 #: the normal force it is zero up to ~eps × the size of its terms, so its sign there is noise
@@ -554,7 +557,7 @@ def simulate(
     output : Output, optional
         Sampling (``t_eval``), progress bar, checkpoints and failure policy
         (:class:`~nonmin.sim.Output`).
-    engine : {"auto", "compiled", "engine", "python"}, default "auto"
+    engine : {"auto", "engine", "python"}, default "auto"
         ``"python"``: the general driver. ``"engine"``: the whole loop in the compiled engine
         (C++, :mod:`nonmin.sim._engine`; same algorithm, results to round-off): every built-in
         method, stabilization, ``t_eval``, controllers (called back), events and automatic
@@ -562,17 +565,11 @@ def simulate(
         which one crosses), for any model (its compiled program, or its Python ``evaluate``
         called back); custom Integrator or Stabilization classes are not covered
         (:class:`~nonmin.errors.InputError` names what is missing);
-        failures hand over to the general driver as with ``"compiled"``. ``"compiled"``: the
-        whole run in numba's compiled loop (same algorithm, same results to round-off); it needs method
-        ``"rk4"``, the mass-metric projection, no controller, no events, no automatic contact,
-        numba, and a model with a compiled program (:meth:`nonmin.model.Model.fast_program`:
-        planar models without springs, dampers, drivers or user-defined joints), and raises
-        :class:`~nonmin.errors.InputError` naming what is missing otherwise. ``"auto"``:
-        the engine when it covers the run (not with the core's backend set to ``"numpy"``),
-        else the general driver; the numba loop only with ``"compiled"`` (no first-use JIT
-        on any default path).
-        ``trajectory.metadata["engine"]`` tells which ran. If a kernel fails in the compiled loop, the general driver takes over
-        at the last accepted step (and raises the typed error).
+        ``"auto"``: the engine when it covers the run (not with the core's backend set to
+        ``"numpy"``), else the general driver. No path compiles anything at run time.
+        ``trajectory.metadata["engine"]`` tells which ran. If a kernel fails in the engine's
+        loop, the general driver takes over at the last accepted step (and raises the typed
+        error).
     resume : path or Trajectory, optional
         Continue an interrupted run (a checkpoint, or any trajectory of the same model ending
         before ``t1``) from its last sample: its samples are kept in front of the new ones.
@@ -600,7 +597,8 @@ def simulate(
     SimulationError, ZenoError, NotPositiveDefiniteError
         When the integration cannot go on (unless ``throw=False``).
     """
-    engine = _fastpath.check_engine(engine)
+    if not isinstance(engine, str) or engine not in ENGINES:
+        raise InputError(f"engine must be one of {ENGINES}, got {engine!r}")
     flat = dict(options)
     if method is not None:
         flat["method"] = method
@@ -705,9 +703,6 @@ def simulate(
         use_engine = why is None
     if fcs:
         _friction.check_friction_run(model, engine, use_engine, why, events)
-    # the numba loop only when asked for (engine="compiled"): "auto" takes the engine
-    prog = _fastpath.program_for(engine, model, integ, stab, controller, events, unilateral, act) \
-        if engine == "compiled" else None  # fmt: skip
     meta = {
         "model": _describe(model),
         "options": {
@@ -726,7 +721,7 @@ def simulate(
             "engine": engine,
         },
         "initial_state": {"t": t0, "q": q.tolist(), "qd": qd.tolist(), "active": sorted(act)},
-        "engine": "compiled" if prog is not None else ("engine" if use_engine else "python"),
+        "engine": "engine" if use_engine else "python",
     }
     if isinstance(stab, Projection) and stab.energy:
         stab = _energy_level(stab, model, t0, q, qd, act, rank_rtol, project_initial,
@@ -844,22 +839,6 @@ def simulate(
             pp = system.point(tt, qq, vv)
             return _friction.first_point(model, pp, system.active, sl, rank_rtol=rank_rtol, bias=stab.bias,
                                          B_u=None if controller is None else model.input_matrix(qq) @ pp.u)  # fmt: skip
-        if prog is not None and t < t1:
-            assert isinstance(stab, Projection)
-            fr = _fastpath.run(
-                prog, t=t, t1=t1, dt=h_init, q=q, qd=qd, t_out=t_out, out_i=out_i,
-                rank_rtol=rank_rtol, drift_factor=DRIFT_RANK_FACTOR, stab=stab,
-                max_steps=int(max_steps), k=k, progress=bar,
-                active_row=np.array([nm in act for nm in model.constraint_names], dtype=bool),
-            )  # fmt: skip
-            for blk in fr.blocks:
-                rec.extend(blk)
-            n_steps += fr.steps
-            system.n_rhs += fr.n_rhs
-            out_i = fr.out_i
-            t = fr.t
-            state = StepperState(t, fr.y.copy(), None, h_init)
-            meta["engine"] = "compiled" if not fr.failed else f"compiled, then python from t = {t:.12g}"
         while t < t1:
             if engine_on:  # the engine's steps up to t1, a failure, or a guard crossing
                 creg = _engine.compiled_controller(controller, model, eng_prog, system.active)

@@ -8,7 +8,6 @@ immutable :class:`PlanarModel` implementing :class:`nonmin.model.Model` with con
 
 from ._builder import PlanarBuilder as PlanarBuilder
 from ._builder import PointRef as PointRef
-from ._compiled import PlanarProgram as PlanarProgram
 from ._elements import GROUND as GROUND
 from ._elements import AngleDriver as AngleDriver
 from ._elements import AngleLimit as AngleLimit
@@ -42,7 +41,6 @@ __all__ = [
     "JointActuator",
     "PlanarBuilder",
     "PlanarModel",
-    "PlanarProgram",
     "Point",
     "PointForce",
     "PointOnLine",

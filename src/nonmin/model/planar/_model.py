@@ -21,7 +21,7 @@ from .._protocol import (
     Model,
     ModelTerms,
 )
-from . import _compiled
+from . import _vectorized
 from ._elements import (
     GROUND,
     Body,
@@ -71,12 +71,11 @@ class PlanarModel(Model):
     Constraints (joints) are named; each is holonomic, rheonomic (drivers) or unilateral, and
     which of them are active is data (``active`` argument of every evaluation).
 
-    Evaluation is compiled (:mod:`._compiled`): the joints are decomposed into row primitives
+    Evaluation is vectorized (:mod:`._vectorized`): the joints are decomposed into row primitives
     with index arrays when the model is built, and the row layout of each active set is cached
     (per frozenset, in a field that is neither compared nor part of the model's value), so
     :meth:`evaluate` and :meth:`constraint_terms` validate the state once and run a handful of
-    array operations, or one numba kernel when the compiled backend of :mod:`nonmin.core` is
-    in use (extra ``fast``; ``nonmin.core.set_backend("numpy")`` switches it off). Constant
+    array operations. Constant
     parts (M, gravity, constant columns of B) are computed once; every call returns new arrays.
     The per-joint formulas of :meth:`Joint.terms` remain the reference (``_reference_*``
     methods; tests demand agreement to 1e-13). The compiled engine evaluates the same model
@@ -121,14 +120,14 @@ class PlanarModel(Model):
     _mdiag: FloatArray = field(init=False, repr=False, compare=False)
     _point_map: dict[str, Point] = field(init=False, repr=False, compare=False)
     # compiled evaluation (built once; caches are not compared and hold no state of a run)
-    _plan: _compiled.Plan = field(init=False, repr=False, compare=False)
-    _layouts: dict[frozenset[str], _compiled.Layout] = field(init=False, repr=False, compare=False)
+    _plan: _vectorized.Plan = field(init=False, repr=False, compare=False)
+    _layouts: dict[frozenset[str], _vectorized.Layout] = field(init=False, repr=False, compare=False)
     _constraints: tuple[ConstraintSpec, ...] = field(init=False, repr=False, compare=False)
     _coordinate_names: tuple[str, ...] = field(init=False, repr=False, compare=False)
     _M: FloatArray = field(init=False, repr=False, compare=False)
     _fg: FloatArray = field(init=False, repr=False, compare=False)
-    _forces_c: _compiled.Forces = field(init=False, repr=False, compare=False)
-    _inputs: _compiled.Inputs = field(init=False, repr=False, compare=False)
+    _forces_c: _vectorized.Forces = field(init=False, repr=False, compare=False)
+    _inputs: _vectorized.Inputs = field(init=False, repr=False, compare=False)
     _stiff: bool = field(init=False, repr=False, compare=False)
     _damped: bool = field(init=False, repr=False, compare=False)
 
@@ -253,7 +252,7 @@ class PlanarModel(Model):
             if b.inertia is not None:
                 cnames.append(f"{b.name}.theta")
         s(self, "_coordinate_names", tuple(cnames))
-        s(self, "_plan", _compiled.Plan(self.joints, index, off))
+        s(self, "_plan", _vectorized.Plan(self.joints, index, off))
         s(self, "_layouts", {})
         M = np.diag(self._mdiag)
         M.flags.writeable = False
@@ -263,7 +262,7 @@ class PlanarModel(Model):
         s(self, "_fg", fg)
         s(self, "_stiff", any(fe.stiffness != 0.0 for fe in self.forces))
         s(self, "_damped", any(fe.damping != 0.0 for fe in self.forces))
-        s(self, "_forces_c", _compiled.Forces(
+        s(self, "_forces_c", _vectorized.Forces(
             [fe for fe in self.forces if isinstance(fe, Spring)],
             [fe for fe in self.forces if isinstance(fe, RotationalSpring)],
             index, off,
@@ -490,7 +489,7 @@ class PlanarModel(Model):
                 f += row[0]
         return f
 
-    def _compile_inputs(self) -> _compiled.Inputs:
+    def _compile_inputs(self) -> _vectorized.Inputs:
         """Constant entries of B and the index arrays of its q-dependent ones."""
         const: list[tuple[int, int, float]] = []
         forces: list[tuple[int, Point, tuple[float, float]]] = []
@@ -515,7 +514,7 @@ class PlanarModel(Model):
             else:
                 d = (float(act.direction[0]), float(act.direction[1]))
                 forces.append((col, act.point, d))
-        return _compiled.Inputs(const, forces, prismatic, self._index, self.n, self.k)
+        return _vectorized.Inputs(const, forces, prismatic, self._index, self.n, self.k)
 
     def input_matrix(self, q: ArrayLike) -> FloatArray:
         return self._inputs.matrix(_vec(q, "q", self.n))
@@ -587,7 +586,7 @@ class PlanarModel(Model):
             return active
         return super().resolve_active(active)
 
-    def _layout(self, active: Iterable[str] | None) -> _compiled.Layout:
+    def _layout(self, active: Iterable[str] | None) -> _vectorized.Layout:
         """The compiled row layout of an active set (cached per frozenset)."""
         key = self.default_active if active is None else active
         lay = self._layouts.get(key) if type(key) is frozenset else None  # type: ignore[call-overload]
@@ -600,14 +599,6 @@ class PlanarModel(Model):
                 lay = self._plan.layout(act)
                 self._layouts[act] = lay
         return lay
-
-    def fast_program(self, active: frozenset[str]) -> _compiled.PlanarProgram | None:
-        """The :class:`PlanarProgram` of ``active`` for compiled loops (see
-        :meth:`nonmin.model.Model.fast_program`), or None when the model has springs, dampers,
-        angle drivers or user-defined joints, or no active constraint."""
-        if self._stiff or self._damped:
-            return None
-        return _compiled.program(self._layout(active), self._M, self._fg)
 
     def engine_program(self) -> Any | None:
         """The compiled engine's ``PlanarProgram`` of this model (see
@@ -641,7 +632,7 @@ class PlanarModel(Model):
         self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
     ) -> ConstraintTerms:
         qv, v = self._state_arrays(q, qd)
-        return _compiled.constraint_terms(self, self._layout(active), t, qv, v)[0]
+        return _vectorized.constraint_terms(self, self._layout(active), t, qv, v)[0]
 
     def _reference_constraint_terms(
         self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
@@ -658,7 +649,7 @@ class PlanarModel(Model):
     ) -> FloatArray:
         """Exact ``Ȧ`` along ``qd`` (closed form), shape (m, n)."""
         qv, v = self._state_arrays(q, qd)
-        Ad = _compiled.constraint_terms(self, self._layout(active), t, qv, v, adot=True)[1]
+        Ad = _vectorized.constraint_terms(self, self._layout(active), t, qv, v, adot=True)[1]
         assert Ad is not None
         return Ad
 
@@ -672,7 +663,7 @@ class PlanarModel(Model):
         self, t: float, q: ArrayLike, qd: ArrayLike, active: Iterable[str] | None = None
     ) -> ModelTerms:
         qv, v = self._state_arrays(q, qd)
-        ct, M = _compiled.constraint_terms_and_mass(self, self._layout(active), t, qv, v, self._M)
+        ct, M = _vectorized.constraint_terms_and_mass(self, self._layout(active), t, qv, v, self._M)
         return ModelTerms(
             M=M,
             h=self._forces_c.conservative(self._fg, qv) if self._stiff else self._fg.copy(),

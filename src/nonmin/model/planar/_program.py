@@ -2,7 +2,7 @@
 
 :func:`description` walks a :class:`~nonmin.model.planar.PlanarModel` and emits its bodies,
 gravity, every constraint as row primitives (pin, line, rod, angle: the decomposition of
-:mod:`._compiled`), springs, dampers and actuators into a ``nonmin._engine.PlanarDescription``;
+:mod:`._vectorized`), springs, dampers and actuators into a ``nonmin._engine.PlanarDescription``;
 :func:`engine_program` builds the C++ ``PlanarProgram`` from it. The engine then evaluates M,
 h, f_passive, B, A, γ, φ, the velocity residual and the energies for any active set (a mask
 over the constraints) with no Python per evaluation, except a driver's motion given as a

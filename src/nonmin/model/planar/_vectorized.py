@@ -1,4 +1,4 @@
-"""Compiled (vectorized) evaluation of a planar model: index arrays built once, NumPy inside.
+"""Vectorized evaluation of a planar model: index arrays built once, NumPy inside.
 
 Every joint is decomposed at build time into *row primitives* of four kinds:
 
@@ -15,9 +15,9 @@ indices of its variable entries. One evaluation then computes the kinematics of 
 points with a few vectorized operations and scatters them into ``A``, ``γ`` and ``φ``; the
 formulas are those of :mod:`._elements` (the per-joint reference implementation).
 
-With numba installed and the compiled backend of :mod:`nonmin.core` selected (the default
-``"auto"``), the pin/line/rod block and the q-dependent entries of B run in one kernel each
-(:mod:`._fast_kernels`, same formulas and entry order); otherwise NumPy.
+This is the Python side's evaluation (``PlanarModel.evaluate``, ``constraint_terms``, the
+general driver); the engine evaluates the same primitives in C++ (``engine/src/planar_program.cpp``,
+described by :mod:`._program`), and the two agree to round-off (tests/model/test_planar_program.py).
 
 Coordinates are addressed in ``q_ext = (q, 0)``: the ground's ``x, y, θ`` and a point mass's
 ``θ`` point at the extra zero entry ``n``. Entries of ``A`` in that column are discarded by
@@ -28,12 +28,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ...core import get_backend
 from ...errors import ModelError
 from .._protocol import ConstraintTerms, FloatArray
 from ._elements import (
@@ -49,10 +47,9 @@ from ._elements import (
     RotationalSpring,
     Spring,
     Weld,
+    _Indexed,
+    _Kin,
 )
-
-if TYPE_CHECKING:
-    from ._model import PlanarModel
 
 IntArray = NDArray[np.intp]
 _ZERO1 = np.zeros(1)
@@ -160,23 +157,6 @@ class Plan:
     def layout(self, active: frozenset[str]) -> Layout:
         """The :class:`Layout` of an active set (names already validated)."""
         return Layout(self, active)
-
-
-_KERNELS: dict[str, Any] = {}
-
-
-def _kernel(name: str = "pin_line_rod") -> Any:
-    """A compiled kernel of :mod:`._fast_kernels`, or None (NumPy backend, or numba missing)."""
-    if get_backend() == "numpy":
-        return None
-    if name not in _KERNELS:
-        try:
-            from . import _fast_kernels
-        except ImportError:  # numba not installed: the NumPy path
-            _KERNELS[name] = None
-        else:
-            _KERNELS[name] = getattr(_fast_kernels, name)
-    return _KERNELS[name]
 
 
 def _known(s: _Side | None) -> _Side:
@@ -322,7 +302,7 @@ class Layout:
         self.A0 = buf
         #: ``[M.ravel(), A0]`` for :func:`constraint_terms_and_mass` (set on first use)
         self.MA0: FloatArray | None = None
-        # packed inputs of the compiled kernel (``_fast_kernels.pin_line_rod``)
+        # packed pin/line/rod inputs, read by the frozen numba loop (benchmarks/numba_baseline)
         self.k_rows = np.concatenate([prow, self.line_rows, self.rod_rows]).astype(np.intp)
         self.k_prm = np.array(
             [v for _, p in lines for v in (p.ux, p.uy)]
@@ -337,71 +317,8 @@ class Layout:
         self.has_rheo = bool(self.drivers) or bool(generic)
 
 
-class PlanarProgram(NamedTuple):
-    """The dynamics of a planar model under one active set, as data for compiled loops.
-
-    Returned by :meth:`PlanarModel.fast_program` (the :meth:`nonmin.model.Model.fast_program`
-    hook) when the whole evaluation is covered: constant ``M`` and generalized force ``f``
-    (gravity; ``C = 0``), no springs or dampers, and constraints made only of pin, line, rod
-    and constant angle-row primitives (revolute, weld, prismatic, point-on-line, rod, gear; no
-    angle drivers, no user-defined joints). :mod:`nonmin.sim`'s compiled loop evaluates it with
-    the same kernel (:func:`._fast_kernels.pin_line_rod`) and formulas as
-    :meth:`PlanarModel.evaluate`, so both give the same ``A``, ``γ``, ``φ``.
-
-    Attributes
-    ----------
-    n, m : int
-        Coordinates and constraint rows.
-    M : (n, n)
-        Constant mass matrix.
-    f : (n,)
-        Constant generalized force ``h = f_g`` (gravity); potential energy ``V = −fᵀq``.
-    A0 : (m·n + 1,)
-        Template of ``A`` (constant entries; the last slot collects ground entries).
-    I6, SL, prm, rows, var_idx, counts
-        Inputs of the pin/line/rod kernel (``counts = (P, NL, NR)``, ``I6`` of shape (6, S)).
-    angle_rows : (na,) int
-        Rows ``φ = G q − c`` (``γ = 0``).
-    G : (na, n)
-    angle_const : (na,)
-    """
-
-    n: int
-    m: int
-    M: FloatArray
-    f: FloatArray
-    A0: FloatArray
-    I6: IntArray
-    SL: FloatArray
-    prm: FloatArray
-    rows: IntArray
-    var_idx: IntArray
-    counts: IntArray
-    angle_rows: IntArray
-    G: FloatArray
-    angle_const: FloatArray
-
-
-def program(lay: Layout, M: FloatArray, f: FloatArray) -> PlanarProgram | None:
-    """The :class:`PlanarProgram` of a layout, or None if it has drivers or user-defined joints."""
-    if lay.m == 0 or lay.drivers or lay.generic:
-        return None
-    def c(x: Any, dtype: Any = None) -> Any:
-        # fresh writable C-contiguous copies: read-only arrays (the model's M) would make numba
-        # compile every kernel they reach a second time, for a "readonly" array type
-        return np.array(x, dtype=dtype, order="C", copy=True)
-
-    return PlanarProgram(
-        n=lay.n, m=lay.m, M=c(M, dtype=np.float64), f=c(f, dtype=np.float64), A0=c(lay.A0),
-        I6=c(lay.I6, dtype=np.intp), SL=c(lay.SL), prm=c(lay.k_prm), rows=c(lay.k_rows, dtype=np.intp),
-        var_idx=c(lay.var_idx, dtype=np.intp), counts=np.array([lay.P, lay.NL, lay.NR], dtype=np.intp),
-        angle_rows=c(lay.angle_rows, dtype=np.intp), G=c(lay.G, dtype=np.float64).reshape(-1, lay.n),
-        angle_const=c(lay.angle_const, dtype=np.float64),
-    )  # fmt: skip
-
-
 def constraint_terms(
-    model: PlanarModel, lay: Layout, t: float, q: FloatArray, qd: FloatArray, adot: bool = False
+    model: _Indexed, lay: Layout, t: float, q: FloatArray, qd: FloatArray, adot: bool = False
 ) -> tuple[ConstraintTerms, FloatArray | None]:
     """Stacked ``(A, γ, φ, A qd + φ_t, holonomic)`` of the layout's active set, and ``Ȧ``
     (shape (m, n)) when ``adot`` is true (else None)."""
@@ -409,7 +326,7 @@ def constraint_terms(
 
 
 def constraint_terms_and_mass(
-    model: PlanarModel, lay: Layout, t: float, q: FloatArray, qd: FloatArray, M: FloatArray
+    model: _Indexed, lay: Layout, t: float, q: FloatArray, qd: FloatArray, M: FloatArray
 ) -> tuple[ConstraintTerms, FloatArray]:
     """:func:`constraint_terms` and a fresh copy of the constant mass matrix ``M``.
 
@@ -427,7 +344,7 @@ def constraint_terms_and_mass(
 
 
 def _constraints(
-    model: PlanarModel, lay: Layout, t: float, q: FloatArray, qd: FloatArray, buf: FloatArray, adot: bool
+    model: _Indexed, lay: Layout, t: float, q: FloatArray, qd: FloatArray, buf: FloatArray, adot: bool
 ) -> tuple[ConstraintTerms, FloatArray | None]:
     """Fill ``buf`` (a copy of the A template, length m·n + 1) and return the terms."""
     n, m = lay.n, lay.m
@@ -439,13 +356,7 @@ def _constraints(
     PG = np.zeros((2, m))  # rows: φ, γ
     phi, gamma = PG[0], PG[1]
     P, NL, NR = lay.P, lay.NL, lay.NR
-    kern = None if adot or not lay.S else _kernel()
-    if kern is not None:
-        kern(
-            np.concatenate((q, _ZERO1, qd, _ZERO1)), lay.I6, lay.SL, lay.k_prm, lay.k_rows, lay.var_idx,
-            P, NL, NR, buf, PG,
-        )  # fmt: skip
-    elif lay.S:
+    if lay.S:
         X = np.concatenate((q, _ZERO1, qd, _ZERO1))[lay.I6]  # (6, S): x, y, θ, ẋ, ẏ, θ̇
         c = np.cos(X[2])
         s = np.sin(X[2])
@@ -536,8 +447,6 @@ def _constraints(
                 phit[row] = -fd
         phi[lay.angle_rows] = pa
     if lay.generic:
-        from ._elements import _Kin
-
         kin = _Kin(model, q, qd)
         if phit is None:
             phit = np.zeros(m)
@@ -751,11 +660,7 @@ class Inputs:
         """``B(q)``, shape (n, k)."""
         n, k = self.n, self.k
         buf = self.B0.copy()
-        kern = _kernel("inputs") if self.varies else None
-        if kern is not None:
-            kern(np.concatenate((q, _ZERO1)), self.I3, self.SL, self.fdir, self.AX, self.NF, self.NP,
-                 self.var_idx, buf)  # fmt: skip
-        elif self.varies:
+        if self.varies:
             nf, npr = self.NF, self.NP
             qe = np.concatenate((q, _ZERO1))
             Q = qe[self.I3]
