@@ -204,6 +204,7 @@ void set_active(Loop& L, const std::uint8_t* active) {
 void set_guards(Loop& L, const std::vector<ContactGuard>& guards) {
     L.guards = guards;
     L.guard_new.assign(guards.size(), 0.0);
+    L.guard_pull.assign(guards.size(), 0);
     L.one_mask.assign(static_cast<std::size_t>(L.c), 0);
     bool release = false;
     for (const ContactGuard& g : guards) release |= g.release;
@@ -321,6 +322,18 @@ Status gaps(Loop& L, double t, const double* q, const double* qd, const std::uin
 
 }  // namespace
 
+namespace {
+
+// λ of active row `row` (from release_forces, whose L.rnorm holds 1/‖A_row‖) clearly pulling:
+// −λ‖A_row‖ > RELEASE_RTOL ‖f_c‖ (_simulate._pulling)
+bool pulling(const Loop& L, int row, double lam, const double* f_c) {
+    const double rn = L.rnorm[row];
+    if (!(lam < 0.0) || rn <= 0.0) return false;
+    return -lam > RELEASE_RTOL * Eigen::Map<const Vec>(f_c, L.n).norm() * rn;
+}
+
+}  // namespace
+
 // The contact guards at the step end: every impact gap from one evaluation, the release forces
 // from one SVD of the active rows.
 Status contact_guards(Loop& L, double t, const double* q, const double* qd, const double* f_c, bool& fired) {
@@ -355,7 +368,8 @@ Status contact_guards(Loop& L, double t, const double* q, const double* qd, cons
         }
         L.guard_new[i] = g1;
         const double g0 = G.g;
-        if ((g0 > 0.0 && g1 <= 0.0) || (!G.release && g0 <= 0.0 && g1 < 0.0)) fired = true;
+        L.guard_pull[i] = G.release && g0 < 0.0 && pulling(L, G.row, g1, f_c);
+        if ((g0 > 0.0 && g1 <= 0.0) || (!G.release && g0 <= 0.0 && g1 < 0.0) || L.guard_pull[i]) fired = true;
     }
     for (std::size_t i = 0; i < L.guards.size(); ++i) {  // friction (sim_friction.cpp)
         const ContactGuard& G = L.guards[i];
@@ -880,10 +894,13 @@ Status contact_event(Loop& L, const FiredStep& st) {
     for (std::size_t i = 0; i < L.guards.size() && r == Status::ok; ++i) {
         const ContactGuard G = L.guards[i];
         const double g0 = G.g, g1 = L.guard_new[i];
-        if (!((g0 > 0.0 && g1 <= 0.0) || (!G.release && g0 <= 0.0 && g1 < 0.0))) continue;
+        const bool pull = L.guard_pull[i] != 0;
+        if (!((g0 > 0.0 && g1 <= 0.0) || (!G.release && g0 <= 0.0 && g1 < 0.0) || pull)) continue;
         double s_root;
-        if (!G.release && g0 <= 0.0) {
-            s_root = 0.0;  // a bounce too short to resolve, or a start inside the obstacle
+        if ((!G.release && g0 <= 0.0) || pull) {
+            // a bounce too short to resolve, a start inside the obstacle, or a contact pulling
+            // from the step start (run start, after a transition): the event is at the start
+            s_root = 0.0;
         } else if (g1 == 0.0) {
             s_root = st.h;
         } else {

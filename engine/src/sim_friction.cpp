@@ -352,6 +352,7 @@ void push_guards(Loop& L) {
         L.guards.push_back(G);
     }
     L.guard_new.assign(L.guards.size(), 0.0);
+    L.guard_pull.assign(L.guards.size(), 0);
 }
 
 Status guard_values(Loop& L, std::size_t from, double t, const Vec& y) {

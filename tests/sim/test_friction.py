@@ -499,3 +499,46 @@ def test_pin_released_by_a_user_event_lets_the_pushed_block_slip(method: str) ->
     assert [e.name for e in tr.events if e.t > t_rel + 1e-9] == []
     s = np.clip(tr.t - t_rel, 0.0, None)
     assert np.max(np.abs(tr.q[:, 0] - 0.5 * (F - mu * G) * s**2)) < 1e-12
+
+
+def _rod_on_floor_frictionless(half: float):  # type: ignore[no-untyped-def]
+    b = PlanarBuilder("rod_floor")
+    b.body("rod", mass=1.0, inertia=half**2 / 3.0, points={"end": (-half, 0.0)})
+    b.point_on_line("floor", ("ground", (0.0, 0.0)), "end", axis=(1.0, 0.0), unilateral=True, active=True)
+    return b.build()
+
+
+@pytest.mark.parametrize("engine", ["engine", "python"])
+def test_contact_pulling_from_the_start_is_released_at_once(engine: str) -> None:
+    """A closed contact whose normal force is already tensile at t0 (no downward crossing of
+    zero to see) is released at t0: the rod at 85°, its end sliding at −20 m/s, spinning at
+    ω = −8 rad/s, frictionless: N = m (g − l sin θ ω²)/(1 + 3 cos² θ) = −21.6 N. It leaves the
+    floor at t0 and flies: centre q0 + q̇0 t − (0, g t²/2, 0), θ = θ0 + ω t (both drivers)."""
+    half, theta, omega = 0.5, math.radians(85.0), -8.0
+    m = _rod_on_floor_frictionless(half)
+    q0, qd0 = _rod_state(theta, half, -20.0, omega=omega)
+    N = (G - half * math.sin(theta) * omega**2) / (1 + 3 * math.cos(theta) ** 2)
+    assert N < -21.0
+    t_eval = np.linspace(0.0, 0.05, 11)
+    tr = simulate(m, 0.05, q0, qd0, dt=1e-4, t_eval=t_eval, engine=engine, progress=False)
+    assert [e.name for e in tr.events] == ["release:floor"]
+    assert tr.events[0].t == 0.0
+    assert not tr.active_mask[-1].any()
+    ref = q0[None, :] + np.outer(tr.t, qd0)
+    ref[:, 1] -= 0.5 * G * tr.t**2
+    np.testing.assert_allclose(tr.q[-1], ref[-1], rtol=0, atol=1e-10)
+    keep = tr.t > 0.0
+    np.testing.assert_allclose(tr.q[keep], ref[keep], rtol=0, atol=1e-10)
+
+
+def test_frictional_contact_pulling_from_the_start_is_released_at_once() -> None:
+    """The same rod with μ_f = 1.5 (N = −34.9 N slipping): released at t0, then ballistic."""
+    half, theta, omega = 0.5, math.radians(85.0), -8.0
+    m = _rod(1.5, half)
+    q0, qd0 = _rod_state(theta, half, -20.0, omega=omega)
+    tr = simulate(m, 0.05, q0, qd0, dt=1e-4, progress=False)
+    assert tr.events and tr.events[0].t == 0.0 and tr.events[0].name == "release:floor"
+    assert not tr.active_mask[-1].any()
+    ref = q0 + 0.05 * qd0
+    ref[1] -= 0.5 * G * 0.05**2
+    np.testing.assert_allclose(tr.q[-1], ref, rtol=0, atol=1e-10)

@@ -279,6 +279,15 @@ def _guard_value(sys: _System, w: _Watch, p: _Point) -> float:
     return float(p.lam[rows][0])
 
 
+def _pulling(sys: _System, w: _Watch, p: _Point, g: float) -> bool:
+    """Release watch ``w``'s normal force ``g`` at ``p`` clearly pulling:
+    ``−λ‖A_row‖ > RELEASE_RTOL ‖f_c‖`` (the engine's ``pulling``)."""
+    if not g < 0.0:
+        return False
+    norm = float(np.linalg.norm(p.A[sys.model.row_slices(sys.active)[w.name].start]))
+    return norm > 0.0 and -g * norm > RELEASE_RTOL * float(np.linalg.norm(p.f_c))
+
+
 def _crossed(g0: float, g1: float, direction: int) -> bool:
     up = g0 < 0.0 <= g1
     down = g0 > 0.0 >= g1
@@ -1004,6 +1013,9 @@ def simulate(
                 i for i, w in enumerate(watches)
                 if (_crossed(gvals[i], new_g[i], w.direction) and id(w.event) not in disarmed)
                 or (w.kind == "impact" and gvals[i] <= 0.0 and new_g[i] < 0.0)
+                # a contact pulling from the step start (run start, after a transition: no
+                # downward crossing to see) and still clearly pulling at its end
+                or (w.kind == "release" and gvals[i] < 0.0 and p1 is not None and _pulling(system, w, p1, new_g[i]))
             ]
             for key in list(disarmed):  # re-arm user events whose guard left the zero band
                 j = next((i for i, w in enumerate(watches) if id(w.event) == key), None)
@@ -1017,7 +1029,9 @@ def simulate(
                     def gfun(s: float, _w: _Watch = w) -> float:
                         return _guard_value(system, _w, at(s))
 
-                    if w.kind == "impact" and gvals[i] <= 0.0:
+                    if gvals[i] < 0.0 and w.kind == "release":
+                        s_root = 0.0  # pulling from the step start: released there
+                    elif w.kind == "impact" and gvals[i] <= 0.0:
                         # a bounce too short to resolve (or a start inside the obstacle): the
                         # gap never became positive at a sample — contact from the step start
                         s_root = 0.0

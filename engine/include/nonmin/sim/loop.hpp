@@ -283,6 +283,9 @@ struct Loop {
     // contact guards (fixed active set: the release SVD has the active rows' size)
     std::vector<ContactGuard> guards;
     std::vector<double> guard_new;
+    // release guards already pulling at the step start (run start or after a transition: no
+    // downward crossing to see) and still clearly pulling at its end: released at the start
+    std::vector<std::uint8_t> guard_pull;
     std::vector<std::uint8_t> one_mask;
     Mat DA;
     Vec lam_c, lam_tmp;
