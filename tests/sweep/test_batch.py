@@ -65,6 +65,38 @@ def test_stays_on_branch_and_matches_the_exact_reference(bar):
     assert np.all(bt.closure < 1e-12)
 
 
+# Two of sweep_bench.py's 1000 random runs (seed 2026) that left the anti-parallelogram branch
+# at dt = 1e-3 through a change point (run 828 at t ≈ 0.58 s; run 882 failed at t ≈ 0.89 s with
+# a non-finite Ȧq̇), on both drivers, until RK4 took its passage steps at its order (3b46bcf,
+# 79eabe6: projected stages next to a passage, a passage step at least PASSAGE_SIGMA wide).
+BRANCH_LEAVERS = [(5.5718870706804555, -6.483511434888186), (5.416978601798854, -7.4216265699471204)]
+
+
+def test_change_point_runs_stay_on_their_branch(bar):
+    th0 = np.array([s[0] for s in BRANCH_LEAVERS])
+    om0 = np.array([s[1] for s in BRANCH_LEAVERS])
+    Q, V = _cfb_coordinates(th0, om0)
+    t = np.linspace(0.0, 2.0, 201)
+    bt = simulate_batch(bar.model, 2.0, Q, V, dt=1e-3, t_eval=t)
+    assert bt.engine == ("batch", "batch") and all(s is Status.SUCCESS for s in bt.status)
+    for i, (th, om) in enumerate(BRANCH_LEAVERS):
+        ref = library.crossed_four_bar_reference(t, theta0=th, omega0=om)
+        # every coordinate on the exact reduction along the branch (measured 9.2e-9 m/rad)
+        assert np.max(np.abs(bt.q[i] - ref["q"])) < 1e-6
+        one = simulate(bar.model, 2.0, Q[i], V[i], dt=1e-3, t_eval=t)
+        np.testing.assert_array_equal(bt.q[i], one.q)
+
+
+@pytest.mark.slow
+def test_change_point_runs_stay_on_their_branch_python_driver(bar):
+    t = np.linspace(0.0, 2.0, 201)
+    for th, om in BRANCH_LEAVERS:
+        Q, V = _cfb_coordinates(np.array([th]), np.array([om]))
+        tr = simulate(bar.model, 2.0, Q[0], V[0], dt=1e-3, t_eval=t, engine="python")
+        ref = library.crossed_four_bar_reference(t, theta0=th, omega0=om)
+        assert np.max(np.abs(tr.q - ref["q"])) < 1e-6
+
+
 def test_params_vary_the_model_without_rebuilding_by_hand(bar):
     Q, V = _states(3, seed=3)
     grav = [(0.0, -9.81), (0.0, -1.62), (0.0, -9.81)]
