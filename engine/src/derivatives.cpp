@@ -1,5 +1,7 @@
-// The derivative pipeline of nonmin/derivatives.hpp: model terms on dual numbers (one
-// evaluate_tangent per direction e_j of q and of q̇), the kernel's derivative analytically.
+// The derivative pipeline of nonmin/derivatives.hpp: the value of the kernel at the state, then
+// the tangents of three residuals of the model terms (Program::residual_tangents, all 2n
+// directions of (q, q̇) in multi-direction forward mode; or one evaluate_tangent per direction
+// for programs without it), then the kernel's derivative as dense products over 2n columns.
 #include "nonmin/derivatives.hpp"
 
 #include <Eigen/Cholesky>
@@ -8,18 +10,57 @@
 #include <cmath>
 #include <vector>
 
+#include "nonmin/dual_terms.hpp"
+
 namespace nonmin {
 
 DerivativeScratch::DerivativeScratch(const Program& p)
-    : val(p.make_terms()), tan(p.make_terms()), ws(p.make_workspace()), dq(Vec::Zero(p.n())), dqd(Vec::Zero(p.n())) {}
+    : val(p.make_terms()),
+      tan(p.make_terms()),
+      ws(p.make_workspace()),
+      dq(Vec::Zero(p.n())),
+      dqd(Vec::Zero(p.n())),
+      DQ(Mat::Zero(2 * p.n(), p.n())),
+      DV(Mat::Zero(2 * p.n(), p.n())),
+      Rdyn(Mat::Zero(2 * p.n(), p.n())),
+      Rlam(Mat::Zero(2 * p.n(), 2 * p.n())),
+      Rcon(Mat::Zero(2 * p.n(), p.m_all())),
+      lam(Mat::Zero(2, p.m_all())) {
+    const int n = p.n();
+    for (int j = 0; j < n; ++j) {
+        DQ(j, j) = 1.0;
+        DV(n + j, j) = 1.0;
+    }
+    rows.reserve(static_cast<std::size_t>(p.m_all()));
+}
+
+namespace {
+
+// The residual tangents one direction at a time from evaluate_tangent (programs without
+// residual_tangents: SymPy tapes).
+Status residuals_by_direction(const Program& p, DerivativeScratch& s, const ResidualQuery& rq) {
+    const int n = p.n(), m_all = p.m_all();
+    const unsigned need = NEED_M | NEED_H | NEED_A | NEED_GAMMA | (rq.u != nullptr && p.k() > 0 ? NEED_B : 0u);
+    for (int j = 0; j < rq.nd; ++j) {
+        const Status st = p.evaluate_tangent(rq.t, rq.q, rq.qd, rq.dq + j * n, rq.dqd + j * n, rq.active, need,
+                                             s.val, s.tan, *s.ws);
+        if (st != Status::ok) return st;
+        residuals_from_terms<double>(s.tan, p.constraints(), rq, rq.r_dyn + j * n,
+                                     rq.r_lam + static_cast<std::ptrdiff_t>(j) * rq.nlam * n, rq.r_con + j * m_all);
+    }
+    return Status::ok;
+}
+
+}  // namespace
 
 Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, const double* q, const double* qd,
                            const double* f, const double* u, const std::uint8_t* active, double rtol,
                            DerivativeOutputs& out) {
     if (!p.differentiable()) return Status::not_differentiable;
-    const int n = p.n(), k = p.k();
+    const int n = p.n(), k = p.k(), m_all = p.m_all();
     // active rows
-    std::vector<int> rows;
+    std::vector<int>& rows = s.rows;
+    rows.clear();
     for (std::size_t c = 0; c < p.constraints().size(); ++c)
         if (active[c])
             for (int r = 0; r < p.constraints()[c].dim; ++r) rows.push_back(p.constraints()[c].row + r);
@@ -27,14 +68,18 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
     Status st = p.evaluate(t, q, qd, active, NEED_M | NEED_H | NEED_B | NEED_A | NEED_GAMMA, s.val, *s.ws);
     if (st != Status::ok) return st;
     const Mat& M = s.val.M;
-    Vec uv = Vec::Zero(k);
-    if (u != nullptr) uv = CVecMap(u, k);
-    Vec g = s.val.h + s.val.f_passive;
+    const bool with_u = k > 0 && u != nullptr;
+    Vec& g = s.g;
+    g = s.val.h + s.val.f_passive;
     if (f != nullptr) g += CVecMap(f, n);
-    if (k > 0) g.noalias() += s.val.B * uv;
+    if (with_u) g.noalias() += s.val.B * CVecMap(u, k);
     // equilibrated active rows and the rank decision
-    Mat Ae(m, n);
-    Vec d = Vec::Zero(m), ge(m);
+    Mat& Ae = s.Ae;
+    Vec& d = s.d;
+    Vec& ge = s.ge;
+    Ae.resize(m, n);
+    d.setZero(m);
+    ge.resize(m);
     double big = 0.0;
     for (int i = 0; i < m; ++i) big = std::max(big, s.val.A.row(rows[i]).norm());
     for (int i = 0; i < m; ++i) {
@@ -43,7 +88,9 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
         Ae.row(i) = d[i] * s.val.A.row(rows[i]);
         ge[i] = d[i] * s.val.gamma[rows[i]];
     }
-    Mat G = Mat::Zero(n, m), Z;
+    Mat& G = s.G;
+    Mat& Z = s.Z;
+    G.setZero(n, m);
     int r = 0;
     if (m > 0) {
         Eigen::JacobiSVD<Mat> svd(Ae, Eigen::ComputeFullU | Eigen::ComputeFullV);
@@ -56,98 +103,98 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
         for (int i = 0; i < r; ++i) G.noalias() += (V.col(i) / sv[i]) * U.col(i).transpose();
         Z = V.rightCols(n - r);
     } else {
-        Z = Mat::Identity(n, n);
+        Z.setIdentity(n, n);
     }
     const int kz = n - r;
-    const Mat MZ = M * Z;
-    const Mat Sm = Z.transpose() * MZ;
-    Eigen::LLT<Mat> llt(Sm);
+    s.MZ.noalias() = M * Z;
+    s.Sm.noalias() = Z.transpose() * s.MZ;
+    Eigen::LLT<Mat> llt(s.Sm);
     if (kz > 0) {
         if (llt.info() != Eigen::Success) return Status::not_positive_definite;
-        const Mat L = llt.matrixL();
+        const auto& L = llt.matrixLLT();
         double dmax = 0.0;
-        for (int i = 0; i < kz; ++i) dmax = std::max(dmax, Sm(i, i));
+        for (int i = 0; i < kz; ++i) dmax = std::max(dmax, s.Sm(i, i));
         for (int i = 0; i < kz; ++i)
             if (L(i, i) * L(i, i) <= 1e-13 * dmax) return Status::not_positive_definite;
     }
     const Vec Gge = G * ge;
-    const Vec w = -Gge;
-    const Vec res = ge - Ae * Gge;  // least-squares residual (0 for consistent biases)
-    const Vec GtGge = G.transpose() * Gge;
-    out.qdd = w;
-    if (kz > 0) out.qdd.noalias() += Z * llt.solve(Z.transpose() * (g - M * w));
-    out.fc = M * out.qdd - g;
+    out.qdd = -Gge;
+    if (kz > 0) out.qdd.noalias() += Z * llt.solve(Z.transpose() * (g + M * Gge));
+    out.fc.noalias() = M * out.qdd;
+    out.fc -= g;
     out.rank = r;
-    const Vec& qdd = out.qdd;
-    const Vec& fc = out.fc;
-    const Vec Gtqdd = G.transpose() * qdd, Gtfc = G.transpose() * fc;
-    const Mat P = Z * Z.transpose();
-    const Vec Pqdd = P * qdd;  // P f_c = 0 (up to round-off): δP f_c = −P δAeᵀ Gᵀ f_c
-    // one direction: the terms' tangents in s.tan -> δq̈, δf_c
-    Mat dAe(m, n);
-    Vec dge(m), dg(n);
-    auto direction = [&](Eigen::Ref<Vec> dqdd, Eigen::Ref<Vec> dfc, bool has_dq) {
-        dg = s.tan.h + s.tan.f_passive;
-        if (k > 0 && has_dq && u != nullptr) dg.noalias() += s.tan.B * uv;
-        Vec a = Vec::Zero(n), dPfc = Vec::Zero(n);
-        if (m > 0) {
-            for (int i = 0; i < m; ++i) {
-                dge[i] = d[i] * s.tan.gamma[rows[i]];
-                if (has_dq) dAe.row(i) = d[i] * s.tan.A.row(rows[i]);
-            }
-            a.noalias() = -G * dge;
-            if (has_dq) {
-                // δw part of δG: +G δAe G ge − G Gᵀ δAeᵀ res − P δAeᵀ Gᵀ G ge
-                a.noalias() += G * (dAe * Gge);
-                a.noalias() -= G * (G.transpose() * (dAe.transpose() * res));
-                a.noalias() -= P * (dAe.transpose() * GtGge);
-                // + δP q̈ = −G δAe P q̈ − P δAeᵀ Gᵀ q̈
-                a.noalias() -= G * (dAe * Pqdd);
-                a.noalias() -= P * (dAe.transpose() * Gtqdd);
-                dPfc.noalias() = -P * (dAe.transpose() * Gtfc);
-            }
+    // the fixed multipliers of the residuals: D λe (λe = Gᵀ f_c) and D ρ (ρ = Dγ − Ae G Dγ)
+    const int nlam = m > 0 ? 2 : 0;
+    s.lam.setZero(2, m_all);
+    if (m > 0) {
+        const Vec lame = G.transpose() * out.fc;
+        const Vec rho = ge - Ae * Gge;
+        for (int i = 0; i < m; ++i) {
+            s.lam(0, rows[i]) = d[i] * lame[i];
+            s.lam(1, rows[i]) = d[i] * rho[i];
         }
-        const Vec aq = a - P * a;
-        Vec rhs = dg - M * aq - dPfc;
-        if (has_dq) rhs.noalias() -= s.tan.M * qdd;
-        dqdd = aq;
-        if (kz > 0) dqdd.noalias() += Z * llt.solve(Z.transpose() * rhs);
-        dfc = M * dqdd - dg;
-        if (has_dq) dfc.noalias() += s.tan.M * qdd;
-    };
-    out.dqdd_dq.resize(n, n);
-    out.dqdd_dqd.resize(n, n);
-    out.dfc_dq.resize(n, n);
-    out.dfc_dqd.resize(n, n);
-    Vec col_a(n), col_b(n);
-    const unsigned need_q = NEED_M | NEED_H | NEED_A | NEED_GAMMA | (k > 0 && u != nullptr ? NEED_B : 0u);
-    const unsigned need_v = NEED_H | NEED_GAMMA;
-    for (int j = 0; j < n; ++j) {
-        s.dq.setZero();
-        s.dq[j] = 1.0;
-        s.dqd.setZero();
-        st = p.evaluate_tangent(t, q, qd, s.dq.data(), s.dqd.data(), active, need_q, s.val, s.tan, *s.ws);
-        if (st != Status::ok) return st;
-        direction(col_a, col_b, true);
-        out.dqdd_dq.col(j) = col_a;
-        out.dfc_dq.col(j) = col_b;
     }
-    for (int j = 0; j < n; ++j) {
-        s.dq.setZero();
-        s.dqd.setZero();
-        s.dqd[j] = 1.0;
-        st = p.evaluate_tangent(t, q, qd, s.dq.data(), s.dqd.data(), active, need_v, s.val, s.tan, *s.ws);
-        if (st != Status::ok) return st;
-        direction(col_a, col_b, false);
-        out.dqdd_dqd.col(j) = col_a;
-        out.dfc_dqd.col(j) = col_b;
+    // residual tangents along the 2n directions
+    const int nd = 2 * n;
+    s.Rdyn.resize(nd, n);
+    s.Rlam.resize(nd, nlam * n);
+    s.Rcon.setZero(nd, m_all);
+    ResidualQuery rq;
+    rq.t = t;
+    rq.q = q;
+    rq.qd = qd;
+    rq.a = out.qdd.data();
+    rq.u = with_u ? u : nullptr;
+    rq.nlam = nlam;
+    rq.lam = s.lam.data();
+    rq.active = active;
+    rq.nd = nd;
+    rq.dq = s.DQ.data();
+    rq.dqd = s.DV.data();
+    rq.r_dyn = s.Rdyn.data();
+    rq.r_lam = s.Rlam.data();
+    rq.r_con = s.Rcon.data();
+    st = p.residual_tangents(rq, *s.ws);
+    if (st == Status::not_differentiable) st = residuals_by_direction(p, s, rq);
+    if (st != Status::ok) return st;
+    // the kernel's derivative over the 2n columns: Q δq̈ = −G (C + Gᵀ L1), C = D (δA q̈ + δγ)
+    Mat& AQ = s.AQ;
+    AQ.setZero(n, nd);
+    if (m > 0) {
+        Mat& C = s.C;
+        C.resize(m, nd);
+        for (int i = 0; i < m; ++i) C.row(i) = d[i] * s.Rcon.col(rows[i]).transpose();
+        // + Gᵀ δAeᵀ ρ (L1: rows n .. 2n of each Rlam row)
+        C.noalias() += G.transpose() * s.Rlam.rightCols(n).transpose();
+        AQ.noalias() = -G * C;
     }
+    Mat& DQDD = s.DQDD;
+    DQDD = AQ;
+    if (kz > 0) {
+        Mat& T1 = s.T1;  // −δ(M q̈ − g) + δAeᵀ λe − M Q δq̈ (n × 2n)
+        T1.noalias() = -s.Rdyn.transpose();
+        if (m > 0) T1.noalias() += s.Rlam.leftCols(n).transpose();
+        T1.noalias() -= M * AQ;
+        s.RHS.noalias() = Z.transpose() * T1;
+        llt.solveInPlace(s.RHS);
+        DQDD.noalias() += Z * s.RHS;
+    }
+    out.dqdd_dq = DQDD.leftCols(n);
+    out.dqdd_dqd = DQDD.rightCols(n);
+    out.dfc_dq.noalias() = M * out.dqdd_dq;
+    out.dfc_dq += s.Rdyn.topRows(n).transpose();
+    out.dfc_dqd.noalias() = M * out.dqdd_dqd;
+    out.dfc_dqd += s.Rdyn.bottomRows(n).transpose();
     // ∂/∂f: δg = e_j, nothing else moves: δq̈ = Z S⁻¹ Zᵀ e_j
-    if (kz > 0)
-        out.dqdd_df = Z * llt.solve(Z.transpose());
-    else
-        out.dqdd_df = Mat::Zero(n, n);
-    out.dfc_df = M * out.dqdd_df - Mat::Identity(n, n);
+    if (kz > 0) {
+        Mat ZS = Z.transpose();
+        llt.solveInPlace(ZS);
+        out.dqdd_df.noalias() = Z * ZS;
+    } else {
+        out.dqdd_df.setZero(n, n);
+    }
+    out.dfc_df.noalias() = M * out.dqdd_df;
+    out.dfc_df.diagonal().array() -= 1.0;
     return Status::ok;
 }
 

@@ -293,6 +293,18 @@ Status PlanarProgram::evaluate_tangent(double t, const double* q, const double* 
     return Status::ok;
 }
 
+Status PlanarProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) const {
+    auto& w = static_cast<PlanarWorkspace&>(wsb);
+    if (w.wc.size() != d_.bodies.size()) {
+        w.wc.assign(d_.bodies.size(), DualW(1.0));
+        w.wsn.assign(d_.bodies.size(), DualW(0.0));
+    }
+    return chunked_residual_tangents<DUAL_WIDTH>(
+        *this, rq, w.wide, [&](const DualW* q, const DualW* qd, unsigned need, TermsOf<DualW>& terms) {
+            return eval<DualW>(rq.t, q, qd, rq.active, need, terms, w.wc.data(), w.wsn.data(), w.treg.data());
+        });
+}
+
 // The evaluation on the scalar S (double: evaluate; Dual: evaluate_tangent). The drivers are
 // functions of t alone, evaluated in double.
 template <class S>

@@ -56,7 +56,9 @@ TreeScratch<S>::TreeScratch(const TreeDescription& d)
       Mv(MatS::Zero(d.model.nv, d.model.nv)),
       R(d.model.joints.size(), Mat3T<S>::Identity()),
       Tq(d.model.joints.size(), Mat34T<S>::Zero()),
-      Y(MatS::Zero(7, d.model.nv)) {
+      Y(MatS::Zero(7, d.model.nv)),
+      Lv(MatS::Zero(2, d.model.nv)),
+      tq(VecS::Zero(d.model.nq)) {
     int m = 0;
     for (const TreeConstraint& c : d.constraints) m += row_count(c);
     Av = MatS::Zero(m, d.model.nv);
@@ -66,6 +68,7 @@ TreeScratch<S>::TreeScratch(const TreeDescription& d)
 }
 template struct TreeScratch<double>;
 template struct TreeScratch<Dual>;
+template struct TreeScratch<DualW>;
 
 TreeProgram::TreeProgram(TreeDescription description) : d_(std::move(description)) {
     const TreeModel& model = d_.model;
@@ -452,6 +455,152 @@ Status TreeProgram::evaluate_tangent(double t, const double* q, const double* qd
     const Status st = eval<Dual>(t, ws.dq.data(), ws.dqd.data(), active, need, ws.dterms, *ws.dual);
     if (st != Status::ok) return st;
     split_dual(ws.dterms, need, out, tangent);
+    return Status::ok;
+}
+
+template <class S>
+void TreeProgram::apply_T(const TreeScratch<S>& ws, const double* xq, S* xv) const {
+    for (const Run& r : runs_)
+        for (int k = 0; k < r.len; ++k) xv[r.iv + k] = S(xq[r.iq + k]);
+    for (const QuatBlock& b : qblocks_) {
+        Eigen::Map<Vec3T<S>>(xv + b.a) = ws.Tq[b.joint] * Eigen::Map<const Vec4>(xq + b.qs);
+        if (b.free) Eigen::Map<Vec3T<S>>(xv + b.iv) = ws.R[b.joint].transpose() * Eigen::Map<const Vec3>(xq + b.iq);
+    }
+}
+
+template <class S>
+NONMIN_FLATTEN Status TreeProgram::residuals(const ResidualQuery& rq, const S* q, const S* qd, TreeScratch<S>& ws,
+                                             S* rd, S* rl, S* rc, const TreeData* fixed) const {
+    using std::isfinite;
+    const TreeModel& model = d_.model;
+    const int nq = model.nq, nv = model.nv;
+    Status st = normalize(q, ws);
+    if (st != Status::ok) return st;
+    for (int i = 0; i < nq; ++i)
+        if (!isfinite(qd[i])) return Status::not_finite;
+    velocity_map(q, qd, ws);
+    // joint acceleration a_v = T a + Ṫ q̇ (in ws.fv)
+    apply_T(ws, rq.a, ws.fv.data());
+    ws.fv += ws.a0;
+    if (fixed != nullptr) {
+        const std::size_t nj = model.joints.size();
+        for (std::size_t i = 0; i < nj; ++i) {
+            ws.data.oMi[i].R = fixed->oMi[i].R.template cast<S>();
+            ws.data.oMi[i].p = fixed->oMi[i].p.template cast<S>();
+            ws.data.oI[i].m = S(fixed->oI[i].m);
+            ws.data.oI[i].h = fixed->oI[i].h.template cast<S>();
+            ws.data.oI[i].I = fixed->oI[i].I.template cast<S>();
+        }
+        ws.data.J = fixed->J.template cast<S>();
+    } else {
+        forward_kinematics(model, ws.data, ws.qn.data(), true);
+    }
+    forward_motion(model, ws.data, ws.v.data(), ws.fv.data());
+    rnea(model, ws.data, ws.fv.data(), ws.tau.data());  // M_v a_v + C_v v + g_v
+    for (int k = 0; k < nv; ++k) ws.tau[k] += d_.damping[k] * ws.v[k];
+    if (rq.u != nullptr)
+        for (int c = 0; c < k_; ++c) ws.tau[d_.actuated[static_cast<std::size_t>(c)]] -= rq.u[c];
+    apply_Tt(ws, ws.tau.data(), rd);
+    const int nlam = rq.nlam;
+    for (int i = 0; i < nlam * nq; ++i) rl[i] = S(0.0);
+    for (int r = 0; r < m_all_; ++r) rc[r] = S(0.0);
+    if (nlam == 0) return Status::ok;
+    ws.Lv.setZero();
+    bool any_frame = false;
+    const double* a = rq.a;
+    for (std::size_t ci = 0; ci < d_.constraints.size(); ++ci) {
+        if (!rq.active[ci]) continue;
+        const TreeConstraint& c = d_.constraints[ci];
+        const int r0 = constraints_[ci].row;
+        const int dim = constraints_[ci].dim;
+        const double* lam = rq.lam + r0;  // λ_l at row r0: lam[l * m_all]
+        auto add_rl = [&](int iq, const S& coef) {
+            for (int l = 0; l < nlam; ++l) rl[l * nq + iq] += lam[l * m_all_] * coef;
+        };
+        if (c.type == RowType::unit_quaternion) {
+            S acc = S(0.0);
+            for (int k = 0; k < 4; ++k) {
+                acc += q[c.iq + k] * a[c.iq + k] + qd[c.iq + k] * qd[c.iq + k];
+                add_rl(c.iq + k, q[c.iq + k]);
+            }
+            rc[r0] = acc;
+        } else if (c.type == RowType::joint_coupling) {
+            const auto& co = c.coef;
+            S d1 = S(0.0), d2 = S(0.0), qd2 = S(0.0);
+            if (c.iq2 >= 0) {
+                const S x = q[c.iq2] - c.ref2;
+                d1 = co[1] + 2 * co[2] * x + 3 * co[3] * x * x + 4 * co[4] * x * x * x;
+                d2 = 2 * co[2] + 6 * co[3] * x + 12 * co[4] * x * x;
+                qd2 = qd[c.iq2];
+            }
+            S acc = S(a[c.iq]);
+            add_rl(c.iq, S(1.0));
+            if (c.iq2 >= 0) {
+                acc -= d1 * a[c.iq2];
+                add_rl(c.iq2, -d1);
+            }
+            rc[r0] = acc - d2 * qd2 * qd2;
+        } else if (c.type == RowType::joint_limit) {
+            rc[r0] = S(c.coef[0] * a[c.iq]);
+            add_rl(c.iq, S(c.coef[0]));
+        } else if (c.type == RowType::joint_driver) {
+            double f[3];
+            const int ev = d_.drivers[static_cast<std::size_t>(c.iq2)].eval(rq.t, f, ws.treg.data());
+            if (ev == TimeFunction::EVAL_FAILED) return Status::callback_error;
+            if (ev != TimeFunction::EVAL_OK) return Status::not_finite;
+            rc[r0] = S(a[c.iq] - f[2]);
+            add_rl(c.iq, S(1.0));
+        } else {
+            // frame rows in velocity space: γ at the acceleration a_v is A_v a_v + γ_v
+            frame_rows(c, ws, true, true, false, ws.Av.row(r0).data(), rc + r0, rc + r0);
+            for (int l = 0; l < nlam; ++l)
+                for (int r = 0; r < dim; ++r) {
+                    const double lv = lam[l * m_all_ + r];
+                    if (lv != 0.0) ws.Lv.row(l) += lv * ws.Av.row(r0 + r);
+                }
+            any_frame = true;
+        }
+    }
+    if (any_frame)
+        for (int l = 0; l < nlam; ++l) {
+            apply_Tt(ws, ws.Lv.row(l).data(), ws.tq.data());
+            for (int i = 0; i < nq; ++i) rl[l * nq + i] += ws.tq[i];
+        }
+    return Status::ok;
+}
+
+Status TreeProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) const {
+    TreeWorkspace& ws = static_cast<TreeWorkspace&>(wsb);
+    constexpr int W = DUAL_WIDTH;
+    const int nq = d_.model.nq;
+    if (!ws.wide) {
+        ws.wide = std::make_unique<TreeScratch<DualW>>(d_);
+        ws.wq.assign(static_cast<std::size_t>(nq), DualW());
+        ws.wqd.assign(static_cast<std::size_t>(nq), DualW());
+        ws.wrd.assign(static_cast<std::size_t>(nq), DualW());
+        ws.wrl.assign(static_cast<std::size_t>(2 * nq), DualW());
+        ws.wrc.assign(static_cast<std::size_t>(m_all_), DualW());
+    }
+    if (rq.nlam > 2) return Status::bad_shape;
+    bool have_fixed = false;
+    for (int j0 = 0; j0 < rq.nd; j0 += W) {
+        const int w = std::min(W, rq.nd - j0);
+        bool moves_q = false;  // a chunk of q̇ directions only: the kinematics at q in double
+        for (int i = 0; i < w * nq && !moves_q; ++i) moves_q = rq.dq[j0 * nq + i] != 0.0;
+        if (!moves_q && !have_fixed) {
+            const Status st = normalize<double>(rq.q, ws);
+            if (st != Status::ok) return st;
+            forward_kinematics(d_.model, ws.data, ws.qn.data(), true);
+            have_fixed = true;
+        }
+        seed_directions<W>(rq, nq, j0, w, ws.wq.data(), ws.wqd.data());
+        const Status st = residuals<DualW>(rq, ws.wq.data(), ws.wqd.data(), *ws.wide, ws.wrd.data(), ws.wrl.data(),
+                                           ws.wrc.data(), moves_q ? nullptr : &ws.data);
+        if (st != Status::ok) return st;
+        scatter_lanes<W>(ws.wrd.data(), nq, j0, w, nq, rq.r_dyn);
+        scatter_lanes<W>(ws.wrl.data(), rq.nlam * nq, j0, w, static_cast<std::ptrdiff_t>(rq.nlam) * nq, rq.r_lam);
+        scatter_lanes<W>(ws.wrc.data(), m_all_, j0, w, m_all_, rq.r_con);
+    }
     return Status::ok;
 }
 

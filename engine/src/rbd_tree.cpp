@@ -7,6 +7,8 @@
 
 namespace nonmin::rbd {
 
+// The algorithms below are NONMIN_FLATTEN (dual.hpp): every call they make is inlined.
+
 void TreeModel::validate() const {
     if (nq < 0 || nv < 0) throw EngineError("tree model: negative nq or nv");
     std::vector<int> qused(nq, 0), vused(nv, 0);
@@ -47,7 +49,7 @@ bool TreeModel::has_quaternions() const {
 }
 
 template <class S>
-void forward_kinematics(const TreeModel& model, TreeDataT<S>& data, const S* q, bool inertias) {
+NONMIN_FLATTEN void forward_kinematics(const TreeModel& model, TreeDataT<S>& data, const S* q, bool inertias) {
     using V3 = Vec3T<S>;
     const int nj = static_cast<int>(model.joints.size());
     for (int i = 0; i < nj; ++i) {
@@ -99,7 +101,7 @@ void forward_kinematics(const TreeModel& model, TreeDataT<S>& data, const S* q, 
 }
 
 template <class S>
-void forward_motion(const TreeModel& model, TreeDataT<S>& data, const S* v, const S* a) {
+NONMIN_FLATTEN void forward_motion(const TreeModel& model, TreeDataT<S>& data, const S* v, const S* a) {
     const int nj = static_cast<int>(model.joints.size());
     for (int i = 0; i < nj; ++i) {
         const Joint& jt = model.joints[i];
@@ -130,7 +132,7 @@ void forward_motion(const TreeModel& model, TreeDataT<S>& data, const S* v, cons
 }
 
 template <class S>
-void crba(const TreeModel& model, TreeDataT<S>& data, S* M, int ld) {
+NONMIN_FLATTEN void crba(const TreeModel& model, TreeDataT<S>& data, S* M, int ld) {
     const int nj = static_cast<int>(model.joints.size());
     for (int i = 0; i < nj; ++i) data.Ic[i] = data.oI[i];
     for (int i = nj - 1; i >= 0; --i) {
@@ -161,7 +163,7 @@ void crba(const TreeModel& model, TreeDataT<S>& data, S* M, int ld) {
 }
 
 template <class S>
-void rnea(const TreeModel& model, TreeDataT<S>& data, const S* a, S* tau) {
+NONMIN_FLATTEN void rnea(const TreeModel& model, TreeDataT<S>& data, const S* a, S* tau) {
     const int nj = static_cast<int>(model.joints.size());
     for (int i = 0; i < nj; ++i) {
         MotionT<S> ag = data.oa[i];
@@ -191,13 +193,13 @@ S potential_energy(const TreeModel& model, const TreeDataT<S>& data) {
 }
 
 template <class S>
-SE3T<S> frame_placement(const TreeModel& /*model*/, const TreeDataT<S>& data, const Frame& frame) {
+NONMIN_FLATTEN SE3T<S> frame_placement(const TreeModel& /*model*/, const TreeDataT<S>& data, const Frame& frame) {
     if (frame.joint >= 0) return data.oMi[frame.joint] * frame.placement;
     return SE3T<S>{frame.placement.R.template cast<S>(), frame.placement.p.template cast<S>()};
 }
 
 template <class S>
-void frame_kinematics(const TreeModel& model, const TreeDataT<S>& data, const Frame& frame, bool motion,
+NONMIN_FLATTEN void frame_kinematics(const TreeModel& model, const TreeDataT<S>& data, const Frame& frame, bool motion,
                       FrameKinematicsT<S>& out) {
     out.oMf = frame_placement(model, data, frame);
     if (!motion) return;
@@ -218,7 +220,7 @@ void frame_kinematics(const TreeModel& model, const TreeDataT<S>& data, const Fr
 }
 
 template <class S>
-void add_jacobian_row(const TreeModel& model, const TreeDataT<S>& data, int joint, const Vec3T<S>& p,
+NONMIN_FLATTEN void add_jacobian_row(const TreeModel& model, const TreeDataT<S>& data, int joint, const Vec3T<S>& p,
                       const Vec3T<S>& c_lin, const Vec3T<S>& c_ang, S* row) {
     const Vec3T<S> wa = c_ang + p.cross(c_lin);
     for (int j = joint; j >= 0; j = model.joints[j].parent) {
@@ -244,6 +246,7 @@ void add_jacobian_row(const TreeModel& model, const TreeDataT<S>& data, int join
                                       const Vec3T<S>&, const Vec3T<S>&, S*);
 NONMIN_RBD_INSTANTIATE(double)
 NONMIN_RBD_INSTANTIATE(Dual)
+NONMIN_RBD_INSTANTIATE(DualW)
 #undef NONMIN_RBD_INSTANTIATE
 
 namespace {

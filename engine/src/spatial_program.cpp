@@ -1,6 +1,8 @@
 // SpatialProgram: evaluation of a spatial multibody description (see nonmin/spatial.hpp).
 #include "nonmin/spatial.hpp"
 
+#include "nonmin/dual_terms.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -10,16 +12,18 @@ namespace nonmin {
 namespace {
 
 // G(ε) = [−e, e0 I − ẽ] (3 × 4).
-inline void G_of(const double* e, double G[3][4]) {
-    const double e0 = e[0], e1 = e[1], e2 = e[2], e3 = e[3];
+template <class S>
+inline void G_of(const S* e, S G[3][4]) {
+    const S e0 = e[0], e1 = e[1], e2 = e[2], e3 = e[3];
     G[0][0] = -e1; G[0][1] = e0;  G[0][2] = e3;  G[0][3] = -e2;
     G[1][0] = -e2; G[1][1] = -e3; G[1][2] = e0;  G[1][3] = e1;
     G[2][0] = -e3; G[2][1] = e2;  G[2][2] = -e1; G[2][3] = e0;
 }
 
 // E(ε) = [−e, e0 I + ẽ] (3 × 4).
-inline void E_of(const double* e, double E[3][4]) {
-    const double e0 = e[0], e1 = e[1], e2 = e[2], e3 = e[3];
+template <class S>
+inline void E_of(const S* e, S E[3][4]) {
+    const S e0 = e[0], e1 = e[1], e2 = e[2], e3 = e[3];
     E[0][0] = -e1; E[0][1] = e0;  E[0][2] = -e3; E[0][3] = e2;
     E[1][0] = -e2; E[1][1] = e3;  E[1][2] = e0;  E[1][3] = -e1;
     E[2][0] = -e3; E[2][1] = -e2; E[2][2] = e1;  E[2][3] = e0;
@@ -102,73 +106,109 @@ SpatialProgram::SpatialProgram(SpatialDescription desc) : d_(std::move(desc)) {
 
 std::unique_ptr<Workspace> SpatialProgram::make_workspace() const {
     auto w = std::make_unique<SpatialWorkspace>();
-    const std::size_t K = d_.attachments.size();
-    w->val.assign(3 * K, 0.0);
-    w->vel.assign(3 * K, 0.0);
-    w->acc.assign(3 * K, 0.0);
-    w->Qe.assign(12 * K, 0.0);
-    w->col.assign(static_cast<std::size_t>(n_), 0.0);
-    w->treg.assign(static_cast<std::size_t>(tape_size_) + 1, 0.0);
+    size_scratch<double>(*w);
     return w;
 }
 
 Status SpatialProgram::evaluate(double t, const double* q, const double* qd, const std::uint8_t* active,
                                 unsigned need, Terms& out, Workspace& wsb) const {
-    (void)t;
+    return eval<double>(t, q, qd, active, need, out, static_cast<SpatialWorkspace&>(wsb));
+}
+
+Status SpatialProgram::evaluate_tangent(double t, const double* q, const double* qd, const double* dq,
+                                        const double* dqd, const std::uint8_t* active, unsigned need, Terms& out,
+                                        Terms& tangent, Workspace& wsb) const {
     auto& w = static_cast<SpatialWorkspace&>(wsb);
+    const auto n = static_cast<std::size_t>(n_);
+    if (!w.dual) {  // first use of this workspace for derivatives
+        w.dual = std::make_unique<SpatialScratch<Dual>>();
+        size_scratch(*w.dual);
+        w.dq.assign(n, Dual());
+        w.dqd.assign(n, Dual());
+        w.dterms.resize(n_, k_, m_all_);
+    }
+    for (std::size_t i = 0; i < n; ++i) {
+        w.dq[i] = Dual(q[i], dq[i]);
+        w.dqd[i] = Dual(qd[i], dqd[i]);
+    }
+    const Status st = eval<Dual>(t, w.dq.data(), w.dqd.data(), active, need, w.dterms, *w.dual);
+    if (st != Status::ok) return st;
+    split_dual(w.dterms, need, out, tangent);
+    return Status::ok;
+}
+
+Status SpatialProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) const {
+    auto& w = static_cast<SpatialWorkspace&>(wsb);
+    if (!w.wide) {
+        w.wide = std::make_unique<SpatialScratch<DualW>>();
+        size_scratch(*w.wide);
+    }
+    return chunked_residual_tangents<DUAL_WIDTH>(
+        *this, rq, w.wres, [&](const DualW* q, const DualW* qd, unsigned need, TermsOf<DualW>& terms) {
+            return eval<DualW>(rq.t, q, qd, rq.active, need, terms, *w.wide);
+        });
+}
+
+// The evaluation on the scalar S (double: evaluate; Dual, DualW: derivatives). Drivers are
+// functions of t alone, evaluated in double.
+template <class S>
+Status SpatialProgram::eval(double t, const S* q, const S* qd, const std::uint8_t* active, unsigned need,
+                            TermsOf<S>& out, SpatialScratch<S>& w) const {
+    using std::isfinite;
+    using std::sqrt;
     const int n = n_;
     {
-        double acc = 0.0;
+        S acc = S(0.0);
         for (int i = 0; i < n; ++i) acc += q[i] * q[i] + qd[i] * qd[i];
-        if (!std::isfinite(acc)) {
+        if (!isfinite(acc)) {
             for (int i = 0; i < n; ++i)
-                if (!std::isfinite(q[i]) || !std::isfinite(qd[i])) return Status::not_finite;
+                if (!isfinite(q[i]) || !isfinite(qd[i])) return Status::not_finite;
         }
     }
     const std::size_t K = d_.attachments.size();
     // ---------------------------------------------------------------- attachment kinematics
     for (std::size_t k = 0; k < K; ++k) {
         const SpatialAttachment& at = d_.attachments[k];
-        double* val = &w.val[3 * k];
-        double* vel = &w.vel[3 * k];
-        double* acc = &w.acc[3 * k];
-        double* Qe = &w.Qe[12 * k];
+        S* val = &w.val[3 * k];
+        S* vel = &w.vel[3 * k];
+        S* acc = &w.acc[3 * k];
+        S* Qe = &w.Qe[12 * k];
         if (at.body < 0) {
             for (int a = 0; a < 3; ++a) {
-                val[a] = at.value[static_cast<std::size_t>(a)];
-                vel[a] = acc[a] = 0.0;
+                val[a] = S(at.value[static_cast<std::size_t>(a)]);
+                vel[a] = acc[a] = S(0.0);
             }
-            for (int j = 0; j < 12; ++j) Qe[j] = 0.0;
+            for (int j = 0; j < 12; ++j) Qe[j] = S(0.0);
             continue;
         }
         const int o = 7 * at.body;
-        const double* e = q + o + 3;
-        const double* ed = qd + o + 3;
+        const S* e = q + o + 3;
+        const S* ed = qd + o + 3;
         const double* Q = at.Q.data();
         for (int a = 0; a < 3; ++a) {
-            double v = 0.0, vd = 0.0, ac = 0.0;
+            S v = S(0.0), vd = S(0.0), ac = S(0.0);
             for (int j = 0; j < 4; ++j) {
                 const double* Qaj = Q + 16 * a + 4 * j;
-                const double qe = Qaj[0] * e[0] + Qaj[1] * e[1] + Qaj[2] * e[2] + Qaj[3] * e[3];
-                const double qed = Qaj[0] * ed[0] + Qaj[1] * ed[1] + Qaj[2] * ed[2] + Qaj[3] * ed[3];
+                const S qe = Qaj[0] * e[0] + Qaj[1] * e[1] + Qaj[2] * e[2] + Qaj[3] * e[3];
+                const S qed = Qaj[0] * ed[0] + Qaj[1] * ed[1] + Qaj[2] * ed[2] + Qaj[3] * ed[3];
                 Qe[4 * a + j] = qe;
                 v += qe * e[j];
                 vd += qe * ed[j];
                 ac += qed * ed[j];
             }
-            val[a] = v + (at.point ? q[o + a] : 0.0);
-            vel[a] = 2.0 * vd + (at.point ? qd[o + a] : 0.0);
+            val[a] = at.point ? v + q[o + a] : v;
+            vel[a] = at.point ? 2.0 * vd + qd[o + a] : 2.0 * vd;
             acc[a] = 2.0 * ac;
         }
     }
     // coef · J_kᵀ w added to f (n-vector): J_k = [I (points), 2 Q(s) ε] in the body's columns
-    auto add_JT = [&](double* f, int k, const double* wv, double coef) {
+    auto add_JT = [&](S* f, int k, const S* wv, const S& coef) {
         const SpatialAttachment& at = d_.attachments[static_cast<std::size_t>(k)];
         if (at.body < 0) return;
         const int o = 7 * at.body;
         if (at.point)
             for (int a = 0; a < 3; ++a) f[o + a] += coef * wv[a];
-        const double* Qe = &w.Qe[12 * static_cast<std::size_t>(k)];
+        const S* Qe = &w.Qe[12 * static_cast<std::size_t>(k)];
         for (int j = 0; j < 4; ++j)
             f[o + 3 + j] += 2.0 * coef * (wv[0] * Qe[j] + wv[1] * Qe[4 + j] + wv[2] * Qe[8 + j]);
     };
@@ -179,8 +219,8 @@ Status SpatialProgram::evaluate(double t, const double* q, const double* qd, con
         for (std::size_t i = 0; i < nb; ++i) {
             const SpatialBody& b = d_.bodies[i];
             const int o = 7 * static_cast<int>(i);
-            for (int a = 0; a < 3; ++a) out.M(o + a, o + a) = b.mass;
-            double G[3][4], JG[3][4];
+            for (int a = 0; a < 3; ++a) out.M(o + a, o + a) = S(b.mass);
+            S G[3][4], JG[3][4];
             G_of(q + o + 3, G);
             for (int a = 0; a < 3; ++a)
                 for (int j = 0; j < 4; ++j)
@@ -193,10 +233,10 @@ Status SpatialProgram::evaluate(double t, const double* q, const double* qd, con
         }
     }
     // ---------------------------------------------------------------- h, f_passive, energy
-    double V = 0.0, T = 0.0;
+    S V = S(0.0), T = S(0.0);
     if (need & (NEED_H | NEED_ENERGY)) {
-        double* h = out.h.data();
-        double* fp = out.f_passive.data();
+        S* h = out.h.data();
+        S* fp = out.f_passive.data();
         if (need & NEED_H) {
             out.h.setZero();
             out.f_passive.setZero();
@@ -204,17 +244,17 @@ Status SpatialProgram::evaluate(double t, const double* q, const double* qd, con
         for (std::size_t i = 0; i < nb; ++i) {
             const SpatialBody& b = d_.bodies[i];
             const int o = 7 * static_cast<int>(i);
-            const double* e = q + o + 3;
-            const double* ed = qd + o + 3;
-            double G[3][4];
+            const S* e = q + o + 3;
+            const S* ed = qd + o + 3;
+            S G[3][4];
             G_of(e, G);
-            double wb[3], Jw[3];  // G ε̇ (half the body angular velocity) and J G ε̇
+            S wb[3], Jw[3];  // G ε̇ (half the body angular velocity) and J G ε̇
             for (int a = 0; a < 3; ++a) wb[a] = G[a][0] * ed[0] + G[a][1] * ed[1] + G[a][2] * ed[2] + G[a][3] * ed[3];
             for (int a = 0; a < 3; ++a)
                 Jw[a] = b.inertia[3 * a] * wb[0] + b.inertia[3 * a + 1] * wb[1] + b.inertia[3 * a + 2] * wb[2];
             if (need & NEED_H) {
-                for (int a = 0; a < 3; ++a) h[o + a] = b.mass * d_.gravity[static_cast<std::size_t>(a)];
-                double Gd[3][4];
+                for (int a = 0; a < 3; ++a) h[o + a] = S(b.mass * d_.gravity[static_cast<std::size_t>(a)]);
+                S Gd[3][4];
                 G_of(ed, Gd);
                 for (int j = 0; j < 4; ++j)
                     h[o + 3 + j] = -8.0 * (Gd[0][j] * Jw[0] + Gd[1][j] * Jw[1] + Gd[2][j] * Jw[2]);
@@ -228,26 +268,27 @@ Status SpatialProgram::evaluate(double t, const double* q, const double* qd, con
             }
         }
         for (const SpatialSpring& s : d_.springs) {
-            const double* pa = &w.val[3 * static_cast<std::size_t>(s.a)];
-            const double* pb = &w.val[3 * static_cast<std::size_t>(s.b)];
-            const double d[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
-            const double ell = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            const S* pa = &w.val[3 * static_cast<std::size_t>(s.a)];
+            const S* pb = &w.val[3 * static_cast<std::size_t>(s.b)];
+            const S d[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
+            const S ell = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
             V += 0.5 * s.stiffness * (ell - s.rest_length) * (ell - s.rest_length);
             if (!(need & NEED_H)) continue;
             if (s.stiffness != 0.0) {
-                double coef = 0.0;
-                if (s.rest_length == 0.0) coef = -s.stiffness;
-                else if (ell > 0.0) coef = -s.stiffness * (ell - s.rest_length) / ell;
-                if (coef != 0.0) {
+                S coef = S(0.0);
+                bool on = false;
+                if (s.rest_length == 0.0) coef = S(-s.stiffness), on = true;
+                else if (ell > 0.0) coef = -s.stiffness * (ell - s.rest_length) / ell, on = true;
+                if (on) {
                     add_JT(h, s.b, d, coef);
                     add_JT(h, s.a, d, -coef);
                 }
             }
             if (s.damping != 0.0 && ell > 0.0) {
-                const double* va = &w.vel[3 * static_cast<std::size_t>(s.a)];
-                const double* vb = &w.vel[3 * static_cast<std::size_t>(s.b)];
-                const double u[3] = {d[0] / ell, d[1] / ell, d[2] / ell};
-                const double rate = u[0] * (vb[0] - va[0]) + u[1] * (vb[1] - va[1]) + u[2] * (vb[2] - va[2]);
+                const S* va = &w.vel[3 * static_cast<std::size_t>(s.a)];
+                const S* vb = &w.vel[3 * static_cast<std::size_t>(s.b)];
+                const S u[3] = {d[0] / ell, d[1] / ell, d[2] / ell};
+                const S rate = u[0] * (vb[0] - va[0]) + u[1] * (vb[1] - va[1]) + u[2] * (vb[2] - va[2]);
                 add_JT(fp, s.b, u, -s.damping * rate);
                 add_JT(fp, s.a, u, s.damping * rate);
             }
@@ -260,30 +301,30 @@ Status SpatialProgram::evaluate(double t, const double* q, const double* qd, con
     // ---------------------------------------------------------------- B
     if ((need & NEED_B) && k_ > 0) {
         out.B.setZero();
-        std::vector<double>& col = w.col;
+        std::vector<S>& col = w.col;
         for (int c = 0; c < k_; ++c) {
             const SpatialActuator& ac = d_.actuators[static_cast<std::size_t>(c)];
-            std::fill(col.begin(), col.end(), 0.0);
-            const double* axis = &w.val[3 * static_cast<std::size_t>(ac.axis)];
+            std::fill(col.begin(), col.end(), S(0.0));
+            const S* axis = &w.val[3 * static_cast<std::size_t>(ac.axis)];
             if (ac.kind == SpatialActuatorKind::rotation) {
                 const int bodies[2] = {ac.body_b, ac.body_a};
                 const double signs[2] = {1.0, -1.0};
                 for (int s = 0; s < 2; ++s) {
                     if (bodies[s] < 0) continue;
                     const int o = 7 * bodies[s];
-                    double E[3][4];
+                    S E[3][4];
                     E_of(q + o + 3, E);
                     for (int j = 0; j < 4; ++j)
                         col[static_cast<std::size_t>(o + 3 + j)] +=
                             signs[s] * 2.0 * (E[0][j] * axis[0] + E[1][j] * axis[1] + E[2][j] * axis[2]);
                 }
             } else {
-                const double* pa = &w.val[3 * static_cast<std::size_t>(ac.pa)];
-                const double* pb = &w.val[3 * static_cast<std::size_t>(ac.pb)];
-                const double d[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
-                add_JT(col.data(), ac.pb, axis, 1.0);
-                add_JT(col.data(), ac.pa, axis, -1.0);
-                add_JT(col.data(), ac.axis, d, 1.0);
+                const S* pa = &w.val[3 * static_cast<std::size_t>(ac.pa)];
+                const S* pb = &w.val[3 * static_cast<std::size_t>(ac.pb)];
+                const S d[3] = {pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]};
+                add_JT(col.data(), ac.pb, axis, S(1.0));
+                add_JT(col.data(), ac.pa, axis, S(-1.0));
+                add_JT(col.data(), ac.axis, d, S(1.0));
             }
             for (int i = 0; i < n; ++i) out.B(i, c) = col[static_cast<std::size_t>(i)];
         }
@@ -292,20 +333,20 @@ Status SpatialProgram::evaluate(double t, const double* q, const double* qd, con
     const unsigned cneed = need & (NEED_A | NEED_GAMMA | NEED_PHI | NEED_VELOCITY);
     if (cneed && m_all_ > 0) {
         const bool wantA = (need & NEED_A) != 0;
-        double* A = out.A.data();
+        S* A = out.A.data();
         for (std::size_t ci = 0; ci < d_.constraints.size(); ++ci) {
             if (!active[ci]) continue;
             const ConstraintInfo& c = d_.constraints[ci];
             if (wantA) std::fill(A + static_cast<std::ptrdiff_t>(c.row) * n,
-                                 A + static_cast<std::ptrdiff_t>(c.row + c.dim) * n, 0.0);
+                                 A + static_cast<std::ptrdiff_t>(c.row + c.dim) * n, S(0.0));
             for (int ri : rows_of_[ci]) {
                 const SpatialRow& r = d_.rows[static_cast<std::size_t>(ri)];
                 const int row = c.row + r.offset;
-                double* Ar = A + static_cast<std::ptrdiff_t>(row) * n;
+                S* Ar = A + static_cast<std::ptrdiff_t>(row) * n;
                 if (r.norm_body >= 0) {
                     const int o = 7 * r.norm_body + 3;
-                    const double* e = q + o;
-                    const double* ed = qd + o;
+                    const S* e = q + o;
+                    const S* ed = qd + o;
                     out.phi[row] = 0.5 * ((e[0] * e[0] + e[1] * e[1] + e[2] * e[2] + e[3] * e[3]) - 1.0);
                     out.gamma[row] = ed[0] * ed[0] + ed[1] * ed[1] + ed[2] * ed[2] + ed[3] * ed[3];
                     out.velocity[row] = e[0] * ed[0] + e[1] * ed[1] + e[2] * ed[2] + e[3] * ed[3];
@@ -315,9 +356,10 @@ Status SpatialProgram::evaluate(double t, const double* q, const double* qd, con
                 }
                 // φ = X·Y of one (x, y) term pair: value, rate A q̇, bias Ȧ q̇; adds scale·A to the row
                 auto dot_row = [&](const std::vector<SpatialTerm>& xs, const std::vector<SpatialTerm>& ys,
-                                   double scale, double& P, double& Pd, double& G) {
-                    double X[3] = {0, 0, 0}, Y[3] = {0, 0, 0}, Xd[3] = {0, 0, 0}, Yd[3] = {0, 0, 0};
-                    double Xa[3] = {0, 0, 0}, Ya[3] = {0, 0, 0};
+                                   double scale, S& P, S& Pd, S& G) {
+                    S X[3] = {S(0.0), S(0.0), S(0.0)}, Y[3] = {S(0.0), S(0.0), S(0.0)};
+                    S Xd[3] = {S(0.0), S(0.0), S(0.0)}, Yd[3] = {S(0.0), S(0.0), S(0.0)};
+                    S Xa[3] = {S(0.0), S(0.0), S(0.0)}, Ya[3] = {S(0.0), S(0.0), S(0.0)};
                     for (const SpatialTerm& tm : xs) {
                         const std::size_t k = static_cast<std::size_t>(tm.attachment);
                         for (int a = 0; a < 3; ++a) {
@@ -339,8 +381,8 @@ Status SpatialProgram::evaluate(double t, const double* q, const double* qd, con
                     G = 2.0 * (Xd[0] * Yd[0] + Xd[1] * Yd[1] + Xd[2] * Yd[2]) +
                         (X[0] * Ya[0] + X[1] * Ya[1] + X[2] * Ya[2]) + (Y[0] * Xa[0] + Y[1] * Xa[1] + Y[2] * Xa[2]);
                     if (wantA && scale != 0.0) {
-                        for (const SpatialTerm& tm : xs) add_JT(Ar, tm.attachment, Y, scale * tm.coef);
-                        for (const SpatialTerm& tm : ys) add_JT(Ar, tm.attachment, X, scale * tm.coef);
+                        for (const SpatialTerm& tm : xs) add_JT(Ar, tm.attachment, Y, S(scale * tm.coef));
+                        for (const SpatialTerm& tm : ys) add_JT(Ar, tm.attachment, X, S(scale * tm.coef));
                     }
                 };
                 if (r.angle) {
@@ -349,13 +391,13 @@ Status SpatialProgram::evaluate(double t, const double* q, const double* qd, con
                     if (st == TimeFunction::EVAL_FAILED) return Status::callback_error;
                     if (st != TimeFunction::EVAL_OK) return Status::not_finite;
                     const double c = std::cos(f[0]), s = std::sin(f[0]);
-                    double P1, P1d, G1, P2, P2d, G2;
+                    S P1, P1d, G1, P2, P2d, G2;
                     dot_row(r.x, r.y, -s, P1, P1d, G1);
                     dot_row(r.x2, r.y2, c, P2, P2d, G2);
-                    const double S = s * P2 + c * P1;
+                    const S Sa = s * P2 + c * P1;
                     out.phi[row] = c * P2 - s * P1;
-                    out.velocity[row] = c * P2d - s * P1d - f[1] * S;
-                    out.gamma[row] = c * G2 - s * G1 - 2.0 * f[1] * (s * P2d + c * P1d) - f[2] * S -
+                    out.velocity[row] = c * P2d - s * P1d - f[1] * Sa;
+                    out.gamma[row] = c * G2 - s * G1 - 2.0 * f[1] * (s * P2d + c * P1d) - f[2] * Sa -
                                      f[1] * f[1] * (c * P2 - s * P1);
                     continue;
                 }

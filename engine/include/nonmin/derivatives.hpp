@@ -1,18 +1,24 @@
 // Derivatives of the projection dynamics at one state (nonmin.linear; docs/linear.md): q̈, f_c
-// and ∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂f (and those of f_c) with the model terms differentiated in forward
-// mode (Program::evaluate_tangent, dual.hpp) and the kernel's solve differentiated analytically
+// and ∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂f (and those of f_c), the kernel's solve differentiated analytically
 // at the rank it used. With G = (DA)⁺ (D the row equilibration), Ae = D A, Z an orthonormal
-// basis of N(A), S = Zᵀ M Z, w = −G D γ, q̈ = w + Z S⁻¹ Zᵀ (g − M w), f_c = M q̈ − g:
+// basis of N(A), S = Zᵀ M Z, w = −G D γ, q̈ = w + Z S⁻¹ Zᵀ (g − M w), f_c = M q̈ − g, the
+// equilibrated multipliers λe = Gᵀ f_c and the least-squares residual ρ = Dγ − Ae G Dγ:
 //
-//   δP x = −G δAe P x − P δAeᵀ Gᵀ x
-//   δw   = G δAe G Dγ − G Gᵀ δAeᵀ (I − Ae G) Dγ − P δAeᵀ Gᵀ G Dγ − G D δγ
-//   Q δq̈ = Q (δw + δP q̈),   P δq̈ = Z S⁻¹ Zᵀ (δg − δM q̈ − M Q δq̈ − δP f_c)
-//   δf_c = δM q̈ + M δq̈ − δg.
+//   Q δq̈ = −G (δAe q̈ + D δγ) − G Gᵀ δAeᵀ ρ                        (= δw + δP q̈, Q G = G)
+//   P δq̈ = Z S⁻¹ Zᵀ (−δ(M q̈ − g) + δAeᵀ λe − M Q δq̈)              (−Zᵀ δP f_c = Zᵀ δAeᵀ λe)
+//   δf_c = δ(M q̈ − g) + M δq̈,
+//
+// where δ(·) holds q̈, λe, ρ and D fixed. So only three products of the model terms are
+// differentiated: δ(M a − g), δ(Aᵀ λ) and δ(A a + γ) at a = q̈ (Program::residual_tangents:
+// for robots one RNEA and the frame accelerations on multi-direction duals, never dM or dA —
+// the route of Pinocchio's derivatives of the constrained dynamics), for all 2n directions of
+// (q, q̇) at once; the kernel's part is then a few dense products over the 2n columns.
 //
 // The rank decision is the core's (rule of docs/theory.md: vanished rows, unit rows, singular
 // values ≤ rtol σ_max dropped), made here with Eigen's JacobiSVD of the equilibrated rows.
 #pragma once
 #include <memory>
+#include <vector>
 
 #include "program.hpp"
 
@@ -26,14 +32,19 @@ struct DerivativeOutputs {
     int rank = 0;
 };
 
-// Preallocated scratch for one program and thread.
+// Preallocated scratch for one program and thread (matrices keep their storage between calls).
 struct DerivativeScratch {
     explicit DerivativeScratch(const Program& p);
     Terms val, tan;
     std::unique_ptr<Workspace> ws;
-    Vec dq, dqd;
+    Vec dq, dqd;              // n
+    Mat DQ, DV;               // 2n × n: the seeds (e_j, 0) then (0, e_j)
+    Mat Rdyn, Rlam, Rcon;     // 2n × n, 2n × 2n (two λ), 2n × m_all: residual tangents
+    Mat lam;                  // 2 × m_all: D λe and D ρ on the active rows
+    std::vector<int> rows;    // active rows
+    Mat Ae, G, Z, MZ, Sm, C, T1, AQ, RHS, DQDD;
+    Vec d, ge, g;
 };
-
 // q̈, f_c and their derivatives at (t, q, qd) with applied force f (n; nullptr: 0) and actuator
 // inputs u (k; nullptr: 0, f += B(q) u with u held fixed). Status::not_positive_definite when
 // Zᵀ M Z fails Cholesky; not_differentiable when the program has no evaluate_tangent.

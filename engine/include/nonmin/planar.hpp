@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "dual.hpp"
+#include "dual_terms.hpp"
 #include "program.hpp"
 #include "timefn.hpp"
 
@@ -115,6 +116,9 @@ struct PlanarWorkspace : Workspace {
     // evaluate_tangent's dual scratch (sized at its first use)
     std::vector<Dual> dq, dqd, dc, ds;
     TermsOf<Dual> dterms;
+    // residual_tangents' scratch (DUAL_WIDTH directions per pass)
+    DualResidualScratch<DUAL_WIDTH> wide;
+    std::vector<DualW> wc, wsn;
 };
 
 class PlanarProgram final : public Program {
@@ -128,6 +132,7 @@ class PlanarProgram final : public Program {
                             const std::uint8_t* active, unsigned need, Terms& out, Terms& tangent,
                             Workspace& ws) const override;
     bool differentiable() const override { return true; }
+    Status residual_tangents(const ResidualQuery& rq, Workspace& ws) const override;
     std::unique_ptr<Workspace> make_workspace() const override;
     bool constant_mass() const override { return true; }
     bool thread_safe() const override { return thread_safe_; }

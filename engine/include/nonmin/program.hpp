@@ -81,6 +81,35 @@ struct TermsOf {
 };
 using Terms = TermsOf<double>;
 
+// One query of Program::residual_tangents: the dynamics residuals at a FIXED joint acceleration a
+// (n) and fixed multiplier vectors λ_l (nlam rows of m_all, entries of inactive rows ignored),
+//
+//   r_dyn   = M(q) a − h(t, q, q̇) − f_p(t, q, q̇) − B(q) u     (n; u == nullptr: no B u)
+//   r_lam,l = A(t, q)ᵀ λ_l                                    (n)
+//   r_con   = A(t, q) a + γ(t, q, q̇)                          (m_all; active rows)
+//
+// and their exact directional derivatives along nd directions (dq_j, dq̇_j), rows j of dq and
+// dqd (nd × n each, row-major). Outputs (row-major): r_dyn nd × n, r_lam nd × nlam × n, r_con
+// nd × m_all (rows of inactive constraints: 0). The derivative pipeline (derivatives.cpp) needs
+// only these products, never dM, dA themselves: Pinocchio's route (derivatives of inverse
+// dynamics at the solution), on any program.
+struct ResidualQuery {
+    double t = 0.0;
+    const double* q = nullptr;
+    const double* qd = nullptr;
+    const double* a = nullptr;
+    const double* u = nullptr;
+    int nlam = 0;
+    const double* lam = nullptr;
+    const std::uint8_t* active = nullptr;
+    int nd = 0;
+    const double* dq = nullptr;
+    const double* dqd = nullptr;
+    double* r_dyn = nullptr;
+    double* r_lam = nullptr;
+    double* r_con = nullptr;
+};
+
 // Preallocated scratch of one Program, one per thread (a Program itself is immutable and may be
 // shared between threads).
 struct Workspace {
@@ -128,6 +157,14 @@ class Program {
     // write into a Terms' A themselves. Callers use it to copy, scan and check only those
     // entries (the loop's gathering of the active rows, the solver's row norms and profile).
     const RowPattern& a_pattern() const { return a_pattern_; }
+
+    // The residual tangents of `rq` in multi-direction forward mode (dual.hpp's DualN: the
+    // directions DUAL_WIDTH at a time). Programs without it return Status::not_differentiable
+    // and the caller builds the same products from evaluate_tangent, one direction at a time.
+    virtual Status residual_tangents(const ResidualQuery& rq, Workspace& ws) const {
+        (void)rq, (void)ws;
+        return Status::not_differentiable;
+    }
 
     // True when M does not depend on q (planar absolute coordinates): the loop may validate and
     // factor it once.

@@ -26,9 +26,12 @@
 // γ = c γ2 − s γ1 − 2ḟ (s Ṗ2 + c Ṗ1) − f̈ S − ḟ² (c P2 − s P1).
 #pragma once
 #include <array>
+#include <memory>
 #include <string>
 #include <vector>
 
+#include "dual.hpp"
+#include "dual_terms.hpp"
 #include "program.hpp"
 #include "timefn.hpp"
 
@@ -94,11 +97,22 @@ struct SpatialDescription {
     int add_constraint(const std::string& name, ConstraintKind kind, int dim);
 };
 
-struct SpatialWorkspace : Workspace {
+// The scratch of one evaluation on the scalar S (double; Dual and DualW for the derivatives).
+template <class S>
+struct SpatialScratch {
     // per attachment: value, velocity, acceleration bias (3 each) and Q ε (3 × 4)
-    std::vector<double> val, vel, acc, Qe;
-    std::vector<double> col;  // one column of B
+    std::vector<S> val, vel, acc, Qe;
+    std::vector<S> col;  // one column of B
     std::vector<double> treg;  // registers of the drivers' expression tapes
+};
+
+struct SpatialWorkspace : Workspace, SpatialScratch<double> {
+    // evaluate_tangent's and residual_tangents' dual scratch (made at first use)
+    std::unique_ptr<SpatialScratch<Dual>> dual;
+    std::vector<Dual> dq, dqd;
+    TermsOf<Dual> dterms;
+    std::unique_ptr<SpatialScratch<DualW>> wide;
+    DualResidualScratch<DUAL_WIDTH> wres;
 };
 
 class SpatialProgram final : public Program {
@@ -107,11 +121,30 @@ class SpatialProgram final : public Program {
 
     Status evaluate(double t, const double* q, const double* qd, const std::uint8_t* active,
                     unsigned need, Terms& out, Workspace& ws) const override;
+    Status evaluate_tangent(double t, const double* q, const double* qd, const double* dq, const double* dqd,
+                            const std::uint8_t* active, unsigned need, Terms& out, Terms& tangent,
+                            Workspace& ws) const override;
+    Status residual_tangents(const ResidualQuery& rq, Workspace& ws) const override;
+    bool differentiable() const override { return true; }
     std::unique_ptr<Workspace> make_workspace() const override;
 
     bool thread_safe() const override { return thread_safe_; }
 
   private:
+    template <class S>
+    Status eval(double t, const S* q, const S* qd, const std::uint8_t* active, unsigned need, TermsOf<S>& out,
+                SpatialScratch<S>& w) const;
+    template <class S>
+    void size_scratch(SpatialScratch<S>& w) const {
+        const std::size_t K = d_.attachments.size();
+        w.val.assign(3 * K, S(0.0));
+        w.vel.assign(3 * K, S(0.0));
+        w.acc.assign(3 * K, S(0.0));
+        w.Qe.assign(12 * K, S(0.0));
+        w.col.assign(static_cast<std::size_t>(n_), S(0.0));
+        w.treg.assign(static_cast<std::size_t>(tape_size_) + 1, 0.0);
+    }
+
     SpatialDescription d_;
     std::vector<std::vector<int>> rows_of_;  // rows of each constraint
     bool thread_safe_ = true;

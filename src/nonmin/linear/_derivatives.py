@@ -63,8 +63,9 @@ def _program(model: Model) -> Any:
     if not _engine().differentiable(prog):
         raise ModelError(
             f"model {model.name!r}: its engine program ({type(prog).__name__}) has no forward-mode "
-            "evaluation yet (Program::evaluate_tangent); derivatives exist for planar models "
-            "(PlanarProgram) and robots (TreeProgram)"
+            "evaluation (Program::evaluate_tangent); derivatives exist for planar and spatial "
+            "models (PlanarProgram, SpatialProgram), SymPy models (TapeProgram) and robots "
+            "(TreeProgram)"
         )
     return prog
 
@@ -119,7 +120,7 @@ def term_tangents(
     Parameters
     ----------
     model : Model
-        A model with a differentiable engine program (planar models, robots).
+        A model with a differentiable engine program (planar, spatial, SymPy models, robots).
     q, qd : array_like, shape (n,)
     dq : array_like, shape (d, n) or (n,)
         Directions of q.
@@ -338,7 +339,8 @@ def dynamics_derivatives(
     Parameters
     ----------
     model : Model
-        Planar model or robot (a model whose engine program evaluates on dual numbers).
+        Planar, spatial or SymPy model, or robot (a model whose engine program evaluates on
+        dual numbers).
     q : array_like, shape (n,)
     qd : array_like, shape (n,), optional
         Velocities (zero by default).
@@ -407,8 +409,28 @@ def dynamics_derivatives(
     )
 
 
-#: Per-thread scratch of the C++ pipeline, per program (a few models at a time).
+#: Per-thread cache of the C++ pipeline, per model: (model, program, scratch, masks by active
+#: set). A few models at a time; the program and its scratch are made once per model.
 _LOCAL = threading.local()
+
+
+def _prepared(model: Model, act: frozenset[str]) -> tuple[Any, Any, NDArray[np.uint8]]:
+    cache: dict[int, tuple[Model, Any, Any, dict[frozenset[str], NDArray[np.uint8]]]] | None
+    cache = getattr(_LOCAL, "prepared", None)
+    if cache is None:
+        cache = _LOCAL.prepared = {}
+    got = cache.get(id(model))
+    if got is None or got[0] is not model:
+        if len(cache) >= 16:
+            cache.clear()
+        prog = _program(model)
+        got = (model, prog, _engine().DerivativeScratch(prog), {})
+        cache[id(model)] = got
+    masks = got[3]
+    mask = masks.get(act)
+    if mask is None:
+        mask = masks[act] = model.active_mask(act)
+    return got[1], got[2], mask
 
 
 def _engine_derivatives(
@@ -421,29 +443,30 @@ def _engine_derivatives(
     act: frozenset[str],
     tol: float,
 ) -> DynamicsDerivatives:
-    """The C++ pipeline (engine/src/derivatives.cpp), with a scratch cached per program."""
-    eng = _engine()
-    prog = _program(model)
-    cache: dict[int, tuple[Any, Any]] = getattr(_LOCAL, "scratch", None) or {}
-    _LOCAL.scratch = cache
-    got = cache.get(id(prog))
-    if got is None or got[0] is not prog:
-        if len(cache) >= 16:
-            cache.clear()
-        got = (prog, eng.DerivativeScratch(prog))
-        cache[id(prog)] = got
+    """The C++ pipeline (engine/src/derivatives.cpp), with the program and scratch cached."""
+    prog, scratch, mask = _prepared(model, act)
     try:
-        r = eng.forward_derivatives(
-            prog, got[1], t, q, qd, f if np.any(f) else None, u if u.size and np.any(u) else None,
-            model.active_mask(act), tol,
-        )  # fmt: skip
+        r = _engine().forward_derivatives(
+            prog,
+            scratch,
+            t,
+            q,
+            qd,
+            f if f.any() else None,
+            u if u.size and u.any() else None,
+            mask,
+            tol,
+        )
     except NotPositiveDefiniteError as exc:
         raise NotPositiveDefiniteError(
             f"M is not positive definite on N(A) at this state ({exc})"
         ) from None
-    B = r["B"] if "B" in r else (model.input_matrix(q) if model.k else np.zeros((model.n, 0)))
+    B = r["B"]
+    dqdd_df, dfc_df = r["dqdd_df"], r["dfc_df"]
     return DynamicsDerivatives(
         qdd=r["qdd"], f_c=r["f_c"], rank=int(r["rank"]),
-        dqdd_dq=r["dqdd_dq"], dqdd_dqd=r["dqdd_dqd"], dqdd_df=r["dqdd_df"], dqdd_du=r["dqdd_df"] @ B,
-        dfc_dq=r["dfc_dq"], dfc_dqd=r["dfc_dqd"], dfc_df=r["dfc_df"], dfc_du=r["dfc_df"] @ B,
+        dqdd_dq=r["dqdd_dq"], dqdd_dqd=r["dqdd_dqd"], dqdd_df=dqdd_df,
+        dqdd_du=dqdd_df @ B if B.shape[1] else np.zeros((model.n, 0)),
+        dfc_dq=r["dfc_dq"], dfc_dqd=r["dfc_dqd"], dfc_df=dfc_df,
+        dfc_du=dfc_df @ B if B.shape[1] else np.zeros((model.n, 0)),
     )  # fmt: skip

@@ -97,6 +97,8 @@ struct TreeScratch {
     std::vector<Mat3T<S>> R;     // per joint: rotation of its quaternion (free flyer, spherical)
     std::vector<Mat34T<S>> Tq;   // per joint: 2 G(ε) / |ε|²
     MatS Y;                      // 7 × nv scratch of the congruence (T_bᵀ M_v rows of one block)
+    MatS Lv;                     // 2 × nv: Σ λ_l A_v rows (residuals)
+    VecS tq;                     // nq scratch (residuals)
     FrameKinematicsT<S> ka, kb;
     std::vector<double> treg;    // registers of the drivers' expression tapes (functions of t)
 };
@@ -107,6 +109,9 @@ struct TreeWorkspace : Workspace, TreeScratch<double> {
     std::unique_ptr<TreeScratch<Dual>> dual;
     std::vector<Dual> dq, dqd;
     TermsOf<Dual> dterms;
+    // residual_tangents' scratch on DualW (DUAL_WIDTH directions per pass; made at first use)
+    std::unique_ptr<TreeScratch<DualW>> wide;
+    std::vector<DualW> wq, wqd, wrd, wrl, wrc;
 };
 
 class TreeProgram : public Program {
@@ -119,6 +124,10 @@ class TreeProgram : public Program {
                             const std::uint8_t* active, unsigned need, Terms& out, Terms& tangent,
                             Workspace& ws) const override;
     bool differentiable() const override { return true; }
+    // The residuals of ResidualQuery in one pass per DUAL_WIDTH directions: M a − h − f_p − B u
+    // = Tᵀ (rnea(q, v, T a + Ṫ q̇) + d ⊙ v − S u) (one RNEA, no CRBA), A a + γ = the frame
+    // accelerations at the joint acceleration T a + Ṫ q̇, Aᵀ λ from the rows.
+    Status residual_tangents(const ResidualQuery& rq, Workspace& ws) const override;
     std::unique_ptr<Workspace> make_workspace() const override;
 
     const TreeDescription& description() const { return d_; }
@@ -154,6 +163,14 @@ class TreeProgram : public Program {
     void apply_Tt(const TreeScratch<S>& ws, const S* fv, S* fq) const;
     template <class S>
     void congruence(TreeScratch<S>& ws, S* M) const;  // M = Tᵀ M_v T (symmetrized)
+    template <class S>
+    void apply_T(const TreeScratch<S>& ws, const double* xq, S* xv) const;  // xv = T xq (nq -> nv)
+    // The residuals of rq at (q, qd) on the scalar S: rd (nq), rl (nlam × nq), rc (m_all, active rows).
+    // fixed: when not null, the kinematics at q in double (directions that do not move q: the
+    // placements, motion subspaces and inertias are copied instead of recomputed on S).
+    template <class S>
+    Status residuals(const ResidualQuery& rq, const S* q, const S* qd, TreeScratch<S>& ws, S* rd, S* rl,
+                     S* rc, const TreeData* fixed) const;
 
     // T is the identity on runs of coordinates (iq .. iq+len ↔ iv .. iv+len) and a small block
     // on each quaternion joint (quaternion qs..qs+4 ↔ angular velocity a..a+3; free flyer also
