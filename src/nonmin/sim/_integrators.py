@@ -510,6 +510,29 @@ class Integrator(ABC):
         """
 
 
+def _fixed_step(
+    method: Integrator, fun: RHS, state: StepperState, t_bound: float, project: Projector | None,
+    place: Placer | None,
+) -> StepResult:  # fmt: skip
+    """One fixed step of ``method``; next to a singular passage (``place`` a
+    :class:`SingularPassages` whose :meth:`~SingularPassages.stages` holds) the step is RK4's
+    with its stage states projected by ``project`` (the engine loop: ``rk4_advance`` with
+    ``Loop::stage_proj``)."""
+    t = state.t
+    h = _clip(t, state.h if place is None else place(t, state.h), t_bound)
+    if project is None or not (isinstance(place, SingularPassages) and place.stages(t, h)):
+        y1 = method.advance(fun, t, state.y, state.f, h)
+    else:
+        y = state.y
+        k1 = fun(t, y) if state.f is None else state.f
+        k2 = fun(t + 0.5 * h, project(t + 0.5 * h, y + 0.5 * h * k1))
+        k3 = fun(t + 0.5 * h, project(t + 0.5 * h, y + 0.5 * h * k2))
+        k4 = fun(t + h, project(t + h, y + h * k3))
+        y1 = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    t1 = t_bound if h == t_bound - t else t + h
+    return StepResult(StepperState(t1, y1, None, state.h), h, 0, None)
+
+
 @dataclass(frozen=True)
 class RK4(Integrator):
     """Classical 4th-order Runge–Kutta with a fixed step ``dt`` (4 RHS calls per step).
@@ -544,22 +567,8 @@ class RK4(Integrator):
         self, fun: RHS, state: StepperState, t_bound: float, project: Projector | None = None,
         place: Placer | None = None,
     ) -> StepResult:  # fmt: skip
-        """One step; next to a singular passage (``place`` a :class:`SingularPassages` whose
-        :meth:`~SingularPassages.stages` holds) the stage states are projected with
-        ``project`` (the engine loop: ``rk4_advance`` with ``Loop::stage_proj``)."""
-        t = state.t
-        h = _clip(t, state.h if place is None else place(t, state.h), t_bound)
-        if project is None or not (isinstance(place, SingularPassages) and place.stages(t, h)):
-            y1 = self.advance(fun, t, state.y, state.f, h)
-        else:
-            y = state.y
-            k1 = fun(t, y) if state.f is None else state.f
-            k2 = fun(t + 0.5 * h, project(t + 0.5 * h, y + 0.5 * h * k1))
-            k3 = fun(t + 0.5 * h, project(t + 0.5 * h, y + 0.5 * h * k2))
-            k4 = fun(t + h, project(t + h, y + h * k3))
-            y1 = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        t1 = t_bound if h == t_bound - t else t + h
-        return StepResult(StepperState(t1, y1, None, state.h), h, 0, None)
+        """One step (:func:`_fixed_step`)."""
+        return _fixed_step(self, fun, state, t_bound, project, place)
 
 
 @dataclass(frozen=True)
@@ -634,22 +643,8 @@ class ImplicitMidpoint(Integrator):
         self, fun: RHS, state: StepperState, t_bound: float, project: Projector | None = None,
         place: Placer | None = None,
     ) -> StepResult:  # fmt: skip
-        """One step; next to a singular passage (``place`` a :class:`SingularPassages` whose
-        :meth:`~SingularPassages.stages` holds) the stage states are projected with
-        ``project`` (the engine loop: ``rk4_advance`` with ``Loop::stage_proj``)."""
-        t = state.t
-        h = _clip(t, state.h if place is None else place(t, state.h), t_bound)
-        if project is None or not (isinstance(place, SingularPassages) and place.stages(t, h)):
-            y1 = self.advance(fun, t, state.y, state.f, h)
-        else:
-            y = state.y
-            k1 = fun(t, y) if state.f is None else state.f
-            k2 = fun(t + 0.5 * h, project(t + 0.5 * h, y + 0.5 * h * k1))
-            k3 = fun(t + 0.5 * h, project(t + 0.5 * h, y + 0.5 * h * k2))
-            k4 = fun(t + h, project(t + h, y + h * k3))
-            y1 = y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        t1 = t_bound if h == t_bound - t else t + h
-        return StepResult(StepperState(t1, y1, None, state.h), h, 0, None)
+        """One step (:func:`_fixed_step`)."""
+        return _fixed_step(self, fun, state, t_bound, project, place)
 
 
 def _initial_step(
