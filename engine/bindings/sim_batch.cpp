@@ -4,8 +4,10 @@
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
+#include <nanobind/stl/tuple.h>
 
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <string>
 #include <vector>
@@ -42,7 +44,9 @@ void bind_sim_batch(nb::module_& m) {
     m.def(
         "simulate_batch",
         [](std::vector<nb::handle> programs, CInt1 program_of, double t0, CArr2 q0, CArr2 qd0, CMask2 active,
-           const sim::Options& opt, CArr1 t_out, unsigned record, int threads) {
+           const sim::Options& opt, CArr1 t_out, unsigned record, int threads, bool contact,
+           const std::vector<double>& restitution, double v_thresh, int zeno_max, double zeno_window,
+           const std::vector<std::tuple<int, std::vector<std::uint8_t>, nb::handle>>& controllers) {
             if (programs.empty()) raise_error("InputError", "simulate_batch: no program");
             sim::BatchInput in;
             for (nb::handle h : programs) in.programs.push_back(&nb::cast<const Program&>(h));
@@ -74,6 +78,20 @@ void bind_sim_batch(nb::module_& m) {
             in.t_out.assign(t_out.data(), t_out.data() + N);
             in.record = record;
             in.threads = threads;
+            in.contact = contact;
+            if (contact && restitution.size() != c)
+                raise_error("ShapeError", "simulate_batch: restitution must have one value per constraint");
+            in.restitution = restitution;
+            in.v_thresh = v_thresh;
+            in.zeno_max = zeno_max;
+            in.zeno_window = zeno_window;
+            for (const auto& [prog, mask, ctl] : controllers) {
+                if (prog < 0 || static_cast<std::size_t>(prog) >= programs.size() || mask.size() != c)
+                    raise_error("InputError", "simulate_batch: a controller names no program or has a bad mask");
+                in.ctrl_protos.push_back(nb::cast<const sim::Controller*>(ctl));
+                in.ctrl_program.push_back(prog);
+                in.ctrl_mask.push_back(mask);
+            }
 
             const double nan = std::numeric_limits<double>::quiet_NaN();
             nb::dict d;
@@ -102,6 +120,13 @@ void bind_sim_batch(nb::module_& m) {
             auto rank = owned<std::int64_t>({k, N}, -1);
             out.rank = rank.data();
             d["rank"] = rank;
+            if (contact) {
+                auto act = owned<std::uint8_t>({k, N, c}, 0);
+                out.active = act.data();
+                d["active_mask"] = act;
+            }
+            std::vector<std::vector<sim::EventInfo>> events(contact ? k : 0);
+            if (contact) out.events = &events;
             auto outcome = owned<std::int32_t>({k}, -1);
             auto samples = owned<std::int64_t>({k}, 0);
             auto steps = owned<std::int64_t>({k}, 0), rhs = owned<std::int64_t>({k}, 0),
@@ -132,14 +157,52 @@ void bind_sim_batch(nb::module_& m) {
             d["y_end"] = y_end;
             d["messages"] = messages;
             d["failed"] = bad;
+            if (contact) {
+                nb::list evs;
+                for (const auto& run : events) {
+                    nb::list l;
+                    for (const sim::EventInfo& e : run) {
+                        nb::dict ed;
+                        ed["t"] = e.t;
+                        ed["name"] = e.name;
+                        ed["transition"] = e.text;
+                        auto vec = [&](const Vec& v) {
+                            auto a = owned<double>({n}, 0.0);
+                            std::memcpy(a.data(), v.data(), n * sizeof(double));
+                            return a;
+                        };
+                        auto msk = [&](const std::vector<std::uint8_t>& v) {
+                            auto a = owned<std::uint8_t>({c}, 0);
+                            if (c) std::memcpy(a.data(), v.data(), c);
+                            return a;
+                        };
+                        ed["q_before"] = vec(e.q_before);
+                        ed["qd_before"] = vec(e.qd_before);
+                        ed["q_after"] = vec(e.q_after);
+                        ed["qd_after"] = vec(e.qd_after);
+                        ed["active_before"] = msk(e.active_before);
+                        ed["active_after"] = msk(e.active_after);
+                        l.append(ed);
+                    }
+                    evs.append(l);
+                }
+                d["events"] = evs;
+            }
             return d;
         },
         nb::arg("programs"), nb::arg("program_of"), nb::arg("t0"), nb::arg("q0"), nb::arg("qd0"),
         nb::arg("active"), nb::arg("options"), nb::arg("t_out"), nb::arg("record"), nb::arg("threads"),
+        nb::arg("contact") = false, nb::arg("restitution") = std::vector<double>{}, nb::arg("v_thresh") = 1e-6,
+        nb::arg("zeno_max") = 100, nb::arg("zeno_window") = 1e-3,
+        nb::arg("controllers") = std::vector<std::tuple<int, std::vector<std::uint8_t>, nb::handle>>{},
         "Run k simulations (run i: programs[program_of[i]], (t0, q0[i], qd0[i]), active mask "
         "active[i]) to options.t1, each recorded at t_out; threads over the runs with the GIL "
         "released. Returns a dict of arrays (k, N, ...) and per-run outcome (SIM_DONE when the "
-        "run reached t1), samples, n_steps, n_rhs, n_rejected, t_end, y_end, messages.");
+        "run reached t1), samples, n_steps, n_rhs, n_rejected, t_end, y_end, messages. contact: the "
+        "engine's event layer on the unilateral constraints (restitution per constraint, v_thresh, "
+        "Zeno limit); then also active_mask (k, N, c) and events (per run, dicts as SimLoop.events). "
+        "controllers: (program index, active mask, compiled SimController) prototypes, copied per "
+        "thread and run.");
 }
 
 }  // namespace nonmin::bindings

@@ -194,6 +194,8 @@ void set_active(Loop& L, const std::uint8_t* active) {
     }
     L.m = static_cast<int>(L.rows.size());
     L.m_hol = static_cast<int>(std::count(L.hol.begin(), L.hol.end(), 1));
+    if (L.ctrl_select)
+        if (Controller* c = L.ctrl_select->select(L.active.data())) L.ctrl = c;
     if (L.ctrl) L.ctrl->attach(L.T, L.Ac, L.m, L.rows);
     L.vheld = false;  // a held velocity-correction factorization is the old rows'
     friction_mask(L);

@@ -149,14 +149,18 @@ def test_step_budget_is_checked_before_the_runs(bar):
         simulate_batch(bar.model, 0.2, Q, V, t_eval=T_EVAL[:21], max_steps=50)
 
 
-def test_runs_with_contact_go_through_simulate():
+def test_runs_with_contact_are_batched_and_engine_python_goes_through_simulate():
+    # (contact with impacts and releases: tests/sweep/test_batch_events.py)
     arm = library.get("arm2r_wall")
     st = arm.state
-    bt = simulate_batch(arm, 0.3, np.stack([st.q, st.q]), np.stack([st.qd, st.qd + 0.5]),
-                        t_eval=np.linspace(0, 0.3, 7))  # fmt: skip
-    assert bt.engine == ("simulate", "simulate")
-    ref = simulate(arm, 0.3, st.q, st.qd + 0.5, t_eval=np.linspace(0, 0.3, 7))
-    np.testing.assert_array_equal(bt[1].q, ref.q)
+    t = np.linspace(0, 0.3, 7)
+    bt = simulate_batch(arm, 0.3, np.stack([st.q, st.q]), np.stack([st.qd, st.qd + 0.5]), t_eval=t)
+    assert bt.engine == ("batch", "batch")
+    ref = simulate(arm, 0.3, st.q, st.qd + 0.5, t_eval=t)
+    np.testing.assert_allclose(bt[1].q, ref.q, rtol=0, atol=1e-12)
+    py = simulate_batch(arm, 0.3, np.stack([st.q, st.q]), np.stack([st.qd, st.qd + 0.5]), t_eval=t, engine="python")
+    assert py.engine == ("simulate", "simulate")
+    np.testing.assert_array_equal(py[1].q, simulate(arm, 0.3, st.q, st.qd + 0.5, t_eval=t, engine="python").q)
 
 
 def test_bad_arguments_are_typed_errors(bar):

@@ -3,12 +3,19 @@
 The k runs go to the compiled engine together (``engine/src/sim_batch.cpp``): each run is the
 engine loop of :func:`simulate` — the same integrator, stabilization, rank policy and output
 sampling, its own step control and active set — and threads take runs one at a time with the
-GIL released, one loop (all buffers) per thread and model, nothing allocated per step. A run
-that the engine loop does not finish alone (a numerical failure it hands over) is finished by
-:func:`simulate` on that run, and runs the batched loop does not cover at all (user events,
-automatic contact of unilateral constraints, a controller, a model without a compiled program,
-custom Integrator/Stabilization classes) are made one by one through :func:`simulate`: every
-run's result is the one :func:`simulate` gives for it, whichever path ran it.
+GIL released, one loop (all buffers) per thread and model, nothing allocated per step.
+Automatic contact goes through the engine's event layer (``engine/src/sim_events.cpp``: guards,
+location, simultaneous impacts, releases) inside the batch, and compiled controllers
+(``Controller.engine_controller``: Regulator, computed-torque Tracker, ForceControl, Switched)
+are copied per thread and run, one per active set met. A run that the engine loop does not
+finish alone (a numerical failure it hands over, a Zeno accumulation, an active set without a
+compiled controller) is made again by :func:`simulate`, and runs the batched loop does not cover
+at all (user events, whose guards and transitions are Python; Coulomb friction, whose modes
+start in Python; a controller without a compiled form; a model without a compiled program;
+custom Integrator/Stabilization classes; the energy projection, whose level is per run) are made
+one by one through :func:`simulate`: every run's result is the one :func:`simulate` gives for it
+(bit for bit without events; to round-off with contact, whose start :func:`simulate` takes in
+Python), whichever path ran it.
 """
 
 from __future__ import annotations
@@ -24,6 +31,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import InputError, NonFiniteError, ShapeError
 from ..model import Model
 from . import _engine
+from ._events import EventRecord
 from ._trajectory import Status, Trajectory
 
 __all__ = ["BatchTrajectory", "simulate_batch"]
@@ -65,6 +73,11 @@ class BatchTrajectory:
     engine : tuple of str, length k
         Which path ran each run: ``"batch"`` (the batched engine loop), ``"batch, then
         simulate"`` (the engine handed a failure over), ``"simulate"`` (not covered by the batch).
+    events : tuple of tuple of EventRecord, length k
+        The events of each run (automatic contact; user events of runs made by simulate).
+    active_mask : ndarray of bool, shape (k, N, c), or None
+        The active constraints at each sample (with automatic contact; else each run's initial
+        set, ``active``, holds throughout).
     """
 
     t: FloatArray
@@ -91,6 +104,8 @@ class BatchTrajectory:
     active: tuple[frozenset[str], ...]
     runs: tuple[Trajectory | None, ...] = field(repr=False)  # the simulate() results it holds
     metadata: dict[str, Any] = field(default_factory=dict, repr=False)
+    events: tuple[tuple[EventRecord, ...], ...] = ()
+    active_mask: NDArray[np.bool_] | None = None
 
     def __len__(self) -> int:
         return len(self.status)
@@ -144,6 +159,7 @@ class BatchTrajectory:
             coordinate_names=self.coordinate_names, constraint_names=self.constraint_names,
             actuator_names=self.actuator_names, active=tuple(self.active[j] for j in idx),
             runs=tuple(self.runs[j] for j in idx), metadata=self.metadata,
+            events=tuple(self.events[j] for j in idx) if self.events else (), active_mask=pick(self.active_mask),
         )  # fmt: skip
 
     def _run(self, j: int) -> Trajectory:
@@ -157,16 +173,19 @@ class BatchTrajectory:
             return np.full((N, w), np.nan) if a is None else np.array(a[j, :N])
 
         mask = np.array([nm in self.active[j] for nm in self.constraint_names], dtype=bool)
+        am = np.repeat(mask[None], N, axis=0).reshape(N, c) if self.active_mask is None \
+            else self.active_mask[j, :N].copy()  # fmt: skip
         return Trajectory(
             t=self.t[:N].copy(), q=arr(self.q, n), qd=arr(self.qd, n), qdd=arr(self.qdd, n),
             f_c=arr(self.f_c, n), u=arr(self.u, nu) if nu else np.zeros((N, 0)),
-            active_mask=np.repeat(mask[None], N, axis=0).reshape(N, c), rank=self.rank[j, :N].copy(),
+            active_mask=am, rank=self.rank[j, :N].copy(),
             cond=self.cond[j, :N].copy(), mu=self.mu[j, :N].copy(), energy=self.energy[j, :N].copy(),
             phi_norm=self.phi_norm[j, :N].copy(),
             velocity_residual_norm=self.velocity_residual_norm[j, :N].copy(),
             constraint_names=self.constraint_names, coordinate_names=self.coordinate_names,
             actuator_names=self.actuator_names, status=self.status[j], message=self.message[j],
             n_steps=int(self.n_steps[j]), n_rhs=int(self.n_rhs[j]), n_rejected=int(self.n_rejected[j]),
+            events=self.events[j] if self.events else (),
             metadata={**self.metadata, "engine": self.engine[j], "run": j},
         )  # fmt: skip
 
@@ -418,12 +437,18 @@ def simulate_batch(
     _durable.check_budget(t0=t0, t1=t1, h=dt if integ.adaptive else h_init, max_steps=int(max_steps),
                           t_out=t_out, n=n, k=model.k, c=len(model.constraint_names))  # fmt: skip
     # ---------------------------------------------------------------- which runs batch
-    unilateral = any(c.kind == "unilateral" for c in model.constraints) and evset.contact
+    names = model.constraint_names
+    unilateral = tuple(c.name for c in model.constraints if c.kind == "unilateral") if evset.contact else ()
+    contact = bool(unilateral)
     why = None
     if engine not in ("auto", "engine"):
         why = f"engine={engine!r}"
-    elif evset.events or unilateral or controller is not None:
-        why = "events, automatic contact or a controller (the event steps and callbacks run in Python)"
+    elif evset.events:
+        why = "user events (their guards and transitions run in Python)"
+    elif contact and model.friction_contacts:
+        why = "Coulomb friction (the contacts' modes start in Python)"
+    elif isinstance(stab, Projection) and stab.energy:
+        why = "the energy projection (its level is per run)"
     else:
         why = _engine.ineligible(integ, stab, (), (), engine)
     progs: list[Any] = []
@@ -435,6 +460,9 @@ def simulate_batch(
                 why = f"model {m.name!r} has no compiled program"
                 break
             progs.append(p)
+    ctrls: list[tuple[int, list[int], Any]] = []
+    if why is None and controller is not None:
+        ctrls, why = _compiled_controllers(controller, models, progs, of_all, acts, names, unilateral)
     if why is not None and engine == "engine":
         raise InputError(f"simulate_batch(engine='engine') cannot batch these runs: {why}")
     meta: dict[str, Any] = {
@@ -443,10 +471,10 @@ def simulate_batch(
                     "dt": None if integ.adaptive else h_init, "stabilization": repr(stab),
                     "rank_rtol": rank_rtol, "runs": k, "record": list(rec)},
     }  # fmt: skip
-    names = model.constraint_names
     masks = np.array([[nm in a for nm in names] for a in acts], dtype=np.uint8).reshape(k, len(names))
     sim_kw: dict[str, Any] = {"solver": sol, "events": evset, "stabilization": stabilization, "engine": engine,
                               "controller": controller, "output": replace(out, t_eval=t_out, throw=False)}  # fmt: skip
+    run_events: list[tuple[EventRecord, ...]] = [()] * k
     if why is None:
         opts = _engine.options(integ, stab, dt=h_init, t1=t1, h0=h_init, rank_rtol=rank_rtol,
                                drift_factor=S.DRIFT_RANK_FACTOR, project_initial=project_initial,
@@ -454,8 +482,18 @@ def simulate_batch(
         flags = 0
         for r in rec:
             flags |= int(getattr(eng, "REC_" + ("FC" if r == "f_c" else r.upper())))
+        if isinstance(evset.restitution, Mapping):
+            S._check_names(model, evset.restitution, "restitution")
+        rest = [S._restitution_of(evset.restitution if isinstance(evset.restitution, float)
+                                  else dict(evset.restitution), c.name) for c in model.constraints]  # fmt: skip
         d = eng.simulate_batch(progs, of_all, float(t0), Q, V, np.ascontiguousarray(masks), opts,
-                               np.ascontiguousarray(t_out), flags, int(threads or 0))  # fmt: skip
+                               np.ascontiguousarray(t_out), flags, int(threads or 0), contact=contact,
+                               restitution=rest, v_thresh=float(evset.impact_velocity_threshold),
+                               zeno_max=int(evset.zeno_max_events), zeno_window=float(evset.zeno_window),
+                               controllers=ctrls)  # fmt: skip
+        if contact:
+            d["active_mask"] = d["active_mask"].astype(bool)
+            run_events = [tuple(_record(model, e) for e in run) for run in d["events"]]
         outcome = d["outcome"]
         status = [Status.SUCCESS] * k
         message = ["reached the end of t_span"] * k
@@ -465,6 +503,8 @@ def simulate_batch(
         meta["engine"] = "batch"
     else:
         d = _empty(k, N, n, model.k, rec)
+        if contact or evset.events:
+            d["active_mask"] = np.zeros((k, N, len(names)), dtype=bool)
         status, message, runs, engines = [Status.SUCCESS] * k, [""] * k, [None] * k, ["simulate"] * k
         redo = list(range(k))
         meta["engine"] = f"simulate, one run at a time ({why})"
@@ -472,6 +512,7 @@ def simulate_batch(
         tr = S.simulate(models[int(of_all[i])], (t0, t1), Q[i], V[i], active=acts[i], **sim_kw)
         _fill(d, i, tr, t_out, rec)
         runs[i] = tr
+        run_events[i] = tr.events
         status[i], message[i] = tr.status, tr.message
         engines[i] = "simulate" if why is not None else "batch, then simulate"
     return BatchTrajectory(
@@ -481,8 +522,51 @@ def simulate_batch(
         n_steps=np.asarray(d["n_steps"], dtype=np.int64), n_rhs=np.asarray(d["n_rhs"], dtype=np.int64),
         n_rejected=np.asarray(d["n_rejected"], dtype=np.int64), engine=tuple(engines),
         coordinate_names=model.coordinate_names, constraint_names=names, actuator_names=model.actuator_names,
-        active=acts, runs=tuple(runs), metadata=meta,
+        active=acts, runs=tuple(runs), metadata=meta, events=tuple(run_events) if (contact or evset.events) else (),
+        active_mask=d.get("active_mask"),
     )  # fmt: skip
+
+
+#: Most unilateral constraints for which a batch compiles the controller of every active set
+#: they can make (2^u sets per initial one); above, controlled contact runs are made one by one.
+MAX_CONTACT_SETS = 6
+
+
+def _compiled_controllers(
+    controller: Any, models: list[Model], progs: list[Any], of_all: NDArray[np.int32],
+    acts: tuple[frozenset[str], ...], names: tuple[str, ...], unilateral: tuple[str, ...],
+) -> tuple[list[tuple[int, list[int], Any]], str | None]:  # fmt: skip
+    """The compiled controller of each (model, active set) the runs start in and, with contact,
+    of each set the unilateral constraints can make from it: ``(program index, mask, compiled)``
+    prototypes for the engine (copied per thread and run), or why the runs are not batched."""
+    if len(unilateral) > MAX_CONTACT_SETS:
+        return [], f"a controller with {len(unilateral)} unilateral constraints (more than {MAX_CONTACT_SETS})"
+    out: list[tuple[int, list[int], Any]] = []
+    seen: set[tuple[int, frozenset[str]]] = set()
+    starts = sorted({(int(j), a) for j, a in zip(of_all, acts)}, key=lambda x: (x[0], sorted(x[1])))
+    for j, a in starts:
+        base = a - set(unilateral)
+        sets = [a] + [base | {u for b, u in enumerate(unilateral) if bits >> b & 1}
+                      for bits in range(1 << len(unilateral))]  # fmt: skip
+        for s_i, act in enumerate(sets):
+            if (j, act) in seen:
+                continue
+            seen.add((j, act))
+            compiled = _engine.compiled_controller(controller, models[j], progs[j], act)
+            if compiled is None:
+                if s_i == 0:
+                    return [], f"controller {type(controller).__name__} has no compiled form here"
+                continue  # (a run reaching this set is made again by simulate)
+            out.append((j, [int(nm in act) for nm in names], compiled))
+    return out, None
+
+
+def _record(model: Model, d: Mapping[str, Any]) -> EventRecord:
+    def names(mask: Any) -> frozenset[str]:
+        return frozenset(nm for nm, a in zip(model.constraint_names, mask) if a)
+
+    return EventRecord(float(d["t"]), str(d["name"]), str(d["transition"]), d["q_before"], d["qd_before"],
+                       d["q_after"], d["qd_after"], names(d["active_before"]), names(d["active_after"]))  # fmt: skip
 
 
 def _empty(k: int, N: int, n: int, nu: int, rec: tuple[str, ...]) -> dict[str, Any]:
@@ -499,12 +583,16 @@ def _fill(d: dict[str, Any], i: int, tr: Trajectory, t_out: FloatArray, rec: tup
     """Run i's samples at the output times (the last sample at each time: after an event)."""
     for key in (*rec, *_SCALARS, "rank"):
         d[key][i] = -1 if key == "rank" else np.nan
+    if "active_mask" in d:
+        d["active_mask"][i] = False
     if len(tr):
         j = np.searchsorted(tr.t, t_out, side="right") - 1
         ok = (j >= 0) & (tr.t[np.clip(j, 0, None)] == t_out)
         jj = j[ok]
         for key in (*rec, *_SCALARS, "rank"):
             d[key][i][ok] = getattr(tr, key)[jj]
+        if "active_mask" in d:
+            d["active_mask"][i][ok] = tr.active_mask[jj]
     d["n_steps"][i] = tr.n_steps
     d["n_rhs"][i] = tr.n_rhs
     d["n_rejected"][i] = tr.n_rejected

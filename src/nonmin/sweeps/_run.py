@@ -94,7 +94,7 @@ def run_block(spec: SweepSpec, rows: Sequence[Mapping[str, Any]], n: int, N: int
             res["status"][i] = _status_name(bt.status[j])
             res["message"][i] = bt.message[j]
             held = bt.runs[j]
-            res["events"][i] = 0 if held is None else len(held.events)
+            res["events"][i] = len(bt.events[j]) if bt.events else (0 if held is None else len(held.events))
             res["n_steps"][i] = int(bt.n_steps[j])
             res["energy_drift"][i] = drift[j]
             res["closure"][i] = closure[j]

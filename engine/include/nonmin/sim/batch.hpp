@@ -6,9 +6,17 @@
 // everything is allocated when a thread first meets a pair, nothing per run or per step (the
 // sample buffers are reused after each run).
 //
-// A run that the loop does not finish alone — a numerical failure handed over, a watched guard
-// (none here: events and contact are the Python layer's) — ends with its outcome and message;
-// nonmin.sim.simulate_batch then finishes that run through simulate(), as one run would.
+// Automatic contact runs through the engine's event layer (sim/events.hpp) exactly as in one run
+// of simulate(): the contact guards of the active set at the start, each transition applied by
+// contact_event() inside run(), then the loop resumed from the state after it (the bookkeeping
+// the Python driver does between two engine calls: the Zeno count, the controller of the new
+// active set). Compiled controllers (sim/control.hpp) are copied per thread and run
+// (Controller::clone), one per active set met (ControllerSelect).
+//
+// A run that the loop does not finish alone — a numerical failure handed over, a step the event
+// layer leaves to the Python driver, a Zeno accumulation, a callback error — ends with its
+// outcome and message; nonmin.sim.simulate_batch then makes that run through simulate(), which
+// raises (or records) what one run would.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -41,6 +49,19 @@ struct BatchInput {
     std::vector<double> t_out;                 // output grid (N times in [t0, t1])
     unsigned record = REC_Q | REC_QD;
     int threads = 0;                           // ≤ 0: hardware concurrency
+    // automatic contact (simulate's contact=True with unilateral constraints): Newton's e per
+    // constraint, the impact velocity threshold, the Zeno limit (more than zeno_max events
+    // within zeno_window ends the run: `zeno` outcome, made again by simulate())
+    bool contact = false;
+    std::vector<double> restitution;
+    double v_thresh = 1e-6;
+    int zeno_max = 100;
+    double zeno_window = 1e-3;
+    // compiled controllers: the prototype of (program ctrl_program[j], active set ctrl_mask[j]),
+    // cloned per thread and run; empty: no controller
+    std::vector<const Controller*> ctrl_protos;
+    std::vector<int> ctrl_program;
+    std::vector<std::vector<std::uint8_t>> ctrl_mask;
 };
 
 // Per-run results; sample arrays are (k × N × width), row-major, NaN where not reached.
@@ -53,12 +74,14 @@ struct BatchOutput {
     double* energy = nullptr, *phi_norm = nullptr, *vel_norm = nullptr, *cond = nullptr,
            *mu = nullptr;   // k × N
     std::int64_t* rank = nullptr;  // k × N
+    std::uint8_t* active = nullptr;  // k × N × c: the active set of each sample (contact runs)
     std::int32_t* outcome = nullptr;  // k: Outcome (done = the run reached t1)
     std::int64_t* samples = nullptr;  // k: samples written
     std::int64_t* n_steps = nullptr, *n_rhs = nullptr, *n_rejected = nullptr;  // k
     double* t_end = nullptr;          // k
     double* y_end = nullptr;          // k × 2n
     std::vector<std::string>* messages = nullptr;  // k
+    std::vector<std::vector<EventInfo>>* events = nullptr;  // k: the transitions applied (contact)
 };
 
 // Run the batch; returns the number of runs whose outcome is not `done`.

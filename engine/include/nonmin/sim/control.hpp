@@ -94,6 +94,7 @@ class Projected : public Controller {
     Status control(double t, const double* q, const double* qd, const std::uint8_t* active, double* u) override;
     Status update(double t, const double* q, const double* qd, const std::uint8_t* active) override;
     bool stateless() const override { return true; }  // update() only records
+    std::unique_ptr<Controller> clone() const override { return std::make_unique<Projected>(*prog_, s_); }
 
     // ControlState.record's counters over the accepted steps seen
     long long steps = 0, infeasible_steps = 0;

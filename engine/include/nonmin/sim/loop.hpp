@@ -133,6 +133,18 @@ class Controller {
         (void)t, (void)q, (void)qd, (void)active;
         return Status::ok;
     }
+    // A fresh controller with the same law and no history, for another loop (the batch: one per
+    // thread and run); null when the controller cannot be copied (then runs are not batched).
+    virtual std::unique_ptr<Controller> clone() const { return nullptr; }
+};
+
+// The controller of an active set, for a loop whose event layer changes the active set (the
+// batch keeps one compiled controller per active set): set_active() asks it, and keeps the
+// current controller when it returns null.
+class ControllerSelect {
+  public:
+    virtual ~ControllerSelect() = default;
+    virtual Controller* select(const std::uint8_t* active) = 0;
 };
 
 // The guards watched during the steps (events and unilateral contact): check() is given the
@@ -219,6 +231,7 @@ struct EventInfo {
 struct Loop {
     const Program* prog = nullptr;
     Controller* ctrl = nullptr;
+    ControllerSelect* ctrl_select = nullptr;  // (the batch) the controller after an active-set change
     Watch* watch = nullptr;
     Options opt;
     std::unique_ptr<Workspace> ws;
