@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
+from . import _durable
 from ._events import Event
 from ._integrators import Integrator
 
@@ -256,6 +257,12 @@ class Output:
                 raise InputError(f"reactions must be True/False or constraint names, got {self.reactions!r}")
             object.__setattr__(self, "reactions", tuple(self.reactions))
         if self.t_eval is not None:
+            size = np.size(self.t_eval)
+            if size * _durable.sample_bytes(1, 0, 0) > _durable.MAX_RECORD_BYTES:  # before copying it
+                raise InputError(
+                    f"t_eval has {size} times: recording them needs more than the "
+                    f"{_durable.MAX_RECORD_BYTES / 2**30:g} GiB budget of a run; pass a coarser t_eval"
+                )
             try:
                 t = np.array(self.t_eval, dtype=float).ravel()
             except (TypeError, ValueError):

@@ -678,9 +678,10 @@ def simulate(
         _check_names(model, restitution, "restitution")
     t_out: FloatArray | None = None
     if t_eval is not None:
-        t_out = np.array(t_eval, dtype=float)
-        _durable.check_budget(t0=t0, t1=t1, h=None, max_steps=1, t_out=t_out, n=n, k=k,
-                              c=len(model.constraint_names))  # its size, before reading it
+        t_raw = np.asarray(t_eval)
+        _durable.check_budget(t0=t0, t1=t1, h=None, max_steps=1, t_out=t_raw, n=n, k=k,
+                              c=len(model.constraint_names))  # its size, before copying it
+        t_out = np.array(t_raw, dtype=float)
         if not np.isfinite(t_out).all():
             raise NonFiniteError(f"t_eval must be finite, got NaN/inf at index {int(np.argmax(~np.isfinite(t_out)))}")
         if prev is not None:
