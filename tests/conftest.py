@@ -34,10 +34,26 @@ def pytest_cmdline_main(config: pytest.Config) -> None:
             config.option.numprocesses = 2
 
 
-#: Tests that take the longest on a fresh clone (mypy checks ``src`` without a cache): first, so
-#: that with two workers they run beside the rest instead of at the end.
-_FIRST = ("tests/test_lint.py::test_mypy_clean",)
+#: The longest tests of a fresh clone, longest first (``--durations`` of the default suite, 17:58
+#: UTC 2026-11-26, load ~15: mypy 140 s, the tutorial pages 17–30 s each, the demo 29 s, ...;
+#: not the browser tests, whose module fixture starts Chromium once per worker that runs them):
+#: they go first, so that the two workers take them in turn beside the rest instead of one
+#: worker finishing them alone at the end (longest-processing-time-first scheduling).
+_FIRST = (
+    "tests/test_lint.py::test_mypy_clean",
+    "tests/docs/test_tutorials.py::test_tutorial_runs[03",
+    "tests/cli/test_cli_e2e.py::test_demo_quick",
+    "tests/docs/test_tutorials.py::test_tutorial_runs[02",
+    "tests/docs/test_tutorials.py::test_tutorial_runs[01",
+    "tests/cli/test_cli_e2e.py::test_run_writes_all_outputs",
+    "tests/docs/test_tutorials.py::test_tutorial_runs[04",
+    "tests/control/test_control_hybrid.py::test_passivity_set_point_lyapunov_non_increasing",
+)
+
+
+def _rank(item: pytest.Item) -> int:
+    return next((i for i, p in enumerate(_FIRST) if item.nodeid.startswith(p)), len(_FIRST))
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    items.sort(key=lambda it: it.nodeid not in _FIRST)  # stable: the rest keep their order
+    items.sort(key=_rank)  # stable: the rest keep their order
