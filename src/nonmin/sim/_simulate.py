@@ -64,7 +64,15 @@ from ..model import ConstraintTerms, Model, State
 from . import _durable, _engine, _friction
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
 from ._impulses import with_impulses
-from ._integrators import METHODS, RK4, Integrator, SingularPassages, StepperState, hermite_quintic
+from ._integrators import (
+    METHODS,
+    RK4,
+    Integrator,
+    SingularPassages,
+    StepperState,
+    _clip,
+    hermite_quintic,
+)
 from ._options import EventSet, Output, Solver, resolve_options
 from ._progress import Progress
 from ._stabilization import Projection, Stabilization, resolve_stabilization
@@ -964,13 +972,30 @@ def simulate(
                 # F at the step start: the method needs it anyway, output samples inside the
                 # step need it for the continuous extension
                 state = state._replace(f=system.rhs(state.t, state.y))
+            h_star = _end_at_passage(integ, passages, stab, system.active, state, t1)
+            if h_star is not None and state.f is None:
+                state = state._replace(f=system.rhs(state.t, state.y))
             y_start, f_start, t_start = state.y, state.f, state.t
-            res = integ.step(system.rhs, state, t1, project_y, passages) if passages is not None \
-                else integ.step(system.rhs, state, t1, project_y)  # fmt: skip
+            res = integ.step(system.rhs, state, t1 if h_star is None else t_start + h_star, project_y, passages) \
+                if passages is not None else integ.step(system.rhs, state, t1, project_y)  # fmt: skip
             n_rejected += res.n_rejected
             n_steps += 1
             h = res.h
             t_new = res.state.t
+            dense_star = None
+            if h_star is not None:
+                # the run ends at a predicted singular instant: the step placed past it was
+                # taken; the end state is its quintic Hermite interpolant at t1, projected as a
+                # sample (the engine loop's end_star, PASSAGE_END_BAND)
+                assert f_start is not None
+                qf, vf = stab.project(model, t_new, res.state.y[:n].copy(), res.state.y[n:].copy(),
+                                      system.active, rank_rtol)  # fmt: skip
+                pf = system.point(t_new, qf, vf)
+                dense_star = partial(_fixed_step_dense, y_start, f_start, np.concatenate((qf, vf)),
+                                     np.concatenate((vf, pf.qdd)), t_start, h)  # fmt: skip
+                ys = dense_star(t1)
+                res = res._replace(state=StepperState(t1, ys, None, res.state.h))
+                h, t_new = t1 - t_start, t1
 
             def at(s: float, _y: FloatArray = y_start, _f: Any = f_start, _t: float = t_start) -> _Point:
                 """Projected state after a partial step of size s from the step start."""
@@ -981,10 +1006,14 @@ def simulate(
                 qq, vv = stab.project(model, _t + s, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
                 return system.point(_t + s, qq, vv)
 
-            q1, qd1 = stab.project(model, t_new, res.state.y[:n].copy(), res.state.y[n:].copy(),
-                                   system.active, rank_rtol)
+            if dense_star is None:
+                q1, qd1 = stab.project(model, t_new, res.state.y[:n].copy(), res.state.y[n:].copy(),
+                                       system.active, rank_rtol)  # fmt: skip
+            else:
+                q1, qd1 = stab.project_sample(model, t_new, res.state.y[:n].copy(), res.state.y[n:].copy(),
+                                              system.active, rank_rtol)  # fmt: skip
             end_tol = 1e-12 * max(1.0, abs(t_new))
-            dense = res.dense
+            dense = res.dense if dense_star is None else dense_star
             inside = (dense is None and f_start is not None and t_out is not None
                       and out_i < t_out.size and t_out[out_i] < t_new - end_tol)  # fmt: skip
             # the full evaluation at the step end is needed for guards, recording, or the
@@ -1337,6 +1366,35 @@ def _advance_out(t_out: FloatArray | None, i: int, t: float) -> int:
     while i < t_out.size and t_out[i] <= t:
         i += 1
     return i
+
+
+#: A fixed-step run whose end lies within this fraction of the placed step from the predicted
+#: singular instant ends by interpolation (:func:`_end_at_passage`; the engine loop's
+#: ``PASSAGE_END_BAND``).
+PASSAGE_END_BAND = 0.05
+
+
+def _end_at_passage(
+    integ: Integrator, passages: SingularPassages | None, stab: Stabilization, active: frozenset[str],
+    state: StepperState, t1: float,
+) -> float | None:  # fmt: skip
+    """The step to take past ``t1`` when the run ends at a predicted singular instant, else None.
+
+    A step ending on the singular configuration evaluates F there (the Gauss solution, not the
+    limit along the branch: the crossed four-bar ending at a change point had q̇ off by up to
+    5 m/s). When the placed step reaches past ``t1`` and ``t1`` lies within
+    :data:`PASSAGE_END_BAND` of it from the predicted instant, the driver takes that step and
+    ends on its quintic Hermite interpolant at ``t1``, projected as a sample (engine loop:
+    ``end_star`` in ``run``)."""
+    if integ.adaptive or passages is None or not isinstance(stab, Projection) or not active:
+        return None
+    ts = passages.t_star
+    if ts is None or not ts > state.t:
+        return None
+    hp = passages.place(state.t, state.h)
+    if _clip(state.t, hp, t1) != t1 - state.t or not state.t + hp > t1:
+        return None
+    return hp if abs(t1 - ts) <= PASSAGE_END_BAND * hp else None
 
 
 def _fixed_step_dense(
