@@ -20,6 +20,7 @@ from ._records import format_table as format_table
 from ._records import machine_info as machine_info
 from ._records import write_report as write_report
 from ._references import a02_parallelogram_reference as a02_parallelogram_reference
+from ._references import a04_bricard_period as a04_bricard_period
 from ._references import load_a01_exact as load_a01_exact
 from ._references import load_a02_n2_exact as load_a02_n2_exact
 from ._references import load_a03_reference as load_a03_reference
@@ -44,6 +45,7 @@ __all__ = [
     "a02_parallelogram_reference",
     "a03_andrews",
     "a04_bricard",
+    "a04_bricard_period",
     "arm2r_wall",
     "crossed_four_bar",
     "format_table",
