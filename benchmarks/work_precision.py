@@ -69,7 +69,7 @@ def gaps(rows: list[dict[str, Any]], closure_floor: float = 1e-13) -> list[dict[
     return res
 
 
-def plot(mech: str, rows: list[dict[str, Any]], out: Path) -> None:
+def plot(mech: str, rows: list[dict[str, Any]], out: Path, note: str = "") -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -100,7 +100,8 @@ def plot(mech: str, rows: list[dict[str, Any]], out: Path) -> None:
             ax.set_ylabel(label)
             ax.grid(True, which="major", alpha=0.3)
     axes[0].legend(fontsize=7, loc="best")
-    fig.suptitle(f"{mech}: work–precision (lower left is better; x: off branch or failed)")
+    fig.suptitle(f"{mech}: work–precision (lower left is better; x: off branch or failed)"
+                 + (f"\n{note}" if note else ""))
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)
@@ -130,12 +131,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("json", nargs="+", help="sim_bench.py result files (later ones win)")
     ap.add_argument("--out", default=str(HERE.parent / "docs" / "img"))
     ap.add_argument("--markdown", default=None, help="write the gap tables here")
+    ap.add_argument("--note", default="", help="a second title line (e.g. when and at what machine load)")
     a = ap.parse_args(argv)
     mechs = merge(a.json)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     for mech, rows in mechs.items():
-        plot(mech, rows, out / f"work_precision_{mech}.png")
+        plot(mech, rows, out / f"work_precision_{mech}.png", a.note)
         print(f"wrote {out / f'work_precision_{mech}.png'} ({len(rows)} points)")
     md = markdown(mechs)
     if a.markdown:
