@@ -160,24 +160,45 @@ def test_branch_direction_must_lie_in_the_tangent_space():
         nonmin.linearize(model, q, branch=np.ones(3))
 
 
-@pytest.mark.parametrize("N", [1, 2])
+@pytest.mark.parametrize("N", [1, 2, 3])
 def test_a02_has_N_plus_1_branches_at_the_horizontal_configuration(N):
     """Each window is a rhombus: at the flat configuration it either stays a parallelogram
     (both its cranks turn together) or folds (its left crank stays flat, its coupler turns with
-    the right crank about the right ground pivot). The branches through the flat configuration
-    are the crank-angle lines (0, …, 0, 1, …, 1): N + 1 of them."""
+    the right crank about the right ground pivot). The exact reduction: window i allows
+    c_i = c_{i+1} or c_i = 0 (crank angles), so the branches through the flat configuration are
+    the crank-angle lines (0, …, 0, 1, …, 1): N + 1 of them, found from the second-order cone
+    (no sampling) and certified complete."""
     model = library.a02_n_four_bar(N=N).model
     q, Q1, _, _ = _a02(N, 0.0)
     found = nonmin.linear.branches(model, q)
+    assert isinstance(found, nonmin.linear.Branches)
+    assert found.certified and found.method == "second-order cone", found.note
+    assert len(found) == N + 1
     A = model.constraint_jacobian(0.0, q)
     cranks = []
     for B in found:
         assert B.shape == (model.n, 1)
-        assert np.abs(A @ B).max() <= 1e-10
+        assert np.abs(A @ B).max() <= 1e-12
         c = B[2 : 3 * (N + 1) : 3, 0]
-        cranks.append(tuple(np.round(c / np.abs(c).max(), 8)))
+        cranks.append(tuple(np.round(c / np.abs(c).max(), 10)))
     expected = {tuple([0.0] * k + [1.0] * (N + 1 - k)) for k in range(N + 1)}
     assert set(cranks) == expected
+    # the tangent of each branch = the exact reduction's: the parallelogram motion of windows
+    # k…N−1 (cranks k…N at the same rate), the windows before k not moving (their cranks flat)
+    for B in found:
+        c = B[2 : 3 * (N + 1) : 3, 0]
+        k0 = int(np.argmax(np.abs(c) > 0.5 * np.abs(c).max()))
+        ref = np.zeros(model.n)
+        for i in range(k0, N + 1):
+            ref[3 * i : 3 * i + 3] = Q1[3 * i : 3 * i + 3]  # crank i: centre (0, 1/2), rate 1
+        for i in range(1, N + 1):  # coupler i (between cranks i − 1 and i): moves with crank i
+            j = 3 * (N + 1) + 3 * (i - 1)
+            if i - 1 >= k0:
+                ref[j : j + 3] = Q1[j : j + 3]  # translates with both cranks
+            elif i >= k0:
+                ref[j : j + 3] = [0.0, 0.5, 1.0]  # folds: turns about its left end with crank i
+        ref /= np.linalg.norm(ref)
+        assert abs(abs(float(ref @ B[:, 0])) - 1.0) <= 1e-12
     # a label selects the same branch as its velocity direction
     label = cranks.index(tuple([1.0] * (N + 1)))
     by_label = nonmin.linearize(model, q, Q1 * 0.5, branch=label)
@@ -193,9 +214,69 @@ def test_crossed_four_bar_has_two_branches_at_the_change_point():
     model = library.crossed_four_bar().model
     q0 = np.asarray(_cfb_coordinates(np.array(0.0), np.array(0.0))[0], dtype=float)
     found = nonmin.linear.branches(model, q0)
+    assert found.certified and len(found) == 2, found.note
     ratios = sorted(float(B[8, 0] / B[2, 0]) for B in found)  # rocker rate / crank rate
-    assert np.allclose(ratios, [-3.0, 1.0], atol=1e-8)  # anti-parallelogram ψ' = −3, parallelogram
+    assert np.allclose(ratios, [-3.0, 1.0], atol=1e-12)  # anti-parallelogram ψ' = −3, parallelogram
     # at a regular configuration there is one branch: N(A)
     q1 = np.asarray(_cfb_coordinates(np.array(1.0), np.array(0.0))[0], dtype=float)
-    (B,) = nonmin.linear.branches(model, q1)
+    regular = nonmin.linear.branches(model, q1)
+    assert regular.certified and regular.method == "regular"
+    (B,) = regular
     assert B.shape == (9, 1)
+
+
+# ------------------------------------------------------------------ the quadratic cone itself
+def _product(a, b):
+    """The symmetric matrix of the form (a·c)(b·c)."""
+    return 0.5 * (np.outer(a, b) + np.outer(b, a))
+
+
+def _lines(dec):
+    out = set()
+    for B in dec.subspaces:
+        assert B.shape[1] == 1
+        b = B[:, 0] / B[int(np.argmax(np.abs(B[:, 0]))), 0]
+        out.add(tuple(np.round(b, 6) + 0.0))
+    return out
+
+
+def test_quadratic_cone_of_products_in_any_basis_of_the_pencil():
+    """c_i (c_i − c_{i+1}) = 0 (the A02 windows): N + 1 lines, also when the forms given are
+    mixed (the splitting members are then found in the pencils of pairs)."""
+    from nonmin.linear._cone import quadratic_cone
+
+    for N in (2, 3):
+        e = np.eye(N + 1)
+        F = [_product(e[i], e[i] - e[i + 1]) for i in range(N)]
+        expected = {tuple([0.0] * k + [1.0] * (N + 1 - k)) for k in range(N + 1)}
+        mixes = [np.random.default_rng(seed).standard_normal((N, N)) for seed in range(5)]
+        for forms in [F] + [[sum(x[i, j] * F[j] for j in range(N)) for i in range(N)] for x in mixes]:
+            dec = quadratic_cone(forms)
+            assert dec.exact and dec.reason == ""
+            assert _lines(dec) == expected
+    # N = 4 mixed: the splitting members are not all in pencils of pairs (two levels): the
+    # decomposition says it is not certified instead of returning a partial list as complete
+    e = np.eye(5)
+    F = [_product(e[i], e[i] - e[i + 1]) for i in range(4)]
+    x = np.random.default_rng(0).standard_normal((4, 4))
+    dec = quadratic_cone([sum(x[i, j] * F[j] for j in range(4)) for i in range(4)])
+    assert not dec.exact and "dimension" in dec.reason
+    assert quadratic_cone(F).exact and len(quadratic_cone(F).subspaces) == 5
+
+
+def test_quadratic_cone_flags_what_it_cannot_certify():
+    from nonmin.linear._cone import quadratic_cone
+
+    # a curved cone x² + y² = z²: no linear subspace, not a union of lines: not certified
+    dec = quadratic_cone([np.diag([1.0, 1.0, -1.0])])
+    assert not dec.exact and dec.subspaces == () and "dimension 3" in dec.reason
+    # definite: only 0, certified; semidefinite: its kernel; zero: the whole space
+    assert quadratic_cone([np.diag([1.0, 2.0, 3.0])]) == quadratic_cone([np.eye(3)])
+    assert quadratic_cone([np.eye(3)]).exact and quadratic_cone([np.eye(3)]).subspaces == ()
+    (K,) = quadratic_cone([np.diag([1.0, 0.0, 2.0])]).subspaces
+    assert K.shape == (3, 1) and abs(abs(K[1, 0]) - 1.0) <= 1e-15
+    (W,) = quadratic_cone([np.zeros((3, 3))]).subspaces
+    assert W.shape == (3, 3)
+    # two planes x·y = 0 in R³ (a plane pair, not lines)
+    dec = quadratic_cone([_product(np.eye(3)[0], np.eye(3)[1])])
+    assert dec.exact and sorted(B.shape[1] for B in dec.subspaces) == [2, 2]

@@ -20,6 +20,7 @@ from ._derivatives import DynamicsDerivatives as DynamicsDerivatives
 from ._derivatives import dynamics_derivatives as dynamics_derivatives
 from ._derivatives import term_tangents as term_tangents
 from ._linearize import BRANCH_STEP as BRANCH_STEP
+from ._linearize import Branches as Branches
 from ._linearize import Equilibrium as Equilibrium
 from ._linearize import LinearSystem as LinearSystem
 from ._linearize import ModeMotion as ModeMotion
@@ -35,6 +36,7 @@ from ._lqr import LQRDesign as LQRDesign
 __all__ = [
     "BRANCH_STEP",
     "LQR",
+    "Branches",
     "DynamicsDerivatives",
     "Equilibrium",
     "LQRDesign",

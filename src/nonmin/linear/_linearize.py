@@ -27,7 +27,7 @@ the kernel there) and says so (:attr:`LinearSystem.singular`, :attr:`LinearSyste
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -37,12 +37,14 @@ from numpy.typing import ArrayLike, NDArray
 from ..core.linalg import DEFAULT_RTOL, range_basis, resolve_rtol
 from ..errors import InputError, MissingDependencyError, ModelError, ShapeError
 from ..model import Model
+from ._cone import quadratic_cone
 from ._derivatives import _kernel_point, _kernel_tangent, _vector, term_tangents
 
 FloatArray = NDArray[np.float64]
 
 __all__ = [
     "BRANCH_STEP",
+    "Branches",
     "Equilibrium",
     "LinearSystem",
     "ModeMotion",
@@ -513,6 +515,145 @@ def branch_tangent(
     return d / float(np.linalg.norm(d))
 
 
+@dataclass(frozen=True)
+class Branches:
+    """The branches through a configuration (:func:`branches`): a sequence of tangent bases.
+
+    Indexing, ``len`` and iteration give the bases (``branches(model, q)[i]`` is branch label
+    ``i`` of :func:`linearize`).
+
+    Attributes
+    ----------
+    bases : tuple of ndarray, each of shape (n, k_b)
+        Orthonormal bases of the branches' tangent spaces (k_b = 1 for a curve).
+    certified : bool
+        True when the list is complete: the second-order tangent cone was decomposed exactly
+        into linear subspaces (:func:`nonmin.linear._cone.quadratic_cone`) and each subspace was
+        confirmed as the limit tangent space of a branch through q (or q is regular). False
+        when some step could not be made exact; the list then also holds what the sampled
+        search found, and a branch can be missing (:attr:`note` says why).
+    method : {"regular", "second-order cone", "second-order cone + sampling"}
+    note : str
+    """
+
+    bases: tuple[FloatArray, ...]
+    certified: bool
+    method: str
+    note: str
+
+    def __len__(self) -> int:
+        return len(self.bases)
+
+    def __getitem__(self, i: int) -> FloatArray:
+        return self.bases[i]
+
+    def __iter__(self) -> Iterator[FloatArray]:
+        return iter(self.bases)
+
+
+def _left_null_localized(A: FloatArray, tol: float) -> FloatArray:
+    """A basis (columns) of N(Aᵀ) in reduced row-echelon form: each vector has a pivot entry 1
+    where the others are 0, so self-stresses of disjoint loops come out separated."""
+    norms = np.linalg.norm(A, axis=1)
+    live = norms > tol * max(float(norms.max(initial=0.0)), 1e-300)
+    d = np.where(live, 1.0 / np.where(live, norms, 1.0), 0.0)
+    Ae = A * d[:, None]
+    U = np.linalg.svd(Ae, full_matrices=True)[0]
+    r = int(range_basis(A, tol).rank)
+    X = (U[:, r:] * d[:, None]).T.copy()  # rows: left-null vectors of A (w = D u)
+    X[:, ~live] = 0.0
+    dead = np.flatnonzero(~live)
+    p, m = X.shape
+    big = float(np.abs(X).max(initial=0.0))
+    row = 0
+    for j in range(m):
+        if row == p:
+            break
+        i = row + int(np.argmax(np.abs(X[row:, j])))
+        if abs(X[i, j]) <= 1e-9 * big:
+            continue
+        X[[row, i]] = X[[i, row]]
+        X[row] /= X[row, j]
+        for i2 in range(p):
+            if i2 != row:
+                X[i2] -= X[i2, j] * X[row]
+        row += 1
+    # rows of A that vanish at q are constraints whose own row is 0: their left-null direction
+    # is e_i (its second-order form is its own Hessian)
+    E = np.zeros((len(dead), m))
+    E[np.arange(len(dead)), dead] = 1.0
+    return np.vstack([X[:row], E]).T
+
+
+def _second_order_forms(
+    model: Model,
+    q: FloatArray,
+    Zq: FloatArray,
+    t: float,
+    act: frozenset[str],
+    pos: NDArray[np.bool_],
+    tol: float,
+) -> list[FloatArray]:
+    """H_i = Zqᵀ (Σ_j w_ij ∇²φ_j) Zq for a localized basis w_i of N(A_hᵀ) (module _cone): the
+    Hessians from γ, the second time derivative of φ along q̇ (polarized: φ''[x, y] =
+    (Q(x + y) − Q(x − y))/4 with Q(v) the part of γ(q, v) even in v)."""
+    A_h = np.asarray(model.constraint_terms(t, q, np.zeros_like(q), act).A, dtype=float)[pos]
+    W = _left_null_localized(A_h, tol)
+    k = Zq.shape[1]
+
+    def gam(v: FloatArray) -> FloatArray:
+        return np.asarray(model.constraint_terms(t, q, v, act).gamma, dtype=float)[pos]
+
+    def even(v: FloatArray) -> FloatArray:
+        return gam(v) + gam(-v)
+
+    Hs = np.zeros((W.shape[1], k, k))
+    for a in range(k):
+        for b in range(a, k):
+            x, y = Zq[:, a], Zq[:, b]
+            val = (even(x + y) - even(x - y)) / 8.0 if a != b else (even(x) - 2 * gam(0 * x)) / 2.0
+            Hs[:, a, b] = Hs[:, b, a] = W.T @ val
+    return [H for H in Hs]
+
+
+def _confirm_branch(
+    model: Model,
+    q: FloatArray,
+    B: FloatArray,
+    t: float,
+    act: frozenset[str],
+    pos: NDArray[np.bool_],
+    tol: float,
+) -> str:
+    """'' when the subspace B (n × l) is the tangent space of a branch through q; else why not.
+
+    For each basis vector b of B, the configurations q + s·b (s = ±k·ε, k = 1…4, ε =
+    :data:`BRANCH_STEP`·(1 + ‖q‖)) assembled onto the manifold (Gauss–Newton lands on the
+    branch nearest to them) must stay within 10 s² of the line (a curve of the manifold
+    tangent to b), and the limit at q of N(A_h) along it must contain B. That limit may be
+    larger than B: a branch lying in the singular set (A_h loses rank all along it)."""
+    scale = 1.0 + float(np.linalg.norm(q))
+    for j in range(B.shape[1]):
+        b = B[:, j]
+        try:
+            eps, states, Zb, _ = _branch_bases(model, q, np.zeros_like(q), b, t, act, pos, tol)
+        except (InputError, ModelError) as exc:
+            return f"no branch along a second-order admissible direction ({exc})"
+        for lev, (qs, _) in states.items():
+            off = float(np.linalg.norm(qs - q - lev * eps * b))
+            if off > 10.0 * (lev * eps) ** 2 * scale:
+                return (
+                    f"the manifold near q + {lev * eps:.2g}·b is {off:.2g} away from that line: no "
+                    "branch tangent to a second-order admissible direction (a higher-order obstruction)"
+                )
+        if Zb.shape[1] < B.shape[1] or float(np.linalg.norm(B - Zb @ (Zb.T @ B))) > 1e-6:
+            return (
+                f"the limit tangent space (dimension {Zb.shape[1]}) along a second-order admissible "
+                f"subspace (dimension {B.shape[1]}) does not contain it"
+            )
+    return ""
+
+
 def branches(
     model: Model,
     q: ArrayLike,
@@ -521,15 +662,24 @@ def branches(
     active: Iterable[str] | None = None,
     rtol: float | None = None,
     starts: int = 8,
-) -> list[FloatArray]:
-    """The branches through a singular configuration, as orthonormal bases of their tangent
-    spaces (the labels ``branch=0, 1, …`` of :func:`linearize` are indices in this list).
+) -> Branches:
+    """The branches through a configuration, as orthonormal bases of their tangent spaces (the
+    labels ``branch=0, 1, …`` of :func:`linearize` are indices in this list).
 
-    Searched from the directions ±e_i and e_i ± e_j of a basis of N(A_h(q)) and ``starts``
-    fixed pseudo-random ones: each is snapped to the tangent of the branch nearest to it
-    (:func:`branch_tangent`); tangents lying in the tangent space of a branch already found
-    are the same branch. A branch no start direction is near can be missed (add starts).
-    Ordered by their first basis vector (largest component positive, then lexicographically).
+    Deterministic, from the second-order tangent cone (``docs/linear.md``): with Zq a basis of
+    N(A_h(q)) (A_h: the active position-level rows) and w_i a basis of N(A_hᵀ), a branch's
+    tangent v = Zq c satisfies cᵀ H_i c = 0, H_i = Zqᵀ (Σ_j w_ij ∇²φ_j) Zq (from γ, exact).
+    The common zero set of these forms is decomposed exactly into linear subspaces
+    (:func:`nonmin.linear._cone.quadratic_cone`: semidefinite forms restrict to their kernel,
+    indefinite rank-2 forms split into two hyperplanes); each subspace is then confirmed as
+    the limit tangent space of a branch (:func:`branch_tangent`'s chord fixed point and the
+    limit of N(A_h) along it). :attr:`Branches.certified` says the list is complete. When a
+    step cannot be made exact (a curved cone, a pencil with no splitting member found) or a
+    subspace is not confirmed, the sampled search is added (±e_i, e_i ± e_j of Zq and
+    ``starts`` fixed pseudo-random directions snapped to the nearest branch) and the result is
+    not certified. Branches tangent to each other at q are one entry (second order cannot tell
+    them apart). Ordered by their first basis vector (largest component positive, then
+    lexicographically).
 
     Parameters
     ----------
@@ -540,13 +690,13 @@ def branches(
     active : iterable of str, optional
     rtol : float, optional
     starts : int
-        Number of pseudo-random start directions besides the basis combinations.
+        Pseudo-random start directions of the sampled search (used only when not certified).
 
     Returns
     -------
-    list of ndarray, each of shape (n, k_b)
-        One orthonormal basis per branch (k_b = 1 for a curve). At a regular configuration the
-        single basis of N(A_h(q)).
+    Branches
+        One orthonormal basis (n, k_b) per branch; at a regular configuration the single basis
+        of N(A_h(q)).
     """
     n = model.n
     qv = _vector(q, "q", n)
@@ -559,7 +709,57 @@ def branches(
     Zq, r = _null_basis(A_h, tol) if A_h.shape[0] else (np.eye(n), 0)
     nz = Zq.shape[1]
     if nz == 0 or _generic_rank(model, qv, Zq, t, act, tol, r) <= r:
-        return [Zq]
+        return Branches((Zq,), True, "regular", f"regular configuration: rank A = {r}")
+    cone = quadratic_cone(_second_order_forms(model, qv, Zq, t, act, pos, tol))
+    found: list[FloatArray] = []
+    problems = [] if cone.exact else [cone.reason]
+    for L in cone.subspaces:
+        B = Zq @ L
+        why = _confirm_branch(model, qv, B, t, act, pos, tol)
+        if why:
+            problems.append(why)
+        else:
+            found.append(B)
+    method = "second-order cone"
+    if problems:
+        method += " + sampling"
+        for B in _sampled_branches(model, qv, Zq, t, act, pos, tol, starts):
+            if not any(
+                C.shape[1] == B.shape[1] and float(np.linalg.norm(B - C @ (C.T @ B))) <= 1e-6
+                for C in found
+            ):
+                found.append(B)
+
+    def key(B: FloatArray) -> tuple[float, ...]:
+        b = B[:, 0] * (1.0 if B[int(np.argmax(np.abs(B[:, 0]))), 0] > 0 else -1.0)
+        return tuple(-np.round(b, 6))
+
+    out = []
+    for B in sorted(found, key=key):
+        j = int(np.argmax(np.abs(B[:, 0])))
+        out.append(B if B[j, 0] > 0 else -B)
+    note = (
+        f"singular configuration (rank A = {r}, tangent space of dimension {nz}): "
+        f"{len(out)} branch(es) from the second-order tangent cone"
+    )
+    if problems:
+        note += "; not certified complete: " + "; ".join(problems)
+    return Branches(tuple(out), not problems, method, note)
+
+
+def _sampled_branches(
+    model: Model,
+    qv: FloatArray,
+    Zq: FloatArray,
+    t: float,
+    act: frozenset[str],
+    pos: NDArray[np.bool_],
+    tol: float,
+    starts: int,
+) -> list[FloatArray]:
+    """Branches found by snapping start directions to the nearest branch (may miss some)."""
+    nz = Zq.shape[1]
+    zero = np.zeros_like(qv)
     dirs: list[FloatArray] = []
     eye = np.eye(nz)
     for i in range(nz):
@@ -582,18 +782,8 @@ def branches(
             continue
         if any(float(np.linalg.norm(B.T @ d)) >= 1.0 - 1e-6 for B in found):
             continue
-        Zb = _branch_bases(model, qv, zero, d, t, act, pos, tol)[2]
-        found.append(Zb)
-
-    def key(B: FloatArray) -> tuple[float, ...]:
-        b = B[:, 0] * (1.0 if B[int(np.argmax(np.abs(B[:, 0]))), 0] > 0 else -1.0)
-        return tuple(-np.round(b, 6))
-
-    out = []
-    for B in sorted(found, key=key):
-        j = int(np.argmax(np.abs(B[:, 0])))
-        out.append(B if B[j, 0] > 0 else -B)
-    return out
+        found.append(_branch_bases(model, qv, zero, d, t, act, pos, tol)[2])
+    return found
 
 
 def _branch_tangent(
