@@ -3,6 +3,7 @@
 // directions (dq, dqd), for nonmin.linear (derivatives of the projection dynamics).
 #include <nanobind/nanobind.h>
 
+#include <cmath>
 #include <cstring>
 #include <string>
 
@@ -101,14 +102,18 @@ void bind_derivatives(nb::module_& m) {
     m.def(
         "forward_derivatives",
         [](const Program& p, DerivativeScratch& s, double t, CArr1 q, CArr1 qd, nb::object f, nb::object u,
-           CMask active, double rtol) {
+           CMask active, double rtol, nb::ndarray<double, nb::ndim<2>, nb::c_contig, nb::device::cpu> res) {
             const auto n = static_cast<std::size_t>(p.n());
+            const auto k = static_cast<std::size_t>(p.k());
             if (q.shape(0) != n || qd.shape(0) != n)
                 raise_error("ShapeError", "q and qd must have shape (" + std::to_string(n) + ",)");
             if (active.shape(0) != p.constraints().size())
                 raise_error("ShapeError", "active must be a mask of shape (" +
                                               std::to_string(p.constraints().size()) + ",)");
             if (s.dq.size() != p.n()) raise_error("ShapeError", "scratch made for another program");
+            if (res.shape(0) != 2 + 6 * n + 2 * k || res.shape(1) != n)
+                raise_error("ShapeError", "out must have shape (2 + 6n + 2k, n) = (" + std::to_string(2 + 6 * n + 2 * k) +
+                                              ", " + std::to_string(n) + ")");
             const double* fp = nullptr;
             const double* up = nullptr;
             CArr1 fa, ua;
@@ -119,11 +124,21 @@ void bind_derivatives(nb::module_& m) {
             }
             if (!u.is_none()) {
                 ua = nb::cast<CArr1>(u);
-                if (ua.shape(0) != static_cast<std::size_t>(p.k()))
-                    raise_error("ShapeError", "u must have shape (" + std::to_string(p.k()) + ",)");
+                if (ua.shape(0) != k) raise_error("ShapeError", "u must have shape (" + std::to_string(k) + ",)");
                 up = ua.data();
             }
-            DerivativeOutputs out;
+            // the boundary's finiteness check (the Python wrapper leaves it here: one pass in C++)
+            auto finite = [](const double* x, std::size_t len, const char* name) {
+                for (std::size_t i = 0; i < len; ++i)
+                    if (!std::isfinite(x[i]))
+                        raise_error("NonFiniteError", std::string(name) + " must be finite, got a non-finite entry at index " +
+                                                          std::to_string(i));
+            };
+            finite(q.data(), n, "q");
+            finite(qd.data(), n, "qd");
+            if (fp != nullptr) finite(fp, n, "f");
+            if (up != nullptr) finite(up, k, "u");
+            DerivativeOutputs& out = s.out;
             Status st;
             if (p.thread_safe()) {
                 nb::gil_scoped_release release;
@@ -132,37 +147,37 @@ void bind_derivatives(nb::module_& m) {
                 st = forward_derivatives(p, s, t, q.data(), qd.data(), fp, up, active.data(), rtol, out);
             }
             if (st != Status::ok) raise_status(st, "forward_derivatives");
-            auto vec = [&](const Vec& x) {
-                NpArr a = new_array({n});
-                std::memcpy(a.data(), x.data(), n * sizeof(double));
-                return a;
+            double* at = res.data();
+            auto put = [&](const double* src, std::size_t len) {
+                if (len) std::memcpy(at, src, len * sizeof(double));
+                at += len;
             };
-            auto mat = [&](const Mat& x) {
-                NpArr a = new_array({n, n});
-                std::memcpy(a.data(), x.data(), n * n * sizeof(double));  // row-major n × n
-                return a;
-            };
-            nb::dict res;
-            res["qdd"] = vec(out.qdd);
-            res["f_c"] = vec(out.fc);
-            res["rank"] = out.rank;
-            res["dqdd_dq"] = mat(out.dqdd_dq);
-            res["dqdd_dqd"] = mat(out.dqdd_dqd);
-            res["dqdd_df"] = mat(out.dqdd_df);
-            res["dfc_dq"] = mat(out.dfc_dq);
-            res["dfc_dqd"] = mat(out.dfc_dqd);
-            res["dfc_df"] = mat(out.dfc_df);
-            const auto k = static_cast<std::size_t>(p.k());
-            NpArr B = new_array({n, k});
-            if (k > 0) std::memcpy(B.data(), s.val.B.data(), n * k * sizeof(double));  // B(q), row-major
-            res["B"] = B;
-            return res;
+            const std::size_t nn = n * n;
+            put(out.qdd.data(), n);
+            put(out.fc.data(), n);
+            put(out.dqdd_dq.data(), nn);  // row-major n × n
+            put(out.dqdd_dqd.data(), nn);
+            put(out.dqdd_df.data(), nn);
+            put(out.dfc_dq.data(), nn);
+            put(out.dfc_dqd.data(), nn);
+            put(out.dfc_df.data(), nn);
+            if (k > 0) {  // ∂/∂u = ∂/∂f · B (u held fixed in the state derivatives), stored transposed (k × n)
+                Mat& DU = s.DU;
+                DU.resize(p.k(), p.n());
+                DU.noalias() = (out.dqdd_df * s.val.B).transpose();
+                put(DU.data(), n * k);
+                DU.noalias() = (out.dfc_df * s.val.B).transpose();
+                put(DU.data(), n * k);
+            }
+            return out.rank;
         },
         nb::arg("program"), nb::arg("scratch"), nb::arg("t"), nb::arg("q"), nb::arg("qd"), nb::arg("f").none(),
-        nb::arg("u").none(), nb::arg("active"), nb::arg("rtol") = 1e-10,
-        "q̈, f_c and ∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂f, ∂f_c/∂· (n × n each) at one state: forward-mode model terms, "
-        "the kernel's derivative at its rank (nonmin/derivatives.hpp); also B(q) (n × k). f (n) and u (k) may be "
-        "None.");
+        nb::arg("u").none(), nb::arg("active"), nb::arg("rtol"), nb::arg("out"),
+        "q̈, f_c and their derivatives at one state (forward-mode model terms, the kernel's derivative at its "
+        "rank; nonmin/derivatives.hpp) written into out, shape (2 + 6n + 2k, n), by rows: q̈, f_c, "
+        "∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂f, ∂f_c/∂q, ∂f_c/∂q̇, ∂f_c/∂f (n rows each), (∂q̈/∂u)ᵀ, (∂f_c/∂u)ᵀ (k rows each: "
+        "∂/∂f · B(q)). Returns the rank used. f (n) and u (k) may be None; NonFiniteError names a non-finite "
+        "argument.");
     m.def("differentiable", [](const Program& p) { return p.differentiable(); }, nb::arg("program"),
           "Whether the program evaluates on dual numbers (term_tangents).");
 }

@@ -1,7 +1,8 @@
 // The derivative pipeline of nonmin/derivatives.hpp: the value of the kernel at the state, then
 // the tangents of three residuals of the model terms (Program::residual_tangents, all 2n
 // directions of (q, q̇) in multi-direction forward mode; or one evaluate_tangent per direction
-// for programs without it), then the kernel's derivative as dense products over 2n columns.
+// for programs without it), then the kernel's derivative as dense products over 2n columns
+// (coefficient-based lazy products: at these sizes Eigen's blocked product costs more than it saves).
 #include "nonmin/derivatives.hpp"
 
 #include <Eigen/Cholesky>
@@ -93,7 +94,8 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
     G.setZero(n, m);
     int r = 0;
     if (m > 0) {
-        Eigen::JacobiSVD<Mat> svd(Ae, Eigen::ComputeFullU | Eigen::ComputeFullV);
+        Eigen::JacobiSVD<Mat>& svd = s.svd;
+        svd.compute(Ae, Eigen::ComputeFullU | Eigen::ComputeFullV);
         const Vec& sv = svd.singularValues();
         const double smax = sv.size() ? sv[0] : 0.0;
         for (int i = 0; i < sv.size(); ++i)
@@ -106,9 +108,10 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
         Z.setIdentity(n, n);
     }
     const int kz = n - r;
-    s.MZ.noalias() = M * Z;
-    s.Sm.noalias() = Z.transpose() * s.MZ;
-    Eigen::LLT<Mat> llt(s.Sm);
+    s.MZ.noalias() = M.lazyProduct(Z);
+    s.Sm.noalias() = Z.transpose().lazyProduct(s.MZ);
+    Eigen::LLT<Mat>& llt = s.llt;
+    llt.compute(s.Sm);
     if (kz > 0) {
         if (llt.info() != Eigen::Success) return Status::not_positive_definite;
         const auto& L = llt.matrixLLT();
@@ -117,9 +120,16 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
         for (int i = 0; i < kz; ++i)
             if (L(i, i) * L(i, i) <= 1e-13 * dmax) return Status::not_positive_definite;
     }
-    const Vec Gge = G * ge;
+    Vec& Gge = s.Gge;
+    Gge.noalias() = G * ge;
     out.qdd = -Gge;
-    if (kz > 0) out.qdd.noalias() += Z * llt.solve(Z.transpose() * (g + M * Gge));
+    if (kz > 0) {
+        s.w1 = g;
+        s.w1.noalias() += M * Gge;
+        s.w2.noalias() = Z.transpose() * s.w1;
+        llt.solveInPlace(s.w2);
+        out.qdd.noalias() += Z * s.w2;
+    }
     out.fc.noalias() = M * out.qdd;
     out.fc -= g;
     out.rank = r;
@@ -127,8 +137,11 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
     const int nlam = m > 0 ? 2 : 0;
     s.lam.setZero(2, m_all);
     if (m > 0) {
-        const Vec lame = G.transpose() * out.fc;
-        const Vec rho = ge - Ae * Gge;
+        Vec& lame = s.w1;
+        Vec& rho = s.w2;
+        lame.noalias() = G.transpose() * out.fc;
+        rho = ge;
+        rho.noalias() -= Ae * Gge;
         for (int i = 0; i < m; ++i) {
             s.lam(0, rows[i]) = d[i] * lame[i];
             s.lam(1, rows[i]) = d[i] * rho[i];
@@ -165,8 +178,8 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
         C.resize(m, nd);
         for (int i = 0; i < m; ++i) C.row(i) = d[i] * s.Rcon.col(rows[i]).transpose();
         // + Gᵀ δAeᵀ ρ (L1: rows n .. 2n of each Rlam row)
-        C.noalias() += G.transpose() * s.Rlam.rightCols(n).transpose();
-        AQ.noalias() = -G * C;
+        C.noalias() += G.transpose().lazyProduct(s.Rlam.rightCols(n).transpose());
+        AQ.noalias() = -G.lazyProduct(C);
     }
     Mat& DQDD = s.DQDD;
     DQDD = AQ;
@@ -174,26 +187,27 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
         Mat& T1 = s.T1;  // −δ(M q̈ − g) + δAeᵀ λe − M Q δq̈ (n × 2n)
         T1.noalias() = -s.Rdyn.transpose();
         if (m > 0) T1.noalias() += s.Rlam.leftCols(n).transpose();
-        T1.noalias() -= M * AQ;
-        s.RHS.noalias() = Z.transpose() * T1;
+        T1.noalias() -= M.lazyProduct(AQ);
+        s.RHS.noalias() = Z.transpose().lazyProduct(T1);
         llt.solveInPlace(s.RHS);
-        DQDD.noalias() += Z * s.RHS;
+        DQDD.noalias() += Z.lazyProduct(s.RHS);
     }
     out.dqdd_dq = DQDD.leftCols(n);
     out.dqdd_dqd = DQDD.rightCols(n);
-    out.dfc_dq.noalias() = M * out.dqdd_dq;
+    out.dfc_dq.noalias() = M.lazyProduct(out.dqdd_dq);
     out.dfc_dq += s.Rdyn.topRows(n).transpose();
-    out.dfc_dqd.noalias() = M * out.dqdd_dqd;
+    out.dfc_dqd.noalias() = M.lazyProduct(out.dqdd_dqd);
     out.dfc_dqd += s.Rdyn.bottomRows(n).transpose();
     // ∂/∂f: δg = e_j, nothing else moves: δq̈ = Z S⁻¹ Zᵀ e_j
     if (kz > 0) {
-        Mat ZS = Z.transpose();
+        Mat& ZS = s.ZS;
+        ZS = Z.transpose();
         llt.solveInPlace(ZS);
-        out.dqdd_df.noalias() = Z * ZS;
+        out.dqdd_df.noalias() = Z.lazyProduct(ZS);
     } else {
         out.dqdd_df.setZero(n, n);
     }
-    out.dfc_df.noalias() = M * out.dqdd_df;
+    out.dfc_df.noalias() = M.lazyProduct(out.dqdd_df);
     out.dfc_df.diagonal().array() -= 1.0;
     return Status::ok;
 }

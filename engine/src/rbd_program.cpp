@@ -470,7 +470,7 @@ void TreeProgram::apply_T(const TreeScratch<S>& ws, const double* xq, S* xv) con
 
 template <class S>
 NONMIN_FLATTEN Status TreeProgram::residuals(const ResidualQuery& rq, const S* q, const S* qd, TreeScratch<S>& ws,
-                                             S* rd, S* rl, S* rc, const TreeData* fixed) const {
+                                             S* rd, S* rl, S* rc, const TreeData* fixed, bool seeded) const {
     using std::isfinite;
     const TreeModel& model = d_.model;
     const int nq = model.nq, nv = model.nv;
@@ -482,7 +482,9 @@ NONMIN_FLATTEN Status TreeProgram::residuals(const ResidualQuery& rq, const S* q
     // joint acceleration a_v = T a + Ṫ q̇ (in ws.fv)
     apply_T(ws, rq.a, ws.fv.data());
     ws.fv += ws.a0;
-    if (fixed != nullptr) {
+    if (seeded) {
+        // ws.data holds the kinematics at q and their tangents (seed_kinematics)
+    } else if (fixed != nullptr) {
         const std::size_t nj = model.joints.size();
         for (std::size_t i = 0; i < nj; ++i) {
             ws.data.oMi[i].R = fixed->oMi[i].R.template cast<S>();
@@ -569,6 +571,95 @@ NONMIN_FLATTEN Status TreeProgram::residuals(const ResidualQuery& rq, const S* q
     return Status::ok;
 }
 
+NONMIN_FLATTEN void TreeProgram::seed_kinematics(const ResidualQuery& rq, int j0, int w, TreeWorkspace& ws) const {
+    constexpr int W = DUAL_WIDTH;
+    const TreeModel& model = d_.model;
+    const TreeData& fx = ws.data;  // the kinematics at q in double
+    TreeDataT<DualW>& out = ws.wide->data;
+    const int nj = static_cast<int>(model.joints.size());
+    const int nq = model.nq;
+    // world twists ξ_i = Σ_{j ≤ i} J_j δv_j per lane (lin: velocity of the point at the origin)
+    for (int l = 0; l < w; ++l) {
+        Vec& dv = ws.dv;
+        dv.setZero();
+        for (const Run& r : runs_)
+            for (int k = 0; k < r.len; ++k) dv[r.iv + k] = rq.dq[(j0 + l) * nq + r.iq + k];
+        for (int i = 0; i < nj; ++i) {
+            const Joint& jt = model.joints[i];
+            Vec3& lin = ws.xl[static_cast<std::size_t>(i * W + l)];
+            Vec3& ang = ws.xa[static_cast<std::size_t>(i * W + l)];
+            if (jt.parent >= 0) {
+                lin = ws.xl[static_cast<std::size_t>(jt.parent * W + l)];
+                ang = ws.xa[static_cast<std::size_t>(jt.parent * W + l)];
+            } else {
+                lin.setZero();
+                ang.setZero();
+            }
+            for (int c = 0; c < joint_nv(jt.type); ++c) {
+                const double x = dv[jt.iv + c];
+                if (x == 0.0) continue;
+                lin += fx.J.col(jt.iv + c).head<3>() * x;
+                ang += fx.J.col(jt.iv + c).tail<3>() * x;
+            }
+        }
+    }
+    for (int i = 0; i < nj; ++i) {
+        const Joint& jt = model.joints[i];
+        const Mat3& R = fx.oMi[i].R;
+        const Vec3& p = fx.oMi[i].p;
+        const Inertia& I = fx.oI[i];
+        SE3T<DualW>& X = out.oMi[i];
+        InertiaT<DualW>& Io = out.oI[i];
+        for (int r = 0; r < 3; ++r) {
+            for (int c = 0; c < 3; ++c) {
+                X.R(r, c) = DualW(R(r, c));
+                Io.I(r, c) = DualW(I.I(r, c));
+            }
+            X.p[r] = DualW(p[r]);
+            Io.h[r] = DualW(I.h[r]);
+        }
+        Io.m = DualW(I.m);
+        const int nvj = joint_nv(jt.type);
+        for (int c = 0; c < nvj; ++c)
+            for (int r = 0; r < 6; ++r) out.J(r, jt.iv + c) = DualW(fx.J(r, jt.iv + c));
+        for (int l = 0; l < w; ++l) {
+            const Vec3& v = ws.xl[static_cast<std::size_t>(i * W + l)];
+            const Vec3& om = ws.xa[static_cast<std::size_t>(i * W + l)];
+            if (v.isZero(0.0) && om.isZero(0.0)) continue;  // the body does not move along l
+            const Vec3 hv = I.h.dot(v) * Vec3::Ones();
+            for (int c = 0; c < 3; ++c) {
+                // column c of δR = [ω]× R and of [ω]× I
+                const Vec3 dRc = om.cross(R.col(c));
+                const Vec3 WIc = om.cross(I.I.col(c));
+                for (int r = 0; r < 3; ++r) X.R(r, c).d[l] = dRc[r];
+                // δI = [ω]× I − I [ω]× + 2 (h·v) 1 − v hᵀ − h vᵀ; (I [ω]×)(r, c) = −([ω]× I)(c, r) (I symmetric)
+                for (int r = 0; r < 3; ++r) Io.I(r, c).d[l] = WIc[r] - v[r] * I.h[c] - I.h[r] * v[c];
+            }
+            for (int c = 0; c < 3; ++c) {
+                const Vec3 WIc = om.cross(I.I.col(c));
+                for (int r = 0; r < 3; ++r) Io.I(c, r).d[l] += WIc[r];
+                Io.I(c, c).d[l] += 2.0 * hv[c];
+            }
+            const Vec3 dp = om.cross(p) + v;
+            const Vec3 dh = om.cross(I.h) + I.m * v;
+            for (int r = 0; r < 3; ++r) {
+                X.p[r].d[l] = dp[r];
+                Io.h[r].d[l] = dh[r];
+            }
+            for (int c = 0; c < nvj; ++c) {  // δJ_c = ξ × J_c (motion cross product)
+                const Vec3 jl = fx.J.col(jt.iv + c).head<3>();
+                const Vec3 ja = fx.J.col(jt.iv + c).tail<3>();
+                const Vec3 djl = om.cross(jl) + v.cross(ja);
+                const Vec3 dja = om.cross(ja);
+                for (int r = 0; r < 3; ++r) {
+                    out.J(r, jt.iv + c).d[l] = djl[r];
+                    out.J(3 + r, jt.iv + c).d[l] = dja[r];
+                }
+            }
+        }
+    }
+}
+
 Status TreeProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) const {
     TreeWorkspace& ws = static_cast<TreeWorkspace&>(wsb);
     constexpr int W = DUAL_WIDTH;
@@ -580,6 +671,9 @@ Status TreeProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) c
         ws.wrd.assign(static_cast<std::size_t>(nq), DualW());
         ws.wrl.assign(static_cast<std::size_t>(2 * nq), DualW());
         ws.wrc.assign(static_cast<std::size_t>(m_all_), DualW());
+        ws.xl.assign(d_.model.joints.size() * W, Vec3::Zero());
+        ws.xa.assign(d_.model.joints.size() * W, Vec3::Zero());
+        ws.dv = Vec::Zero(d_.model.nv);
     }
     if (rq.nlam > 2) return Status::bad_shape;
     bool have_fixed = false;
@@ -587,15 +681,18 @@ Status TreeProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) c
         const int w = std::min(W, rq.nd - j0);
         bool moves_q = false;  // a chunk of q̇ directions only: the kinematics at q in double
         for (int i = 0; i < w * nq && !moves_q; ++i) moves_q = rq.dq[j0 * nq + i] != 0.0;
-        if (!moves_q && !have_fixed) {
+        // without quaternions the kinematics' tangents are the bodies' world twists (seed_kinematics)
+        const bool seed = moves_q && !quat_;
+        if ((!moves_q || seed) && !have_fixed) {
             const Status st = normalize<double>(rq.q, ws);
             if (st != Status::ok) return st;
             forward_kinematics(d_.model, ws.data, ws.qn.data(), true);
             have_fixed = true;
         }
         seed_directions<W>(rq, nq, j0, w, ws.wq.data(), ws.wqd.data());
+        if (seed) seed_kinematics(rq, j0, w, ws);
         const Status st = residuals<DualW>(rq, ws.wq.data(), ws.wqd.data(), *ws.wide, ws.wrd.data(), ws.wrl.data(),
-                                           ws.wrc.data(), moves_q ? nullptr : &ws.data);
+                                           ws.wrc.data(), moves_q ? nullptr : &ws.data, seed);
         if (st != Status::ok) return st;
         scatter_lanes<W>(ws.wrd.data(), nq, j0, w, nq, rq.r_dyn);
         scatter_lanes<W>(ws.wrl.data(), rq.nlam * nq, j0, w, static_cast<std::ptrdiff_t>(rq.nlam) * nq, rq.r_lam);

@@ -1,9 +1,9 @@
 """Robots (TreeProgram on dual numbers) against Pinocchio and a reduced-coordinate model.
 
-* ∂q̈/∂q, ∂q̈/∂v, ∂q̈/∂τ of a UR5 whose end effector is held at a point (3 closure rows)
-  against Pinocchio's analytical ``computeConstraintDynamicsDerivatives`` (KKT derivatives,
-  Carpentier & Mansard) at several states: fixed base, so q = Pinocchio's configuration and
-  q̇ = v.
+* ∂q̈/∂q, ∂q̈/∂v, ∂q̈/∂τ of a UR5 and a Panda whose tool is held at a point (3 closure rows)
+  or welded (6 rows) against Pinocchio's analytical ``computeConstraintDynamicsDerivatives``
+  (KKT derivatives, Carpentier & Mansard) at several states: fixed base, so q = Pinocchio's
+  configuration and q̇ = v.
 * The robot four-bar (fourbar.urdf closed by a planar point, 1 DOF) at its hanging
   equilibrium: the eigenvalue of the tangent-space linearization against the reduced model in
   the crank angle θ — M_r = Jᵀ M J and K_r = −d/dθ (Jᵀ g(q(θ))) with q(θ) the closed loop solved
@@ -35,8 +35,25 @@ def _ur5_point():
     return model, state.q, pinocchio_point_constraint(model)
 
 
-def test_ur5_point_closure_derivatives_match_pinocchio():
-    model, q0, cm = _ur5_point()
+def _arm_closure(arm, closure):
+    from nonmin.errors import MissingDependencyError
+    from nonmin.model.robots import example_robot_closure, pinocchio_frame_constraint
+
+    try:
+        model, state = example_robot_closure(arm, closure)
+    except MissingDependencyError as exc:
+        pytest.skip(str(exc))
+    return model, state.q, pinocchio_frame_constraint(model)
+
+
+@pytest.mark.parametrize(
+    ("arm", "closure"), [("ur5", "point"), ("panda", "point"), ("panda", "weld")]
+)
+def test_arm_closure_derivatives_match_pinocchio(arm, closure):
+    """UR5 and Panda (9 coordinates: 7 joints, 2 finger slides) with the tool held by a point
+    (3 rows) or a weld (6 rows; Pinocchio's CONTACT_6D rows differ from nonmin's, the
+    constrained accelerations and their derivatives do not)."""
+    model, q0, cm = _arm_closure(arm, closure)
     pm = model.pinocchio_model
     pd = pm.createData()
     cms = pin.StdVec_RigidConstraintModel()
@@ -61,6 +78,24 @@ def test_ur5_point_closure_derivatives_match_pinocchio():
         for ours, theirs in ((d.dqdd_dq, ddq_dq), (d.dqdd_dqd, ddq_dv), (d.dqdd_df, ddq_dtau)):
             scale = max(1.0, float(np.abs(theirs).max()))
             assert np.abs(ours - theirs).max() <= PIN_RTOL * scale, trial
+
+
+def test_engine_boundary_checks_name_the_argument():
+    """The engine path leaves finiteness to the binding: a NaN still raises NonFiniteError
+    naming the argument, a wrong shape ShapeError; lists are accepted."""
+    model, q0, _ = _ur5_point()
+    d = dynamics_derivatives(model, list(q0), None, f=np.zeros(model.n))
+    assert d.dqdd_dq.shape == (6, 6) and d.dqdd_du.shape == (6, model.k)
+    assert np.allclose(d.dqdd_du, d.dqdd_df @ model.input_matrix(q0), atol=1e-12)
+    for kw, name in (({"qd": np.full(6, np.nan)}, "qd"), ({"f": np.r_[0, 0, np.inf, 0, 0, 0]}, "f")):
+        with pytest.raises(nonmin.errors.NonFiniteError, match=name):
+            dynamics_derivatives(model, q0, **kw)
+    bad = q0.copy()
+    bad[1] = np.nan
+    with pytest.raises(nonmin.errors.NonFiniteError, match="q must"):
+        dynamics_derivatives(model, bad)
+    with pytest.raises(nonmin.errors.ShapeError, match="f must"):
+        dynamics_derivatives(model, q0, f=np.zeros(5))
 
 
 def test_ur5_term_tangents_match_central_differences():

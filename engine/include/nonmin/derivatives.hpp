@@ -20,7 +20,10 @@
 #include <memory>
 #include <vector>
 
+#include <Eigen/Cholesky>
+
 #include "program.hpp"
+#include "svd.hpp"
 
 namespace nonmin {
 
@@ -42,8 +45,12 @@ struct DerivativeScratch {
     Mat Rdyn, Rlam, Rcon;     // 2n × n, 2n × 2n (two λ), 2n × m_all: residual tangents
     Mat lam;                  // 2 × m_all: D λe and D ρ on the active rows
     std::vector<int> rows;    // active rows
-    Mat Ae, G, Z, MZ, Sm, C, T1, AQ, RHS, DQDD;
-    Vec d, ge, g;
+    Mat Ae, G, Z, MZ, Sm, C, T1, AQ, RHS, DQDD, ZS;
+    Vec d, ge, g, Gge, w1, w2;
+    Eigen::LLT<Mat> llt;
+    Eigen::JacobiSVD<Mat> svd;
+    DerivativeOutputs out;  // the bindings' outputs (no allocation per call)
+    Mat DU;                 // k × n: (∂q̈/∂u)ᵀ, (∂f_c/∂u)ᵀ (the bindings)
 };
 // q̈, f_c and their derivatives at (t, q, qd) with applied force f (n; nullptr: 0) and actuator
 // inputs u (k; nullptr: 0, f += B(q) u with u held fixed). Status::not_positive_definite when

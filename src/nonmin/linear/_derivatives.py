@@ -45,11 +45,17 @@ __all__ = ["DynamicsDerivatives", "dynamics_derivatives", "term_tangents"]
 
 
 # --------------------------------------------------------------------------- model terms
-def _engine() -> Any:
-    """The compiled extension (imported on first use; no type stubs)."""
-    from .. import _engine as eng  # type: ignore[attr-defined]
+_ENGINE_MODULE: Any = None
 
-    return eng
+
+def _engine() -> Any:
+    """The compiled extension (imported on first use, then cached; no type stubs)."""
+    global _ENGINE_MODULE
+    if _ENGINE_MODULE is None:
+        from .. import _engine as eng  # type: ignore[attr-defined]
+
+        _ENGINE_MODULE = eng
+    return _ENGINE_MODULE
 
 
 def _program(model: Model) -> Any:
@@ -373,16 +379,24 @@ def dynamics_derivatives(
     if not isinstance(model, Model):
         raise InputError(f"model must be a nonmin Model, got {type(model).__name__}")
     n, k = model.n, model.k
+    if backend == "engine":
+        # the boundary check is cheap here: shapes and types in Python, finiteness in the
+        # binding (one C++ pass, NonFiniteError naming the argument)
+        tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
+        return _engine_derivatives(
+            model, float(t), _array(q, "q", n), _array(qd, "qd", n, True),
+            None if u is None or k == 0 else _array(u, "u", k),
+            None if f is None else _array(f, "f", n),
+            model.resolve_active(active), tol,
+        )  # fmt: skip
     qv = _vector(q, "q", n)
     vv = _vector(qd, "qd", n)
     uv = _vector(u, "u", k)
     fv = _vector(f, "f", n)
     tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
     act = model.resolve_active(active)
-    if backend not in ("engine", "numpy"):
+    if backend != "numpy":
         raise InputError(f"backend must be 'engine' or 'numpy', got {backend!r}")
-    if backend == "engine":
-        return _engine_derivatives(model, float(t), qv, vv, uv, fv, act, tol)
     DQ = np.vstack([np.eye(n), np.zeros((n, n))])
     DV = np.vstack([np.zeros((n, n)), np.eye(n)])
     kp, tt, dqdd, dfc = _directional(model, float(t), qv, vv, uv, fv, act, tol, DQ, DV)
@@ -438,35 +452,43 @@ def _engine_derivatives(
     t: float,
     q: FloatArray,
     qd: FloatArray,
-    u: FloatArray,
-    f: FloatArray,
+    u: FloatArray | None,
+    f: FloatArray | None,
     act: frozenset[str],
     tol: float,
 ) -> DynamicsDerivatives:
     """The C++ pipeline (engine/src/derivatives.cpp), with the program and scratch cached."""
     prog, scratch, mask = _prepared(model, act)
+    n, k = model.n, model.k
+    blk = np.empty((2 + 6 * n + 2 * k, n))  # every output, one allocation (rows: the binding's doc)
     try:
-        r = _engine().forward_derivatives(
-            prog,
-            scratch,
-            t,
-            q,
-            qd,
-            f if f.any() else None,
-            u if u.size and u.any() else None,
-            mask,
-            tol,
-        )
+        rank = _engine().forward_derivatives(prog, scratch, t, q, qd, f, u, mask, tol, blk)
     except NotPositiveDefiniteError as exc:
         raise NotPositiveDefiniteError(
             f"M is not positive definite on N(A) at this state ({exc})"
         ) from None
-    B = r["B"]
-    dqdd_df, dfc_df = r["dqdd_df"], r["dfc_df"]
-    return DynamicsDerivatives(
-        qdd=r["qdd"], f_c=r["f_c"], rank=int(r["rank"]),
-        dqdd_dq=r["dqdd_dq"], dqdd_dqd=r["dqdd_dqd"], dqdd_df=dqdd_df,
-        dqdd_du=dqdd_df @ B if B.shape[1] else np.zeros((model.n, 0)),
-        dfc_dq=r["dfc_dq"], dfc_dqd=r["dfc_dqd"], dfc_df=dfc_df,
-        dfc_du=dfc_df @ B if B.shape[1] else np.zeros((model.n, 0)),
+    e = 2 + 6 * n
+    out = object.__new__(DynamicsDerivatives)  # frozen: fill its fields without __setattr__
+    out.__dict__.update(
+        qdd=blk[0], f_c=blk[1], rank=rank,
+        dqdd_dq=blk[2 : 2 + n], dqdd_dqd=blk[2 + n : 2 + 2 * n], dqdd_df=blk[2 + 2 * n : 2 + 3 * n],
+        dqdd_du=blk[e : e + k].T,
+        dfc_dq=blk[2 + 3 * n : 2 + 4 * n], dfc_dqd=blk[2 + 4 * n : 2 + 5 * n], dfc_df=blk[2 + 5 * n : e],
+        dfc_du=blk[e + k : e + 2 * k].T,
     )  # fmt: skip
+    return out
+
+
+def _array(x: ArrayLike | None, name: str, n: int, zero: bool = False) -> FloatArray:
+    """x as a float64 C-contiguous (n,) array (None: zeros if `zero`); finiteness is checked
+    by the engine's binding."""
+    if type(x) is np.ndarray and x.dtype == np.float64 and x.shape == (n,) and x.flags.c_contiguous:
+        return x
+    if x is None and zero:
+        return np.zeros(n)
+    arr = np.ascontiguousarray(x, dtype=np.float64)
+    if arr.shape != (n,):
+        raise ShapeError(f"{name} must have shape ({n},), got shape {arr.shape}")
+    return arr
+
+

@@ -112,6 +112,8 @@ struct TreeWorkspace : Workspace, TreeScratch<double> {
     // residual_tangents' scratch on DualW (DUAL_WIDTH directions per pass; made at first use)
     std::unique_ptr<TreeScratch<DualW>> wide;
     std::vector<DualW> wq, wqd, wrd, wrl, wrc;
+    std::vector<Vec3> xl, xa;  // per joint and lane: world twists of the seeded directions
+    Vec dv;                    // nv: one lane's velocity-space direction
 };
 
 class TreeProgram : public Program {
@@ -168,9 +170,15 @@ class TreeProgram : public Program {
     // The residuals of rq at (q, qd) on the scalar S: rd (nq), rl (nlam × nq), rc (m_all, active rows).
     // fixed: when not null, the kinematics at q in double (directions that do not move q: the
     // placements, motion subspaces and inertias are copied instead of recomputed on S).
+    // seeded: ws.data already holds the kinematics at q with their tangents (seed_kinematics).
     template <class S>
     Status residuals(const ResidualQuery& rq, const S* q, const S* qd, TreeScratch<S>& ws, S* rd, S* rl,
-                     S* rc, const TreeData* fixed) const;
+                     S* rc, const TreeData* fixed, bool seeded = false) const;
+    // The kinematics at q on DualW for the w directions rq.dq[j0 ..] (programs without
+    // quaternions, v = q̇): values from fx (double), lane l's tangent from the world twist of
+    // each body along direction l — δ(oMi) = ξ_i × oMi, δJ_c = ξ_i × J_c, δ(oI_i) the motion
+    // of its mass points — instead of differentiating the forward kinematics.
+    void seed_kinematics(const ResidualQuery& rq, int j0, int w, TreeWorkspace& ws) const;
 
     // T is the identity on runs of coordinates (iq .. iq+len ↔ iv .. iv+len) and a small block
     // on each quaternion joint (quaternion qs..qs+4 ↔ angular velocity a..a+3; free flyer also

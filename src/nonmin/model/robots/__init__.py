@@ -17,7 +17,9 @@
   constraint of a chosen type), :func:`fourbar_mjcf` (MJCF four-bar with ``<equality>``
   connect/weld/joint), :func:`two_arm_grasp` (two arms holding a free-floating box) and
   :func:`ur5_point_closure` (example-robot-data's UR5 with its tool pinned to the world;
-  :func:`pinocchio_point_constraint` gives Pinocchio's form of that closure).
+  :func:`pinocchio_point_constraint` gives Pinocchio's form of that closure);
+  :func:`example_robot_closure` (UR5 or Panda with its tool held by a point or a weld;
+  :func:`pinocchio_frame_constraint` gives Pinocchio's form).
 
 The constraint values and :func:`data_path` need no optional dependency; :class:`RobotModel`
 is imported lazily, so ``import nonmin.model.robots`` never imports Pinocchio and a missing
@@ -39,8 +41,10 @@ from ._constraints import PathDriver as PathDriver
 from ._data import data_path as data_path
 
 if TYPE_CHECKING:
+    from ._examples import example_robot_closure as example_robot_closure
     from ._examples import fourbar as fourbar
     from ._examples import fourbar_mjcf as fourbar_mjcf
+    from ._examples import pinocchio_frame_constraint as pinocchio_frame_constraint
     from ._examples import pinocchio_point_constraint as pinocchio_point_constraint
     from ._examples import serial_arm as serial_arm
     from ._examples import two_arm_grasp as two_arm_grasp
@@ -57,8 +61,10 @@ __all__ = [
     "PathDriver",
     "RobotModel",
     "data_path",
+    "example_robot_closure",
     "fourbar",
     "fourbar_mjcf",
+    "pinocchio_frame_constraint",
     "pinocchio_point_constraint",
     "serial_arm",
     "two_arm_grasp",
@@ -66,8 +72,10 @@ __all__ = [
 ]
 
 _EXAMPLES = (
+    "example_robot_closure",
     "fourbar",
     "fourbar_mjcf",
+    "pinocchio_frame_constraint",
     "pinocchio_point_constraint",
     "serial_arm",
     "two_arm_grasp",

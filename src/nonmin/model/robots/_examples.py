@@ -15,8 +15,10 @@ from ._data import data_path
 from ._pinocchio import RobotModel
 
 __all__ = [
+    "example_robot_closure",
     "fourbar",
     "fourbar_mjcf",
+    "pinocchio_frame_constraint",
     "pinocchio_point_constraint",
     "serial_arm",
     "two_arm_grasp",
@@ -157,6 +159,105 @@ def ur5_point_closure() -> tuple[RobotModel, State]:
     con = FrameConstraint.point("closure", "ee_link", placement_b=oMe)
     model = RobotModel.from_urdf(urdf, constraints=[con], joint_limits="ignore")
     return model, assemble(model, q_guess)
+
+
+#: example-robot-data arms of :func:`example_robot_closure`: (URDF under robots/, tool frame,
+#: configuration where the tool is held).
+EXAMPLE_ARMS = {
+    "ur5": ("ur_description/urdf/ur5_robot.urdf", "ee_link", UR5_Q_GUESS),
+    "panda": (
+        "panda_description/urdf/panda.urdf",
+        "panda_hand",
+        (0.1, -0.5, 0.2, -2.0, 0.1, 1.6, 0.8, 0.02, 0.03),
+    ),
+}
+
+
+def example_robot_closure(arm: str = "panda", closure: str = "point") -> tuple[RobotModel, State]:
+    """An example-robot-data arm whose tool frame is held in the world: a 3-row ``"point"``
+    or a 6-row ``"weld"`` constraint named ``"closure"`` (joint limits ignored), assembled at
+    rest where the tool is at the arm's guess configuration (:data:`EXAMPLE_ARMS`).
+
+    ``example_robot_closure("ur5", "point")`` is :func:`ur5_point_closure`. The Panda has 9
+    coordinates (7 arm joints and 2 finger slides, which the closure leaves free). Used by the
+    derivative tests against Pinocchio and ``benchmarks/derivative_bench.py``;
+    :func:`pinocchio_frame_constraint` builds Pinocchio's form of the closure.
+
+    Raises
+    ------
+    InputError
+        Unknown arm or closure.
+    MissingDependencyError
+        When Pinocchio or example-robot-data (extra ``test``) is not installed.
+    """
+    from pathlib import Path
+
+    from ...errors import InputError, MissingDependencyError
+
+    if arm not in EXAMPLE_ARMS:
+        raise InputError(f"arm must be one of {sorted(EXAMPLE_ARMS)}, got {arm!r}")
+    if closure not in ("point", "weld"):
+        raise InputError(f"closure must be 'point' or 'weld', got {closure!r}")
+    try:
+        import pinocchio as pin
+    except ImportError:
+        raise MissingDependencyError(
+            "example_robot_closure needs Pinocchio: pip install 'nonmin[pin]'"
+        ) from None
+    rel, frame, guess = EXAMPLE_ARMS[arm]
+    urdf = Path(pin.__file__).resolve().parents[4] / "share" / "example-robot-data" / "robots" / rel
+    if not urdf.exists():
+        raise MissingDependencyError(
+            f"example_robot_closure needs example-robot-data ({urdf} is missing): "
+            "pip install example-robot-data"
+        )
+    q_guess = np.array(guess)
+    free = RobotModel.from_urdf(urdf, joint_limits="ignore")
+    oMe = free.frame_placement(q_guess, frame)
+    con = getattr(FrameConstraint, closure)("closure", frame, placement_b=oMe)
+    model = RobotModel.from_urdf(urdf, constraints=[con], joint_limits="ignore")
+    return model, assemble(model, q_guess)
+
+
+def pinocchio_frame_constraint(model: RobotModel, name: str = "closure") -> object:
+    """Pinocchio's ``RigidConstraintModel`` of a point (``CONTACT_3D``) or weld
+    (``CONTACT_6D``) constraint of ``model`` that holds a frame in the world (LOCAL).
+
+    The rows differ from nonmin's (a weld's rotation rows), the constrained accelerations and
+    their derivatives do not (the same constraint set at full rank).
+
+    Raises
+    ------
+    InputError
+        When ``name`` is not a point or weld constraint of a frame to the world.
+    """
+    import pinocchio as pin
+
+    from ...errors import InputError
+
+    cons = {c.name: c for c in model.robot_constraints}
+    con = cons.get(name)
+    if (
+        not isinstance(con, FrameConstraint)
+        or con.type not in ("point", "weld")
+        or con.frame_b != WORLD
+    ):
+        raise InputError(
+            "name must be a point or weld constraint of a frame to the world in "
+            f"{sorted(cons)}, got {name!r}"
+        )
+    pm = model.pinocchio_model
+    fr = pm.frames[pm.getFrameId(con.frame_a)]
+    kind = pin.ContactType.CONTACT_3D if con.type == "point" else pin.ContactType.CONTACT_6D
+    return pin.RigidConstraintModel(
+        kind,
+        pm,
+        fr.parentJoint,
+        fr.placement * pin.SE3(con.placement_a),
+        0,
+        pin.SE3(con.placement_b),
+        pin.ReferenceFrame.LOCAL,
+    )
 
 
 def pinocchio_point_constraint(model: RobotModel, name: str = "closure") -> object:
