@@ -612,9 +612,16 @@ double singular_indicator(Loop& L, const Mat& A, int m) {
     Passages& P = L.pas;
     const int n = L.n;
     if (m == 0) return inf;
+    // A = L.Ac with its known row pattern (sim_loop.cpp's evaluate): only the pattern's entries
+    // are read and written (the others are 0; B's are then never read), in the same order, so
+    // the indicator is bitwise the dense scan's
+    const bool pat = &A == &L.Ac && !L.pc_start.empty() && !L.gathered.empty() && L.gathered == L.rows;
+    const int* pst = pat ? L.pc_start.data() : nullptr;
+    const int* pco = pat ? L.pc_cols.data() : nullptr;
     double big = 0.0;
     for (int i = 0; i < m; ++i) {
-        P.w[i] = linalg::row_norm(&A(i, 0), n);
+        P.w[i] = pat ? linalg::row_norm_pattern(&A(i, 0), n, pco + pst[i], pst[i + 1] - pst[i])
+                     : linalg::row_norm(&A(i, 0), n);
         big = std::max(big, P.w[i]);
     }
     if (!(big > 0.0 && std::isfinite(big))) {
@@ -630,10 +637,19 @@ double singular_indicator(Loop& L, const Mat& A, int m) {
         const int i = P.live[static_cast<std::size_t>(r)];
         const double d = 1.0 / P.w[i];
         int fc = n;
-        for (int j = 0; j < n; ++j) {
-            const double b = A(i, j) * d;
-            P.B(r, j) = b;
-            if (b != 0.0 && fc == n) fc = j;
+        if (pat) {
+            for (int t = pst[i]; t < pst[i + 1]; ++t) {
+                const int j = pco[t];
+                const double b = A(i, j) * d;
+                P.B(r, j) = b;
+                if (b != 0.0 && fc == n) fc = j;
+            }
+        } else {
+            for (int j = 0; j < n; ++j) {
+                const double b = A(i, j) * d;
+                P.B(r, j) = b;
+                if (b != 0.0 && fc == n) fc = j;
+            }
         }
         P.first[static_cast<std::size_t>(r)] = fc;
         P.order[static_cast<std::size_t>(r)] = r;
@@ -642,27 +658,43 @@ double singular_indicator(Loop& L, const Mat& A, int m) {
                      [&P](int a, int b) { return P.first[static_cast<std::size_t>(a)] < P.first[static_cast<std::size_t>(b)]; });
     // column lists (permuted row positions, increasing)
     std::fill(P.col_ptr.begin(), P.col_ptr.end(), 0);
-    for (int p = 0; p < k; ++p) {
-        const int r = P.order[static_cast<std::size_t>(p)];
-        for (int j = 0; j < n; ++j)
-            if (P.B(r, j) != 0.0) ++P.col_ptr[static_cast<std::size_t>(j) + 1];
-    }
+    auto each_nonzero = [&](int r, auto&& f) {  // f(j) for the nonzero entries of B's row r, j increasing
+        if (pat) {
+            const int i = P.live[static_cast<std::size_t>(r)];
+            for (int t = pst[i]; t < pst[i + 1]; ++t)
+                if (P.B(r, pco[t]) != 0.0) f(pco[t]);
+        } else {
+            for (int j = 0; j < n; ++j)
+                if (P.B(r, j) != 0.0) f(j);
+        }
+    };
+    for (int p = 0; p < k; ++p)
+        each_nonzero(P.order[static_cast<std::size_t>(p)], [&](int j) { ++P.col_ptr[static_cast<std::size_t>(j) + 1]; });
     for (int j = 0; j < n; ++j) P.col_ptr[static_cast<std::size_t>(j) + 1] += P.col_ptr[static_cast<std::size_t>(j)];
     {
         // fill (col_ptr as running cursor, restored after)
-        for (int p = 0; p < k; ++p) {
-            const int r = P.order[static_cast<std::size_t>(p)];
-            for (int j = 0; j < n; ++j)
-                if (P.B(r, j) != 0.0) P.col_rows[static_cast<std::size_t>(P.col_ptr[static_cast<std::size_t>(j)]++)] = p;
-        }
+        for (int p = 0; p < k; ++p)
+            each_nonzero(P.order[static_cast<std::size_t>(p)], [&](int j) {
+                P.col_rows[static_cast<std::size_t>(P.col_ptr[static_cast<std::size_t>(j)]++)] = p;
+            });
         for (int j = n; j > 0; --j) P.col_ptr[static_cast<std::size_t>(j)] = P.col_ptr[static_cast<std::size_t>(j) - 1];
         P.col_ptr[0] = 0;
     }
-    // Gram matrix G = (DA)(DA)ᵀ in the permuted order, lower triangle; envelope first[p]
-    for (int p = 0; p < k; ++p) {
-        for (int q = 0; q <= p; ++q) P.G(p, q) = 0.0;
-        P.first[static_cast<std::size_t>(p)] = p;
+    // the envelope first[p] of G's lower triangle (the first row sharing a column with row p),
+    // zeroed there; G = (DA)(DA)ᵀ in the permuted order accumulated over it
+    for (int p = 0; p < k; ++p) P.first[static_cast<std::size_t>(p)] = p;
+    for (int j = 0; j < n; ++j) {
+        const int a0 = P.col_ptr[static_cast<std::size_t>(j)], a1 = P.col_ptr[static_cast<std::size_t>(j) + 1];
+        if (a1 > a0) {
+            const int p0 = P.col_rows[static_cast<std::size_t>(a0)];  // (the lists increase)
+            for (int a = a0 + 1; a < a1; ++a) {
+                const int pa = P.col_rows[static_cast<std::size_t>(a)];
+                if (p0 < P.first[static_cast<std::size_t>(pa)]) P.first[static_cast<std::size_t>(pa)] = p0;
+            }
+        }
     }
+    for (int p = 0; p < k; ++p)  // (the dense eigensolver reads the whole lower triangle)
+        for (int q = k <= PASSAGE_DENSE_ROWS ? 0 : P.first[static_cast<std::size_t>(p)]; q <= p; ++q) P.G(p, q) = 0.0;
     for (int j = 0; j < n; ++j) {
         const int a0 = P.col_ptr[static_cast<std::size_t>(j)], a1 = P.col_ptr[static_cast<std::size_t>(j) + 1];
         for (int a = a0; a < a1; ++a) {
@@ -671,7 +703,6 @@ double singular_indicator(Loop& L, const Mat& A, int m) {
             for (int b = a0; b <= a; ++b) {
                 const int pb = P.col_rows[static_cast<std::size_t>(b)];
                 P.G(pa, pb) += ba * P.B(P.order[static_cast<std::size_t>(pb)], j);
-                if (pb < P.first[static_cast<std::size_t>(pa)]) P.first[static_cast<std::size_t>(pa)] = pb;
             }
         }
     }

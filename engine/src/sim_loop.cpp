@@ -32,6 +32,25 @@ constexpr double inf = std::numeric_limits<double>::infinity();
 // instant ends by interpolation (run(): end_star).
 constexpr double PASSAGE_END_BAND = 0.05;
 
+// The Solver's Known bits for a constant M (solver.hpp), by the checks its forward call makes:
+// every entry finite, max|M − Mᵀ| ≤ sym_rtol · max|M|; diagonal when every off-diagonal entry is
+// 0. An M that fails gets 0 (the solver checks it and reports the failure at each call).
+unsigned mass_known(const Mat& M, double sym_rtol) {
+    const int n = static_cast<int>(M.rows());
+    double scale = 0.0, asym = 0.0;
+    bool diagonal = true;
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) {
+            const double v = M(i, j);
+            if (!std::isfinite(v)) return 0u;
+            scale = std::max(scale, std::fabs(v));
+            asym = std::max(asym, std::fabs(v - M(j, i)));
+            if (i != j && v != 0.0) diagonal = false;
+        }
+    if (asym > sym_rtol * std::max(scale, std::numeric_limits<double>::min())) return 0u;
+    return KNOWN_M_VALID | (diagonal ? KNOWN_M_DIAGONAL : 0u);
+}
+
 bool finite(const double* x, int len) {
     for (int i = 0; i < len; ++i)
         if (!std::isfinite(x[i])) return false;
@@ -47,11 +66,12 @@ double velocity_rtol(const Options& o, const ProjectionOptions& po) {
 }
 
 SolveOptions solve_options(const Loop& L, double rtol, const std::vector<int>* pst = nullptr,
-                           const std::vector<int>* pco = nullptr) {
+                           const std::vector<int>* pco = nullptr, unsigned known = 0) {
     SolveOptions so;
     so.rtol = rtol;
     so.spd_rtol = L.opt.spd_rtol;
     so.sym_rtol = L.opt.sym_rtol;
+    so.known = known;
     if (pst && !pst->empty() && !L.gathered.empty() && L.gathered == L.rows) {  // A's known pattern
         so.a_start = pst->data();
         so.a_cols = pco->data();
@@ -64,8 +84,10 @@ SolveOptions solve_options(const Loop& L, double rtol, const std::vector<int>* p
 Status correction(Loop& L, const Mat& A, int m, const double* r, double rtol, double* out, int* rank) {
     L.vheld = false;
     const bool hol = &A == &L.Alin;
-    const SolveOptions so = hol ? solve_options(L, rtol, &L.ph_start, &L.ph_cols)
-                                : solve_options(L, rtol, &L.pc_start, &L.pc_cols);
+    // the metric's Known bits: the identity, or the constant M validated once (m_known)
+    const unsigned known = L.mq == 1 ? KNOWN_M_VALID | KNOWN_M_DIAGONAL : L.mq == 2 ? L.m_known : 0u;
+    const SolveOptions so = hol ? solve_options(L, rtol, &L.ph_start, &L.ph_cols, known)
+                                : solve_options(L, rtol, &L.pc_start, &L.pc_cols, known);
     const SolveInfo info = L.solver.forward(L.Mq.data(), L.zero_n.data(), A.data(), m, r, so, out, nullptr);
     if (rank) *rank = info.rank;
     if (info.status != Status::ok) return info.status;
@@ -85,7 +107,7 @@ SolveInfo dynamics_solve(Loop& L, double t, const double* q, double rtol, double
     }
     L.vheld = false;
     return L.solver.forward(L.T.M.data(), L.g.data(), L.Ac.data(), L.m, L.bias.data(),
-                            solve_options(L, rtol, &L.pc_start, &L.pc_cols), qdd, fc);
+                            solve_options(L, rtol, &L.pc_start, &L.pc_cols, L.m_held ? L.m_known : 0u), qdd, fc);
 }
 
 }  // namespace
@@ -160,8 +182,12 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
 
 Status evaluate(Loop& L, double t, const double* q, const double* qd, unsigned need) {
     const std::uint8_t* mask = L.fric.empty() ? L.active.data() : L.eval_mask.data();  // + slipping rows
-    const Status s = L.prog->evaluate(t, q, qd, mask, need, L.T, *L.ws);
+    const Status s = L.prog->evaluate(t, q, qd, mask, L.m_held ? need & ~NEED_M : need, L.T, *L.ws);
     if (s != Status::ok) return s;
+    if ((need & NEED_M) && !L.m_held && L.prog->constant_mass()) {  // a constant M: kept, validated once
+        L.m_held = true;
+        L.m_known = mass_known(L.T.M, L.opt.sym_rtol);
+    }
     const int n = L.n;
     const RowPattern& pat = L.prog->a_pattern();
     // A: the pattern's entries only, once the rows were gathered in full for this active set
@@ -377,10 +403,13 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
     double* qd = y + n;
     Status s = evaluate(L, t, q, qd, NEED_M | NEED_A | NEED_PHI | NEED_VELOCITY);
     if (s != Status::ok) return s;
-    if (po.euclidean)
-        L.Mq.setIdentity();
-    else
+    if (po.euclidean) {
+        if (L.mq != 1) L.Mq.setIdentity();
+        L.mq = 1;
+    } else if (!(L.m_held && L.mq == 2)) {  // (a constant M is copied once)
         L.Mq = L.T.M;  // M at the uncorrected q (the corrections are at the integrator's error)
+        L.mq = L.m_held ? 2 : 0;
+    }
     const int mh = L.m_hol;
     if (mh > 0) {
         double prev = inf;

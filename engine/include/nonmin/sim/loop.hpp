@@ -257,6 +257,12 @@ struct Loop {
     Vec gam, phi, vel, phih, bias, floor_, rnorm;
     Vec g, u, qdd, fc, zero_n, aq, dq;
     Mat Mq, L;  // the projection's metric (n × n), Cholesky factor of M̄
+    // A constant M (Program::constant_mass) is evaluated once: T.M keeps it, later evaluations
+    // skip NEED_M (m_held); m_known: the solver's Known bits for it (0: not valid, the solver
+    // checks and reports); mq: what Mq holds (0 nothing yet, 1 the identity, 2 the constant M).
+    bool m_held = false;
+    unsigned m_known = 0;
+    int mq = 0;
     // The Solver holds the velocity correction's factorization (its generation vgen; A at
     // (vt, vq), metric Mq, rank tolerance vrtol): a dynamics solve at the same (t, q) with M = Mq
     // and that tolerance has the same A and reuses it (Solver::again).
