@@ -34,8 +34,8 @@ CONFIGS: dict[str, list[dict[str, Any]]] = {
         *({"method": m, "rtol": r, "atol": r} for m in ("dopri5", "dop853") for r in (1e-6, 1e-8, 1e-10, 1e-12)),
     ],
     "A04_bricard": [
-        *({"method": "rk4", "dt": dt} for dt in (1e-2, 5e-3, 2e-3, 1e-3)),
-        *({"method": m, "rtol": r, "atol": r * 1e-2} for m in ("dopri5", "dop853") for r in (1e-6, 1e-8, 1e-10)),
+        *({"method": "rk4", "dt": dt} for dt in (0.2, 0.1, 5e-2, 2e-2, 1e-2, 5e-3, 2e-3, 1e-3)),
+        *({"method": m, "rtol": r, "atol": r * 1e-2} for m in ("dopri5", "dop853") for r in (1e-4, 1e-6, 1e-8, 1e-10)),
     ],
 }
 HORIZON = {"A03_andrews": 0.03, "A04_bricard": 10.0}
@@ -45,6 +45,10 @@ HORIZON = {"A03_andrews": 0.03, "A04_bricard": 10.0}
 #: default and stiff equality settings (as sim_bench.py's: solref = 2 dt, solimp 0.99 0.999).
 MUJOCO_DTS = (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4)
 _A04_FINE: dict[str, np.ndarray] = {}
+
+
+#: Output sampling interval of the A04 runs (s), both engines (``--sample``).
+SAMPLE = {"dt": 0.01}
 
 
 def a04_fine_reference() -> dict[str, np.ndarray]:
@@ -58,7 +62,8 @@ def a04_fine_reference() -> dict[str, np.ndarray]:
         tr = simulate(mech, (0.0, 10.0), method="dop853", rtol=1e-12, atol=1e-14, t_eval=te, progress=False)
         _A04_FINE["t"] = np.asarray(tr.t)
         _A04_FINE["P3"] = np.asarray(tr.outputs(mech.model)["P3.position"])
-    return _A04_FINE
+    k = round(SAMPLE["dt"] / 0.01)
+    return {"t": _A04_FINE["t"][::k], "P3": _A04_FINE["P3"][::k]}
 
 
 def _v(a: Any) -> str:
@@ -101,7 +106,7 @@ def run_mujoco_a04(dt: float, setting: str, repeat: int) -> dict[str, Any]:
     model = mujoco.MjModel.from_xml_string(_a04_mjcf(dt, setting))
     data = mujoco.MjData(model)
     n = round(T / dt)
-    every = max(1, round(0.01 / dt))
+    every = max(1, round(SAMPLE["dt"] / dt))
     rod3 = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "rod3")
     rod5 = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "rod5")
     walls = []
@@ -144,7 +149,7 @@ def run(name: str, cfg: dict[str, Any], repeat: int) -> dict[str, Any]:
 
     T = HORIZON[name]
     mech = library.get(name)
-    t_eval = np.array([0.0, T]) if name == "A03_andrews" else np.round(np.arange(0.0, T + 1e-9, 0.01), 10)
+    t_eval = np.array([0.0, T]) if name == "A03_andrews" else np.round(np.arange(0.0, T + 1e-9, SAMPLE["dt"]), 10)
     walls = []
     tr = None
     for _ in range(repeat + 1):  # one warm-up run
@@ -179,7 +184,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--mechanisms", default="A03_andrews,A04_bricard")
     ap.add_argument("--peers", action="store_true", help="add MuJoCo (default and stiff) on A04")
+    ap.add_argument("--sample", type=float, default=0.01, help="A04 output interval (s), a multiple of 0.01")
     a = ap.parse_args(argv)
+    SAMPLE["dt"] = float(a.sample)
     load = os.getloadavg()
     out: dict[str, Any] = {"command": "python benchmarks/library_wp.py " + " ".join(sys.argv[1:] if argv is None else argv),
                            "date_utc": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
@@ -194,7 +201,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name:>12} {r['setting']:<36} dt={r['dt']} err={r['error_vs_reference_max']} "
                   f"dE={r['energy_drift']:.2e} closure={r['closure_max']:.1e} steps={r['n_steps']} "
                   f"rej={r['n_rejected']} wall/s={r['wall_per_sim_s']} {r['status']}", flush=True)  # fmt: skip
-        out["mechanisms"][name] = {"t_final": HORIZON[name], "rows": rows}
+        key = name if name != "A04_bricard" or a.sample == 0.01 else f"{name}_samples_{a.sample:g}s"
+        for r in rows:
+            r["mechanism"] = key
+        out["mechanisms"][key] = {"t_final": HORIZON[name], "rows": rows}
     out["load_after"] = [round(x, 2) for x in os.getloadavg()]
     Path(a.json).parent.mkdir(parents=True, exist_ok=True)
     Path(a.json).write_text(json.dumps(out, indent=1, default=float), encoding="utf-8")
