@@ -194,6 +194,7 @@ Status evaluate(Loop& L, double t, const double* q, const double* qd, unsigned n
     const bool sparse = (need & NEED_A) && pat.known() && L.gathered == L.rows;
     if ((need & NEED_A) && !sparse) {  // a new active set: its rows in full, and their pattern
         L.gathered.clear();
+        ++L.gather_gen;
         for (auto* v : {&L.pc_start, &L.pc_cols, &L.ph_start, &L.ph_cols}) v->clear();
         if (pat.known()) {
             L.gathered = L.rows;
@@ -449,7 +450,14 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
             if (relin) {
                 if (lin_count >= po.max_iter) break;
                 ++lin_count;
-                L.Alin.topRows(mh) = L.Ah.topRows(mh);
+                if (hol_pattern(L) && L.alin_gen == L.gather_gen) {  // the pattern's entries (the others 0)
+                    for (int i = 0; i < mh; ++i)
+                        for (int t = L.ph_start[i]; t < L.ph_start[i + 1]; ++t)
+                            L.Alin(i, L.ph_cols[t]) = L.Ah(i, L.ph_cols[t]);
+                } else {
+                    L.Alin.topRows(mh) = L.Ah.topRows(mh);
+                    L.alin_gen = hol_pattern(L) ? L.gather_gen : ~0ull;
+                }
                 have_lin = true;
             }
             fresh = relin;

@@ -254,6 +254,9 @@ struct Loop {
     // That pattern for the gathered rows (RowPattern's compressed rows; empty: unknown): of
     // Ac's m rows (pc_*) and of Ah's m_hol rows (ph_*, also Alin's), as the Solver takes them.
     std::vector<int> pc_start, pc_cols, ph_start, ph_cols;
+    // Counts the full gatherings; Alin holds rows copied in full at gathering alin_gen (later
+    // copies of the same rows take the pattern's entries only)
+    unsigned long long gather_gen = 0, alin_gen = ~0ull;
     Vec gam, phi, vel, phih, bias, floor_, rnorm;
     Vec g, u, qdd, fc, zero_n, aq, dq;
     Mat Mq, L;  // the projection's metric (n × n), Cholesky factor of M̄
