@@ -1,6 +1,7 @@
 // Bindings of the compiled controllers (nonmin/sim/control.hpp): SimControl (Regulator, the
 // Tracker's computed torque, ForceControl over either), the time signals they evaluate
-// (SimPiecewisePolynomial; SimPySignal, a Python function called back) and the SimController base
+// (SimTimeSignal: the engine's TimeFunctions, which SimPiecewisePolynomial builds from PPoly's
+// layout; SimPySignal, a Python function called back) and the SimController base
 // SimLoop takes.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
@@ -133,25 +134,38 @@ void bind_control(nb::module_& m) {
                 return x;
             },
             nb::arg("t"), "(value, first derivative, second derivative) at t, concatenated.");
-    nb::class_<sim::PiecewisePolynomial, sim::Signal>(
-        m, "SimPiecewisePolynomial",
-        "scipy.interpolate.PPoly's layout: breakpoints x (p + 1,), coefficients c (order, p, dim); "
-        "hold: constant outside [x_0, x_p] with zero derivatives, else the end pieces extend.")
+    nb::class_<sim::TimeSignal, sim::Signal>(
+        m, "SimTimeSignal",
+        "A vector of TimeFunctions (pieces or tapes), one per component; hold: outside [lo, hi] "
+        "(strictly) the end values with zero derivatives.")
         .def(
             "__init__",
-            [](sim::PiecewisePolynomial* self, CArr1 x, CArr3 c, bool hold) {
-                std::vector<double> xv(x.data(), x.data() + x.shape(0));
-                std::vector<double> cv(c.data(), c.data() + c.size());
-                if (c.shape(1) + 1 != x.shape(0))
-                    raise_input("SimPiecewisePolynomial: c must have shape (order, len(x) - 1, dim)");
+            [](sim::TimeSignal* self, std::vector<TimeFunction> f, bool hold, double lo, double hi) {
                 try {
-                    new (self) sim::PiecewisePolynomial(std::move(xv), std::move(cv), static_cast<int>(c.shape(0)),
-                                                        static_cast<int>(c.shape(2)), hold);
+                    new (self) sim::TimeSignal(std::move(f), hold, lo, hi);
                 } catch (const EngineError& e) {
                     raise_input(e.what());
                 }
             },
-            nb::arg("x"), nb::arg("c"), nb::arg("hold"));
+            nb::arg("functions"), nb::arg("hold") = false, nb::arg("lo") = 0.0, nb::arg("hi") = 0.0);
+    m.def(
+        "SimPiecewisePolynomial",
+        [](CArr1 x, CArr3 c, bool hold) {
+            std::vector<double> xv(x.data(), x.data() + x.shape(0));
+            std::vector<double> cv(c.data(), c.data() + c.size());
+            if (c.shape(1) + 1 != x.shape(0))
+                raise_input("SimPiecewisePolynomial: c must have shape (order, len(x) - 1, dim)");
+            try {
+                return sim::TimeSignal::from_ppoly(xv, cv, static_cast<int>(c.shape(0)), static_cast<int>(c.shape(2)),
+                                                   hold);
+            } catch (const EngineError& e) {
+                raise_input(e.what());
+            }
+        },
+        nb::arg("x"), nb::arg("c"), nb::arg("hold"),
+        "scipy.interpolate.PPoly's layout as a SimTimeSignal: breakpoints x (p + 1,), coefficients c "
+        "(order, p, dim); hold: constant outside [x_0, x_p] with zero derivatives, else the end pieces "
+        "extend.");
     nb::class_<PySignal, sim::Signal>(m, "SimPySignal",
                                       "A Python function t -> array (3, dim) (triple) or (dim,), called back.")
         .def(nb::init<nb::object, int, bool>(), nb::arg("fn"), nb::arg("dim"), nb::arg("triple"));

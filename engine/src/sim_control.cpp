@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <string>
 
 namespace nonmin::sim {
 
@@ -34,39 +35,58 @@ double norm2(const double* x, int len) {
 
 // ------------------------------------------------------------------------------ signals
 
-PiecewisePolynomial::PiecewisePolynomial(std::vector<double> x, std::vector<double> c, int order, int dim,
-                                         bool hold)
-    : x_(std::move(x)), c_(std::move(c)), order_(order), dim_(dim), hold_(hold) {
-    pieces_ = static_cast<int>(x_.size()) - 1;
-    if (pieces_ < 1 || order_ < 1 || dim_ < 0 ||
-        c_.size() != static_cast<std::size_t>(order_) * pieces_ * dim_)
-        throw EngineError("PiecewisePolynomial: need x (p + 1 ≥ 2) and c (order, p, dim)");
-    for (int i = 0; i < pieces_; ++i)
-        if (!(x_[i] < x_[i + 1])) throw EngineError("PiecewisePolynomial: breakpoints must increase");
-    if (!finite(c_.data(), static_cast<int>(c_.size())) || !finite(x_.data(), static_cast<int>(x_.size())))
-        throw EngineError("PiecewisePolynomial: coefficients and breakpoints must be finite");
+TimeSignal::TimeSignal(std::vector<TimeFunction> f, bool hold, double lo, double hi)
+    : f_(std::move(f)), hold_(hold), lo_(lo), hi_(hi) {
+    for (std::size_t j = 0; j < f_.size(); ++j) {
+        f_[j].validate("reference component " + std::to_string(j));
+        if (!f_[j].thread_safe()) throw EngineError("TimeSignal: a callback time function is not a value");
+        scratch_size_ = std::max(scratch_size_, static_cast<std::size_t>(f_[j].scratch_size()));
+    }
+    if (hold_ && !(lo_ < hi_ && std::isfinite(lo_) && std::isfinite(hi_)))
+        throw EngineError("TimeSignal: the hold window must be finite and increasing");
 }
 
-Status PiecewisePolynomial::eval(double t, double* x, double* v, double* a) {
+TimeSignal TimeSignal::from_ppoly(const std::vector<double>& x, const std::vector<double>& c, int order, int dim,
+                                  bool hold) {
+    const int pieces = static_cast<int>(x.size()) - 1;
+    if (pieces < 1 || order < 1 || dim < 0 || c.size() != static_cast<std::size_t>(order) * pieces * dim)
+        throw EngineError("PiecewisePolynomial: need x (p + 1 ≥ 2) and c (order, p, dim)");
+    for (int i = 0; i < pieces; ++i)
+        if (!(x[i] < x[i + 1])) throw EngineError("PiecewisePolynomial: breakpoints must increase");
+    if (!finite(c.data(), static_cast<int>(c.size())) || !finite(x.data(), static_cast<int>(x.size())))
+        throw EngineError("PiecewisePolynomial: coefficients and breakpoints must be finite");
+    // TimeFunction's pieces: ascending powers; PPoly's: descending. Horner runs over the same
+    // coefficients in the same order, so the values are the same bit for bit.
+    std::vector<TimeFunction> f(static_cast<std::size_t>(dim));
+    for (int d = 0; d < dim; ++d) {
+        TimeFunction& fd = f[static_cast<std::size_t>(d)];
+        fd.kind = TimeFunction::pieces;
+        fd.breaks = x;
+        fd.degree = order - 1;
+        fd.hold = false;  // (the signal holds, outside [x_0, x_p] strictly)
+        fd.coefs.resize(static_cast<std::size_t>(order) * pieces);
+        for (int i = 0; i < pieces; ++i)
+            for (int k = 0; k < order; ++k)
+                fd.coefs[static_cast<std::size_t>(i) * order + k] =
+                    c[(static_cast<std::size_t>(order - 1 - k) * pieces + i) * dim + d];
+    }
+    return TimeSignal(std::move(f), hold, x.front(), x.back());
+}
+
+Status TimeSignal::eval(double t, double* x, double* v, double* a) {
     if (!std::isfinite(t)) return Status::not_finite;
-    const double lo = x_.front(), hi = x_.back();
-    const bool outside = hold_ && (t < lo || t > hi);
-    const double s = outside ? std::min(std::max(t, lo), hi) : t;
-    // the piece: the last i with x_i ≤ s, within [0, p − 1] (scipy's interval search)
-    int i = static_cast<int>(std::upper_bound(x_.begin(), x_.end(), s) - x_.begin()) - 1;
-    i = std::min(std::max(i, 0), pieces_ - 1);
-    const double d = s - x_[i];
-    for (int j = 0; j < dim_; ++j) {
-        double p = 0.0, p1 = 0.0, p2 = 0.0;  // Horner with derivatives: p, p', p''/2
-        for (int o = 0; o < order_; ++o) {
-            const double c = c_[(static_cast<std::size_t>(o) * pieces_ + i) * dim_ + j];
-            p2 = p2 * d + p1;
-            p1 = p1 * d + p;
-            p = p * d + c;
-        }
-        x[j] = p;
-        if (v) v[j] = outside ? 0.0 : p1;
-        if (a) a[j] = outside ? 0.0 : 2.0 * p2;
+    const bool outside = hold_ && (t < lo_ || t > hi_);
+    const double s = outside ? std::min(std::max(t, lo_), hi_) : t;
+    // a tape's registers: per thread (controllers of a batch may share a reference), sized once
+    thread_local std::vector<double> scratch;
+    if (scratch.size() < scratch_size_) scratch.resize(scratch_size_);
+    double f[3];
+    for (std::size_t j = 0; j < f_.size(); ++j) {
+        // (a non-finite value is the controller's check: desired() answers not_finite)
+        if (f_[j].eval(s, f, scratch.data()) == TimeFunction::EVAL_FAILED) return Status::callback_error;
+        x[j] = f[0];
+        if (v) v[j] = outside ? 0.0 : f[1];
+        if (a) a[j] = outside ? 0.0 : f[2];
     }
     return Status::ok;
 }
@@ -172,6 +192,10 @@ void Projected::attach(const Terms& T, const Mat& A, int m, const std::vector<in
         rhs_ = Vec::Zero(n + mf);
         lam_ = Vec::Zero(mf);
         svd_g_ = Eigen::JacobiSVD<Mat>(n + mf, std::max(k, 1), Eigen::ComputeThinU | Eigen::ComputeThinV);
+        Wf_ = Mat::Zero(n + mf, std::max(k, 1));
+        Lf_ = Mat::Zero(n + mf, n + mf);
+        rhsf_ = Vec::Zero(n + mf);
+        yf_ = Vec::Zero(n + mf);
     }
     if (m > 0) {
         Atrue_ = Mat::Zero(m, n);
@@ -535,6 +559,66 @@ Status Projected::law(double t, const double* q, const double* qd, const Terms& 
 
 // ------------------------------------------------------------------------------ step 3
 
+// The minimum-norm solution u of W u = rhs (W: the first `rows` rows of W, k ≥ rows columns;
+// overwritten by the Householder reflectors of its LQ; L's factor into Lw) when W's smallest
+// singular value (its lower bound 1/‖L⁻¹‖_F) is certified far above the rank cutoff
+// rtol·max(‖W‖_F, bscale) and W is well conditioned: then the truncated SVD pseudo-inverse of
+// the Python code keeps every singular value, and W⁺ rhs = Q [L⁻¹ rhs; 0] agrees with it to
+// round-off. False (u untouched, W and Lw destroyed) otherwise. y: scratch of `rows` entries.
+bool Projected::certified_min_norm(Mat& W, Mat& Lw, int rows, int k, const double* rhs, double fro, double bscale,
+                                   double* y, double* u) {
+    const int d = rows;
+    for (int a = 0; a < d; ++a) {
+        double sq = 0.0;
+        for (int j = a; j < k; ++j) sq += W(a, j) * W(a, j);
+        const double nx = std::sqrt(sq);
+        if (!(nx > 0.0)) return false;
+        const double alpha = W(a, a) > 0.0 ? -nx : nx;
+        const double v0 = W(a, a) - alpha;
+        const double vv = sq - W(a, a) * W(a, a) + v0 * v0;
+        const double beta = vv > 0.0 ? 2.0 / vv : 0.0;
+        // the reflector v = (v0, W(a, a+1..)) kept in row a past the diagonal; L_aa = alpha
+        W(a, a) = v0;
+        for (int b = a + 1; b < d; ++b) {
+            double s = 0.0;
+            for (int j = a; j < k; ++j) s += W(a, j) * W(b, j);
+            s *= beta;
+            for (int j = a; j < k; ++j) W(b, j) -= s * W(a, j);
+        }
+        hv_[a] = beta;
+        Lw(a, a) = alpha;  // L's diagonal
+        for (int b = a + 1; b < d; ++b) Lw(b, a) = W(b, a);  // L below the diagonal
+    }
+    // ‖L⁻¹‖_F (σ_min(W) ≥ 1/‖L⁻¹‖_F) and y = L⁻¹ rhs
+    double inv_fro = 0.0;
+    for (int c = 0; c < d; ++c) {  // column c of L⁻¹ by forward substitution
+        for (int i = 0; i < d; ++i) {
+            double s = i == c ? 1.0 : 0.0;
+            for (int j = c; j < i; ++j) s -= Lw(i, j) * y[j];
+            y[i] = i < c ? 0.0 : s / Lw(i, i);
+            if (i >= c) inv_fro += y[i] * y[i];
+        }
+    }
+    const double smin_lo = 1.0 / std::sqrt(inv_fro);
+    const double ref_hi = std::max({fro, bscale, TINY});
+    if (!(std::isfinite(smin_lo) && smin_lo > CERTIFY_FACTOR * rtol_ * ref_hi && fro <= CERTIFY_COND * smin_lo))
+        return false;
+    for (int i = 0; i < d; ++i) {
+        double s = rhs[i];
+        for (int j = 0; j < i; ++j) s -= Lw(i, j) * y[j];
+        y[i] = s / Lw(i, i);
+    }
+    // u = H_0 ⋯ H_{d−1} [y; 0]
+    for (int j = 0; j < k; ++j) u[j] = j < d ? y[j] : 0.0;
+    for (int a = d - 1; a >= 0; --a) {
+        double s = 0.0;
+        for (int j = a; j < k; ++j) s += W(a, j) * u[j];
+        s *= hv_[a];
+        for (int j = a; j < k; ++j) u[j] -= s * W(a, j);
+    }
+    return true;
+}
+
 // _common.actuate: u = (PB)⁺ f_∥ with rank(PB) by σ > rtol·max(σ_max, max column norm of B).
 Status Projected::actuate(const Terms& T) {
     const int n = n_, k = k_, d = n_ - rank_;
@@ -566,62 +650,10 @@ Status Projected::actuate(const Terms& T) {
             zf_[a] = s;
         }
         fro = std::sqrt(fro);
-        bool ok = true;
-        for (int a = 0; a < d && ok; ++a) {
-            double sq = 0.0;
-            for (int j = a; j < k; ++j) sq += W(a, j) * W(a, j);
-            const double nx = std::sqrt(sq);
-            if (!(nx > 0.0)) {
-                ok = false;
-                break;
-            }
-            const double alpha = W(a, a) > 0.0 ? -nx : nx;
-            const double v0 = W(a, a) - alpha;
-            const double vv = sq - W(a, a) * W(a, a) + v0 * v0;
-            const double beta = vv > 0.0 ? 2.0 / vv : 0.0;
-            // the reflector v = (v0, W(a, a+1..)) kept in row a past the diagonal; L_aa = alpha
-            W(a, a) = v0;
-            for (int b = a + 1; b < d; ++b) {
-                double s = 0.0;
-                for (int j = a; j < k; ++j) s += W(a, j) * W(b, j);
-                s *= beta;
-                for (int j = a; j < k; ++j) W(b, j) -= s * W(a, j);
-            }
-            hv_[a] = beta;
-            G_(a, a) = alpha;  // L's diagonal
-            for (int b = a + 1; b < d; ++b) G_(b, a) = W(b, a);  // L below the diagonal
-        }
-        if (ok) {
-            // ‖L⁻¹‖_F (σ_min(ZB) ≥ 1/‖L⁻¹‖_F) and y = L⁻¹ zf
-            double inv_fro = 0.0;
-            for (int c = 0; c < d; ++c) {  // column c of L⁻¹ by forward substitution
-                for (int i = 0; i < d; ++i) {
-                    double s = i == c ? 1.0 : 0.0;
-                    for (int j = c; j < i; ++j) s -= G_(i, j) * y_[j];
-                    y_[i] = i < c ? 0.0 : s / G_(i, i);
-                    if (i >= c) inv_fro += y_[i] * y_[i];
-                }
-            }
-            const double smin_lo = 1.0 / std::sqrt(inv_fro);
-            const double ref_hi = std::max({fro, bscale, TINY});
-            if (std::isfinite(smin_lo) && smin_lo > CERTIFY_FACTOR * rtol_ * ref_hi && fro <= CERTIFY_COND * smin_lo) {
-                for (int i = 0; i < d; ++i) {
-                    double s = zf_[i];
-                    for (int j = 0; j < i; ++j) s -= G_(i, j) * y_[j];
-                    y_[i] = s / G_(i, i);
-                }
-                // u = H_0 ⋯ H_{d−1} [y; 0]
-                for (int j = 0; j < k; ++j) uraw_[j] = j < d ? y_[j] : 0.0;
-                for (int a = d - 1; a >= 0; --a) {
-                    double s = 0.0;
-                    for (int j = a; j < k; ++j) s += W(a, j) * uraw_[j];
-                    s *= hv_[a];
-                    for (int j = a; j < k; ++j) uraw_[j] -= s * W(a, j);
-                }
-                last_feasible_ = true;
-                ++fast_actuations;
-                return Status::ok;
-            }
+        if (certified_min_norm(W, G_, d, k, zf_.data(), fro, bscale, y_.data(), uraw_.data())) {
+            last_feasible_ = true;
+            ++fast_actuations;
+            return Status::ok;
         }
     }
     // the SVD of PB (the Python code's decision, everywhere the fast path is not certified)
@@ -747,6 +779,38 @@ Status Projected::actuate_force(double t, const Terms& T, const Mat& A) {
         bscale = std::max(bscale, sq);
     }
     bscale = std::sqrt(bscale);
+    if (d + mf > 0 && k >= d + mf) {
+        // W = [Z B; E B] ((d + mf) × k), rhs = [Z f_∥; E(c₀ − S f_∥) − λ*]: PB = Zᵀ(Z B) and
+        // f_∥ = Zᵀ(Z f_∥) with Zᵀ's columns orthonormal, so [PB; EB] and W have the same singular
+        // values and the same minimum-norm solution; W's by its certified LQ
+        Mat& W = Wf_;
+        double fro = 0.0;
+        for (int a = 0; a < d; ++a) {
+            for (int j = 0; j < k; ++j) {
+                double s = 0.0;
+                for (int i = 0; i < n; ++i) s += Z_(a, i) * T.B(i, j);
+                W(a, j) = s;
+                fro += s * s;
+            }
+            double s = 0.0;
+            for (int i = 0; i < n; ++i) s += Z_(a, i) * fpar_[i];
+            rhsf_[a] = s;
+        }
+        for (int f = 0; f < mf; ++f) {
+            for (int j = 0; j < k; ++j) {
+                W(d + f, j) = Gf_(n + f, j);
+                fro += Gf_(n + f, j) * Gf_(n + f, j);
+            }
+            rhsf_[d + f] = rhs_[n + f];
+        }
+        fro = std::sqrt(fro);
+        if (certified_min_norm(W, Lf_, d + mf, k, rhsf_.data(), fro, bscale, yf_.data(), uraw_.data())) {
+            last_feasible_ = true;
+            ++fast_actuations;
+            return Status::ok;
+        }
+    }
+    ++svd_actuations;
     svd_g_.compute(Gf_);
     const auto& sv = svd_g_.singularValues();
     const auto& U = svd_g_.matrixU();

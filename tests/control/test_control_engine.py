@@ -17,7 +17,7 @@ import pytest
 from nonmin import library
 from nonmin.control import ForceControl, Reference, Regulator, Switched, Tracker
 from nonmin.core import use_backend
-from nonmin.errors import SimulationError
+from nonmin.errors import InputError, SimulationError
 from nonmin.model.planar import PlanarBuilder
 from nonmin.sim import _engine, simulate
 
@@ -81,6 +81,38 @@ def test_piecewise_polynomial_equals_the_reference_functions() -> None:
     np.testing.assert_allclose(q, [0.1 + 0.5 * 2 - 4.0 + 0.25 * 8, 2.0 + 12.0 + 8.0])
     np.testing.assert_allclose(v, [0.5 - 4.0 + 0.75 * 4, -0.0 + 12.0 + 12.0])
     np.testing.assert_allclose(a, [-2.0 + 1.5 * 2, 6.0 + 12.0])
+
+
+def test_time_signal_is_the_model_time_functions() -> None:
+    """A reference's engine signal is made of the engine's TimeFunctions (the drivers' values):
+    SimTimeSignal over model time functions (a spline, an expression's tape) = their Python
+    evaluation, and = SimPiecewisePolynomial (PPoly's layout) bit for bit."""
+    from nonmin.model import Expression, PiecewisePolynomial, Spline
+
+    eng = _engine._engine()
+    ts = np.array([0.0, 0.3, 0.7, 1.0])
+    f0 = Spline(ts, np.array([0.0, 0.4, -0.3, 0.1]))
+    f1 = Expression("sin(2*t) + t**3")
+    sig = eng.SimTimeSignal([f0.engine(), f1.engine()])
+    assert sig.dim == 2
+    for t in (-0.5, 0.0, 0.15, 0.3, 0.55, 1.0, 1.7):
+        got = np.asarray(sig(t)).reshape(3, 2)
+        for j, f in enumerate((f0, f1)):
+            np.testing.assert_allclose(got[:, j], f(t), rtol=1e-13, atol=1e-13)
+    ref = Reference.spline(ts, np.array([[0.0, 1.0], [0.4, 0.2], [-0.3, 0.9], [0.1, 0.0]]))
+    x, c, hold = ref.piecewise
+    pp = eng.SimPiecewisePolynomial(np.ascontiguousarray(x), np.ascontiguousarray(c), hold)
+    assert type(pp).__name__ == "SimTimeSignal"
+    comps = [
+        PiecewisePolynomial(np.asarray(x), np.ascontiguousarray(c[::-1, :, j].T), hold=False).engine()
+        for j in range(2)
+    ]
+    held = eng.SimTimeSignal(comps, hold, float(x[0]), float(x[-1]))
+    for t in (-0.5, 0.0, 0.15, 0.3, 0.55, 0.7, 1.0, 1.7):
+        assert np.asarray(pp(t)).tolist() == np.asarray(held(t)).tolist()
+        np.testing.assert_allclose(np.asarray(pp(t)), np.concatenate(ref(t)), rtol=1e-13, atol=1e-13)
+    with pytest.raises(InputError, match="hold window"):
+        eng.SimTimeSignal(comps, True, 1.0, 1.0)
 
 
 # ----------------------------------------------------------------------------- regulator
@@ -213,6 +245,32 @@ def test_force_control_engine_equals_python(target: Any, motion: str) -> None:
     lam = [ctl.measured_force(t, q, fc)["rod"][0] for t, q, fc in zip(a.t, a.q, a.f_c)]
     want = [force(t) if callable(force) else force for t in a.t]
     np.testing.assert_allclose(lam, want, atol=1e-9)
+
+
+def test_force_control_feasible_takes_the_certified_lq(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A feasible commanded force: step 3 solves [ZB; EB] u = [Z f_∥; …] by its certified LQ
+    (no SVD per call; the same singular values as [PB; EB]) and the run still equals the Python
+    controller's SVD minimum-norm solution to round-off."""
+    from nonmin.control import _engine as ceng
+
+    made: list[Any] = []
+    real = ceng.compile_controller
+
+    def spy(*args: Any, **kw: Any) -> Any:  # the real compiler; keeps what it made
+        out = real(*args, **kw)
+        made.append(out)
+        return out
+
+    monkeypatch.setattr(ceng, "compile_controller", spy)
+    model = _pendulum_xy()
+
+    def make() -> ForceControl:
+        return ForceControl(Regulator(model, target=pendulum_configuration(0.5), Kp=5.0, Kd=1.0), {"rod": -2.0})
+
+    a, b = _pair(model, make, t_span=(0.0, 0.3), q0=pendulum_configuration(-1.2), dt=2e-3)
+    _close(a, b)
+    stats = made[-1].stats
+    assert stats["fast_actuations"] > 0 and stats["svd_actuations"] == 0, stats
 
 
 def test_force_control_through_contact_and_switched() -> None:

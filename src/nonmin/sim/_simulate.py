@@ -287,6 +287,18 @@ def _guard_value(sys: _System, w: _Watch, p: _Point) -> float:
     return float(p.lam[rows][0])
 
 
+def _guard_values(sys: _System, watches: list[_Watch], p: _Point) -> list[float]:
+    """Every watch's value at ``p`` (:func:`_guard_value`), the impact gaps from one evaluation
+    with their constraints active together (each constraint's rows are its own: the engine's
+    ``gaps`` reads them the same way) instead of one per constraint."""
+    names = frozenset(w.name for w in watches if w.kind == "impact")
+    gap: dict[str, float] = {}
+    if len(names) > 1:
+        ct = sys.model.constraint_terms(p.t, p.q, p.qd, names)
+        gap = {nm: float(ct.phi[sl.start]) for nm, sl in sys.model.row_slices(names).items()}
+    return [gap[w.name] if w.kind == "impact" and w.name in gap else _guard_value(sys, w, p) for w in watches]
+
+
 def _pulling(sys: _System, w: _Watch, p: _Point, g: float) -> bool:
     """Release watch ``w``'s normal force ``g`` at ``p`` clearly pulling:
     ``−λ‖A_row‖ > RELEASE_RTOL ‖f_c‖`` (the engine's ``pulling``)."""
@@ -835,7 +847,7 @@ def simulate(
                 rec.add(p, system.active)
             out_i = 0 if t_out is None else int(np.searchsorted(t_out, t0, side="right"))
             watches = _watches(events, system.active, unilateral)
-            gvals = [_guard_value(system, w, p) for w in watches]
+            gvals = _guard_values(system, watches, p)
             state = integ.init(system.rhs, t, np.concatenate((q, qd)), h_init)
             if passages is not None:
                 for ts, ys in zip(*seed, strict=True):
@@ -953,7 +965,7 @@ def simulate(
                         system.cstate = _durable.user_call("controller.update", te, controller.update, te, q, qd,
                                                            system.cstate, active=system.active)  # fmt: skip
                     watches = _watches(events, system.active, unilateral)
-                    gvals = [_guard_value(system, w2, p) for w2 in watches]
+                    gvals = _guard_values(system, watches, p)
                     bar.update(t)
                     if terminal:
                         status = Status.EVENT_TERMINATED
@@ -1038,7 +1050,7 @@ def simulate(
                 qq, vv = stab.project_sample(model, _t + s, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
                 return system.point(_t + s, qq, vv)
 
-            new_g = [_guard_value(system, w, p1) for w in watches] if p1 is not None else []
+            new_g = _guard_values(system, watches, p1) if p1 is not None else []
             fired = [
                 i for i, w in enumerate(watches)
                 if (_crossed(gvals[i], new_g[i], w.direction) and id(w.event) not in disarmed)
@@ -1131,7 +1143,7 @@ def simulate(
                     system.cstate = _durable.user_call("controller.update", te, controller.update, te, qn,
                                                        qdn, system.cstate, active=system.active)
                 watches = _watches(events, system.active, unilateral)
-                gvals = [_guard_value(system, w2, p) for w2 in watches]
+                gvals = _guard_values(system, watches, p)
                 if passages is not None:
                     passages.reset()
                     passages.observe(te, p.A)

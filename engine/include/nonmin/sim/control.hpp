@@ -1,6 +1,7 @@
 // Built-in controllers compiled for the loop (nonmin.control): the Regulator, the Tracker's
 // computed-torque law, and ForceControl over either, with their references as values the engine
-// evaluates (piecewise polynomials) or, as an escape hatch, a Python function called back. The
+// evaluates (TimeSignal: one TimeFunction of nonmin/timefn.hpp per component, the drivers' own
+// values) or, as an escape hatch, a Python function called back. The
 // Python classes stay the specification (nonmin/control/*.py); every formula below names the one
 // it mirrors, in the same order of decisions, so the two agree to round-off.
 //
@@ -15,7 +16,8 @@
 //      n − r, feasible, and this is the SVD's truncated pseudo-inverse); otherwise the SVD of PB
 //      with the cutoff rtol·max(σ_max, max column norm of B), as the Python code;
 //      force control (ForceControl.actuation): the minimum-norm solution of [PB; EB] u =
-//      [f_∥; E(c₀ − S f_∥) − λ*] by SVD;
+//      [f_∥; E(c₀ − S f_∥) − λ*]: the same certified LQ on [ZB; EB] u = [Z f_∥; …] (the same
+//      singular values), else by SVD;
 //   4. u clipped to [u_min, u_max].
 // update() records what ControlState.record does (σ(PB) computed once per step there).
 // A failure (infeasible actuation with on_infeasible="raise", a reference off the manifold or
@@ -32,6 +34,7 @@
 #include "../linalg.hpp"
 #include "../program.hpp"
 #include "../solver.hpp"
+#include "../timefn.hpp"
 #include "loop.hpp"
 
 namespace nonmin::sim {
@@ -45,20 +48,26 @@ class Signal {
     virtual Status eval(double t, double* x, double* v, double* a) = 0;
 };
 
-// scipy.interpolate.PPoly's layout: breakpoints x (p + 1, increasing), coefficients
-// c[(j·p + i)·dim + d] of (t − x_i)^(order−1−j) on [x_i, x_{i+1}). Outside [x_0, x_p]: `hold`
-// (nonmin.control.Reference.spline) keeps the end value with zero derivatives; otherwise the end
-// pieces extend (a polynomial).
-class PiecewisePolynomial final : public Signal {
+// A vector of the engine's TimeFunctions (nonmin/timefn.hpp), one per component: the references
+// of the compiled controllers are the same values the drivers of every model evaluate. `hold`
+// (nonmin.control.Reference.spline): outside [lo, hi] (strictly) the end value with zero
+// derivatives; otherwise each function's own rule (the end pieces extend). Pieces or tapes (a
+// reference called back is a PySignal); eval() is thread safe.
+class TimeSignal final : public Signal {
   public:
-    PiecewisePolynomial(std::vector<double> x, std::vector<double> c, int order, int dim, bool hold);
-    int dim() const override { return dim_; }
+    TimeSignal(std::vector<TimeFunction> f, bool hold, double lo, double hi);
+    // scipy.interpolate.PPoly's layout: breakpoints x (p + 1, increasing), coefficients
+    // c[(j·p + i)·dim + d] of (t − x_i)^(order−1−j) on [x_i, x_{i+1}); hold on [x_0, x_p].
+    static TimeSignal from_ppoly(const std::vector<double>& x, const std::vector<double>& c, int order, int dim,
+                                 bool hold);
+    int dim() const override { return static_cast<int>(f_.size()); }
     Status eval(double t, double* x, double* v, double* a) override;
 
   private:
-    std::vector<double> x_, c_;
-    int order_, pieces_, dim_;
+    std::vector<TimeFunction> f_;
     bool hold_;
+    double lo_, hi_;
+    std::size_t scratch_size_ = 0;  // the tapes' registers
 };
 
 enum class Law : int { regulator = 0, computed_torque = 1 };
@@ -102,7 +111,7 @@ class Projected : public Controller {
     std::vector<std::uint8_t> saturated;
     double min_sigma_pb = std::numeric_limits<double>::infinity();
     std::vector<double> max_abs_u;
-    long long fast_actuations = 0, svd_actuations = 0;  // which path step 3 took
+    long long fast_actuations = 0, svd_actuations = 0;  // which path step 3 took (force control too)
 
   private:
     Status law(double t, const double* q, const double* qd, const Terms& T, const Mat& A, double* u);
@@ -113,6 +122,8 @@ class Projected : public Controller {
     Status project_configuration(double t, double* x);
     Status min_norm_true(const Mat& A, int m, const double* b, double* x);  // A⁺ b
     Status actuate(const Terms& T);
+    bool certified_min_norm(Mat& W, Mat& Lw, int rows, int k, const double* rhs, double fro, double bscale, double* y,
+                            double* u);
     Status actuate_force(double t, const Terms& T, const Mat& A);
     void record();
     double sigma_min_pb();
@@ -163,7 +174,8 @@ class Projected : public Controller {
     bool pb_valid_ = false;  // PB_ holds P B of the last law evaluation
     Eigen::JacobiSVD<Mat> svd_pb_, svd_vals_, svd_a_, svd_g_;
     // force control
-    Mat Mbar_L_, E_, Gf_, Atrue_;
+    Mat Mbar_L_, E_, Gf_, Atrue_, Wf_, Lf_;
+    Vec rhsf_, yf_;
     Vec c0_, qtmp_, gtmp_, rhs_, lam_, sf_, pf_;
     // the state of the last law evaluation
     double last_t_ = std::numeric_limits<double>::quiet_NaN();
