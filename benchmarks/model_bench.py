@@ -214,13 +214,15 @@ def _admissible(robot: Any, state: Any, rng: Any) -> Any:
     return state.replace(qd=Vt[r:].T @ rng.normal(size=robot.n - r))
 
 
-def _pin_setup(robot: Any) -> tuple[Any, ...]:
+def _pin_setup(robot: Any, active: Any) -> tuple[Any, ...]:
     import pinocchio as pin
 
     pm = robot.pinocchio_model
     models = pin.StdVec_RigidConstraintModel()
     datas = pin.StdVec_RigidConstraintData()
     for c in robot.robot_constraints:
+        if c.name not in active or getattr(c, "type", None) not in ("point", "weld"):
+            continue  # the active frame closures only (not the URDF joint limits: inactive here)
         fa = pm.frames[robot.frame_id(f"{c.name}:a")]
         fb = pm.frames[robot.frame_id(f"{c.name}:b")]
         kind = {"point": pin.ContactType.CONTACT_3D, "weld": pin.ContactType.CONTACT_6D}[c.type]
@@ -265,7 +267,7 @@ def run_robots(repeat: int) -> dict[str, Any]:
             mt = robot.evaluate(t, q, qd, act)
             return forward_dynamics(mt.M, mt.h + mt.f_passive, mt.constraints.A, mt.constraints.gamma)
 
-        pm, data, cms, cds, prox = _pin_setup(robot)
+        pm, data, cms, cds, prox = _pin_setup(robot, act)
         qn = robot.pinocchio_configuration(q)
         v = robot.to_pinocchio_velocity(q, qd)
         tau = np.zeros(robot.nv)
