@@ -414,6 +414,7 @@ void bind_sim(nb::module_& m) {
                 d["energy"] = copy_array(R.energy.data(), {N});
                 d["phi_norm"] = copy_array(R.phi_norm.data(), {N});
                 d["velocity_residual_norm"] = copy_array(R.vel_norm.data(), {N});
+                if (!s.loop->fric.empty()) d["friction_work"] = copy_array(R.fr_work.data(), {N});
                 R.clear();
                 return d;
             },
@@ -459,6 +460,12 @@ void bind_sim(nb::module_& m) {
             nb::arg("contacts"),
             "Coulomb friction contacts (normal index, tangent index, mu, slip, direction d0, d1); before "
             "start/resume.")
+        .def_prop_rw(
+            "friction_work",
+            [](const SimLoop& s) { return s.loop->fw; },
+            [](SimLoop& s, double w) { s.loop->fw = w; },
+            "The friction forces' work (J) accumulated up to the current state; set it before "
+            "start/resume to continue a run's total.")
         .def(
             "arm_friction",
             [](SimLoop& s) {

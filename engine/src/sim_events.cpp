@@ -517,7 +517,7 @@ void truncate(Samples& R, std::size_t N) {
     R.u.resize(N * k);
     R.active.resize(N * c);
     R.rank.resize(N);
-    for (auto* v : {&R.cond, &R.mu, &R.energy, &R.phi_norm, &R.vel_norm}) v->resize(N);
+    for (auto* v : {&R.cond, &R.mu, &R.energy, &R.phi_norm, &R.vel_norm, &R.fr_work}) v->resize(N);
 }
 
 // _sample_t_eval over (t_start, te] with the driver's out_at
@@ -754,13 +754,15 @@ Status apply_and_record(Loop& L, const FiredStep& st, double best_s, const std::
         if (std::isnan(E.pe.cond) && (r = point(L, te, L.yq1.data(), L.yq1.data() + n, E.pe, true)) != Status::ok)
             return r;
     }
-    std::size_t out_i = L.out_i;
-    if (!L.every && (r = sample_until(L, st, te, out_i)) != Status::ok) return r;
-    record_sample(L, E.pe, te);
     for (int i = 0; i < n; ++i) {
         E.y[i] = E.pe.q[i];
         E.y[n + i] = E.pe.qd[i];
     }
+    // the friction forces' work up to the event (sim_friction.cpp)
+    if (!L.fric.empty() && (r = friction_work_step(L, te, E.y.data(), E.pe)) != Status::ok) return r;
+    std::size_t out_i = L.out_i;
+    if (!L.every && (r = sample_until(L, st, te, out_i)) != Status::ok) return r;
+    record_sample(L, E.pe, te);
     std::vector<int> impacts;
     std::vector<std::uint8_t> plastic;
     const std::vector<std::uint8_t> act_start = L.active;
@@ -871,6 +873,7 @@ Status apply_and_record(Loop& L, const FiredStep& st, double best_s, const std::
         if ((r = friction_append_guards(L, te, E.y)) != Status::ok) return r;
     }
     record_sample(L, pa, te);
+    friction_work_commit(L, pa);  // (W continuous across the event; F after it)
     // leave the loop at the event
     while (out_i < L.t_out.size() && L.t_out[out_i] <= te) ++out_i;
     L.out_i = out_i;
@@ -926,6 +929,7 @@ Status contact_event(Loop& L, const FiredStep& st) {
     }
     if (r != Status::ok) {  // nothing happened: the Python driver takes the step
         truncate(L.rec, rec_mark);
+        L.fw_step = false;
         L.fric = fric0;
         set_active(L, active0.data());
         set_guards(L, guards0);

@@ -222,6 +222,10 @@ void set_friction(Loop& L, const std::vector<FrictionContact>& contacts) {
     L.fr_p.q = L.fr_p.qd = L.fr_p.qdd = L.fr_p.f_c = Vec::Zero(L.n);
     L.fr_p.u = Vec::Zero(L.k);
     L.painleve = -1;
+    L.fw_f0 = L.fw_f1 = L.fw_ym = Vec::Zero(2 * L.n);
+    L.fw_p.q = L.fw_p.qd = L.fw_p.qdd = L.fw_p.f_c = Vec::Zero(L.n);
+    L.fw_p.u = Vec::Zero(L.k);
+    L.fw_have0 = L.fw_step = false;
     if (L.one_mask.size() != static_cast<std::size_t>(L.c)) L.one_mask.assign(static_cast<std::size_t>(L.c), 0);
     ensure_release(L);
     friction_mask(L);
@@ -237,6 +241,7 @@ void friction_mask(Loop& L) {
 
 Status friction_forces(Loop& L, double t, const double* qd, double* qdd, double* fc) {
     L.fr_J.clear();
+    L.fr_power = 0.0;
     const int nf = static_cast<int>(L.fric.size());
     for (int j = 0; j < nf; ++j) {
         const FrictionContact& f = L.fric[static_cast<std::size_t>(j)];
@@ -248,6 +253,7 @@ Status friction_forces(Loop& L, double t, const double* qd, double* qdd, double*
     if (k > MAX_SLIP) return Status::bad_shape;
     const int n = L.n;
     const auto& cons = L.prog->constraints();
+    double gvel[MAX_SLIP];
     // responses to a unit force along each slipping contact's slip direction, g_j = A_tᵀ e_j
     // (e = s for one row; the slip velocity's unit direction for two — the one at the last
     // event when it vanishes): q̈_j = M̄⁻¹P g_j, f_c,j = −S g_j (the held factorization, zero bias)
@@ -271,11 +277,14 @@ Status friction_forces(Loop& L, double t, const double* qd, double* qdd, double*
                 e[1] = fb.dir[1];
             }
         }
+        double gv = 0.0;  // g_b·q̇ = e_b·v_t: the power of a unit force along g_b
         for (int i = 0; i < n; ++i) {
             double gi = 0.0;
             for (int kk = 0; kk < fb.dim; ++kk) gi += e[kk] * L.T.A(row + kk, i);
             L.fr_g[i] = gi;
+            gv += gi * qd[i];
         }
+        gvel[b] = gv;
         const SolveInfo info = L.solver.again(L.T.M.data(), L.fr_g.data(), L.fr_zero.data(), &L.fr_rq(b, 0),
                                               &L.fr_rf(b, 0));
         if (info.status != Status::ok) return info.status;
@@ -313,6 +322,7 @@ Status friction_forces(Loop& L, double t, const double* qd, double* qdd, double*
         const double N = L.fr_tmp[b];
         L.fr_N[static_cast<std::size_t>(L.fr_J[b])] = N;
         const double F = -fb.mu * N;  // along g_b = A_tᵀ e_b
+        L.fr_power += F * gvel[b];
         for (int i = 0; i < n; ++i) {
             qdd[i] += F * L.fr_rq(b, i);
             fc[i] += F * L.fr_rf(b, i);
@@ -415,6 +425,69 @@ Status friction_transition(Loop& L, double t, Vec& y, const std::vector<int>& fi
             changed.push_back(j);
     }
     return Status::ok;
+}
+
+namespace {
+
+// whether a contact slips under the current modes (else the friction forces vanish)
+bool any_slipping(const Loop& L) {
+    for (const FrictionContact& f : L.fric)
+        if (f.slip != 0 && L.active[static_cast<std::size_t>(f.normal)] && !L.active[static_cast<std::size_t>(f.tangent)])
+            return true;
+    return false;
+}
+
+void set_f(Vec& f, const Point& p, int n) {
+    for (int i = 0; i < n; ++i) {
+        f[i] = p.qd[i];
+        f[n + i] = p.qdd[i];
+    }
+}
+
+}  // namespace
+
+Status friction_work_step(Loop& L, double t1, const double* y1, const Point& p1) {
+    L.fw_step = false;
+    if (L.fric.empty()) return Status::ok;
+    const int n = L.n;
+    const double h = t1 - L.t;
+    if (!any_slipping(L) || !(h > 0.0)) {  // no friction force on the step: W constant
+        L.fw_have0 = false;
+        return Status::ok;
+    }
+    Status r;
+    if (!L.fw_have0) {  // F and the power at the step start (after start, resume or a stick)
+        if ((r = point(L, L.t, L.y.data(), L.y.data() + n, L.fw_p, false)) != Status::ok) return r;
+        set_f(L.fw_f0, L.fw_p, n);
+        L.fw_P0 = L.fw_p.fr_power;
+    }
+    set_f(L.fw_f1, p1, n);
+    hermite_quintic(n, L.y.data(), L.fw_f0.data(), y1, L.fw_f1.data(), h, 0.5 * h, L.fw_ym.data());
+    if ((r = point(L, L.t + 0.5 * h, L.fw_ym.data(), L.fw_ym.data() + n, L.fw_p, false)) != Status::ok) return r;
+    L.fw_step = true;
+    L.fw_t0 = L.t;
+    L.fw_h = h;
+    L.fw_W0 = L.fw;
+    L.fw_Pm = L.fw_p.fr_power;
+    L.fw_P1 = p1.fr_power;
+    return Status::ok;
+}
+
+double friction_work_at(const Loop& L, double t) {
+    if (!L.fw_step) return L.fw;
+    // ∫₀ᵘ of the quadratic through (0, P0), (½, Pm), (1, P1), u = (t − t0)/h; u = 1: Simpson
+    const double u = std::clamp((t - L.fw_t0) / L.fw_h, 0.0, 1.0), u2 = u * u, u3 = u2 * u;
+    const double a0 = 2.0 * u3 / 3.0 - 1.5 * u2 + u, am = -4.0 * u3 / 3.0 + 2.0 * u2, a1 = 2.0 * u3 / 3.0 - 0.5 * u2;
+    return L.fw_W0 + L.fw_h * (a0 * L.fw_P0 + am * L.fw_Pm + a1 * L.fw_P1);
+}
+
+void friction_work_commit(Loop& L, const Point& p) {
+    if (L.fric.empty()) return;
+    if (L.fw_step) L.fw = friction_work_at(L, L.fw_t0 + L.fw_h);
+    L.fw_step = false;
+    set_f(L.fw_f0, p, L.n);
+    L.fw_P0 = p.fr_power;
+    L.fw_have0 = true;
 }
 
 }  // namespace nonmin::sim

@@ -113,7 +113,7 @@ SolveInfo dynamics_solve(Loop& L, double t, const double* q, double rtol, double
 }  // namespace
 
 void Samples::clear() {
-    for (auto* v : {&t, &q, &qd, &qdd, &f_c, &u, &cond, &mu, &energy, &phi_norm, &vel_norm}) v->clear();
+    for (auto* v : {&t, &q, &qd, &qdd, &f_c, &u, &cond, &mu, &energy, &phi_norm, &vel_norm, &fr_work}) v->clear();
     rank.clear();
     active.clear();
 }
@@ -346,6 +346,7 @@ Status point(Loop& L, double t, const double* q, const double* qd, Point& p, boo
     if (!L.fric.empty() && (s = friction_forces(L, t, qd, p.qdd.data(), p.f_c.data())) != Status::ok) return s;
     if (!finite(p.qdd.data(), n)) return Status::not_finite;
     p.t = t;
+    p.fr_power = L.fric.empty() ? 0.0 : L.fr_power;
     for (int i = 0; i < n; ++i) {
         p.q[i] = q[i];
         p.qd[i] = qd[i];
@@ -390,6 +391,7 @@ void record(Loop& L, const Point& p, double t) {
     R.energy.push_back(p.energy);
     R.phi_norm.push_back(p.phi_norm);
     R.vel_norm.push_back(p.vel_norm);
+    R.fr_work.push_back(friction_work_at(L, t));
 }
 
 }  // namespace
@@ -600,6 +602,7 @@ Outcome start(Loop& L, double t0, const double* q0, const double* qd0) {
     const bool rec0 = L.every || (!L.t_out.empty() && L.t_out[0] == t0);
     if ((s = point(L, t0, L.y.data(), L.y.data() + n, L.p1, rec0)) != Status::ok) return fail(L, s);
     if (rec0) record(L, L.p1, t0);
+    friction_work_commit(L, L.p1);
     passage_reset(L);
     if (L.opt.passages) passage_observe(L, t0, L.Ac, L.m);  // A at the first point
     L.out_i = static_cast<std::size_t>(std::upper_bound(L.t_out.begin(), L.t_out.end(), t0) - L.t_out.begin());
@@ -617,6 +620,7 @@ void resume(Loop& L, double t, const double* y, double h, long long n_steps, std
     L.n_steps = n_steps;
     L.out_i = out_i;
     L.message.clear();
+    L.fw_have0 = L.fw_step = false;
     passage_restart(L);  // a state reached elsewhere: the history starts afresh, from this state
 }
 
@@ -777,6 +781,14 @@ Outcome run(Loop& L, long long max_steps) {
                 L.fp1[n + i] = L.p1.qdd[i];
             }
         }
+        if (!L.fric.empty()) {  // the friction forces' work over the step (sim_friction.cpp)
+            if (!have_p1) {
+                if ((s = point(L, t_new, L.yq1.data(), L.yq1.data() + n, L.p1, L.every || end_sampled)) != Status::ok)
+                    return fail(L, s);
+                have_p1 = true;
+            }
+            if ((s = friction_work_step(L, t_new, L.yq1.data(), L.p1)) != Status::ok) return fail(L, s);
+        }
         if (!L.every) {  // _sample_t_eval over (t_start, t_new + end_tol]
             const std::size_t o0 = L.out_i;
             std::size_t j = o0;
@@ -839,6 +851,10 @@ Outcome run(Loop& L, long long max_steps) {
         }
         L.t = t_new;
         L.y = L.yq1;
+        if (!L.fric.empty()) {
+            friction_work_commit(L, L.p1);
+            if (L.ctrl && !L.ctrl->stateless()) L.fw_have0 = false;  // (u changes with update)
+        }
         ++L.n_steps;
         ++taken;
         if (L.ctrl) {

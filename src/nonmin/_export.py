@@ -78,7 +78,8 @@ def columns(traj: Any, model: Any | None = None) -> dict[str, tuple[np.ndarray, 
 
     ``t``; ``q_<c>``, ``qd_<c>``, ``qdd_<c>``, ``fc_<c>`` per coordinate c; ``u_<a>`` per
     actuator; ``rank``, ``cond``, ``mu``, ``energy``, ``phi_norm``,
-    ``velocity_residual_norm``; ``active_<k>`` (0/1) per constraint.
+    ``velocity_residual_norm``, ``friction_work``, ``impact_loss`` (the energy balance's
+    recorded terms, J; zeros for a trajectory without them); ``active_<k>`` (0/1) per constraint.
     """
     names = tuple(traj.coordinate_names)
     units = coordinate_units(model, names)
@@ -94,10 +95,22 @@ def columns(traj: Any, model: Any | None = None) -> dict[str, tuple[np.ndarray, 
     for key, unit in (("rank", "1"), ("cond", "1"), ("mu", "kg or kg*m^2"), ("energy", "J"),
                       ("phi_norm", "m, rad"), ("velocity_residual_norm", "m/s, rad/s")):
         cols[key] = (np.asarray(getattr(traj, key), dtype=float), unit)
+    for key in _BALANCE:
+        cols[key] = (_balance(traj, key), "J")
     mask = np.asarray(traj.active_mask, dtype=float).reshape(len(traj), -1)
     for j, c_name in enumerate(traj.constraint_names):
         cols[f"active_{c_name}"] = (mask[:, j], "1")
     return cols
+
+
+#: The energy bookkeeping a trajectory records (nonmin.sim.Trajectory: friction work, impact loss).
+_BALANCE = ("friction_work", "impact_loss")
+
+
+def _balance(traj: Any, key: str) -> np.ndarray:
+    """A recorded energy array (T,) of the trajectory, zeros when it has none."""
+    a = getattr(traj, key, None)
+    return np.zeros(len(traj)) if a is None or np.shape(a) != (len(traj),) else np.asarray(a, dtype=float)
 
 
 def _metadata(traj: Any) -> dict[str, Any]:
@@ -167,7 +180,8 @@ def to_xarray(traj: Any, model: Any | None = None) -> Any:
 
     Variables ``q``, ``qd``, ``qdd``, ``f_c`` (t, coordinate), ``u`` (t, actuator),
     ``active`` (t, constraint), and ``rank``, ``cond``, ``mu``, ``energy``, ``phi_norm``,
-    ``velocity_residual_norm`` (t); ``coordinate_unit`` (coordinate); the metadata JSON in
+    ``velocity_residual_norm``, ``friction_work``, ``impact_loss`` (t); ``coordinate_unit``
+    (coordinate); the metadata JSON in
     ``attrs["nonmin"]``.
     """
     try:
@@ -189,6 +203,8 @@ def to_xarray(traj: Any, model: Any | None = None) -> Any:
     for key, unit in (("rank", "1"), ("cond", "1"), ("mu", "kg or kg*m^2"), ("energy", "J"),
                       ("phi_norm", "m, rad"), ("velocity_residual_norm", "m/s, rad/s")):
         vars_[key] = (("t",), np.asarray(getattr(traj, key), dtype=float), {"units": unit})
+    for key in _BALANCE:
+        vars_[key] = (("t",), _balance(traj, key), {"units": "J"})
     vars_["coordinate_unit"] = (("coordinate",), np.array(units, dtype=object).astype(str), {})
     ds = xr.Dataset(
         vars_,

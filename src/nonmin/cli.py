@@ -49,9 +49,10 @@ def _summary_row(name: str, traj: Any, timings: dict[str, float], model: Any = N
     """One row of the run/demo summary.
 
     ``sim_s`` is the elapsed time of the simulation alone; ``render_s`` that of the plot, the
-    animation and the files. ``energy_balance`` is ``max |E − E₀ − W|`` with W the work of
-    controllers, actuators, dampers and drivers (:func:`nonmin.viz.energy_balance`): the drift
-    of a conservative run (plus impact losses), not the work a controller does.
+    animation and the files. ``energy_balance`` is the drift ``max |E − E₀ − W − W_fr + L_imp|``
+    with W the work of controllers, actuators, dampers and drivers, W_fr the work of Coulomb
+    friction and L_imp the energy lost at impacts (:func:`nonmin.viz.energy_balance`); ``work``,
+    ``friction`` and ``impacts`` are their values at the end of the run.
     """
     import numpy as np
 
@@ -66,6 +67,9 @@ def _summary_row(name: str, traj: Any, timings: dict[str, float], model: Any = N
         "status": _status_name(traj),
         "t_end": float(np.asarray(traj.t)[-1]),
         "energy_balance": float(np.max(np.abs(bal.balance))) if bal is not None else float("nan"),
+        "work": float(bal.work[-1]) if bal is not None else float("nan"),
+        "friction": float(bal.friction[-1]) if bal is not None else float("nan"),
+        "impacts": float(bal.impacts[-1]) if bal is not None else float("nan"),
         "max_phi": float(np.max(phi)) if phi.size else float("nan"),
         "max_Aqd": float(np.max(vel)) if vel.size else float("nan"),
         "rank": f"{int(rank.min())}..{int(rank.max())}" if rank.size else "-",
@@ -78,19 +82,22 @@ def _summary_row(name: str, traj: Any, timings: dict[str, float], model: Any = N
 def _format_rows(rows: Sequence[dict[str, Any]]) -> str:
     w = max([len("scenario"), *(len(str(r["scenario"])) for r in rows)])
     head = (
-        f"{'scenario':{w}s} {'status':16s} {'t_end[s]':>8s} {'|E-E0-W|[J]':>11s} {'|phi| max':>10s} "
+        f"{'scenario':{w}s} {'status':16s} {'t_end[s]':>8s} {'drift[J]':>9s} {'W[J]':>9s} "
+        f"{'W_fr[J]':>9s} {'L_imp[J]':>9s} {'|phi| max':>10s} "
         f"{'|Aqd| max':>10s} {'rank A':>7s} {'events':>6s} {'sim[s]':>7s} {'render[s]':>9s}"
     )
     lines = [head, "-" * len(head)]
     for r in rows:
         lines.append(
-            f"{r['scenario']:{w}s} {r['status']:16s} {r['t_end']:8.3g} {r['energy_balance']:11.2e} "
+            f"{r['scenario']:{w}s} {r['status']:16s} {r['t_end']:8.3g} {r['energy_balance']:9.1e} "
+            f"{r['work']:9.2e} {r['friction']:9.2e} {r['impacts']:9.2e} "
             f"{r['max_phi']:10.2e} {r['max_Aqd']:10.2e} {r['rank']:>7s} {r['events']:6d} "
             f"{r['sim_s']:7.2f} {r['render_s']:9.2f}"
         )
     lines.append(
         "sim[s] = seconds spent simulating; render[s] = seconds spent on the plot, animation and files; "
-        "|E-E0-W| = energy balance (W: work of forces and controllers)"
+        "drift = max|E-E0-W-W_fr+L_imp| (W: work of forces and controllers, W_fr: of friction, "
+        "L_imp: lost at impacts; W, W_fr, L_imp at the end)"
     )
     return "\n".join(lines)
 

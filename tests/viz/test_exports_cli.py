@@ -105,7 +105,7 @@ def test_demo_summary_separates_simulation_from_rendering(tmp_path, capsys):
     summary = (tmp_path / "summary.txt").read_text()
     head = summary.splitlines()[0]
     assert "sim[s]" in head and "render[s]" in head and "wall" not in head.lower()
-    assert "|E-E0-W|" in head
+    assert "drift[J]" in head and "W_fr[J]" in head and "L_imp[J]" in head
     assert "simulated 0.2 s in" in out and "in all" in out
 
 

@@ -180,11 +180,14 @@ def resume_point(resume: Any, model: Any, t1: float) -> Trajectory:
 
 def join(prev: Trajectory, new: Trajectory, drop_last: bool) -> Trajectory:
     """The samples of ``prev`` (without its last one if ``drop_last``) followed by ``new``'s."""
-    from ._trajectory import _ARRAYS
+    from ._trajectory import _ARRAYS, _BALANCE
 
     cut = len(prev) - 1 if drop_last else len(prev)
     arrays: dict[str, Any] = {a: np.concatenate((np.asarray(getattr(prev, a))[:cut], np.asarray(getattr(new, a))))
               for a in _ARRAYS}
+    for a in _BALANCE:  # cumulative: the resumed run's continue from the earlier run's last value
+        old = np.asarray(getattr(prev, a))
+        arrays[a] = np.concatenate((old[:cut], np.asarray(getattr(new, a)) + (float(old[-1]) if old.size else 0.0)))
     meta = dict(new.metadata)
     meta["resumed_at"] = float(prev.t[-1])
     return Trajectory(

@@ -296,6 +296,7 @@ class EngineResult(NamedTuple):
     events: tuple[dict[str, Any], ...] = ()  # what the engine's event layer applied
     slip: tuple[tuple[int, float, float], ...] = ()  # friction contacts' (slip, d0, d1) at the end
     painleve: tuple[int, float, float] | None = None  # (friction contact, t, factor) when met
+    friction_work: float = 0.0  # the friction forces' work (J) from the run's start to (t, y)
 
 
 def run(
@@ -315,6 +316,7 @@ def run(
     contact: tuple[list[float], float] | None = None,
     passage_seed: tuple[FloatArray, FloatArray] | None = None,
     friction: list[tuple[int, int, float, int, float, float]] | None = None,
+    work0: float = 0.0,
 ) -> EngineResult:
     """Run the engine loop to ``opts.t1``, a handover or a watched event.
 
@@ -323,7 +325,8 @@ def run(
     given to ``sink`` as soon as it is taken (so an interruption keeps them). ``contact =
     (restitution per constraint, impact velocity threshold)`` configures the engine's event
     layer (engine/src/sim_events.cpp), which locates and applies contact events itself when no
-    user guard is watched (``transition`` and ``events`` of the result).
+    user guard is watched (``transition`` and ``events`` of the result). ``work0``: the friction
+    forces' work done before the start or resume (the samples' ``friction_work`` continue it).
     """
     eng = _engine()
     tv = np.zeros(0) if t_out is None else np.ascontiguousarray(t_out, dtype=np.float64)
@@ -335,9 +338,13 @@ def run(
         loop.set_contact(contact[0], contact[1])
     if friction:  # Coulomb friction (engine/src/sim_friction.cpp): (normal, tangent, mu, slip)
         loop.set_friction(friction)
+        loop.friction_work = float(work0)
 
     def fric_end() -> dict[str, Any]:
-        return {"slip": tuple(loop.friction_slip), "painleve": loop.painleve} if friction else {}
+        if not friction:
+            return {}
+        return {"slip": tuple(loop.friction_slip), "painleve": loop.painleve,
+                "friction_work": float(loop.friction_work)}  # fmt: skip
 
     def take() -> None:
         blk = loop.take()

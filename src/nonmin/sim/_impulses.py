@@ -18,7 +18,7 @@ import numpy as np
 
 from ._events import EventRecord
 
-__all__ = ["impact_set", "with_impulses"]
+__all__ = ["impact_losses", "impact_set", "with_impulses"]
 
 
 def _is_impact(ev: EventRecord) -> bool:
@@ -63,3 +63,36 @@ def with_impulses(model: Any, events: tuple[EventRecord, ...], rtol: float | Non
             ev = dataclasses.replace(ev, impulses=imp)
         out.append(ev)
     return tuple(out)
+
+
+def event_loss(model: Any, ev: EventRecord) -> float:
+    """The energy an event takes out (J): the kinetic energy before minus after,
+    ``½ q̇⁻ᵀ M(q⁻) q̇⁻ − ½ q̇⁺ᵀ M(q⁻) q̇⁺``, when it changes the velocity (an impact, an
+    activation, a contact that sticks: ``(1 − e²)·½ m v²`` for a point mass hitting a wall with
+    restitution e); ``E⁻ − E⁺`` at a user ``Reset`` (the user's map may move q too); 0 otherwise."""
+    if not all(np.isfinite(x).all() for x in (ev.q_before, ev.qd_before, ev.q_after, ev.qd_after)):
+        return 0.0
+    if ev.transition.startswith("reset"):
+        return float(model.energy(ev.q_before, ev.qd_before) - model.energy(ev.q_after, ev.qd_after))
+    if np.array_equal(ev.qd_before, ev.qd_after):
+        return 0.0
+    M = np.asarray(model.mass_matrix(ev.q_before), dtype=float)
+    return 0.5 * float(ev.qd_before @ M @ ev.qd_before - ev.qd_after @ M @ ev.qd_after)
+
+
+def impact_losses(model: Any, events: tuple[EventRecord, ...], t: Any) -> np.ndarray:
+    """The cumulative energy taken out by the events at every sample time ``t`` (shape (N,)).
+
+    An event at ``te`` counts from the samples after it: those with ``t > te`` and, of the
+    samples at ``te`` itself (the one before the transition, the one after), the last one."""
+    tv = np.asarray(t, dtype=float)
+    out = np.zeros(tv.shape[0])
+    for ev in events:
+        loss = event_loss(model, ev)
+        if loss == 0.0:
+            continue
+        out[tv > ev.t] += loss
+        same = np.flatnonzero(tv == ev.t)
+        if same.size >= 2:
+            out[same[-1]] += loss
+    return out

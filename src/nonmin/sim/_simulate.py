@@ -63,7 +63,7 @@ from ..errors import (
 from ..model import ConstraintTerms, Model, State
 from . import _durable, _engine, _friction
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
-from ._impulses import with_impulses
+from ._impulses import impact_losses, with_impulses
 from ._integrators import (
     METHODS,
     RK4,
@@ -325,9 +325,12 @@ class _Recorder:
     """Samples, row by row (general driver) or in array blocks (compiled engine), in order."""
 
     KEYS = ("t", "q", "qd", "qdd", "f_c", "u", "active_mask", "rank", "cond", "mu", "energy",
-            "phi_norm", "velocity_residual_norm")  # fmt: skip
+            "phi_norm", "velocity_residual_norm", "friction_work")  # fmt: skip
 
     def __init__(self, model: Model) -> None:
+        #: the friction forces' work up to the state reached (the engine's EngineResult.friction_work):
+        #: the value of the rows added here and of engine blocks without friction
+        self.work = 0.0
         self.names = model.constraint_names
         self.n, self.k = model.n, model.k
         self.blocks: list[dict[str, Any]] = []
@@ -364,10 +367,13 @@ class _Recorder:
         hol = p.phi[p.holonomic]
         c["phi_norm"].append(float(np.max(np.abs(hol))) if hol.size else 0.0)
         c["velocity_residual_norm"].append(float(np.max(np.abs(p.velocity))) if p.velocity.size else 0.0)
+        c["friction_work"].append(self.work)
 
     def extend(self, block: dict[str, Any]) -> None:
         """Append a block of samples (arrays with the keys of :meth:`arrays`)."""
         self._flush()
+        if "friction_work" not in block:
+            block["friction_work"] = np.full(len(block["t"]), self.work)
         self.blocks.append(block)
         self.count += len(block["t"])
 
@@ -394,6 +400,7 @@ class _Recorder:
             "energy": np.asarray(c["energy"], dtype=float),
             "phi_norm": np.asarray(c["phi_norm"], dtype=float),
             "velocity_residual_norm": np.asarray(c["velocity_residual_norm"], dtype=float),
+            "friction_work": np.asarray(c["friction_work"], dtype=float),
         }
 
     def arrays(self) -> dict[str, Any]:
@@ -769,8 +776,10 @@ def simulate(
     def snapshot(st: Status, msg: str) -> Trajectory:
         """The samples so far as a Trajectory (checkpoints, interruption, the final result),
         behind those of the run it resumes."""
+        arrays = rec.arrays()
         new = Trajectory(
-            **rec.arrays(),
+            **arrays,
+            impact_loss=impact_losses(model, tuple(records), arrays["t"]),
             constraint_names=model.constraint_names,
             coordinate_names=model.coordinate_names,
             actuator_names=model.actuator_names,
@@ -882,6 +891,7 @@ def simulate(
                         resume=(t, state.y, state.h if integ.adaptive else h_init, n_steps, out_i),
                         watch=_engine_watch(system, watches, gvals, disarmed, rearm_tol), guards=guards,
                         contact=contact_opts, friction=_friction.engine_contacts(model, slip) if fcs else None,
+                        work0=rec.work,
                     )  # fmt: skip
                 finally:
                     if ccb is not None:
@@ -900,6 +910,8 @@ def simulate(
                         min(er.h if integ.adaptive else h_init, t1 - er.t), n, rec.extend,
                     )  # fmt: skip
                     er = fstep.er
+                if fcs:
+                    rec.work = er.friction_work
                 for i, g in zip(g_idx, er.guards):
                     gvals[i] = g
                 if fcs:
@@ -1675,7 +1687,7 @@ def _friction_run(
             run_kw["program"], opts=opts, active_mask=run_kw["active_mask"], t_out=run_kw["t_out"], sink=sink,
             progress=_Quiet(), controller=ccb, compiled=creg, guards=g0, contact=run_kw["contact"],
             resume=(er.t, er.y, min(er.h, s) if h_fixed is None else h_fixed, er.steps, er.out_i),
-            friction=_friction.engine_contacts(system.model, slip),
+            friction=_friction.engine_contacts(system.model, slip), work0=er.friction_work,
         )  # fmt: skip
     finally:
         opts.t1 = t1

@@ -45,6 +45,10 @@ _ARRAYS = (
     "velocity_residual_norm",
 )
 
+#: The energy bookkeeping the simulation records besides ``energy`` (shape (N,), J): saved with
+#: the other arrays, optional on load (files written before them get zeros).
+_BALANCE = ("friction_work", "impact_loss")
+
 
 class Status(enum.Enum):
     """How a simulation ended."""
@@ -83,6 +87,18 @@ class Trajectory:
         ``‖φ‖∞`` of the active holonomic rows.
     velocity_residual_norm : ndarray, shape (N,)
         ``‖A qd + φ_t‖∞``.
+    friction_work : ndarray, shape (N,)
+        Work of the Coulomb friction forces of the slipping contacts from the start (J, ≤ 0):
+        ``∫ Σ_j F_j e_j·v_t,j dt``, integrated by the engine step by step (Simpson's rule on each
+        step's power; samples inside a step read the integral of its quadratic). Zeros without
+        frictional contacts.
+    impact_loss : ndarray, shape (N,)
+        Energy taken out at the events from the start (J, ≥ 0 for dissipative impacts): at each
+        event that changes the velocity (impact, activation, a contact that sticks) the kinetic
+        energy before minus after, ``½ q̇⁻ᵀ M q̇⁻ − ½ q̇⁺ᵀ M q̇⁺`` at the event's q; at a user
+        ``Reset``, ``E⁻ − E⁺``. It steps at the event's second sample (the one after it).
+        With W the work of applied forces, ``E − E₀ − W − friction_work + impact_loss`` is the
+        integration drift (:func:`nonmin.viz.energy_balance`).
     constraint_names, coordinate_names, actuator_names : tuple of str
     events : tuple of EventRecord
     status : Status
@@ -120,9 +136,15 @@ class Trajectory:
     n_rejected: int = 0
     metadata: dict[str, Any] = field(default_factory=dict)
     reactions: dict[str, Any] = field(default_factory=dict)
+    friction_work: FloatArray | None = None
+    impact_loss: FloatArray | None = None
 
     def __post_init__(self) -> None:
-        for name in _ARRAYS:
+        N = int(np.shape(self.t)[0]) if np.ndim(self.t) else 0
+        for name in _BALANCE:  # not recorded (a batch run, an old file): zeros
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.zeros(N))
+        for name in (*_ARRAYS, *_BALANCE):
             arr = getattr(self, name)
             if isinstance(arr, np.ndarray):
                 arr.setflags(write=False)
@@ -231,7 +253,7 @@ class Trajectory:
         OutputError
             The file cannot be written (the message names it).
         """
-        arrays = {name: np.asarray(getattr(self, name)) for name in _ARRAYS}
+        arrays = {name: np.asarray(getattr(self, name)) for name in (*_ARRAYS, *_BALANCE)}
         for i, r in enumerate(self.reactions.values()):
             arrays.update(r.to_arrays(f"reaction{i}."))
         arrays["__metadata__"] = np.array(self._metadata_json())
@@ -302,6 +324,7 @@ def _check_arrays(arrays: dict[str, Any], n: int, k: int, c: int, p: str) -> Non
         "active_mask": ((N, c), "b"),
         "rank": ((N,), "iu"),
         **{a: ((N,), "f") for a in _DIAGNOSTICS},
+        **{a: ((N,), "f") for a in _BALANCE if a in arrays},
     }
     for name, (shape, kinds) in want.items():
         arr = arrays[name]
@@ -412,6 +435,10 @@ def load_trajectory(path: str | os.PathLike[str], *, max_bytes: int = MAX_LOAD_B
             for a in _ARRAYS:
                 entry = a
                 arrays[a] = np.array(data[a])
+            for a in _BALANCE:  # (absent from files written before they were recorded)
+                if a in data.files:
+                    entry = a
+                    arrays[a] = np.array(data[a])
             reaction_arrays = {f: np.array(data[f]) for f in data.files if f.startswith("reaction")}
     except FileFormatError:
         raise

@@ -1,9 +1,11 @@
 """Diagnostics that plots, the demo summary and the viewer share (NumPy only, no matplotlib).
 
 * :func:`singularity_distance` — σ_r/σ₁ of the *active* constraint matrix at every sample.
-* :func:`energy_balance` — ``E − E₀ − W`` with ``W`` the work of the applied non-conservative
-  forces (actuators/controllers, dampers, rheonomic drivers), so that a driven or controlled
-  system does not show the work done on it as drift.
+* :func:`energy_balance` — ``E − E₀ − W − W_fr + L_imp`` with ``W`` the work of the applied
+  non-conservative forces (actuators/controllers, dampers, rheonomic drivers), ``W_fr`` the work
+  of Coulomb friction and ``L_imp`` the energy taken out at impacts (both recorded by the
+  simulation in the trajectory), so that neither the work done on a system nor its physical
+  dissipation shows as drift.
 * :func:`coordinate_units` — the physical unit of each coordinate (m, rad or 1).
 """
 
@@ -86,27 +88,39 @@ class EnergyBalance(NamedTuple):
         (driven) constraints; scleronomic constraints do no work (``A q̇ = 0``). Zero when no
         model was given (``known`` is then False).
     balance : ndarray
-        ``E − E₀ − W``: the integration error plus the energy that impacts take out (steps at
-        impact events). For a conservative system W = 0 and this is the energy drift.
+        ``E − E₀ − W − friction + impacts``: the integration error (drift) alone. For a
+        conservative system without contacts W = 0 and this is ``E − E₀``.
     known : bool
         Whether ``work`` was computed (a model was given).
+    friction : ndarray
+        ``W_fr(t)``, the work of the Coulomb friction forces of slipping contacts (≤ 0), as the
+        simulation integrated it (the trajectory's ``friction_work``; zeros when absent).
+    impacts : ndarray
+        ``L_imp(t)``, the energy taken out at impacts and other velocity jumps (≥ 0 when
+        dissipative; the trajectory's ``impact_loss``; zeros when absent).
     """
 
     energy: np.ndarray
     work: np.ndarray
     balance: np.ndarray
     known: bool
+    friction: np.ndarray
+    impacts: np.ndarray
 
 
 def energy_balance(traj: Any, model: Any | None = None) -> EnergyBalance | None:
-    """The energy balance ``E − E₀ − W`` of a trajectory (see :class:`EnergyBalance`).
+    """The energy balance ``E − E₀ − W − W_fr + L_imp`` of a trajectory (see
+    :class:`EnergyBalance`).
+
+    ``W_fr`` and ``L_imp`` are read from the trajectory (``friction_work``, ``impact_loss``:
+    the simulation records them, viz does not recompute the dynamics); W is computed here.
 
     Parameters
     ----------
     traj : Trajectory
     model : Model, optional
         Needed for W (its ``B`` and ``f_passive`` at each sample). Without it W = 0 and
-        ``known`` is False.
+        ``known`` is False (friction and impacts are still subtracted).
 
     Returns
     -------
@@ -118,8 +132,9 @@ def energy_balance(traj: Any, model: Any | None = None) -> EnergyBalance | None:
         return None
     e = np.asarray(e, dtype=float)
     t = np.asarray(traj.t, dtype=float)
+    fr, imp = (_recorded(traj, name, e) for name in ("friction_work", "impact_loss"))
     if model is None:
-        return EnergyBalance(e, np.zeros_like(e), e - e[0], False)
+        return EnergyBalance(e, np.zeros_like(e), e - e[0] - fr + imp, False, fr, imp)
     qd = np.asarray(traj.qd, dtype=float)
     fc = np.asarray(getattr(traj, "f_c", np.zeros_like(qd)), dtype=float)
     u = np.asarray(getattr(traj, "u", np.zeros((len(t), 0))), dtype=float)
@@ -136,7 +151,15 @@ def energy_balance(traj: Any, model: Any | None = None) -> EnergyBalance | None:
         if u.shape[1] and B.size:
             f = f + B @ u[i]
         power[i] = float(qd[i] @ f)
-    return EnergyBalance(e, (work := _cumulative_work(t, power)), e - e[0] - work, True)
+    work = _cumulative_work(t, power)
+    return EnergyBalance(e, work, e - e[0] - work - fr + imp, True, fr, imp)
+
+
+def _recorded(traj: Any, name: str, like: np.ndarray) -> np.ndarray:
+    """A recorded per-sample energy array of the trajectory (zeros when it has none)."""
+    a = getattr(traj, name, None)
+    a = np.zeros_like(like) if a is None else np.asarray(a, dtype=float)
+    return a if a.shape == like.shape else np.zeros_like(like)
 
 
 def _cumulative_work(t: np.ndarray, power: np.ndarray) -> np.ndarray:

@@ -88,9 +88,9 @@ def plot_trajectory(traj: Any, model: Model | None = None, *, title: str | None 
     Every curve is labelled with its coordinate and unit (m, rad; rates m/s, rad/s;
     generalized forces N, N·m). The rank axis has integer ticks. σ_r/σ₁ is computed on the
     constraints active at each sample (:func:`~nonmin.viz.singularity_distance`). The energy
-    panel shows the balance ``|E − E₀ − W|`` where W is the work of actuators, controllers,
-    dampers and drivers (:func:`~nonmin.viz.energy_balance`): the drift of a conservative
-    system, and the error of the bookkeeping of a driven one (impacts show as steps).
+    panel shows the drift ``|E − E₀ − W − W_fr + L_imp|`` where W is the work of actuators,
+    controllers, dampers and drivers, W_fr the work of Coulomb friction and L_imp the energy
+    lost at impacts (:func:`~nonmin.viz.energy_balance`), next to |W|, |W_fr| and L_imp.
 
     Parameters
     ----------
@@ -173,13 +173,19 @@ def plot_trajectory(traj: Any, model: Model | None = None, *, title: str | None 
     if bal is not None:
         if bal.known:
             ax.semilogy(t, np.maximum(np.abs(bal.balance), 1e-17), lw=1,
-                        label="energy balance |E − E₀ − W| [J]")
+                        label="drift |E − E₀ − W − W_fr + L_imp| [J]")
             if np.max(np.abs(bal.work)) > 0:
                 ax.semilogy(t, np.maximum(np.abs(bal.work), 1e-17), lw=1, ls=":", color="0.4",
                             label="|W| work of forces, controllers, drivers [J]")
         else:
             ax.semilogy(t, np.maximum(np.abs(bal.balance), 1e-17), lw=1,
-                        label="|E − E₀| [J] (no model: work W not subtracted)")
+                        label="|E − E₀ − W_fr + L_imp| [J] (no model: W not subtracted)")
+        if np.max(np.abs(bal.friction)) > 0:
+            ax.semilogy(t, np.maximum(np.abs(bal.friction), 1e-17), lw=1, ls="--", color="0.55",
+                        label="|W_fr| work of friction (slip) [J]")
+        if np.max(np.abs(bal.impacts)) > 0:
+            ax.semilogy(t, np.maximum(np.abs(bal.impacts), 1e-17), lw=1, ls="-.", color="0.25",
+                        label="L_imp energy lost at impacts [J]")
     phi = _field(traj, "phi_norm", "position_residual_norm")
     if phi is not None and phi.size:
         ax.semilogy(t, np.maximum(phi, 1e-17), label="‖φ‖ position residual [m, rad]", lw=1)

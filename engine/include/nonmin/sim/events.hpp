@@ -120,4 +120,15 @@ Status friction_transition(Loop& L, double t, Vec& y, const std::vector<int>& fi
 // Append the friction guards after an event (L.lam_c: release_forces of the point after it).
 Status friction_append_guards(Loop& L, double t, const Vec& y);
 
+// The work of the friction forces, W(t) = ∫ Σ F_j e_j·v_t,j dt (≤ 0: Coulomb friction only
+// dissipates), integrated step by step with Simpson's rule on the power at the step's start, at
+// the middle of the quintic Hermite interpolant of its (projected) ends, and at its end (one
+// evaluation more per step in which a contact slips; the modes are fixed inside a step, so the
+// power is smooth there). friction_work_step: the step from (L.t, L.y) to (t1, y1), `p1` the
+// evaluation at its end; samples recorded until friction_work_commit read friction_work_at.
+Status friction_work_step(Loop& L, double t1, const double* y1, const Point& p1);
+double friction_work_at(const Loop& L, double t);
+// End of the step (or of the event's partial step): W, F and the power at the new state `p`.
+void friction_work_commit(Loop& L, const Point& p);
+
 }  // namespace nonmin::sim

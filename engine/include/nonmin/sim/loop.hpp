@@ -191,6 +191,7 @@ struct FrictionContact {
 struct Samples {
     int n = 0, k = 0, c = 0;
     std::vector<double> t, q, qd, qdd, f_c, u, cond, mu, energy, phi_norm, vel_norm;
+    std::vector<double> fr_work;  // cumulative work of the friction forces (J; sim_friction.cpp)
     std::vector<std::int64_t> rank;
     std::vector<std::uint8_t> active;
     std::size_t size() const { return t.size(); }
@@ -216,6 +217,7 @@ struct Point {
     Vec q, qd, qdd, f_c, u;
     int rank = 0;
     double mu = 0.0, cond = 1.0, energy = 0.0, phi_norm = 0.0, vel_norm = 0.0;
+    double fr_power = 0.0;  // power of the slipping contacts' friction forces, Σ F e·v_t (W)
 };
 
 // One transition applied by the engine's event layer (the fields of nonmin.sim.EventRecord).
@@ -330,6 +332,17 @@ struct Loop {
     double fr_vthresh = 1e-6;  // |v_t| at or below which a closing contact may stick
     int painleve = -1;
     double painleve_t = 0.0, painleve_den = 0.0;
+    // the friction forces' work (sim_friction.cpp, friction_work_*): the power of the last
+    // evaluation; the cumulative work at (t, y) and F = (q̇, q̈) and the power there (fw_have0:
+    // known); the step being recorded (Simpson's rule on [fw_t0, fw_t0 + fw_h] with the power at
+    // its start, middle and end: samples inside it read the integral of that quadratic)
+    double fr_power = 0.0;
+    double fw = 0.0, fw_P0 = 0.0;
+    bool fw_have0 = false;
+    bool fw_step = false;
+    double fw_t0 = 0.0, fw_h = 0.0, fw_W0 = 0.0, fw_Pm = 0.0, fw_P1 = 0.0;
+    Vec fw_f0, fw_f1, fw_ym;
+    Point fw_p;
 
     // the engine's event layer (sim/events.hpp, sim_events.cpp): what the last transition did
     std::vector<EventInfo> events;
