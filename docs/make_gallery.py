@@ -2,7 +2,7 @@
 
 Usage::
 
-    nonmin demo --out nonmin-demo          # runs the three built-in scenarios
+    nonmin demo --out nonmin-demo          # runs the four built-in scenarios
     python docs/make_gallery.py nonmin-demo
 
 Copies the demo's animations, redraws its plots with their models (σ_r/σ₁ of the active
@@ -35,6 +35,7 @@ def main(demo_dir: str) -> None:
         ("n_four_bar", "A02_n_four_bar", {"N": 2}),
         ("crossed_four_bar", "crossed_four_bar", {}),
         ("arm_wall", "arm2r_wall", {}),
+        ("foot_friction", "foot_friction", {}),
     ):
         traj = load_trajectory(demo / name / "trajectory.npz")
         model = library.get(lib, **params).model
