@@ -300,6 +300,25 @@ void Projected::project(const double* x, double* out) {
     }
 }
 
+// The first d = n − r rows of W = Z B (d × k) and zf = Z f_∥: the actuation and the force to
+// realize in the basis Z of N(A) (regulator and force control); returns ‖Z B‖²_F
+double Projected::reduce_actuation(const Terms& T, Mat& W, double* zf) const {
+    const int n = n_, k = k_, d = n_ - rank_;
+    double fro = 0.0;
+    for (int a = 0; a < d; ++a) {
+        for (int j = 0; j < k; ++j) {
+            double s = 0.0;
+            for (int i = 0; i < n; ++i) s += Z_(a, i) * T.B(i, j);
+            W(a, j) = s;
+            fro += s * s;
+        }
+        double s = 0.0;
+        for (int i = 0; i < n; ++i) s += Z_(a, i) * fpar_[i];
+        zf[a] = s;
+    }
+    return fro;
+}
+
 // PB = Zᵀ(Z B), kept for σ(PB) in record(), the SVD path and force control
 void Projected::ensure_pb(const Terms& T) {
     if (pb_valid_) return;
@@ -637,18 +656,7 @@ Status Projected::actuate(const Terms& T) {
     if (d > 0 && k >= d) {
         // ZB = Z B (d × k), zf = Z f_∥; LQ of ZB by Householder reflectors on its rows
         Mat& W = ZB_;
-        double fro = 0.0;
-        for (int a = 0; a < d; ++a) {
-            for (int j = 0; j < k; ++j) {
-                double s = 0.0;
-                for (int i = 0; i < n; ++i) s += Z_(a, i) * T.B(i, j);
-                W(a, j) = s;
-                fro += s * s;
-            }
-            double s = 0.0;
-            for (int i = 0; i < n; ++i) s += Z_(a, i) * fpar_[i];
-            zf_[a] = s;
-        }
+        double fro = reduce_actuation(T, W, zf_.data());
         fro = std::sqrt(fro);
         if (certified_min_norm(W, G_, d, k, zf_.data(), fro, bscale, y_.data(), uraw_.data())) {
             last_feasible_ = true;
@@ -784,18 +792,7 @@ Status Projected::actuate_force(double t, const Terms& T, const Mat& A) {
         // f_∥ = Zᵀ(Z f_∥) with Zᵀ's columns orthonormal, so [PB; EB] and W have the same singular
         // values and the same minimum-norm solution; W's by its certified LQ
         Mat& W = Wf_;
-        double fro = 0.0;
-        for (int a = 0; a < d; ++a) {
-            for (int j = 0; j < k; ++j) {
-                double s = 0.0;
-                for (int i = 0; i < n; ++i) s += Z_(a, i) * T.B(i, j);
-                W(a, j) = s;
-                fro += s * s;
-            }
-            double s = 0.0;
-            for (int i = 0; i < n; ++i) s += Z_(a, i) * fpar_[i];
-            rhsf_[a] = s;
-        }
+        double fro = reduce_actuation(T, W, rhsf_.data());
         for (int f = 0; f < mf; ++f) {
             for (int j = 0; j < k; ++j) {
                 W(d + f, j) = Gf_(n + f, j);

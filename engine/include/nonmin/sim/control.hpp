@@ -118,6 +118,7 @@ class Projected : public Controller {
     Status nullspace(const Mat& A);
     void project(const double* x, double* out);
     void ensure_pb(const Terms& T);
+    double reduce_actuation(const Terms& T, Mat& W, double* zf) const;
     Status desired(double t, const double* q);
     Status project_configuration(double t, double* x);
     Status min_norm_true(const Mat& A, int m, const double* b, double* x);  // A⁺ b
