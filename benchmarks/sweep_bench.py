@@ -114,15 +114,16 @@ def nonmin_single(th0: np.ndarray, om0: np.ndarray) -> tuple[float, np.ndarray]:
 # --------------------------------------------------------------------------- MuJoCo
 
 
-def mujoco_rollout(th0: np.ndarray, om0: np.ndarray, setting: str, threads: int, block: int = 500
-                   ) -> tuple[float, np.ndarray]:  # fmt: skip
+def mujoco_rollout(th0: np.ndarray, om0: np.ndarray, setting: str, threads: int, block: int = 500,
+                   dt: float = DT, integrator: str = "Euler") -> tuple[float, np.ndarray]:  # fmt: skip
     """Wall time of the rollouts and the crank/rocker angles every 10 ms (k, 201, 2)."""
     import mujoco
     import sim_bench as sb
     from mujoco import rollout
 
     ref = sb.crossed_four_bar_mechanism()
-    m = mujoco.MjModel.from_xml_string(sb.mjcf(ref, DT, setting))
+    xml = sb.mjcf(ref, dt, setting).replace('integrator="Euler"', f'integrator="{integrator}"')
+    m = mujoco.MjModel.from_xml_string(xml)
     jid = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"j{i}") for i in range(ref.nb)]
     qadr = [int(m.jnt_qposadr[j]) for j in jid]
     vadr = [int(m.jnt_dofadr[j]) for j in jid]
@@ -143,9 +144,9 @@ def mujoco_rollout(th0: np.ndarray, om0: np.ndarray, setting: str, threads: int,
                 d.qvel[vadr[b]] = mech.rates0[b]
         mujoco.mj_forward(m, d)
         mujoco.mj_getState(m, d, init[i], spec)
-    nstep = round(T_FINAL / DT)
+    nstep = round(T_FINAL / dt)
     datas = [mujoco.MjData(m) for _ in range(threads)]
-    every = round(0.01 / DT)
+    every = round(0.01 / dt)
     angles = np.empty((k, nstep // every + 1, 2))
     wall = 0.0
     for lo in range(0, k, block):
@@ -170,7 +171,11 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=3, help="interleaved rounds (medians)")
     ap.add_argument("--skip-dask", action="store_true")
     ap.add_argument("--json", default=str(HERE / "results" / "sweep_bench.json"))
+    ap.add_argument("--work-precision", action="store_true",
+                    help="only the work-precision comparison with mujoco.rollout over a range of dt for both")
     args = ap.parse_args()
+    if args.work_precision:
+        return work_precision(args)
     load0 = os.getloadavg()
     th0, om0 = states(args.runs, 2026)
     t = np.linspace(0.0, T_FINAL, 201)
@@ -243,6 +248,69 @@ def main() -> int:
         print(f"| {k} | {a:.2f} | {b:.2f} | {a / (2 * b):.2f} |")
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(rows, indent=1), encoding="utf-8")
+    return 0
+
+
+NONMIN_DT = (1e-3, 2e-3, 2.5e-3, 5e-3, 1e-2, 2e-2)
+MUJOCO_DT = (2e-3, 1e-3, 5e-4, 2.5e-4)
+
+
+def work_precision(args: Any) -> int:
+    """Per-run cost against accuracy: nonmin's batch (RK4 + projection, 1 thread) and
+    mujoco.rollout (semi-implicit Euler and RK4, default and stiff constraint settings, 1 thread)
+    over a range of steps, on the first ``--runs`` states; crank angle error against the exact
+    reduction on the first ``--ref`` runs; every run's largest distance from its branch."""
+    load0 = os.getloadavg()
+    th0, om0 = states(args.runs, 2026)
+    t = np.linspace(0.0, T_FINAL, 201)
+    paths: dict[str, Any] = {}
+    for h in NONMIN_DT:
+        paths[f"nonmin RK4+projection, dt = {h:g}"] = lambda h=h: nonmin_batch(th0, om0, 1, h)
+    for integ in ("Euler", "RK4"):
+        for setting in ("default", "stiff"):
+            for h in MUJOCO_DT:
+                paths[f"mujoco {integ} {setting}, dt = {h:g}"] = (
+                    lambda h=h, s=setting, i=integ: mujoco_rollout(th0, om0, s, 1, dt=h, integrator=i))
+    walls: dict[str, list[float]] = {k: [] for k in paths}
+    outs: dict[str, Any] = {}
+    for _ in range(args.repeat):
+        for k, fn in paths.items():
+            w, out = fn()
+            walls[k].append(w / args.runs)
+            outs[k] = out
+    rows = []
+    for k in paths:
+        o = outs[k]
+        theta, psi = (o.q[:, :, 2], o.q[:, :, 8]) if k.startswith("nonmin") else (o[:, :, 0], o[:, :, 1])
+        err = crank_errors(theta, th0, om0, t, args.ref)
+        rows.append((k, statistics.median(walls[k]), max(err), float(np.median(err)),
+                     float(np.nanmax(anti_residual(theta, psi)))))  # fmt: skip
+    load1 = os.getloadavg()
+    print(f"load average before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, after {load1[0]:.2f} {load1[1]:.2f} "
+          f"{load1[2]:.2f}\n\n{args.runs} runs of the crossed four-bar over {T_FINAL} s, 1 thread each, medians of "
+          f"{args.repeat} interleaved rounds; crank error over the first {args.ref} runs\n")  # fmt: skip
+    print("| path | per run (ms) | crank error max (rad) | median (rad) | max branch distance (rad) |")
+    print("|---|---|---|---|---|")
+    for k, w, e_max, e_med, br in rows:
+        print(f"| {k} | {w * 1e3:.3f} | {e_max:.2e} | {e_med:.2e} | {br:.2e} |")
+    print("\nFor each MuJoCo setting: the cheapest nonmin step at equal or better accuracy (max error over the "
+          "checked runs, and every run within 1e-3 rad of its branch)\n")  # fmt: skip
+    print("| MuJoCo | its ms | its error | cheapest nonmin at ≤ error | nonmin ms | ratio nonmin / MuJoCo |")
+    print("|---|---|---|---|---|---|")
+    nm = [r for r in rows if r[0].startswith("nonmin") and r[4] < 1e-3]
+    for k, w, e_max, _, _ in rows:
+        if k.startswith("nonmin"):
+            continue
+        ok = [r for r in nm if r[2] <= e_max]
+        if not ok:
+            print(f"| {k} | {w * 1e3:.3f} | {e_max:.2e} | none | | |")
+            continue
+        best = min(ok, key=lambda r: r[1])
+        print(f"| {k} | {w * 1e3:.3f} | {e_max:.2e} | {best[0].split(', ')[1]} ({best[2]:.1e}) | "
+              f"{best[1] * 1e3:.3f} | {best[1] / w:.2f} |")  # fmt: skip
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).with_name("sweep_bench_work_precision.json").write_text(
+        json.dumps({"load": [load0, load1], "rows": rows}, indent=1), encoding="utf-8")
     return 0
 
 
