@@ -169,6 +169,14 @@ def _flat(row: IntArray, col: IntArray, m: int, n: int) -> IntArray:
     return np.where(col < n, row * n + col, m * n).astype(np.intp)
 
 
+def _pair_flat(
+    row: IntArray, cols: tuple[IntArray, IntArray, IntArray], a_: slice, b_: slice, m: int, n: int
+) -> list[IntArray]:
+    """The six flat indices of a two-point row, in value order x_b, y_b, θ_b, x_a, y_a, θ_a
+    (``cols`` = the point columns of x, y and θ)."""
+    return [_flat(row, c[s], m, n) for s in (b_, a_) for c in cols]
+
+
 class Layout:
     """Row layout and index arrays of one active set (immutable once built)."""
 
@@ -255,14 +263,7 @@ class Layout:
             self.UP = np.stack([-uy, ux])
             self.UPp = np.stack([-ux, -uy])
             # value order: n_x (x_b), n_y (y_b), n·rsp_b (θ_b), −n_x (x_a), −n_y (y_a), θ_a
-            var_idx += [
-                _flat(rl, ix[b_], m, n),
-                _flat(rl, iy[b_], m, n),
-                _flat(rl, ith[b_], m, n),
-                _flat(rl, ix[a_], m, n),
-                _flat(rl, iy[a_], m, n),
-                _flat(rl, ith[a_], m, n),
-            ]
+            var_idx += _pair_flat(rl, (ix, iy, ith), a_, b_, m, n)
         # ---------------------------------------------------------------- rods
         self.rod_rows = np.array([row for row, _ in rods], dtype=np.intp)
         if NR:
@@ -272,14 +273,7 @@ class Layout:
             self.rod_coef = np.array([p.coef for _, p in rods])
             self.rod_len = np.array([p.length for _, p in rods])
             self.rod_sign = np.array([p.sign for _, p in rods])
-            var_idx += [
-                _flat(rr, ix[b_], m, n),
-                _flat(rr, iy[b_], m, n),
-                _flat(rr, ith[b_], m, n),
-                _flat(rr, ix[a_], m, n),
-                _flat(rr, iy[a_], m, n),
-                _flat(rr, ith[a_], m, n),
-            ]
+            var_idx += _pair_flat(rr, (ix, iy, ith), a_, b_, m, n)
         # ---------------------------------------------------------------- angle rows
         self.angle_rows = np.array([row for row, _ in angles], dtype=np.intp)
         G = np.zeros((len(angles), n + 1))
