@@ -16,6 +16,7 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
+import functools
 import json
 import statistics
 import sys
@@ -36,6 +37,10 @@ CONFIGS: dict[str, list[dict[str, Any]]] = {
     "A04_bricard": [
         *({"method": "rk4", "dt": dt} for dt in (0.2, 0.1, 5e-2, 2e-2, 1e-2, 5e-3, 2e-3, 1e-3)),
         *({"method": m, "rtol": r, "atol": r * 1e-2} for m in ("dopri5", "dop853") for r in (1e-4, 1e-6, 1e-8, 1e-10)),
+        # the same mechanism as a tree of five hinges closed by one hinge constraint (n = 5):
+        # nonmin's robot source on the Pinocchio model that the Pinocchio peer uses
+        *({"model": "robot", "method": "rk4", "dt": dt} for dt in (0.4, 0.2, 0.1, 5e-2, 2e-2, 1e-2, 5e-3, 2e-3, 1e-3, 5e-4)),
+        *({"model": "robot", "method": m, "rtol": r, "atol": r * 1e-2} for m in ("dopri5", "dop853") for r in (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)),
     ],
 }
 HORIZON = {"A03_andrews": 0.03, "A04_bricard": 10.0}
@@ -139,8 +144,242 @@ def run_mujoco_a04(dt: float, setting: str, repeat: int) -> dict[str, Any]:
         "status": "ok" if ok else "diverged", "on_branch": ok, "closure_max": float(np.max(closure)),
         "energy_drift": float(np.max(np.abs(E - E[0]))), "error_vs_reference_max": err,
         "n_steps": n, "n_rejected": 0, "wall_runs_s": walls,
-        "wall_per_sim_s": statistics.median(walls) / T if ok else None,
+        "wall_per_sim_s": statistics.median(walls) / T if ok and walls else None,
     }  # fmt: skip
+
+
+#: Pinocchio peer on A04: a Python loop of proximal ``constraintDynamics`` (the same hinge chain,
+#: closed by two ``CONTACT_3D`` points on J6's axis), semi-implicit Euler and RK4, Baumgarte
+#: gains Kp = 0 (none) and Kp = 100 (Kd = 2 √Kp), proximal mu 1e-8.
+PIN_DTS = (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4)
+PIN_SETTINGS = tuple((m, kp) for m in ("euler", "rk4") for kp in (0.0, 100.0))
+#: Exudyn peer on A04: rigid bodies (Euler parameters) with five revolute joints and J6, its
+#: generalized-α solver (index 3) over spectral radii 0.6 / 0.9 / 1.0, redundant rows allowed
+#: (``linearSolver.ignoreSingularJacobian`` with the dense LU; the sparse one fails to factorize).
+EXUDYN_DTS = (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4)
+EXUDYN_RHOS = (0.6, 0.9, 1.0)
+
+
+def _a04_rod_inertia(start: Any, end: Any, mass: float = 1.0, width: float = 0.1) -> np.ndarray:
+    """Principal moments of a rod about its centre in the world-aligned frame (axial m a²/6)."""
+    p0, p1 = np.asarray(start), np.asarray(end)
+    axial, transverse = mass * width**2 / 6.0, mass * (1.0 + width**2) / 12.0
+    return np.where(np.abs(p1 - p0) > 0.5, axial, transverse)
+
+
+def _peer_row(engine: str, setting: str, dt: float, walls: list[float], ok: bool, p3: list[Any],
+              energy: list[float] | None, closure: list[float] | None, n: int) -> dict[str, Any]:
+    ref = a04_fine_reference()
+    P = np.array(p3)
+    m = min(len(P), len(ref["P3"]))
+    ok = ok and bool(np.all(np.isfinite(P)))
+    err = float(np.max(np.abs(P[:m] - ref["P3"][:m]))) if ok else None
+    T = HORIZON["A04_bricard"]
+    E = np.array(energy) if energy else None
+    return {
+        "engine": engine, "setting": setting, "mechanism": "A04_bricard", "dt": dt, "t_final": T,
+        "status": "ok" if ok else "diverged", "on_branch": ok,
+        "closure_max": float(np.max(closure)) if closure else None,
+        "energy_drift": float(np.max(np.abs(E - E[0]))) if E is not None and ok else None,
+        "error_vs_reference_max": err, "n_steps": n, "n_rejected": 0, "wall_runs_s": walls,
+        "wall_per_sim_s": statistics.median(walls) / T if ok and walls else None,
+    }  # fmt: skip
+
+
+def a04_pinocchio_model() -> Any:
+    """A04 as a Pinocchio hinge chain ground → rod1 … rod5 (joint frames at J1 … J5, aligned
+    with the world at the tabulated configuration; a frame per joint, named ``rod<i>_j``)."""
+    import pinocchio as pin
+
+    from nonmin.library.bricard import _JOINTS, _RODS
+
+    model = pin.Model()
+    model.gravity.linear = np.array([0.0, -9.81, 0.0])
+    revolute = {0: pin.JointModelRX, 1: pin.JointModelRY, 2: pin.JointModelRZ}
+    parent, prev = 0, np.zeros(3)
+    for (name, start, end), (_, point, axis, _, _) in zip(_RODS, _JOINTS[:5], strict=True):
+        jm = revolute[int(np.argmax(np.abs(axis)))]()
+        parent = model.addJoint(parent, jm, pin.SE3(np.eye(3), np.asarray(point) - prev), f"{name}_j")
+        c = 0.5 * (np.asarray(start) + np.asarray(end)) - np.asarray(point)
+        model.appendBodyToJoint(parent, pin.Inertia(1.0, c, np.diag(_a04_rod_inertia(start, end))),
+                                pin.SE3.Identity())
+        model.addJointFrame(parent)
+        prev = np.asarray(point)
+    return model
+
+
+def run_pinocchio_a04(dt: float, method: str, kp: float, repeat: int, mu: float = 1e-8) -> dict[str, Any]:
+    """One Pinocchio run of A04 over 10 s (Python loop of ``constraintDynamics``)."""
+    import pinocchio as pin
+
+    model = a04_pinocchio_model()
+    parent = model.njoints - 1
+    data = model.createData()
+    # rod5's frame sits at J5 = (0, -1, 1): the points (0, 1, 0) and (1, 1, 0) of it are J6's axis
+    local = (np.array([0.0, 1.0, 0.0]), np.array([1.0, 1.0, 0.0]))
+    world = (np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 1.0]))
+    cms = []
+    for a, b in zip(local, world, strict=True):
+        cm = pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, model, parent, pin.SE3(np.eye(3), a),
+                                      0, pin.SE3(np.eye(3), b), pin.ReferenceFrame.LOCAL)
+        cm.m_baumgarte_parameters.Kp = kp
+        cm.m_baumgarte_parameters.Kd = 2.0 * np.sqrt(kp)
+        cms.append(cm)
+    cdatas = [cm.createData() for cm in cms]
+    prox = pin.ProximalSettings(1e-12, mu, 50)
+    pin.initConstraintDynamics(model, data, cms, cdatas)
+    tau = np.zeros(model.nv)
+    T = HORIZON["A04_bricard"]
+    n = round(T / dt)
+    every = max(1, round(SAMPLE["dt"] / dt))
+    rod3 = 3  # joint 3 sits at J3 = P3
+
+    def acc(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return pin.constraintDynamics(model, data, q, v, tau, cms, cdatas, prox)
+
+    walls: list[float] = []
+    p3: list[Any] = []
+    energy: list[float] = []
+    closure: list[float] = []
+    ok = True
+    for rep in range(repeat + 1):
+        q, v = np.zeros(model.nq), np.zeros(model.nv)
+        p3, energy, closure = [], [], []
+        t0 = time.perf_counter()
+        for k in range(n + 1):
+            if k % every == 0:
+                pin.forwardKinematics(model, data, q)
+                p3.append(data.oMi[rod3].translation.copy())
+                energy.append(float(pin.computeMechanicalEnergy(model, data, q, v)))
+                M5 = data.oMi[parent]
+                closure.append(max(float(np.abs(M5.act(a) - b).max()) for a, b in zip(local, world, strict=True)))
+            if k == n:
+                break
+            if method == "euler":  # semi-implicit (symplectic) Euler
+                v = v + dt * acc(q, v)
+                q = q + dt * v
+            else:
+                k1v = acc(q, v)
+                k2v = acc(q + 0.5 * dt * v, v + 0.5 * dt * k1v)
+                k3v = acc(q + 0.5 * dt * (v + 0.5 * dt * k1v), v + 0.5 * dt * k2v)
+                k4v = acc(q + dt * (v + 0.5 * dt * k2v), v + dt * k3v)
+                q = q + dt * (v + dt / 6.0 * (k1v + k2v + k3v))
+                v = v + dt / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+            if not np.isfinite(v[0]):
+                ok = False
+                break
+        if rep:
+            walls.append(time.perf_counter() - t0)
+        if not ok:
+            break
+    setting = f"{'semi-implicit Euler' if method == 'euler' else 'RK4'} prox Kp={kp:g}"
+    return _peer_row("pinocchio", setting, dt, walls, ok, p3, energy, closure, n)
+
+
+def run_exudyn_a04(dt: float, rho: float, repeat: int) -> dict[str, Any]:
+    """One Exudyn run of A04 over 10 s: generalized-α (index 3) with spectral radius ``rho``."""
+    import exudyn as exu
+    import exudyn.utilities  # (adds the Create* methods to MainSystem)
+    from exudyn.itemInterface import SensorBody
+    from exudyn.utilities import InertiaCuboid, RigidBodyInertia
+
+    from nonmin.library.bricard import _JOINTS, _RODS
+
+    T = HORIZON["A04_bricard"]
+
+    def build() -> tuple[Any, Any, Any, Any]:
+        sc = exu.SystemContainer()
+        mbs = sc.AddSystem()
+        bodies = {"ground": mbs.CreateGround()}
+        for name, start, end in _RODS:
+            p0, p1 = np.asarray(start), np.asarray(end)
+            sides = np.where(np.abs(p1 - p0) > 0.5, 1.0, 0.1)
+            inertia = InertiaCuboid(density=1.0 / float(np.prod(sides)), sideLengths=list(sides))
+            assert isinstance(inertia, RigidBodyInertia)
+            bodies[name] = mbs.CreateRigidBody(inertia=inertia, referencePosition=list(0.5 * (p0 + p1)),
+                                               gravity=[0.0, -9.81, 0.0])
+        for _, point, axis, a, b in _JOINTS:
+            mbs.CreateRevoluteJoint(itemNumbers=[bodies[a], bodies[b]], position=list(point),
+                                    axis=list(axis), useGlobalFrame=True)
+        def sensor(body: str, kind: Any, local: Any = (0.0, 0.0, 0.0)) -> Any:
+            return mbs.AddSensor(SensorBody(bodyNumber=bodies[body], localPosition=list(local),
+                                            storeInternal=True, outputVariableType=kind))
+
+        O = exu.OutputVariableType
+        centre = {name: 0.5 * (np.asarray(a) + np.asarray(b)) for name, a, b in _RODS}
+        sens = {"P3": sensor("rod3", O.Position, np.asarray(_RODS[2][1]) - centre["rod3"]),
+                "J6": [sensor("rod5", O.Position, np.asarray(p) - centre["rod5"]) for p in ((0, 0, 1), (1, 0, 1))]}
+        for name, *_ in _RODS:  # energy: centre position and velocity, body angular velocity
+            sens[name] = (sensor(name, O.Position), sensor(name, O.Velocity), sensor(name, O.AngularVelocityLocal))
+        mbs.Assemble()
+        s = exu.SimulationSettings()
+        s.timeIntegration.numberOfSteps = round(T / dt)
+        s.timeIntegration.endTime = T
+        s.timeIntegration.verboseMode = 0
+        s.timeIntegration.generalizedAlpha.spectralRadius = rho
+        s.timeIntegration.generalizedAlpha.computeInitialAccelerations = True
+        s.linearSolver.ignoreSingularJacobian = True  # the redundant row (dense LU only)
+        s.linearSolver.solverType = exu.LinearSolverType.EigenDense
+        s.solution.file.write = False
+        s.solution.sensors.writePeriod = SAMPLE["dt"]
+        s.show.statistics = False
+        s.show.computationTime = False
+        return sc, mbs, sens, s
+
+    walls: list[float] = []
+    ok = True
+    mbs = sens = None
+    for rep in range(repeat + 1):
+        _sc, mbs, sens, s = build()
+        t0 = time.perf_counter()
+        try:
+            ok = bool(mbs.SolveDynamic(s))
+        except Exception:  # Exudyn raises on Newton failure
+            ok = False
+        if rep:
+            walls.append(time.perf_counter() - t0)
+        if not ok:
+            break
+    assert mbs is not None and sens is not None
+    if not ok:
+        return _peer_row("exudyn", f"gen-alpha rho={rho:g}", dt, walls, ok, [], None, None, round(T / dt))
+
+    def series(sid: Any) -> np.ndarray:
+        return np.asarray(mbs.GetSensorStoredData(sid))[:, 1:4]
+
+    energy = 0.0
+    for name, start, end in _RODS:
+        pos, vel, om = (series(x) for x in sens[name])
+        inertia = _a04_rod_inertia(start, end)
+        energy = energy + 0.5 * np.sum(vel**2, axis=1) + 0.5 * (om**2 @ inertia) + 9.81 * pos[:, 1]
+    closure = np.maximum(*(np.abs(series(x) - p).max(axis=1) for x, p in zip(sens["J6"], ((0, 0, 1), (1, 0, 1)), strict=True)))
+    return _peer_row("exudyn", f"gen-alpha rho={rho:g}", dt, walls, ok, list(series(sens["P3"])), list(energy),
+                     list(closure), round(T / dt))
+
+
+def a04_robot() -> Any:
+    """A04 with nonmin's robot source: :func:`a04_pinocchio_model` (five hinges, n = 5) closed by
+    a :meth:`~nonmin.model.robots.FrameConstraint.hinge` between rod5 and the ground at J6
+    (5 rows; with Bricard's geometry one of them is redundant along the whole motion)."""
+    from nonmin.model.robots import FrameConstraint, RobotModel
+
+    j6 = FrameConstraint.hinge("J6", "rod5_j", axis=(1.0, 0.0, 0.0), placement_a=np.array([0.0, 1.0, 0.0]),
+                               placement_b=np.array([0.0, 0.0, 1.0]))
+    return RobotModel.from_pinocchio(a04_pinocchio_model(), constraints=[j6], gravity=[0.0, -9.81, 0.0],
+                                     joint_limits="ignore", name="A04_bricard_robot")
+
+
+def a04_robot_p3(robot: Any, q: np.ndarray) -> np.ndarray:
+    """P3 (the origin of joint 3's frame, J3) along the rows of ``q``, by Pinocchio's kinematics."""
+    import pinocchio as pin
+
+    model = a04_pinocchio_model()
+    data = model.createData()
+    out = np.empty((len(q), 3))
+    for k, qk in enumerate(q):
+        pin.forwardKinematics(model, data, qk)
+        out[k] = data.oMi[3].translation
+    return out
 
 
 def run(name: str, cfg: dict[str, Any], repeat: int) -> dict[str, Any]:
@@ -148,13 +387,18 @@ def run(name: str, cfg: dict[str, Any], repeat: int) -> dict[str, Any]:
     from nonmin.validation._references import load_a03_reference
 
     T = HORIZON[name]
-    mech = library.get(name)
+    cfg = dict(cfg)
+    robot = cfg.pop("model", None) == "robot"
+    mech: Any = a04_robot() if robot else library.get(name)
     t_eval = np.array([0.0, T]) if name == "A03_andrews" else np.round(np.arange(0.0, T + 1e-9, SAMPLE["dt"]), 10)
     walls = []
     tr = None
     for _ in range(repeat + 1):  # one warm-up run
         t0 = time.perf_counter()
-        tr = simulate(mech, (0.0, T), t_eval=t_eval, throw=False, progress=False, **cfg)
+        if robot:
+            tr = simulate(mech, (0.0, T), np.zeros(5), np.zeros(5), t_eval=t_eval, throw=False, progress=False, **cfg)
+        else:
+            tr = simulate(mech, (0.0, T), t_eval=t_eval, throw=False, progress=False, **cfg)
         walls.append(time.perf_counter() - t0)
         if not tr.success:
             break
@@ -165,9 +409,9 @@ def run(name: str, cfg: dict[str, Any], repeat: int) -> dict[str, Any]:
         _, ref = load_a03_reference()
         err = float(np.max(np.abs(np.asarray(tr.q[-1])[:7] - ref[:7])))
     if name == "A04_bricard" and tr.success:
-        p3 = np.asarray(tr.outputs(mech.model)["P3.position"])
+        p3 = a04_robot_p3(mech, np.asarray(tr.q)) if robot else np.asarray(tr.outputs(mech.model)["P3.position"])
         err = float(np.max(np.abs(p3 - a04_fine_reference()["P3"])))
-    setting = f"{cfg['method']} projection" + (f" rtol={cfg['rtol']:g}" if "rtol" in cfg else "")
+    setting = ("robot tree+hinge " if robot else "") + f"{cfg['method']} projection" + (f" rtol={cfg['rtol']:g}" if "rtol" in cfg else "")
     ok = bool(tr.success)
     return {
         "engine": "nonmin", "setting": setting + f" [{tr.metadata.get('engine')}]", "mechanism": name,
@@ -183,7 +427,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", default=str(HERE / "results" / "library_wp.json"))
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--mechanisms", default="A03_andrews,A04_bricard")
-    ap.add_argument("--peers", action="store_true", help="add MuJoCo (default and stiff) on A04")
+    ap.add_argument("--peers", action="store_true", help="add the peers on A04 (--peer-engines)")
+    ap.add_argument("--peer-engines", default="mujoco,pinocchio,exudyn",
+                    help="peers on A04: MuJoCo (Euler, default and stiff equalities), Pinocchio "
+                         "(constraintDynamics loop, Euler/RK4, Kp 0/100), Exudyn (gen-alpha)")
+    ap.add_argument("--peers-only", action="store_true", help="skip nonmin's rows (merge files later)")
+    ap.add_argument("--models", default="spatial,robot",
+                    help="nonmin's A04 models: spatial (the library's, n = 35), robot (tree + hinge, n = 5)")
     ap.add_argument("--sample", type=float, default=0.01, help="A04 output interval (s), a multiple of 0.01")
     a = ap.parse_args(argv)
     SAMPLE["dt"] = float(a.sample)
@@ -193,13 +443,20 @@ def main(argv: list[str] | None = None) -> int:
                            "load_before": [round(x, 2) for x in load], "mechanisms": {}}  # fmt: skip
     for name in a.mechanisms.split(","):
         rows = []
-        peers = [("mujoco", s, dt) for s in ("default", "stiff") for dt in MUJOCO_DTS] \
-            if name == "A04_bricard" and a.peers else []  # fmt: skip
-        for cfg in [*CONFIGS[name], *peers]:
-            r = run_mujoco_a04(cfg[2], cfg[1], a.repeat) if isinstance(cfg, tuple) else run(name, cfg, a.repeat)
+        engines = a.peer_engines.split(",") if name == "A04_bricard" and a.peers else []
+        peers: list[Any] = []
+        if "mujoco" in engines:
+            peers += [functools.partial(run_mujoco_a04, dt, st, a.repeat) for st in ("default", "stiff") for dt in MUJOCO_DTS]
+        if "pinocchio" in engines:
+            peers += [functools.partial(run_pinocchio_a04, dt, m, kp, a.repeat) for m, kp in PIN_SETTINGS for dt in PIN_DTS]
+        if "exudyn" in engines:
+            peers += [functools.partial(run_exudyn_a04, dt, rho, a.repeat) for rho in EXUDYN_RHOS for dt in EXUDYN_DTS]
+        mine = [c for c in CONFIGS[name] if c.get("model", "spatial") in a.models.split(",")]
+        for cfg in [*(mine if not a.peers_only else []), *peers]:
+            r = cfg() if callable(cfg) else run(name, cfg, a.repeat)
             rows.append(r)
             print(f"{name:>12} {r['setting']:<36} dt={r['dt']} err={r['error_vs_reference_max']} "
-                  f"dE={r['energy_drift']:.2e} closure={r['closure_max']:.1e} steps={r['n_steps']} "
+                  f"dE={r['energy_drift']} closure={r['closure_max']} steps={r['n_steps']} "
                   f"rej={r['n_rejected']} wall/s={r['wall_per_sim_s']} {r['status']}", flush=True)  # fmt: skip
         key = name if name != "A04_bricard" or a.sample == 0.01 else f"{name}_samples_{a.sample:g}s"
         for r in rows:

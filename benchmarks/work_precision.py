@@ -81,6 +81,7 @@ def plot(mech: str, rows: list[dict[str, Any]], out: Path, note: str = "") -> No
             fams[family(r)].append(r)
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
     markers = "osD^v<>ph*"
+    colors = plt.get_cmap("tab20").colors if len(fams) > 10 else plt.get_cmap("tab10").colors
     for i, (fam, rs) in enumerate(sorted(fams.items())):
         rs = sorted(rs, key=lambda r: r["wall_per_sim_s"])
         style = "-" if fam.startswith("nonmin") else "--"
@@ -89,7 +90,8 @@ def plot(mech: str, rows: list[dict[str, Any]], out: Path, note: str = "") -> No
             bad = [r for r in rs if not _ok(r)]
             x = [r["wall_per_sim_s"] for r in good]
             y = [min(CAP, max(FLOOR, float(r[key]))) for r in good]
-            (ln,) = ax.plot(x, y, style, marker=markers[i % len(markers)], ms=4, label=fam)
+            (ln,) = ax.plot(x, y, style, marker=markers[i % len(markers)], ms=4, label=fam,
+                            color=colors[i % len(colors)])
             if bad:
                 ax.plot([r["wall_per_sim_s"] for r in bad],
                         [min(CAP, max(FLOOR, float(r.get(key) or CAP))) for r in bad],
