@@ -181,18 +181,21 @@ def _timed(fn: Callable[[], Any], repeat: int) -> tuple[float, Any]:
 # --------------------------------------------------------------------------- engines
 
 
-def run_nonmin(case: Case, dt: float, T: float, **kw: Any) -> dict[str, Any]:
+def run_nonmin(case: Case, dt: float | None, T: float, **kw: Any) -> dict[str, Any]:
+    """nonmin RK4 at ``dt``, or (``dt=None``) the adaptive ``kw["method"]`` at ``kw["rtol"]``."""
     import nonmin
 
-    traj = nonmin.simulate(case.model, (0.0, T), case.q0, np.zeros(case.model.n), method="rk4", dt=dt,
-                           t_eval=_samples(T), progress=False, **kw)
+    kw = {"method": "rk4", "dt": dt, **kw} if dt is not None else kw
+    traj = nonmin.simulate(case.model, (0.0, T), case.q0, np.zeros(case.model.n), t_eval=_samples(T),
+                           progress=False, **kw)
     return {"t": traj.t, "q": traj.q, "closure": float(np.max(traj.phi_norm)),
             "dE": float(np.max(np.abs(traj.energy - traj.energy[0]))), "status": traj.status.value,
             "engine": str(getattr(traj, "diagnostics", {}).get("engine", "?"))
             if isinstance(getattr(traj, "diagnostics", None), dict) else "?"}
 
 
-def run_pinocchio(case: Case, dt: float, T: float) -> dict[str, Any]:
+def run_pinocchio(case: Case, dt: float, T: float, kp: float = KP) -> dict[str, Any]:
+    """RK4 over ``constraintDynamics`` with Baumgarte gains ``kp`` and ``Kd = 2 √kp``."""
     import pinocchio as pin
 
     pm = case.model.pinocchio_model
@@ -202,8 +205,8 @@ def run_pinocchio(case: Case, dt: float, T: float) -> dict[str, Any]:
         cms.append(cm)
     for cm in cms:
         bp = cm.m_baumgarte_parameters
-        bp.Kp = KP
-        bp.Kd = KD
+        bp.Kp = kp
+        bp.Kd = 2.0 * np.sqrt(kp)
         cm.setBaumgarteCorrectorParameters(bp)
     cds = pin.StdVec_RigidConstraintData()
     for cm in cms:
@@ -422,9 +425,13 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--dt-ref", type=float, default=1e-4)
     ap.add_argument("--quick", action="store_true", help="short horizon, one dt per engine")
     ap.add_argument("--json", default=str(HERE / "results" / "robot_bench.json"))
+    ap.add_argument("--wp", default=None, metavar="JSON",
+                    help="work-precision mode: every engine over its full range (nonmin RK4 and "
+                         "DOPRI5/DOP853 rtol 1e-4..1e-10, Pinocchio Kp 0 and 100, MuJoCo), dt up to "
+                         "1.6e-2; rows also written in work_precision.py's format to JSON")
     a = ap.parse_args(argv)
     T = 0.2 if a.quick else a.horizon
-    dts = [1e-3] if a.quick else [5e-4, 1e-3, 2e-3, 4e-3, 8e-3]
+    dts = [1e-3] if a.quick else [5e-4, 1e-3, 2e-3, 4e-3, 8e-3] + ([1.6e-2] if a.wp else [])
     engines = a.engines.split(",")
     rows: list[dict[str, Any]] = []
     for cname in a.cases.split(","):
@@ -437,31 +444,58 @@ def main(argv: list[str] | None = None) -> None:
                 runs.append(("nonmin", "rk4", dt, lambda dt=dt, case=case: run_nonmin(case, dt, T)))
             if "pinocchio" in engines:
                 runs.append(("pinocchio", f"rk4 Kp={KP:g} Kd={KD:g}", dt, lambda dt=dt, case=case: run_pinocchio(case, dt, T)))
+                if a.wp:
+                    runs.append(("pinocchio", "rk4 Kp=0 Kd=0", dt, lambda dt=dt, case=case: run_pinocchio(case, dt, T, 0.0)))
             if "mujoco" in engines:
                 for integ in ("RK4", "implicitfast"):
                     for stiff in (False, True):
                         label = f"{integ} {'stiff' if stiff else 'default'}"
                         runs.append(("mujoco", label, dt,
                                      lambda dt=dt, integ=integ, stiff=stiff, case=case: run_mujoco(case, dt, T, integ, stiff)))
+        if a.wp and "nonmin" in engines:
+            for meth in ("dopri5", "dop853"):
+                for rtol in (1e-4, 1e-6, 1e-8, 1e-10):
+                    runs.append(("nonmin", f"{meth} rtol={rtol:g}", None,
+                                 lambda meth=meth, rtol=rtol, case=case: run_nonmin(case, None, T, method=meth, rtol=rtol,
+                                                                                    atol=rtol * 1e-2)))
         for eng, setting, dt, fn in runs:
             try:
                 wall, out = _timed(fn, a.repeat)
             except Exception as exc:  # a failing peer setting is a result
                 rows.append({"case": cname, "engine": eng, "setting": setting, "dt": dt, "error": repr(exc)})
-                print(f"{cname:15s} {eng:10s} {setting:22s} dt={dt:.0e}  FAILED: {exc!r}", flush=True)
+                print(f"{cname:15s} {eng:10s} {setting:22s} dt={dt or 0:.0e}  FAILED: {exc!r}", flush=True)
                 continue
             err = _errors(case, out["t"], out["q"], refpair) if out["status"] == "success" else np.inf
             row = {"case": cname, "engine": eng, "setting": setting, "dt": dt, "T": T,
                    "wall_per_sim_s": wall / T, "err_rad": err, "closure_m": out["closure"],
                    "dE_J": out["dE"], "status": out["status"], "nonmin_engine": out.get("engine")}
             rows.append(row)
-            print(f"{cname:15s} {eng:10s} {setting:22s} dt={dt:.0e}  {wall / T * 1e3:9.2f} ms/s  "
+            print(f"{cname:15s} {eng:10s} {setting:22s} dt={dt or 0:.0e}  {wall / T * 1e3:9.2f} ms/s  "
                   f"err {err:.1e} rad  closure {out['closure']:.1e}  dE {out['dE']:.1e}  {out['status']}",
                   flush=True)
     res = {"machine": machine(), "horizon": T, "dt_ref": a.dt_ref, "rows": rows,
            "command": " ".join(["python", "benchmarks/robot_bench.py", *(argv or sys.argv[1:])])}
     Path(a.json).parent.mkdir(parents=True, exist_ok=True)
     Path(a.json).write_text(json.dumps(res, indent=1, default=float))
+    if a.wp:
+        Path(a.wp).write_text(json.dumps(to_work_precision(res), indent=1, default=float))
+
+
+def to_work_precision(res: dict[str, Any]) -> dict[str, Any]:
+    """The rows in ``work_precision.py``'s format: one mechanism per case; the joint-angle error
+    (rad) stands in the position-error column."""
+    mechs: dict[str, Any] = {}
+    for r in res["rows"]:
+        if "error" in r:
+            continue
+        ok = r["status"] == "success" and bool(np.isfinite(r["err_rad"]))
+        mechs.setdefault(r["case"], {"t_final": r["T"], "rows": []})["rows"].append({
+            "engine": r["engine"], "setting": r["setting"], "mechanism": r["case"], "dt": r["dt"],
+            "t_final": r["T"], "status": "ok" if ok else r["status"], "on_branch": ok,
+            "error_vs_reference_max": r["err_rad"], "energy_drift": r["dE_J"], "closure_max": r["closure_m"],
+            "wall_per_sim_s": r["wall_per_sim_s"] if ok else None,
+        })  # fmt: skip
+    return {"command": res["command"], "machine": res["machine"], "mechanisms": mechs}
 
 
 if __name__ == "__main__":
