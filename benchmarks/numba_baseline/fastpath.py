@@ -25,9 +25,7 @@ from nonmin.core.linalg import DEFAULT_RTOL, SPD_RTOL
 from nonmin.sim._simulate import DRIFT_RANK_FACTOR
 from nonmin.sim._stabilization import (
     CHORD_RATE,
-    POSITION_CUT_RTOL,
     ROUNDOFF_FLOOR,
-    ROUNDOFF_RESIDUAL_RATIO,
     SINGULAR_CUT_RTOL,
     Projection,
 )
@@ -35,6 +33,12 @@ from nonmin.sim._stabilization import (
 from . import loop_kernels
 
 FloatArray = NDArray[np.float64]
+
+#: The projection's cutoff rule of nonmin ≤ 0.1, frozen with the loop: a first Gauss–Newton
+#: residual within ROUNDOFF_RESIDUAL_RATIO of its round-off floor was cut at POSITION_CUT_RTOL
+#: (nonmin now takes the full rank there when A has no singular value below SINGULAR_CUT_RTOL).
+POSITION_CUT_RTOL = 1e-2
+ROUNDOFF_RESIDUAL_RATIO = 1e3
 
 #: Target wall time (s) of one compiled chunk.
 CHUNK_SECONDS = 0.25

@@ -466,20 +466,12 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
             prev = err;
             const double c2 = std::max(SINGULAR_CUT_RTOL, full);
             if (lin_count == 1 && fresh && cut > c2) {  // _stabilization._first_step
-                bool done = false;
-                bool real = false;
-                for (int i = 0; i < mh; ++i)
-                    if (!(std::abs(L.phih[i]) <= ROUNDOFF_RESIDUAL_RATIO * L.floor_[i])) real = true;
-                if (real) {
-                    int rank = 0;
-                    s = correction(L, L.Alin, mh, L.phih.data(), c2, L.dq.data(), &rank);
-                    if (s != Status::ok) return s;
-                    if (rank == mh) {  // no singular value below the cutoff: the full-rank step
-                        cut = c2;
-                        done = true;
-                    }
-                }
-                if (!done) {
+                int rank = 0;
+                s = correction(L, L.Alin, mh, L.phih.data(), c2, L.dq.data(), &rank);
+                if (s != Status::ok) return s;
+                if (rank == mh) {  // no singular value below c2: the full-rank step
+                    cut = c2;
+                } else {  // next to a singular configuration: without the directions below the cut
                     cut = std::max(POSITION_CUT_RTOL, full);
                     s = correction(L, L.Alin, mh, L.phih.data(), cut, L.dq.data(), nullptr);
                 }

@@ -281,14 +281,18 @@ def test_a_real_residual_at_a_regular_configuration_takes_the_full_rank(
     assert phi < 1e-14 and vel < 1e-12
 
 
-def test_a_roundoff_residual_keeps_the_cut(monkeypatch: pytest.MonkeyPatch) -> None:
-    # The same state with an error of 1e-15: the residual is within ROUNDOFF_RESIDUAL_RATIO of
-    # its round-off floor, so its component along the small singular direction is noise, and
-    # the first step cuts that direction (POSITION_CUT_RTOL) instead of dividing the noise by it.
+def test_a_roundoff_residual_at_a_regular_configuration_takes_the_full_rank(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The same state with an error of 1e-15 (a residual at its round-off floor): the first step
+    # keeps the direction of σ_min/σ_max ~ 4e-3 too. Before, a round-off residual was cut at
+    # POSITION_CUT_RTOL = 1e-2, which on A02 N = 40 (σ_min/σ_max ≤ 0.024 everywhere) failed the
+    # certified LQ and cost a 242 × 243 SVD per projection; next to a singular configuration
+    # (σ below SINGULAR_CUT_RTOL) the cut stays (the next test).
     from nonmin.sim import _stabilization as stab_mod
 
     pos, phi, vel = _projection_cutoffs(monkeypatch, 0.71, 1e-15)
-    assert pos and pos[0] == stab_mod.POSITION_CUT_RTOL, pos
+    assert pos == [stab_mod.SINGULAR_CUT_RTOL], pos
     assert phi < 1e-14 and vel < 1e-12
 
 

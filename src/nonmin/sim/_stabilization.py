@@ -8,9 +8,10 @@ remedies, given as objects or registered names (:data:`STABILIZATIONS`):
   (:func:`nonmin.core.baumgarte_bias`), i.e. enforces ``φ̈ + 2αφ̇ + β²φ = 0``.
 * :class:`Projection` (``"projection"``): after every accepted step, Gauss–Newton iterations
   ``q ← q + Sᵀ(−A⁺φ)`` (:func:`nonmin.core.position_correction`, the minimum-kinetic-metric
-  step onto φ = 0; the first ones without singular values below :data:`POSITION_CUT_RTOL`,
-  whose φ components near a singular configuration are round-off, unless the residual is real
-  and A has no singular value below :data:`SINGULAR_CUT_RTOL`; simplified steps that keep
+  step onto φ = 0; the first ones at the full rank when A has no singular value below
+  :data:`SINGULAR_CUT_RTOL`, otherwise without singular values below
+  :data:`POSITION_CUT_RTOL`, whose φ components near a singular configuration are round-off;
+  simplified steps that keep
   the A of the last linearization while they converge fast, :data:`CHORD_RATE`) until
   ``‖φ‖∞ ≤ tol``, then
   the velocity correction
@@ -120,34 +121,31 @@ ROUNDOFF_FLOOR = 4.0 * float(np.finfo(np.float64).eps)
 #: values keep the integrator's position); it is kept only while it converges, i.e. when the
 #: residual along those directions is at the round-off floor. If the iterations stall above
 #: the floor there (a real residual along them), they continue at the full rank.
-#: This cutoff applies when A has a singular value below :data:`SINGULAR_CUT_RTOL` or the
-#: residual is within :data:`ROUNDOFF_RESIDUAL_RATIO` of the round-off floor; otherwise the
-#: first steps use :data:`SINGULAR_CUT_RTOL` (and so take the full rank).
+#: This cutoff applies when A has a singular value below :data:`SINGULAR_CUT_RTOL` (next to a
+#: singular configuration); otherwise the first steps use :data:`SINGULAR_CUT_RTOL` (and so
+#: take the full rank).
 POSITION_CUT_RTOL = 1e-2
 
-#: Cutoff of the first Gauss–Newton steps of :class:`Projection` when the residual is real
-#: (more than :data:`ROUNDOFF_RESIDUAL_RATIO` times its round-off floor on some row) and no
-#: singular value of the equilibrated A lies below it. Singular values between this and
-#: :data:`POSITION_CUT_RTOL` belong to ill-conditioned but regular configurations of long
-#: chains (A02 N = 40: σ_min/σ_max is 0.016 far from the horizontal configurations and below
-#: 1e-2 for a third of the motion) as well as to the approach of a singular configuration; where the residual is
-#: real they carry real residual, which the cut steps could not reduce (the iterations then
-#: stalled and went on at the full rank after a wasted step and a truncated SVD). Measured
-#: (A02 N = 2, RK4 steps ending 1e-7…1e-6 s from a horizontal configuration, 30 start times
-#: each): the same energy errors as the cutoff 1e-2 in every step (the first Gauss–Newton
-#: residuals of those steps are 7…240 × their floor, so they keep the 1e-2 cutoff; the step
-#: after the crossing, 1e4…4e8 ×, takes this one).
+#: Cutoff of the first Gauss–Newton steps of :class:`Projection` when no singular value of the
+#: equilibrated A lies below it (whatever the size of the residual). Singular values between
+#: this and :data:`POSITION_CUT_RTOL` belong to ill-conditioned but regular configurations of
+#: long chains (A02 N = 40: σ_min/σ_max ≤ 0.024 everywhere, below 1e-2 for a third of the
+#: motion) as well as to the approach of a singular configuration. A real residual along them
+#: is one the cut steps could not reduce (they stalled and went on at the full rank after a
+#: wasted step and a truncated SVD). A round-off residual (at its floor
+#: ``ROUNDOFF_FLOOR · (1 + Σ_j |A_ij q_j|)``) was cut at :data:`POSITION_CUT_RTOL` until
+#: 2026-11-26; that cut lay inside A02 N = 40's singular values, so the certified LQ could not
+#: decide it and every such projection ran a 242 × 243 SVD (7.4 ms per RK4 step at dt = 2e-3
+#: against 0.58 ms now; DOP853 rtol 1e-10 over 20 s 4.5 → 0.66 s CPU, energy 1.84e-7 →
+#: 1.82e-7 J). The singularity-aware step placement (:class:`~nonmin.sim.RK4`'s ``passages``)
+#: keeps step ends out of the neighbourhood where that noise mattered. Measured with it (A02
+#: N = 2, RK4 steps ending 1e-7…1e-4 s from a horizontal configuration, 30 start times each,
+#: dt 1e-3 and 2e-3): the same energy errors as with the round-off cut (8.4e-12…9.7e-12 J
+#: against 8.6e-12…9.3e-12 J; 2.8e-10 J both); issue 18's targets 1 and 2 unchanged to
+#: round-off. With ``passages=False`` the steps that end 1e-6 s from the configuration scatter
+#: either way (dt 1e-3: 7.7e-10 → 2.4e-6 J at most; dt 2e-3: 1.6e-5 → 1.3e-6 J).
 SINGULAR_CUT_RTOL = 1e-4
 
-#: A first Gauss–Newton residual at most this many times its round-off floor
-#: (``ROUNDOFF_FLOOR · (1 + Σ_j |A_ij q_j|)`` per row) is treated as round-off: its components
-#: along small singular directions are noise, which the full-rank step would divide by them,
-#: so the first steps keep :data:`POSITION_CUT_RTOL`. Measured: the first residuals of RK4
-#: steps next to a horizontal configuration of A02 N = 2 are 7 × (dt = 1e-3) and 200…240 ×
-#: (dt = 2e-3) their floor; those of A02 N = 40's steps and output samples (RK4 dt 1e-2…5e-2)
-#: ≥ 7e3 ×. (1e2 made the dt = 2e-3 cases of A02 N = 2 depend on round-off: energy errors
-#: scattered over 1e-9…7e-7 J instead of 1.4e-6…4e-6 J for 30 start times 1e-8 s apart.)
-ROUNDOFF_RESIDUAL_RATIO = 1e3
 
 
 #: Rank tolerance (at least) of the velocity step when an output sample taken from a
@@ -195,20 +193,17 @@ def _correction(
     return sol.qdd
 
 
-def _first_step(
-    M: FloatArray, A: FloatArray, phi: FloatArray, floor: FloatArray, full: float
-) -> tuple[float, FloatArray]:
+def _first_step(M: FloatArray, A: FloatArray, phi: FloatArray, full: float) -> tuple[float, FloatArray]:
     """Cutoff and correction of the first Gauss–Newton step at a state with residual ``phi``
-    (the rule of :data:`SINGULAR_CUT_RTOL`; ``floor``: the rows' round-off levels
-    ``ROUNDOFF_FLOOR · (1 + Σ_j |A_ij q_j|)``, ``full``: the rank tolerance of the simulation).
-    The step at :data:`SINGULAR_CUT_RTOL` is kept if it had the full rank."""
-    if not np.all(np.abs(phi) <= ROUNDOFF_RESIDUAL_RATIO * floor):  # a real residual
-        cut = max(SINGULAR_CUT_RTOL, full)
-        ranks: list[int] = []
-        dq = _correction(M, A, phi, cut, ranks)
-        if ranks[0] == A.shape[0]:
-            return cut, dq  # no singular value below the cutoff: the full-rank step
-    cut = max(POSITION_CUT_RTOL, full)  # round-off residual, or next to a singular configuration
+    (the rule of :data:`SINGULAR_CUT_RTOL`; ``full``: the rank tolerance of the simulation).
+    The step at :data:`SINGULAR_CUT_RTOL` is kept if it had the full rank; otherwise (next to a
+    singular configuration) the step at :data:`POSITION_CUT_RTOL` is taken."""
+    cut = max(SINGULAR_CUT_RTOL, full)
+    ranks: list[int] = []
+    dq = _correction(M, A, phi, cut, ranks)
+    if ranks[0] == A.shape[0]:
+        return cut, dq  # no singular value below the cutoff: the full-rank step
+    cut = max(POSITION_CUT_RTOL, full)  # next to a singular configuration
     return cut, _correction(M, A, phi, cut)
 
 
@@ -347,7 +342,7 @@ class Projection(Stabilization):
                 # so the metric change is of second order
                 Mq = M if eye is None else eye
                 if lin_count == 1 and fresh and cut > max(SINGULAR_CUT_RTOL, full):
-                    cut, dq = _first_step(Mq, A_lin, phi, floor, full)  # (A_lin: this q's A)
+                    cut, dq = _first_step(Mq, A_lin, phi, full)  # (A_lin: this q's A)
                 else:
                     dq = _correction(Mq, A_lin, phi, cut)
                 q = q + dq

@@ -39,7 +39,6 @@ constexpr double DEFAULT_RTOL = 1e-10;                  // nonmin.core.linalg.DE
 constexpr double ROUNDOFF_FLOOR = 4.0 * std::numeric_limits<double>::epsilon();
 constexpr double POSITION_CUT_RTOL = 1e-2;
 constexpr double SINGULAR_CUT_RTOL = 1e-4;
-constexpr double ROUNDOFF_RESIDUAL_RATIO = 1e3;
 constexpr double CHORD_RATE = 0.1;
 constexpr double SAMPLE_VELOCITY_RTOL = SINGULAR_CUT_RTOL;
 constexpr double DRIFT_RTOL_CAP = 1e-2;                  // drift_rank_rtol's upper bound
