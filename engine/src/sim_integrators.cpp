@@ -263,10 +263,11 @@ Status dp_step(Loop& L, double& h_acc, double& t_new) {
             L.ev[i] = h * e;
         }
         L.yq1 = L.y1;
-        if (proj) {  // err = project(t + h, y1) − project(t + h, y1 − err)
-            if ((s = project(L, t + h, L.yq1.data(), L.opt.projection)) != Status::ok) return s;
+        if (proj) {  // err = project(t + h, y1) − project(t + h, y1 − err); y1 projected last,
+                     // so F at the accepted end reuses its velocity factorization (dynamics_solve)
             for (int i = 0; i < n2; ++i) L.yp[i] = L.y1[i] - L.ev[i];
             if ((s = project(L, t + h, L.yp.data(), L.opt.projection)) != Status::ok) return s;
+            if ((s = project(L, t + h, L.yq1.data(), L.opt.projection)) != Status::ok) return s;
             for (int i = 0; i < n2; ++i) L.ev[i] = L.yq1[i] - L.yp[i];
         }
         for (int i = 0; i < n2; ++i) {
@@ -422,13 +423,16 @@ Status d8_step(Loop& L, double& h_acc, double& t_new) {
             L.e3[i] = h * e3;
         }
         L.yq1 = L.y1;
-        if (proj) {  // each estimate: project(t + h, y1) − project(t + h, y1 − err)
-            if ((s = project(L, t + h, L.yq1.data(), L.opt.projection)) != Status::ok) return s;
+        if (proj) {  // each estimate: project(t + h, y1) − project(t + h, y1 − err), the
+                     // estimates' points projected in place first and y1 last (its velocity
+                     // factorization is then F's at the accepted end: dynamics_solve)
             for (Vec* e : {&L.ev, &L.e3}) {
-                for (int i = 0; i < n2; ++i) L.yp[i] = L.y1[i] - (*e)[i];
-                if ((s = project(L, t + h, L.yp.data(), L.opt.projection)) != Status::ok) return s;
-                for (int i = 0; i < n2; ++i) (*e)[i] = L.yq1[i] - L.yp[i];
+                for (int i = 0; i < n2; ++i) (*e)[i] = L.y1[i] - (*e)[i];
+                if ((s = project(L, t + h, e->data(), L.opt.projection)) != Status::ok) return s;
             }
+            if ((s = project(L, t + h, L.yq1.data(), L.opt.projection)) != Status::ok) return s;
+            for (Vec* e : {&L.ev, &L.e3})
+                for (int i = 0; i < n2; ++i) (*e)[i] = L.yq1[i] - (*e)[i];
         }
         // Hairer's norm: ‖e5‖² / √(N (‖e5‖² + 0.01 ‖e3‖²)), scaled componentwise
         double s5 = 0.0, s3 = 0.0;

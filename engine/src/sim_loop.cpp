@@ -89,6 +89,7 @@ Status correction(Loop& L, const Mat& A, int m, const double* r, double rtol, do
     const SolveOptions so = hol ? solve_options(L, rtol, &L.ph_start, &L.ph_cols, known)
                                 : solve_options(L, rtol, &L.pc_start, &L.pc_cols, known);
     const SolveInfo info = L.solver.forward(L.Mq.data(), L.zero_n.data(), A.data(), m, r, so, out, nullptr);
+    L.lq_full = info.status == Status::ok && info.method != 0 && info.rank == m;
     if (rank) *rank = info.rank;
     if (info.status != Status::ok) return info.status;
     return Status::ok;
@@ -96,10 +97,12 @@ Status correction(Loop& L, const Mat& A, int m, const double* r, double rtol, do
 
 // Solver::forward at the evaluation just made at (t, q) (M = T.M, A = Ac, g, bias), or
 // Solver::again on the velocity correction's factorization when it was taken at this (t, q)
-// with the same M and rank tolerance: A is a function of (t, q), so the factorization is this
-// A's (certified LQ: bitwise the fresh result).
+// with the same M and rank tolerance (or a larger one, when it was a certified LQ of every
+// row: Loop::vlq): A is a function of (t, q), so the factorization is this A's (certified LQ:
+// bitwise the fresh result).
 SolveInfo dynamics_solve(Loop& L, double t, const double* q, double rtol, double* qdd, double* fc) {
-    if (L.vheld && L.solver.generation() == L.vgen && t == L.vt && rtol == L.vrtol && L.solver.held()) {
+    if (L.vheld && L.solver.generation() == L.vgen && t == L.vt && L.solver.held() &&
+        (rtol == L.vrtol || (L.vlq && rtol <= L.vrtol))) {
         bool same = true;
         for (int i = 0; i < L.n && same; ++i) same = q[i] == L.vq[i];
         if (same && (L.prog->constant_mass() || L.Mq == L.T.M))
@@ -492,6 +495,7 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
         if (s != Status::ok) return s;
         for (int j = 0; j < n; ++j) qd[j] = qd[j] + L.dq[j];
         L.vheld = !po.euclidean;  // (the Euclidean metric is not M)
+        L.vlq = L.lq_full;
         L.vgen = L.solver.generation();
         L.vt = t;
         L.vrtol = vr;

@@ -269,8 +269,13 @@ struct Loop {
     int mq = 0;
     // The Solver holds the velocity correction's factorization (its generation vgen; A at
     // (vt, vq), metric Mq, rank tolerance vrtol): a dynamics solve at the same (t, q) with M = Mq
-    // and that tolerance has the same A and reuses it (Solver::again).
-    bool vheld = false;
+    // and that tolerance has the same A and reuses it (Solver::again). vlq: that factorization
+    // is a certified LQ of every row (rank m): the rank tolerance decided nothing but the
+    // certificate, which holds at any smaller tolerance, so a solve at a tolerance ≤ vrtol
+    // reuses it too (bitwise the fresh result; the sample's velocity step is at
+    // SAMPLE_VELOCITY_RTOL, the dynamics at the drift-aware tolerance). lq_full: the last
+    // correction()'s factorization was one.
+    bool vheld = false, vlq = false, lq_full = false;
     unsigned long long vgen = 0;
     double vt = 0.0, vrtol = 0.0;
     Vec vq;
