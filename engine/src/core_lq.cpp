@@ -21,6 +21,8 @@ LQWork::LQWork(int m_max_, int n_) : m_max(m_max_), n(n_) {
     Pc.assign(nn, 0);
     Lr.assign(nn, 0);
     order.assign(m, 0);
+    Kr.assign(m, 0);
+    Cs.assign(m, 0.0);
     if (m_max_ > DENSE_INVERSE_MAX_ROWS) {  // lq_sparse's scratch (many rows only)
         G.assign(m * m, 0.0);
         Rl.assign(m * (nn + 1), 0);
@@ -95,9 +97,10 @@ inline void merge_columns(LQWork& w, int i, int j) {
     }
 }
 
-// Finish reflector j (pivot p, x0 its entry, s the sum of squares over its columns) of the work
-// matrix X (Wq or Wz) and apply it to rows j+1 … imax. Returns false for an all-zero row.
-bool reflect(double* X, LQWork& w, int j, int p, double x0, double s, int imax, bool track) {
+// Finish reflector j (pivot p, x0 its entry, s the sum of squares over its columns) of row `row`
+// of the work matrix X (Wq or Wz) and apply it to rows row+1 … imax. Returns false for an
+// all-zero row.
+bool reflect(double* X, LQWork& w, int j, int row, int p, double x0, double s, int imax, bool track) {
     const int n = w.n;
     int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
     double* v = w.Hv.data() + static_cast<long>(j) * n;
@@ -109,10 +112,10 @@ bool reflect(double* X, LQWork& w, int j, int p, double x0, double s, int imax, 
     v[p] = v0;
     const double bj = 2.0 / (s - x0 * x0 + v0 * v0);
     w.beta[j] = bj;
-    double* Xj = X + static_cast<long>(j) * n;
+    double* Xj = X + static_cast<long>(row) * n;
     Xj[p] = alpha;
     for (int t = 2; t <= cnt; ++t) Xj[H[t]] = 0.0;
-    for (int i = j + 1; i <= imax; ++i)
+    for (int i = row + 1; i <= imax; ++i)
         if (reflect_row(X + static_cast<long>(i) * n, w, j, bj) && track) merge_columns(w, i, j);
     for (int t = 1; t <= cnt; ++t)  // those rows may now be nonzero in all its columns
         if (imax > w.Lr[H[t]]) w.Lr[H[t]] = imax;
@@ -132,6 +135,50 @@ void pivot_order(LQWork& w, int m, int n) {
 }
 
 
+// The skipped rows' part of the certificate (docs/theory.md, rule 3). With X = D A in the
+// basis of the reflectors, X = [L₁₁ 0; L₂₁ E] (kept rows, then the skipped ones); the rows of E
+// are the skipped rows' residuals against every kept row, each ≤ its residual ρ against the
+// rows kept before it, so ‖E‖₂ ≤ eF = √Σρ². Weyl: σ_{r+1}(X) ≤ eF and σ_r(X) ≥ σ_min(L₁₁) − eF;
+// σ_max(X) ≥ max_a ‖L_a‖ (a kept row) and σ_max(X)² ≤ ‖L₁₁‖² + ‖[L₂₁ E]‖_F² = ‖L₁₁‖² + Σ‖x_s‖².
+// True when margin · eF < rtol · max_a ‖L_a‖ (row2max = max_a ‖L_a‖²): then σ_{r+1}(X) is
+// below the SVD rule's cut by the certificate's margin; the caller proves
+// σ_min(L₁₁) > rt · σ_max(X) + eF.
+// Whether work row j of X (residual sum of squares s after the r reflectors so far) is redundant
+// to round-off in [D A | D b]: s ≤ (tol · (1 + ‖c‖₁))² with c L = its entries at the pivot
+// columns (L: the kept rows, factor row a at work row Kr[a]), and its bias consistent with that
+// combination, |b_j − Σ c_a b_a| ≤ REDUNDANT_BIAS_RTOL · (|b_j| + Σ|c_a b_a|) (an inconsistent
+// bias gets the SVD's least-squares solution instead). Only for s ≤ REDUNDANT_CANDIDATE².
+// The bias of work row i is B[Ro[i]·(n + 1) + n].
+bool redundant_row(const double* X, LQWork& w, int r, int j, const double* B, double s, double tol) {
+    if (!(s <= REDUNDANT_CANDIDATE * REDUNDANT_CANDIDATE)) return false;
+    const int n = w.n;
+    const long ldb = n + 1;
+    const double* x = X + static_cast<long>(j) * n;
+    double* c = w.Cs.data();
+    double c1 = 0.0;
+    for (int b = r - 1; b >= 0; --b) {  // back substitution over L's columns
+        const int pb = w.Hx[static_cast<long>(b) * (n + 1) + 1];
+        double t = x[pb];
+        for (int a = b + 1; a < r; ++a) t -= c[a] * X[static_cast<long>(w.Kr[a]) * n + pb];
+        c[b] = t / X[static_cast<long>(w.Kr[b]) * n + pb];
+        c1 += std::fabs(c[b]);
+    }
+    const double d = tol * (1.0 + c1);
+    if (!(s <= d * d)) return false;
+    const double bj = B[w.Ro[j] * ldb + n];
+    double bc = 0.0, bs = std::fabs(bj);
+    for (int a = 0; a < r; ++a) {
+        const double t = c[a] * B[w.Ro[w.Kr[a]] * ldb + n];
+        bc += t;
+        bs += std::fabs(t);
+    }
+    return std::fabs(bj - bc) <= REDUNDANT_BIAS_RTOL * bs;
+}
+
+bool skipped_rows_small(const LQWork& w, double rtol, double margin, double row2max) {
+    return margin * std::sqrt(w.skip_f2) < rtol * std::sqrt(row2max);
+}
+
 // The profile certificate of lq_sparse: Cholesky of T − τI, T = L Lᵀ, over L's row profile.
 int certify_profile(const double* B, int m, int n, double rtol, LQWork& w, double* cv) {
     const int ld = w.m_max;
@@ -139,7 +186,8 @@ int certify_profile(const double* B, int m, int n, double rtol, LQWork& w, doubl
     double* G = w.G.data();
     const double* Wz = w.Wz.data();
     for (int i = 0; i < m; ++i)  // L (columns in the pivot order Pc) over its row profile
-        for (int c = w.Lf[i]; c <= i; ++c) Li[i * ld + c] = Wz[static_cast<long>(i) * n + w.Pc[c]];
+        for (int c = w.Lf[i]; c <= i; ++c)
+            Li[i * ld + c] = Wz[static_cast<long>(w.Kr[i]) * n + w.Pc[c]];
     for (int i = 0; i < m; ++i) cv[i] = 0.0;
     for (int i = 0; i < m; ++i) {  // T = L Lᵀ over the profile, |T| row sums
         const int fi = w.Lf[i];
@@ -155,7 +203,14 @@ int certify_profile(const double* B, int m, int n, double rtol, LQWork& w, doubl
     double tnorm = 0.0;
     for (int i = 0; i < m; ++i) tnorm = std::max(tnorm, cv[i]);
     const double rt = CERT_SLACK * std::max(rtol, CERT_FLOOR);
-    const double tau = rt * rt * tnorm;
+    double tau = rt * rt * tnorm;
+    if (w.skipped > 0) {  // the skipped rows: σ_min(L₁₁) > rt · σ_max(X) + eF
+        double row2max = 0.0;
+        for (int i = 0; i < m; ++i) row2max = std::max(row2max, G[static_cast<long>(i) * ld + i]);
+        if (!skipped_rows_small(w, rtol, CERT_SLACK, row2max)) return LQ_NONE;
+        const double sq = rt * std::sqrt(tnorm + w.skip_n2) + std::sqrt(w.skip_f2);
+        tau = sq * sq;
+    }
     for (int i = 0; i < m; ++i) {  // Cholesky of T − τI, row by row over the profile
         const int fi = w.Lf[i];
         double* Gi = G + static_cast<long>(i) * ld;
@@ -172,12 +227,14 @@ int certify_profile(const double* B, int m, int n, double rtol, LQWork& w, doubl
     }
     for (int i = 0; i < m; ++i) cv[i] = B[static_cast<long>(w.Ro[i]) * (n + 1) + n];
     lq_profile_solve(w, m, cv);
+    w.rank = m;
     return LQ_PROFILE;
 }
 
 }  // namespace
 
-int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* cv) {
+int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* cv,
+                 bool skip_redundant) {
     const int ld = w.m_max;
     double* Wq = w.Wq.data();
     for (int k = 0; k < n; ++k) {
@@ -194,34 +251,67 @@ int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* 
             if (x != 0.0) w.Lr[k] = i;
         }
     }
+    // a row whose residual is at round-off level is skipped (skip_redundant; else never)
+    const double tol = redundant_row_tol(m, n);
+    w.skipped = 0;
+    w.skip_f2 = 0.0;
+    w.skip_n2 = 0.0;
+    int r = 0;  // reflectors so far: reflector r pivots on column r
     for (int j = 0; j < m; ++j) {
-        const int p = j;
+        const int p = r;
         double* Wj = Wq + static_cast<long>(j) * n;
-        double* v = w.Hv.data() + static_cast<long>(j) * n;
-        int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
-        const double x0 = Wj[p];
-        double s = x0 * x0;
-        v[p] = x0;
-        H[1] = p;
-        w.Pc[p] = 1;
-        int cnt = 1;
-        int imax = w.Lr[p];
-        for (int k = p + 1; k < n; ++k) {  // (columns after j are not pivoted yet)
-            const double x = Wj[k];
-            v[k] = x;
-            if (x != 0.0) {
-                s += x * x;
-                H[1 + cnt++] = k;
-                if (w.Lr[k] > imax) imax = w.Lr[k];
+        double s = 0.0;
+        if (p < n) {
+            double* v = w.Hv.data() + static_cast<long>(r) * n;
+            int* H = w.Hx.data() + static_cast<long>(r) * (n + 1);
+            const double x0 = Wj[p];
+            s = x0 * x0;
+            v[p] = x0;
+            H[1] = p;
+            int cnt = 1;
+            int imax = w.Lr[p];
+            for (int k = p + 1; k < n; ++k) {  // (columns after r are not pivoted yet)
+                const double x = Wj[k];
+                v[k] = x;
+                if (x != 0.0) {
+                    s += x * x;
+                    H[1 + cnt++] = k;
+                    if (w.Lr[k] > imax) imax = w.Lr[k];
+                }
             }
+            H[0] = cnt;
+            if (!skip_redundant || !redundant_row(Wq, w, r, j, B, s, tol)) {
+                w.Pc[p] = 1;
+                if (!reflect(Wq, w, r, j, p, x0, s, imax, false)) return LQ_NONE;
+                w.Kr[r++] = j;
+                continue;
+            }
+        } else if (!skip_redundant || !redundant_row(Wq, w, r, j, B, 0.0, tol)) {
+            return LQ_NONE;
         }
-        H[0] = cnt;
-        if (!reflect(Wq, w, j, p, x0, s, imax, false)) return LQ_NONE;
+        ++w.skipped;  // every column pivoted (s = 0), or a residual at round-off level
+        w.skip_f2 += s;
+        const double* Bj = B + static_cast<long>(j) * (n + 1);
+        for (int k = 0; k < n; ++k) w.skip_n2 += Bj[k] * Bj[k];
     }
+    for (int a = 0; a < r; ++a) {  // the kept rows' L entries (columns 0 … a) to rows 0 … r − 1
+        const int src = w.Kr[a];
+        w.Ro[a] = src;
+        if (src != a)
+            for (int k = 0; k <= a; ++k) Wq[a * n + k] = Wq[static_cast<long>(src) * n + k];
+    }
+    m = r;
     pivot_order(w, m, n);
-    double fl = 0.0;  // ‖L‖_F²
-    for (int i = 0; i < m; ++i)
-        for (int k = 0; k <= i; ++k) fl += Wq[i * n + k] * Wq[i * n + k];
+    double fl = 0.0, row2max = 0.0;  // ‖L‖_F², max_a ‖L_a‖²
+    for (int i = 0; i < m; ++i) {
+        double ri = 0.0;
+        for (int k = 0; k <= i; ++k) {
+            const double x2 = Wq[i * n + k] * Wq[i * n + k];
+            fl += x2;
+            ri += x2;
+        }
+        row2max = std::max(row2max, ri);
+    }
     for (int i = 0; i < m; ++i) cv[i] = 1.0 / Wq[i * n + i];  // reciprocal pivots (scratch)
     // L⁻¹ row by row: row i = (e_i − Σ_{k<i} L_ik · row k) / L_ii (zero L_ik skipped)
     double* Li = w.Li.data();
@@ -248,13 +338,20 @@ int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* 
     }
     const double fi = f0 + f1;
     const double margin = rtol <= QR_MARGIN_RTOL ? QR_MARGIN : 1.0;
-    if (!(std::sqrt(fl) * std::sqrt(fi) * margin * rtol < 1.0)) return LQ_NONE;
-    for (int i = 0; i < m; ++i) {  // cv = L⁻¹ D b
+    if (w.skipped == 0) {
+        if (!(std::sqrt(fl) * std::sqrt(fi) * margin * rtol < 1.0)) return LQ_NONE;
+    } else {  // σ_min(L₁₁) ≥ 1/‖L⁻¹‖_F > margin · rtol · √(‖L‖_F² + Σ‖x_s‖²) + eF
+        if (!skipped_rows_small(w, rtol, margin, row2max)) return LQ_NONE;
+        const double bound = margin * rtol * std::sqrt(fl + w.skip_n2) + std::sqrt(w.skip_f2);
+        if (!(bound * std::sqrt(fi) < 1.0)) return LQ_NONE;
+    }
+    for (int i = 0; i < m; ++i) {  // cv = L⁻¹ (D b)[Ro]
         const double* Ri = Li + static_cast<long>(i) * ld;
         double s = 0.0;
-        for (int k = 0; k <= i; ++k) s += Ri[k] * B[static_cast<long>(k) * (n + 1) + n];
+        for (int k = 0; k <= i; ++k) s += Ri[k] * B[static_cast<long>(w.Ro[k]) * (n + 1) + n];
         cv[i] = s;
     }
+    w.rank = m;
     return LQ_INVERSE;
 }
 
@@ -298,68 +395,90 @@ int lq_sparse(const double* B, int m, int n, double rtol, LQWork& w, double* cv)
     }
     int res = LQ_NONE;
     bool ok = true;
-    for (int j = 0; j < m; ++j) {
+    const double tol = redundant_row_tol(m, n);  // a residual at round-off level: skipped
+    w.skipped = 0;
+    w.skip_f2 = 0.0;
+    w.skip_n2 = 0.0;
+    int r = 0;  // reflectors so far (factor rows kept)
+    for (int j = 0; j < m; ++j) {  // j: the work row
         const int* R = w.Rl.data() + j * ldp;
         double* Wj = Wz + static_cast<long>(j) * n;
-        double* v = w.Hv.data() + static_cast<long>(j) * n;
-        int* H = w.Hx.data() + j * ldp;
+        double* v = w.Hv.data() + static_cast<long>(r) * n;
+        int* H = w.Hx.data() + r * ldp;
         const int c = R[0];
         int p = -1;
         for (int t = 0; t < c; ++t) {  // the pivot: first unpivoted nonzero column
             const int k = R[1 + t];
             if (w.Pc[k] == 0 && Wj[k] != 0.0 && (p < 0 || k < p)) p = k;
         }
-        if (p < 0) {
-            ok = false;
-            break;
-        }
-        const double x0 = Wj[p];
-        v[p] = x0;
-        H[1] = p;
-        w.Pc[p] = 1;
-        int cnt = 1;
-        for (int t = 0; t < c; ++t) {  // the other unpivoted nonzero columns, increasing
-            const int k = R[1 + t];
-            if (w.Pc[k] == 0) {
-                const double x = Wj[k];
-                if (x != 0.0) {
-                    v[k] = x;
-                    int a = 1 + cnt;
-                    while (a > 2 && H[a - 1] > k) {
-                        H[a] = H[a - 1];
-                        --a;
+        double s = 0.0;
+        if (p >= 0) {
+            const double x0 = Wj[p];
+            v[p] = x0;
+            H[1] = p;
+            w.Pc[p] = 1;
+            int cnt = 1;
+            for (int t = 0; t < c; ++t) {  // the other unpivoted nonzero columns, increasing
+                const int k = R[1 + t];
+                if (w.Pc[k] == 0) {
+                    const double x = Wj[k];
+                    if (x != 0.0) {
+                        v[k] = x;
+                        int a = 1 + cnt;
+                        while (a > 2 && H[a - 1] > k) {
+                            H[a] = H[a - 1];
+                            --a;
+                        }
+                        H[a] = k;
+                        ++cnt;
                     }
-                    H[a] = k;
-                    ++cnt;
                 }
             }
-        }
-        double s = x0 * x0;
-        int imax = w.Lr[p];
-        for (int t = 2; t <= cnt; ++t) {
-            const double x = v[H[t]];
-            s += x * x;
-            if (w.Lr[H[t]] > imax) imax = w.Lr[H[t]];
-        }
-        H[0] = cnt;
-        if (!reflect(Wz, w, j, p, x0, s, imax, true)) {
+            s = x0 * x0;
+            int imax = w.Lr[p];
+            for (int t = 2; t <= cnt; ++t) {
+                const double x = v[H[t]];
+                s += x * x;
+                if (w.Lr[H[t]] > imax) imax = w.Lr[H[t]];
+            }
+            H[0] = cnt;
+            if (!redundant_row(Wz, w, r, j, B, s, tol)) {
+                if (!reflect(Wz, w, r, j, p, x0, s, imax, true)) {
+                    ok = false;
+                    break;
+                }
+                w.Kr[r++] = j;
+                continue;
+            }
+            w.Pc[p] = 0;
+        } else if (!redundant_row(Wz, w, r, j, B, 0.0, tol)) {  // (no residual: the bias decides)
             ok = false;
             break;
         }
+        ++w.skipped;  // no residual left, or one at round-off level: a redundant row
+        w.skip_f2 += s;
+        const int src = w.Ro[j];
+        const int* P = w.Ap.data() + src * ldp;
+        for (int t = 0; t < P[0]; ++t) {
+            const double x = B[src * ldp + P[1 + t]];
+            w.skip_n2 += x * x;
+        }
     }
-    if (ok) {
-        pivot_order(w, m, n);
+    if (ok && r > 0) {
+        for (int a = 0; a < r; ++a) w.Ro[a] = w.Ro[w.Kr[a]];  // (Kr[a] ≥ a: in place)
+        pivot_order(w, r, n);
         for (int c = 0; c < n; ++c) w.Lr[w.Pc[c]] = c;  // a column's position in that order
-        for (int i = 0; i < m; ++i) {  // L's row profile: its first nonzero column
-            int f = i;
+        for (int a = 0; a < r; ++a) {  // L's row profile: its first nonzero column
+            int f = a;
+            const int i = w.Kr[a];
             const int* R = w.Rl.data() + i * ldp;
             for (int t = 0; t < R[0]; ++t) {
                 const int k = R[1 + t];
                 if (w.Lr[k] < f && Wz[static_cast<long>(i) * n + k] != 0.0) f = w.Lr[k];
             }
-            w.Lf[i] = f;
+            w.Lf[a] = f;
         }
-        res = certify_profile(B, m, n, rtol, w, cv);
+        res = certify_profile(B, r, n, rtol, w, cv);
     }
     for (int i = 0; i < m; ++i) {  // Wz and In back to zero
         const int* R = w.Rl.data() + i * ldp;

@@ -83,7 +83,9 @@ struct Solver::Impl {
     // Rule 3: the rank r of D A (B holds [D A | D b], live rows of A: `live`; B is overwritten,
     // its live rows first: a vanished row is a zero row of D A, which changes neither the SVD's
     // nonzero singular values and vectors nor the LQ's certificate).
-    // Certified LQ (lqmode ≠ LQ_NONE): cv = L⁻¹ D b and Q (rows of V) or Z (rows of Kt, zmode).
+    // Certified LQ (lqmode ≠ LQ_NONE): cv = L⁻¹ D b and Q (rows of V) or Z (rows of Kt, zmode);
+    // rows the LQ skipped as redundant (residual at round-off level, certified below the cut) are
+    // left out like vanished rows: r = lq.rank kept rows, lq.Ro[a] the live row of factor row a.
     // SVD: the kept right singular vectors V (r × n), cv_k = (u_kᵀ D b)/σ_k, and with many rows
     // and few degrees of freedom (zmode) the other right singular vectors in the rows of Kt.
     int rank_decision(int m, int live, double rtol, const int* pst = nullptr, const int* pco = nullptr) {
@@ -109,7 +111,7 @@ struct Solver::Impl {
         }
         m_live = m;
         if (m == 0) return 0;
-        if (linalg::QR_MIN_ROWS <= m && m <= n) {
+        if (linalg::QR_MIN_ROWS <= m) {  // (m > n: at least m − n rows are skipped)
             if (m > linalg::DENSE_INVERSE_MAX_ROWS) {
                 if (pst)
                     linalg::row_pattern_known(pst, pco, lrows.data(), m, n, lq.Ap.data());
@@ -117,15 +119,16 @@ struct Solver::Impl {
                     linalg::row_pattern(B.data(), m, n, n + 1, lq.Ap.data());
                 lqmode = linalg::lq_sparse(B.data(), m, n, rtol, lq, cv.data());
             } else {
-                lqmode = linalg::lq_certified(B.data(), m, n, rtol, lq, cv.data());
+                lqmode = linalg::lq_certified(B.data(), m, n, rtol, lq, cv.data(), true);
             }
             if (lqmode != linalg::LQ_NONE) {
-                zmode = n - m <= m;  // few degrees of freedom: the null-space basis Z
+                const int r = lq.rank;
+                zmode = n - r <= r;  // few degrees of freedom: the null-space basis Z
                 if (zmode)
-                    linalg::lq_rows(lq, m, n, m, n - m, Kt.data());
+                    linalg::lq_rows(lq, r, n, r, n - r, Kt.data());
                 else
-                    linalg::lq_rows(lq, m, n, 0, m, V.data());
-                return m;
+                    linalg::lq_rows(lq, r, n, 0, r, V.data());
+                return r;
             }
         }
         if (m <= JACOBI_MAX_ROWS) {  // (T accumulates the rotations: Σ⁻¹Uᵀ for again())
@@ -332,7 +335,7 @@ struct Solver::Impl {
     // certified LQ), or −Σ_k v_k cv_k.
     void min_norm_w(int r) {
         if (zmode && lqmode != linalg::LQ_NONE) {
-            linalg::lq_min_norm(lq, m_live, n, cv.data(), wv.data());
+            linalg::lq_min_norm(lq, r, n, cv.data(), wv.data());
             return;
         }
         for (int j = 0; j < n; ++j) wv[j] = 0.0;
@@ -628,17 +631,17 @@ SolveInfo Solver::Impl::again(const double* M, const double* gin, const double* 
     for (int i = 0; i < h_m; ++i)
         if (d[i] != 0.0) b[c++] = d[i] * gamma[i];
     const int ml = m_live;
-    if (lqmode == linalg::LQ_INVERSE) {  // cv = L⁻¹ D γ (lq_certified's product)
+    if (lqmode == linalg::LQ_INVERSE) {  // cv = L⁻¹ (D γ)[Ro] (lq_certified's product)
         const int ld = lq.m_max;
-        for (int i = 0; i < ml; ++i) {
+        for (int i = 0; i < r; ++i) {
             const double* Ri = lq.Li.data() + static_cast<long>(i) * ld;
             double s = 0.0;
-            for (int k = 0; k <= i; ++k) s += Ri[k] * b[k];
+            for (int k = 0; k <= i; ++k) s += Ri[k] * b[lq.Ro[k]];
             cv[i] = s;
         }
     } else if (lqmode == linalg::LQ_PROFILE) {  // cv = L⁻¹ (D γ)[Ro] over L's profile
-        for (int i = 0; i < ml; ++i) cv[i] = b[lq.Ro[i]];
-        linalg::lq_profile_solve(lq, ml, cv.data());
+        for (int i = 0; i < r; ++i) cv[i] = b[lq.Ro[i]];
+        linalg::lq_profile_solve(lq, r, cv.data());
     } else {  // cv = Σ⁻¹Uᵀ D γ over the kept rows
         for (int a = 0; a < r; ++a) {
             const double* Ua = Ui.data() + static_cast<long>(a) * ml;
@@ -686,7 +689,7 @@ int Solver::range_basis(const double* A, int m, double rtol, double* Vout) {
                                          s.sig.data());
     const int r = s.rank_decision(m, live, rtol);
     if (s.zmode && s.lqmode != linalg::LQ_NONE)  // the decision kept Z: form Q
-        linalg::lq_rows(s.lq, s.m_live, n, 0, s.m_live, s.V.data());
+        linalg::lq_rows(s.lq, r, n, 0, r, s.V.data());
     for (long k = 0; k < static_cast<long>(r) * n; ++k) Vout[k] = s.V[k];
     return r;
 }

@@ -77,7 +77,7 @@ def _info(M, h, A, gam, rtol):
         (1.3, 1e-2, LQ_PROFILE, 0),
         (0.1, 1e-2, SVD, None),
         (3e-3, 1e-10, LQ_PROFILE, 0),
-        (0.0, 1e-10, SVD, "N"),
+        (0.0, 1e-10, LQ_PROFILE, "N"),  # horizontal: N rows redundant, skipped
     ],
 )
 def test_large_chain_agrees_with_numpy(N, theta, rtol, method, deficit):
@@ -115,7 +115,7 @@ def test_large_chain_in_any_coordinate_order(seed):
 
 def test_large_random_sparse_range_form():
     """Many rows and many degrees of freedom (n − m > m): the range form after the profile
-    certificate; and a redundant copy of a row: the SVD (m > n − … not certified)."""
+    certificate; and a redundant copy of a row: skipped, still certified (rank m)."""
     rng = np.random.default_rng(4)
     n, m = 120, 40
     A = rng.standard_normal((m, n)) * (rng.uniform(size=(m, n)) < 0.05)
@@ -128,7 +128,7 @@ def test_large_random_sparse_range_form():
     A2 = np.vstack([A, 2.0 * A[3]])
     g2 = np.append(gam, 2.0 * gam[3])
     info = _info(M, h, A2, g2, 1e-10)
-    assert info["method"] == SVD and info["rank"] == m
+    assert info["method"] == LQ_PROFILE and info["rank"] == m
     _agree(M, h, A2, g2, 1e-10)
 
 
@@ -146,10 +146,14 @@ def test_small_systems_certified_or_svd(seed):
     info = _info(M, h, Az, Az @ h, 1e-10)
     assert info["method"] == LQ_INVERSE and info["rank"] == A.shape[0]
     _agree(M, h, Az, Az @ h, 1e-10)
-    Ad = np.vstack([A, A[0] + 1e-12 * rng.standard_normal(n)])  # nearly redundant: the SVD
-    if Ad.shape[0] <= n:
-        info = _info(M, h, Ad, Ad @ h, 1e-10)
-        assert info["method"] == SVD and info["rank"] == A.shape[0]
+    noise = rng.standard_normal(n)
+    Ad = np.vstack([A, A[0] + 1e-11 * np.linalg.norm(A[0]) / np.linalg.norm(noise) * noise])
+    info = _info(M, h, Ad, Ad @ h, 1e-10)  # nearly redundant (above round-off): the SVD
+    assert info["method"] == SVD and info["rank"] == A.shape[0]
+    Ar = np.vstack([A, -2.0 * A[0]])  # exactly redundant: skipped, certified
+    info = _info(M, h, Ar, Ar @ h, 1e-10)
+    assert info["method"] == LQ_INVERSE and info["rank"] == A.shape[0]
+    _agree(M, h, Ar, Ar @ h, 1e-10)
 
 
 def test_large_nonfinite_and_huge_entries():

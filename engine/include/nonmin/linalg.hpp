@@ -91,6 +91,20 @@ inline constexpr double QR_MARGIN_RTOL = 1e-6;
 // The profile certificate: Cholesky of L Lᵀ − τI, τ = (CERT_SLACK · max(rtol, CERT_FLOOR))² ‖L Lᵀ‖∞.
 inline constexpr double CERT_FLOOR = 1e-5;
 inline constexpr double CERT_SLACK = 1.01;
+// Rank-revealing rows (docs/theory.md, rule 3): a row whose residual ρ after the reflectors of the
+// rows kept before it is ≤ REDUNDANT_CANDIDATE and ≤ redundant_row_tol(m, n) · (1 + ‖c‖₁), c the
+// row's combination of the kept rows (c L = its L part), is skipped: the round-off of an exactly
+// dependent unit row, whose Householder backward error per row is ≤ γ̃_{mn} ≈ m n u (Higham
+// Thm 19.4, taken as m n eps) for it and for each kept row it combines. The certificate then
+// also bounds the skipped rows' residuals (eF = √Σρ²: margin · eF < rtol · σ_max's lower bound)
+// and proves σ_min(L₁₁) > rt · σ_max + eF.
+inline double redundant_row_tol(int m, int n) {
+    return static_cast<double>(m) * static_cast<double>(n) * 2.220446049250313e-16;
+}
+inline constexpr double REDUNDANT_CANDIDATE = 1e-8;
+// A skipped row's bias must be the same combination of the kept rows' biases to this relative
+// accuracy (else the SVD's least-squares solution of the inconsistent system is taken).
+inline constexpr double REDUNDANT_BIAS_RTOL = 1e-10;
 // The certified LQ is tried from this many live rows on. (The numba kernels used 4: there the
 // Jacobi SVD of 1–3 rows was as cheap; in C++ the LQ of a few rows costs a fraction of it.)
 inline constexpr int QR_MIN_ROWS = 1;
@@ -106,7 +120,7 @@ struct LQWork {
     std::vector<double> key;    // m: row sort keys (lq_sparse)
     std::vector<int> Hx;        // m × (n + 1): [count, columns…] of reflector j (pivot first)
     std::vector<int> Lf;        // m: first column of L's row i (profile)
-    std::vector<int> Ro;        // m: row order (lq_sparse; identity for lq_certified)
+    std::vector<int> Ro;        // m: the row of B of factor row a (lq_sparse: by first column)
     std::vector<int> Pc;        // n: pivot columns in order, then the others
     std::vector<int> Lr;        // n: last row that may be nonzero in column k (scratch)
     std::vector<int> Rl;        // m × (n + 1): [count, columns…] where row i may be nonzero
@@ -114,6 +128,12 @@ struct LQWork {
     std::vector<std::uint8_t> In;  // m × n: membership marks of Rl (zero between calls)
     std::vector<double> Wz;     // m × n: lq_sparse's work matrix (zero between calls)
     std::vector<int> Ap;        // m × (n + 1): the row pattern of A (lq_sparse's input)
+    std::vector<int> Kr;        // m: the work-matrix row of factor row a (rows kept, in order)
+    std::vector<double> Cs;     // m: a candidate row's combination of the kept rows (scratch)
+    int rank = 0;               // factor rows kept (m when no row was skipped)
+    int skipped = 0;            // rows skipped as redundant (residual ≤ redundant_row_tol)
+    double skip_f2 = 0.0;       // Σ of their squared residual norms (eF²)
+    double skip_n2 = 0.0;       // Σ of their squared norms (‖x_s‖², 1 each up to round-off)
 
     LQWork() = default;
     LQWork(int m_max, int n);
@@ -126,14 +146,20 @@ void row_pattern(const double* A, int m, int n, int lda, int* Ap);
 // of A: a superset of the nonzeros, which lq_sparse filters by value (the same result).
 void row_pattern_known(const int* start, const int* cols, const int* rows, int m, int n, int* Ap);
 
-// Few rows (m ≤ DENSE_INVERSE_MAX_ROWS, m ≤ n, every row of B = [D A | D b] live): reflector j
-// pivots on column j. On LQ_INVERSE: cv = L⁻¹ D b (m), the reflectors in w.
-int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* cv);
+// Few rows (m ≤ DENSE_INVERSE_MAX_ROWS, every row of B = [D A | D b] live; m ≤ n unless
+// skip_redundant): reflector j pivots on column j. With skip_redundant, rows at round-off distance
+// from the span of the rows kept before them are skipped (w.rank rows kept, w.Ro[a] the row of
+// B of factor row a); without, w.rank = m. On LQ_INVERSE: cv = L⁻¹ (D b)[Ro] (w.rank), the
+// reflectors in w.
+int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* cv,
+                 bool skip_redundant = false);
 
 // Many rows: rows taken in the order of their first nonzero column (w.Ro), reflector j pivots on
 // row j's first column not pivoted yet, row column lists track fill-in; B is read over w.Ap
-// (row_pattern of A, set by the caller). Certificate: Cholesky of L Lᵀ − τI over L's row profile.
-// On LQ_PROFILE: cv = L⁻¹ (D b)[Ro].
+// (row_pattern of A, set by the caller). Rows at round-off distance from the span of the rows
+// kept before them are skipped (w.rank rows kept; w.Ro[a] the row of B of factor row a).
+// Certificate: Cholesky of L Lᵀ − τI over L's row profile, with the skipped rows' bound.
+// On LQ_PROFILE: cv = L⁻¹ (D b)[Ro] (w.rank).
 int lq_sparse(const double* B, int m, int n, double rtol, LQWork& w, double* cv);
 
 // Rows first … first + count − 1 of the orthogonal H_{m−1} ⋯ H_0 into E (count × n): rows

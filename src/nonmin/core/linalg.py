@@ -267,3 +267,211 @@ def cho_solve(L: FloatArray, b: FloatArray) -> FloatArray:
 def matvec(Mat: FloatArray, v: FloatArray) -> FloatArray:
     """Batched matrix-vector product ``Mat @ v`` with shapes (..., a, b), (..., b) -> (..., a)."""
     return (Mat @ v[..., None])[..., 0]
+
+
+# --------------------------------------------------------------------------- certified LQ
+# The specification of the engine's rank-revealing certified LQ (engine/src/core_lq.cpp,
+# docs/theory.md rule 3): the shortcut that proves, without an SVD, which rank the SVD rule of
+# rule 3 decides on the equilibrated live rows of A, and skips rows that are redundant to
+# round-off (a permanently redundant constraint, e.g. Bricard's mechanism).
+
+#: Up to this many rows the certificate is the Frobenius one (``‖L‖_F ‖L⁻¹‖_F``), above it the
+#: Cholesky factorization of ``L Lᵀ − τ I`` (C++ ``DENSE_INVERSE_MAX_ROWS``).
+DENSE_INVERSE_MAX_ROWS = 32
+#: The Frobenius certificate's margin for ``rtol ≤ QR_MARGIN_RTOL`` (else 1).
+QR_MARGIN = 10.0
+QR_MARGIN_RTOL = 1e-6
+#: The Cholesky certificate proves ``σ_min > CERT_SLACK · max(rtol, CERT_FLOOR) · σ_max``.
+CERT_FLOOR = 1e-5
+CERT_SLACK = 1.01
+
+
+def redundant_row_tol(m: int, n: int) -> float:
+    """Residual norm at or below which a unit row is skipped as redundant: ``m n ε``.
+
+    The Householder LQ of the ``m × n`` equilibrated rows is backward stable row by row with
+    ``‖Δx_i‖ ≤ γ̃_{mn} ‖x_i‖ ≈ m n u`` (Higham, *Accuracy and Stability*, Thm 19.4): a row that
+    is exactly a combination of the rows kept before it leaves a residual of that order.
+    """
+    return float(m) * float(n) * float(np.finfo(np.float64).eps)
+
+
+class CertifiedLQ(NamedTuple):
+    """The rank-revealing LQ ``B[kept] = L Q`` of unit rows ``B`` and what it proved.
+
+    Attributes
+    ----------
+    certified : bool
+        True when the certificate proves that the SVD rule (σ ≤ rtol σ_max is zero) on ``B``
+        keeps exactly ``rank`` singular values; False: the SVD decides (nothing else is to be
+        used then).
+    rank : int
+        Rows kept ``r``.
+    kept, skipped : ndarray of int, shapes (r,), (m − r,)
+        Indices of the kept and skipped rows of ``B``.
+    L : ndarray, shape (r, r)
+        Lower triangular factor of the kept rows.
+    Q : ndarray, shape (r, n)
+        Orthonormal rows spanning the kept rows (= R(Bᵀ) when certified).
+    residuals : ndarray, shape (m − r,)
+        Each skipped row's residual norm against the rows kept before it.
+    """
+
+    certified: bool
+    rank: int
+    kept: NDArray[np.intp]
+    skipped: NDArray[np.intp]
+    L: FloatArray
+    Q: FloatArray
+    residuals: FloatArray
+
+    def solve(self, b: FloatArray) -> FloatArray:
+        """Minimum-norm solution ``x = Qᵀ L⁻¹ b[kept]`` of ``B x = b`` (b consistent), shape (n,)."""
+        y = np.linalg.solve(self.L, np.asarray(b, dtype=np.float64)[self.kept]) if self.rank else np.zeros(0)
+        return np.asarray(self.Q.T @ y)
+
+
+#: Only a row whose residual is at most this (unit rows) is tested for redundancy.
+REDUNDANT_CANDIDATE = 1e-8
+
+
+#: A skipped row's bias must be the same combination of the kept rows' biases to this relative
+#: accuracy (else the SVD's least-squares solution of the inconsistent system is taken).
+REDUNDANT_BIAS_RTOL = 1e-10
+
+
+def _redundant(x: FloatArray, rows: list[FloatArray], s: float, delta: float, bj: float,
+               bk: FloatArray) -> bool:
+    """Whether a row with residual sum of squares ``s`` is redundant to round-off in ``[B | b]``:
+    ``√s ≤ δ (1 + ‖c‖₁)``, ``c L = x[:r]`` its combination of the kept rows (rows of ``L``; the
+    round-off of an exactly dependent row grows with the kept rows it combines), and its bias
+    ``bj`` that combination of the kept rows' biases ``bk`` to :data:`REDUNDANT_BIAS_RTOL`."""
+    if not s <= REDUNDANT_CANDIDATE**2:
+        return False
+    r = len(rows)
+    L = np.array([row[:r] for row in rows]).reshape(r, r)
+    c = np.linalg.solve(L.T, x[:r]) if r else np.zeros(0)
+    d = delta * (1.0 + float(np.sum(np.abs(c))))
+    if not s <= d * d:
+        return False
+    t = c * bk
+    return abs(bj - float(np.sum(t))) <= REDUNDANT_BIAS_RTOL * (abs(bj) + float(np.sum(np.abs(t))))
+
+
+def certified_lq(B: FloatArray, rtol: float | None = None, *, b: FloatArray | None = None,
+                 certificate: str | None = None) -> CertifiedLQ:
+    """Rank-revealing certified LQ of equilibrated rows (the engine's shortcut of rule 3).
+
+    The rows are taken in order; reflector ``k`` (Householder, from the right) pivots on column
+    ``k``. A row whose residual against the rows kept before it (its entries in the columns
+    not pivoted yet) has norm ``ρ ≤ δ (1 + ‖c‖₁)`` (``ρ ≤`` :data:`REDUNDANT_CANDIDATE`,
+    ``δ =`` :func:`redundant_row_tol`, ``c`` its combination of the kept rows) is *skipped*: it
+    is treated as a vanished row, provided its bias is the same combination of the kept rows'
+    biases (to :data:`REDUNDANT_BIAS_RTOL`). With ``X = B`` in the reflectors' basis, ``X = [L₁₁ 0; L₂₁ E]`` (kept rows,
+    then skipped ones) and ``‖E‖₂ ≤ e_F = √Σρ²`` (a residual against every kept row is at most
+    the one against the rows kept before it). By Weyl's inequality ``σ_{r+1}(X) ≤ e_F`` and
+    ``σ_r(X) ≥ σ_min(L₁₁) − e_F``; ``σ_max(X) ≥ max_a ‖L_a‖`` and
+    ``σ_max(X)² ≤ ‖L₁₁‖² + Σ_skipped ‖b_s‖²``. The certificate holds when
+
+    * ``margin · e_F < rtol · max_a ‖L_a‖`` (the SVD rule drops the skipped directions), and
+    * ``σ_min(L₁₁) > rt · σ_max(X) + e_F`` (it keeps the others), proved either by
+      ``‖L⁻¹‖_F⁻¹ > margin · rtol · √(‖L‖_F² + Σ‖b_s‖²) + e_F`` (``certificate="frobenius"``,
+      margin :data:`QR_MARGIN`) or by the Cholesky factorization of ``L Lᵀ − τ I`` with
+      ``√τ = rt · √(‖L Lᵀ‖∞ + Σ‖b_s‖²) + e_F``, ``rt = CERT_SLACK · max(rtol, CERT_FLOOR)``
+      (``"profile"``, margin :data:`CERT_SLACK`).
+
+    Without skipped rows both are the engine's earlier certificates unchanged. Near-singular
+    rows (residual above round-off but below the certificate's floor) make it refuse.
+
+    Parameters
+    ----------
+    B : ndarray, shape (m, n)
+        Row-equilibrated live rows (unit norms) of ``D A``.
+    b : ndarray, shape (m,), optional
+        The equilibrated bias ``D b`` (default zeros): a row redundant in ``B`` whose bias is not
+        the same combination (an inconsistent system) is kept, and the certificate refuses.
+    rtol : float, optional
+        The rank rule's relative cutoff (default :data:`DEFAULT_RTOL`).
+    certificate : {"frobenius", "profile"}, optional
+        Default: Frobenius up to :data:`DENSE_INVERSE_MAX_ROWS` rows, else profile (as the engine).
+
+    Returns
+    -------
+    CertifiedLQ
+    """
+    tol = resolve_rtol(rtol)
+    X = np.asarray(B, dtype=np.float64)
+    m, n = X.shape
+    if certificate is None:
+        certificate = "frobenius" if m <= DENSE_INVERSE_MAX_ROWS else "profile"
+    delta = redundant_row_tol(m, n)
+    bias = np.zeros(m) if b is None else np.asarray(b, dtype=np.float64)
+    refused = False
+    refl: list[tuple[FloatArray, float]] = []
+    rows: list[FloatArray] = []
+    kept: list[int] = []
+    skipped: list[int] = []
+    res: list[float] = []
+    for j in range(m):
+        x = X[j].copy()
+        for v, beta in refl:  # the reflectors of the rows kept so far
+            x -= beta * float(x @ v) * v
+        p = len(kept)
+        s = float(x[p:] @ x[p:]) if p < n else 0.0
+        if _redundant(x, rows, s, delta, float(bias[j]), bias[kept]):
+            skipped.append(j)
+            res.append(float(np.sqrt(s)))
+            continue
+        if p >= n:  # no residual left but an inconsistent bias: the SVD decides
+            refused = True
+            break
+        alpha = -np.sqrt(s) if x[p] >= 0.0 else np.sqrt(s)
+        v = np.zeros(n)
+        v[p:] = x[p:]
+        v[p] -= alpha
+        refl.append((v, 2.0 / float(v @ v)))
+        row = np.zeros(n)
+        row[:p] = x[:p]
+        row[p] = alpha
+        rows.append(row)
+        kept.append(j)
+    r = len(kept)
+    L = np.array([row[:r] for row in rows]).reshape(r, r)
+    Q = np.eye(n)[:r]
+    for v, beta in reversed(refl):
+        Q = Q - beta * np.outer(Q @ v, v)
+    e_f = float(np.sqrt(np.sum(np.square(res))))
+    skip_n2 = float(np.sum(np.square(X[skipped]))) if skipped else 0.0
+    row2max = float(np.max(np.sum(L * L, axis=1))) if r else 0.0
+    ok = r > 0 and not refused
+    if ok and certificate == "frobenius":
+        margin = QR_MARGIN if tol <= QR_MARGIN_RTOL else 1.0
+        fi = float(np.sum(np.square(np.linalg.inv(L))))
+        if skipped:
+            ok = margin * e_f < tol * np.sqrt(row2max)
+            bound = margin * tol * np.sqrt(float(np.sum(L * L)) + skip_n2) + e_f
+            ok = ok and bound * np.sqrt(fi) < 1.0
+        else:
+            ok = np.sqrt(float(np.sum(L * L))) * np.sqrt(fi) * margin * tol < 1.0
+    elif ok:
+        T = L @ L.T
+        rt = CERT_SLACK * max(tol, CERT_FLOOR)
+        tnorm = float(np.max(np.sum(np.abs(T), axis=1)))
+        tau = rt * rt * tnorm
+        if skipped:
+            ok = CERT_SLACK * e_f < tol * np.sqrt(row2max)
+            tau = (rt * np.sqrt(tnorm + skip_n2) + e_f) ** 2
+        if ok:
+            try:
+                np.linalg.cholesky(T - tau * np.eye(r))
+            except np.linalg.LinAlgError:
+                ok = False
+    return CertifiedLQ(
+        certified=bool(ok),
+        rank=r,
+        kept=np.asarray(kept, dtype=np.intp),
+        skipped=np.asarray(skipped, dtype=np.intp),
+        L=L,
+        Q=Q,
+        residuals=np.asarray(res),
+    )
