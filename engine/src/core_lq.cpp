@@ -366,10 +366,32 @@ int lq_sparse(const double* B, int m, int n, double rtol, LQWork& w, double* cv)
                 break;
             }
         w.key[i] = static_cast<double>(f) * m + i;
-        w.order[i] = i;
     }
-    std::sort(w.order.begin(), w.order.begin() + m,
-              [&](int a, int b) { return w.key[a] < w.key[b]; });
+    // The keys are distinct, so the sorted order is unique: insertion sort from the last call's
+    // order (the rows' first columns rarely change: O(m)), std::sort when it moves too much
+    bool sorted = false;
+    if (w.order_m == m) {
+        long moves = 0;
+        const long budget = 4L * m;
+        for (int a = 1; a < m && moves <= budget; ++a) {
+            const int r = w.order[a];
+            const double kr = w.key[r];
+            int b = a;
+            while (b > 0 && w.key[w.order[b - 1]] > kr) {
+                w.order[b] = w.order[b - 1];
+                --b;
+                ++moves;
+            }
+            w.order[b] = r;
+        }
+        sorted = moves <= budget;
+    }
+    if (!sorted) {
+        for (int i = 0; i < m; ++i) w.order[i] = i;
+        std::sort(w.order.begin(), w.order.begin() + m,
+                  [&](int a, int b) { return w.key[a] < w.key[b]; });
+        w.order_m = m;
+    }
     for (int k = 0; k < n; ++k) {
         w.Pc[k] = 0;
         w.Lr[k] = -1;

@@ -124,7 +124,8 @@ struct LQWork {
     std::vector<int> Pc;        // n: pivot columns in order, then the others
     std::vector<int> Lr;        // n: last row that may be nonzero in column k (scratch)
     std::vector<int> Rl;        // m × (n + 1): [count, columns…] where row i may be nonzero
-    std::vector<int> order;     // m: scratch of the row sort
+    std::vector<int> order;     // m: the row sort (lq_sparse keeps it for the next call)
+    int order_m = -1;           // rows of the order kept in `order` (−1: none)
     std::vector<std::uint8_t> In;  // m × n: membership marks of Rl (zero between calls)
     std::vector<double> Wz;     // m × n: lq_sparse's work matrix (zero between calls)
     std::vector<int> Ap;        // m × (n + 1): the row pattern of A (lq_sparse's input)
