@@ -415,6 +415,7 @@ void bind_sim(nb::module_& m) {
                 d["phi_norm"] = copy_array(R.phi_norm.data(), {N});
                 d["velocity_residual_norm"] = copy_array(R.vel_norm.data(), {N});
                 if (!s.loop->fric.empty()) d["friction_work"] = copy_array(R.fr_work.data(), {N});
+                d["work"] = copy_array(R.work.data(), {N});
                 R.clear();
                 return d;
             },
@@ -460,6 +461,13 @@ void bind_sim(nb::module_& m) {
             nb::arg("contacts"),
             "Coulomb friction contacts (normal index, tangent index, mu, slip, direction d0, d1); before "
             "start/resume.")
+        .def_prop_rw(
+            "work",
+            [](const SimLoop& s) { return s.loop->wk; },
+            [](SimLoop& s, double w) { s.loop->wk = w; },
+            "The work of controllers and applied forces (J) up to the current state (the "
+            "integrator's own quadrature of q̇ᵀ(B u + f_passive + f_c)); set it before "
+            "start/resume to continue a run's total.")
         .def_prop_rw(
             "friction_work",
             [](const SimLoop& s) { return s.loop->fw; },

@@ -398,7 +398,10 @@ Status at_point(Loop& L, const FiredStep& st, double s, Point& p, bool diagnosti
     EventScratch& E = *L.evs;
     Status r = partial_step(L, st.t_start, L.y, st.f_start ? &L.f : nullptr, s, E.yt);
     if (r != Status::ok) return r;
-    return point(L, st.t_start + s, E.yt.data(), E.yt.data() + L.n, p, diagnostics);
+    const double dW = L.wk_dW;  // the partial step's own quadrature of the work
+    if ((r = point(L, st.t_start + s, E.yt.data(), E.yt.data() + L.n, p, diagnostics)) != Status::ok) return r;
+    p.work = L.wk + dW;
+    return Status::ok;
 }
 
 // _guard_value of contact guard G at at(s)
@@ -517,7 +520,7 @@ void truncate(Samples& R, std::size_t N) {
     R.u.resize(N * k);
     R.active.resize(N * c);
     R.rank.resize(N);
-    for (auto* v : {&R.cond, &R.mu, &R.energy, &R.phi_norm, &R.vel_norm, &R.fr_work}) v->resize(N);
+    for (auto* v : {&R.cond, &R.mu, &R.energy, &R.phi_norm, &R.vel_norm, &R.fr_work, &R.work}) v->resize(N);
 }
 
 // _sample_t_eval over (t_start, te] with the driver's out_at
@@ -763,6 +766,9 @@ Status apply_and_record(Loop& L, const FiredStep& st, double best_s, const std::
     std::size_t out_i = L.out_i;
     if (!L.every && (r = sample_until(L, st, te, out_i)) != Status::ok) return r;
     record_sample(L, E.pe, te);
+    // W is continuous across the event: the samples after it read W at te
+    L.wk = std::isnan(E.pe.work) ? work_at(L, te) : E.pe.work;
+    L.wk_on = false;
     std::vector<int> impacts;
     std::vector<std::uint8_t> plastic;
     const std::vector<std::uint8_t> act_start = L.active;
@@ -894,6 +900,7 @@ Status contact_event(Loop& L, const FiredStep& st) {
     const std::vector<std::uint8_t> active0 = L.active;
     const std::vector<ContactGuard> guards0 = L.guards;
     const std::vector<FrictionContact> fric0 = L.fric;
+    const double wk0 = L.wk;
     E.roots.clear();
     Status r = Status::ok;
     for (std::size_t i = 0; i < L.guards.size() && r == Status::ok; ++i) {
@@ -930,6 +937,8 @@ Status contact_event(Loop& L, const FiredStep& st) {
     if (r != Status::ok) {  // nothing happened: the Python driver takes the step
         truncate(L.rec, rec_mark);
         L.fw_step = false;
+        L.wk = wk0;
+        L.wk_on = false;
         L.fric = fric0;
         set_active(L, active0.data());
         set_guards(L, guards0);

@@ -55,6 +55,7 @@ Status rk4_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec&
     } else if ((s = rhs(L, t, y.data(), L.k1.data())) != Status::ok) {
         return s;
     }
+    const double P1 = f ? L.wk_f : L.wk_P;  // the stage powers (the work's quadrature)
     const double hh = 0.5 * h;
     // next to a singular passage the stage states are projected (RK4.step, stages=True): F's
     // derivatives across the manifold grow like 1/σ_min, a stage off it by O(h²) would cost
@@ -63,14 +64,17 @@ Status rk4_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec&
     for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k1[i];
     if (sp && (s = project(L, t + 0.5 * h, L.ys.data(), L.opt.projection)) != Status::ok) return s;
     if ((s = rhs(L, t + 0.5 * h, L.ys.data(), L.k2.data())) != Status::ok) return s;
+    const double P2 = L.wk_P;
     for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k2[i];
     if (sp && (s = project(L, t + 0.5 * h, L.ys.data(), L.opt.projection)) != Status::ok) return s;
     if ((s = rhs(L, t + 0.5 * h, L.ys.data(), L.k3.data())) != Status::ok) return s;
+    const double P3 = L.wk_P;
     for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + h * L.k3[i];
     if (sp && (s = project(L, t + h, L.ys.data(), L.opt.projection)) != Status::ok) return s;
     if ((s = rhs(L, t + h, L.ys.data(), L.k4.data())) != Status::ok) return s;
     const double h6 = h / 6.0;
     for (int i = 0; i < n2; ++i) out[i] = y[i] + h6 * (((L.k1[i] + 2.0 * L.k2[i]) + 2.0 * L.k3[i]) + L.k4[i]);
+    L.wk_dW = h6 * (((P1 + 2.0 * P2) + 2.0 * P3) + L.wk_P);
     return Status::ok;
 }
 
@@ -106,6 +110,7 @@ Status midpoint_solve(Loop& L, double t, const Vec& y, const Vec* f, double h, V
         L.k1 = L.kn;
         if (delta <= L.opt.xtol * scale) {
             for (int i = 0; i < n2; ++i) out[i] = y[i] + h * L.k1[i];
+            L.wk_dW = h * L.wk_P;  // (the power at the midpoint state of this last iterate)
             ok = true;
             return Status::ok;
         }
@@ -126,7 +131,10 @@ Status midpoint_advance(Loop& L, double t, const Vec& y, const Vec* f, double h,
     }
     Vec& ym = L.half[static_cast<std::size_t>(depth)];
     if ((s = midpoint_advance(L, t, y, f, 0.5 * h, depth - 1, ym)) != Status::ok) return s;
-    return midpoint_advance(L, t + 0.5 * h, ym, nullptr, 0.5 * h, depth - 1, out);
+    const double dW = L.wk_dW;
+    if ((s = midpoint_advance(L, t + 0.5 * h, ym, nullptr, 0.5 * h, depth - 1, out)) != Status::ok) return s;
+    L.wk_dW += dW;
+    return Status::ok;
 }
 
 // DormandPrince5._stages into L.K (K[0] = f0 given)
@@ -141,6 +149,7 @@ Status dp_stages(Loop& L, double t, const Vec& y, double h) {
         const Status st = rhs(L, t + DP_C[s] * h, L.ys.data(), L.tmp2n.data());
         if (st != Status::ok) return st;
         L.K.row(s) = L.tmp2n.transpose();
+        L.wk_K[s] = L.wk_P;
     }
     return Status::ok;
 }
@@ -234,6 +243,7 @@ Status dp_step(Loop& L, double& h_acc, double& t_new) {
     if (!L.have_f) {
         if ((s = rhs(L, t, L.y.data(), L.f.data())) != Status::ok) return s;
         L.have_f = true;
+        L.wk_f = L.wk_P;
     }
     double h = L.h;
     if (!std::isfinite(h) || h <= 0) {
@@ -252,6 +262,7 @@ Status dp_step(Loop& L, double& h_acc, double& t_new) {
             return Status::not_finite;
         }
         L.K.row(0) = L.f.transpose();
+        L.wk_K[0] = L.wk_f;
         if ((s = dp_stages(L, t, L.y, h)) != Status::ok) return s;
         for (int i = 0; i < n2; ++i) {
             double b = 0.0, e = 0.0;
@@ -287,6 +298,9 @@ Status dp_step(Loop& L, double& h_acc, double& t_new) {
             h_acc = h;
             L.y0 = L.y;
             dp_dense_setup(L, h);
+            double dW = 0.0;
+            for (int j = 0; j < 7; ++j) dW += DP_B[j] * L.wk_K[j];
+            L.wk_dW = h * dW;
             L.h = std::min(h * fac, L.opt.h_max);
             L.n_rejected += rejected;
             return Status::ok;
@@ -300,9 +314,11 @@ Status dp_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& 
     Status st;
     if (f) {
         L.K.row(0) = f->transpose();
+        L.wk_K[0] = L.wk_f;
     } else {
         if ((st = rhs(L, t, y.data(), L.tmp2n.data())) != Status::ok) return st;
         L.K.row(0) = L.tmp2n.transpose();
+        L.wk_K[0] = L.wk_P;
     }
     if ((st = dp_stages(L, t, y, h)) != Status::ok) return st;
     for (int i = 0; i < 2 * L.n; ++i) {
@@ -310,6 +326,9 @@ Status dp_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& 
         for (int j = 0; j < 7; ++j) b += DP_B[j] * L.K(j, i);
         out[i] = y[i] + h * b;
     }
+    double dW = 0.0;
+    for (int j = 0; j < 7; ++j) dW += DP_B[j] * L.wk_K[j];
+    L.wk_dW = h * dW;
     return Status::ok;
 }
 
@@ -365,13 +384,17 @@ Status d8_stages(Loop& L, double t, const Vec& y, double h, int first, int last)
         const Status st = rhs(L, t + D8_C[s] * h, L.ys.data(), L.tmp2n.data());
         if (st != Status::ok) return st;
         L.K8.row(s) = L.tmp2n.transpose();
+        L.wk_K[s] = L.wk_P;
     }
     return Status::ok;
 }
 
-// y + h Σ_{j<12} b_j k_j into out
-void d8_combine(const Loop& L, const Vec& y, double h, Vec& out) {
+// y + h Σ_{j<12} b_j k_j into out (and the work's increment h Σ b_j P_j)
+void d8_combine(Loop& L, const Vec& y, double h, Vec& out) {
     const int n2 = 2 * L.n;
+    double dW = 0.0;
+    for (int j = 0; j < D8_STAGES; ++j) dW += D8_B[j] * L.wk_K[j];
+    L.wk_dW = h * dW;
     for (int i = 0; i < n2; ++i) {
         double b = 0.0;
         for (int j = 0; j < D8_STAGES; ++j) b += D8_B[j] * L.K8(j, i);
@@ -392,6 +415,7 @@ Status d8_step(Loop& L, double& h_acc, double& t_new) {
     if (!L.have_f) {
         if ((s = rhs(L, t, L.y.data(), L.f.data())) != Status::ok) return s;
         L.have_f = true;
+        L.wk_f = L.wk_P;
     }
     double h = L.h;
     if (!std::isfinite(h) || h <= 0) {
@@ -411,6 +435,7 @@ Status d8_step(Loop& L, double& h_acc, double& t_new) {
             return Status::not_finite;
         }
         L.K8.row(0) = L.f.transpose();
+        L.wk_K[0] = L.wk_f;
         if ((s = d8_stages(L, t, L.y, h, 1, D8_STAGES)) != Status::ok) return s;
         d8_combine(L, L.y, h, L.y1);
         for (int i = 0; i < n2; ++i) {
@@ -463,6 +488,7 @@ Status d8_step(Loop& L, double& h_acc, double& t_new) {
             if (!proj) {  // the FSAL stage: the next step's F(t, y)
                 if ((s = rhs(L, t + h, L.y1.data(), L.tmp2n.data())) != Status::ok) return s;
                 L.K8.row(12) = L.tmp2n.transpose();
+                L.wk_K[12] = L.wk_P;
                 L.d8_fsal = true;
             }
             return Status::ok;
@@ -482,6 +508,7 @@ Status d8_dense_setup(Loop& L) {
     if (!L.d8_fsal) {
         if ((s = rhs(L, t0 + h, L.y1.data(), L.tmp2n.data())) != Status::ok) return s;
         L.K8.row(12) = L.tmp2n.transpose();
+        L.wk_K[12] = L.wk_P;
         L.d8_fsal = true;
     }
     if ((s = d8_stages(L, t0, L.y0, h, 13, 16)) != Status::ok) return s;
@@ -521,9 +548,11 @@ Status d8_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& 
     Status st;
     if (f) {
         L.K8.row(0) = f->transpose();
+        L.wk_K[0] = L.wk_f;
     } else {
         if ((st = rhs(L, t, y.data(), L.tmp2n.data())) != Status::ok) return st;
         L.K8.row(0) = L.tmp2n.transpose();
+        L.wk_K[0] = L.wk_P;
     }
     if ((st = d8_stages(L, t, y, h, 1, D8_STAGES)) != Status::ok) return st;
     d8_combine(L, y, h, out);

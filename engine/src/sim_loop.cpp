@@ -116,7 +116,7 @@ SolveInfo dynamics_solve(Loop& L, double t, const double* q, double rtol, double
 }  // namespace
 
 void Samples::clear() {
-    for (auto* v : {&t, &q, &qd, &qdd, &f_c, &u, &cond, &mu, &energy, &phi_norm, &vel_norm, &fr_work}) v->clear();
+    for (auto* v : {&t, &q, &qd, &qdd, &f_c, &u, &cond, &mu, &energy, &phi_norm, &vel_norm, &fr_work, &work}) v->clear();
     rank.clear();
     active.clear();
 }
@@ -332,7 +332,33 @@ Status rhs(Loop& L, double t, const double* y, double* out) {
         out[i] = qd[i];
         out[n + i] = L.qdd[i];
     }
+    L.wk_P = work_power(L, qd, L.qdd.data());
     return Status::ok;
+}
+
+// q̇ᵀ(B u + f_passive + f_c) = q̇ᵀ(M q̈ − h) (M q̈ = h + f_passive + B u + f_c), less the
+// friction forces' power (their work is W_fr, recorded apart); O(n²), no evaluation
+double work_power(const Loop& L, const double* qd, const double* qdd) {
+    const int n = L.n;
+    double p = 0.0;
+    for (int i = 0; i < n; ++i) {
+        double mi = -L.T.h[i];
+        for (int j = 0; j < n; ++j) mi += L.T.M(i, j) * qdd[j];
+        p += qd[i] * mi;
+    }
+    return L.fric.empty() ? p : p - L.fr_power;
+}
+
+// the cubic Hermite interpolant of W on the step being recorded (W and its derivative, the
+// power, at both ends): exact at the ends, O(h⁴) inside
+double work_at(const Loop& L, double t) {
+    if (!L.wk_on) return L.wk;
+    const double u = std::clamp((t - L.wk_t0) / L.wk_h, 0.0, 1.0);
+    if (u == 1.0) return L.wk_W1;
+    if (u == 0.0) return L.wk_W0;
+    const double u2 = u * u, u3 = u2 * u;
+    return (2.0 * u3 - 3.0 * u2 + 1.0) * L.wk_W0 + (u3 - 2.0 * u2 + u) * L.wk_h * L.wk_P0 +
+           (-2.0 * u3 + 3.0 * u2) * L.wk_W1 + (u3 - u2) * L.wk_h * L.wk_P1;
 }
 
 // _System.point (and the diagnostics _Recorder.add derives from it)
@@ -350,6 +376,8 @@ Status point(Loop& L, double t, const double* q, const double* qd, Point& p, boo
     if (!finite(p.qdd.data(), n)) return Status::not_finite;
     p.t = t;
     p.fr_power = L.fric.empty() ? 0.0 : L.fr_power;
+    p.power = work_power(L, qd, p.qdd.data());
+    p.work = std::numeric_limits<double>::quiet_NaN();
     for (int i = 0; i < n; ++i) {
         p.q[i] = q[i];
         p.qd[i] = qd[i];
@@ -395,6 +423,7 @@ void record(Loop& L, const Point& p, double t) {
     R.phi_norm.push_back(p.phi_norm);
     R.vel_norm.push_back(p.vel_norm);
     R.fr_work.push_back(friction_work_at(L, t));
+    R.work.push_back(std::isnan(p.work) ? work_at(L, t) : p.work);
 }
 
 }  // namespace
@@ -556,6 +585,7 @@ Status partial_step(Loop& L, double t, const Vec& y, const Vec* f, double s, Vec
     Status st;
     if (s <= 0.0) {
         out = y;
+        L.wk_dW = 0.0;
     } else if (L.opt.method == Method::dop853) {
         if ((st = d8_advance(L, t, y, f, s, out)) != Status::ok) return st;
     } else if (adaptive(L)) {
@@ -595,6 +625,7 @@ Outcome start(Loop& L, double t0, const double* q0, const double* qd0) {
         if ((s = project(L, t0, L.y.data(), po)) != Status::ok) return fail(L, s);
     }
     L.t = t0;
+    L.wk_on = false;
     const bool rec0 = L.every || (!L.t_out.empty() && L.t_out[0] == t0);
     if ((s = point(L, t0, L.y.data(), L.y.data() + n, L.p1, rec0)) != Status::ok) return fail(L, s);
     if (rec0) record(L, L.p1, t0);
@@ -617,6 +648,7 @@ void resume(Loop& L, double t, const double* y, double h, long long n_steps, std
     L.out_i = out_i;
     L.message.clear();
     L.fw_have0 = L.fw_step = false;
+    L.wk_on = false;
     passage_restart(L);  // a state reached elsewhere: the history starts afresh, from this state
 }
 
@@ -650,11 +682,14 @@ Outcome run(Loop& L, long long max_steps) {
             // F at the step start: the method needs it, the output samples inside the step too
             if ((s = rhs(L, L.t, L.y.data(), L.f.data())) != Status::ok) return fail(L, s);
             L.have_f = true;
+            L.wk_f = L.wk_P;
         }
         const double t_start = L.t;
         const bool f_start = L.have_f;
         const double h_before = L.h;
         double h = 0.0, t_new = 0.0;
+        double h_wk = 0.0, dW_step = 0.0;  // the step the work's increment dW_step is over
+        bool end_star_p = false;           // L.ps: the point at the end of a step taken past t1
         bool fsal = false;
         if (adapt) {
             const long long rej0 = L.n_rejected;
@@ -662,6 +697,8 @@ Outcome run(Loop& L, long long max_steps) {
                 L.n_rejected = rej0;
                 return fail(L, s);
             }
+            h_wk = h;
+            dW_step = L.wk_dW;
             // dopri5: L.K.row(6) = F(t_new, y1 raw); dop853: L.K8.row(12) when evaluated
             fsal = !dop853 || L.d8_fsal;
             if (dop853 && !L.every && L.out_i < n_out &&
@@ -689,17 +726,21 @@ Outcome run(Loop& L, long long max_steps) {
             if (end_star && !f_start) {
                 if ((s = rhs(L, L.t, L.y.data(), L.f.data())) != Status::ok) return fail(L, s);
                 L.have_f = true;
+                L.wk_f = L.wk_P;
             }
             L.stage_proj = L.opt.method == Method::rk4 && L.any_active && passage_stages(L, L.t, hs);
             s = fixed_advance(L, L.t, L.y, (f_start || end_star) ? &L.f : nullptr, hs, L.y1);
             L.stage_proj = false;
             if (s != Status::ok) return fail(L, s);
+            h_wk = hs;
+            dW_step = L.wk_dW;
             t_new = (h == t1 - L.t) ? t1 : L.t + h;
             L.yq1 = L.y1;
             if (end_star) {
                 const double tf = L.t + hs;
                 if ((s = stab_project(L, tf, L.yq1.data())) != Status::ok) return fail(L, s);
                 if ((s = point(L, tf, L.yq1.data(), L.yq1.data() + n, L.ps, false)) != Status::ok) return fail(L, s);
+                end_star_p = true;
                 for (int i = 0; i < n; ++i) {
                     L.fp1[i] = L.yq1[n + i];
                     L.fp1[n + i] = L.ps.qdd[i];
@@ -724,6 +765,19 @@ Outcome run(Loop& L, long long max_steps) {
                 return fail(L, s);
             have_p1 = true;
         }
+        // the work's step record: W at both ends, the powers there (F at the start: L.f; at the
+        // end: the point there, else the methods' last stage at the raw end)
+        L.wk_on = true;
+        L.wk_t0 = t_start;
+        L.wk_h = h_wk;
+        L.wk_W0 = L.wk;
+        L.wk_W1 = L.wk + dW_step;
+        L.wk_P0 = L.wk_f;
+        L.wk_P1 = end_star_p ? L.ps.power
+                  : have_p1  ? L.p1.power
+                  : !adapt   ? 0.0
+                  : dop853   ? (L.d8_fsal ? L.wk_K[12] : 0.0)
+                             : L.wk_K[6];
         if (L.opt.passages && L.any_active) {  // the indicator at the projected step end
             if (!have_p1 && (adapt || L.opt.stab != Stabilization::projection) &&
                 (s = evaluate(L, t_new, L.yq1.data(), L.yq1.data() + n, NEED_A)) != Status::ok)
@@ -800,6 +854,7 @@ Outcome run(Loop& L, long long max_steps) {
                     continue;
                 }
                 const double tt = t_start + sj;
+                bool partial = false;  // W there from the partial step's own quadrature
                 if (dop853) {
                     d8_dense(L, tt, L.yp.data());
                 } else if (adapt) {
@@ -810,15 +865,18 @@ Outcome run(Loop& L, long long max_steps) {
                 } else {  // a partial step of the method (the driver's `at`)
                     if (sj <= 0.0) {
                         L.yp = L.y0;
+                        L.wk_dW = 0.0;
                     } else if ((s = fixed_advance(L, t_start, L.y0, f_start ? &L.f : nullptr, sj, L.yp)) !=
                                Status::ok) {
                         return fail(L, s);
                     }
+                    partial = true;
                 }
                 if ((s = (adapt || (f_start && have_p1)) ? stab_project_sample(L, tt, L.yp.data())
                                                           : stab_project(L, tt, L.yp.data())) != Status::ok)
                     return fail(L, s);
                 if ((s = point(L, tt, L.yp.data(), L.yp.data() + n, L.ps, true)) != Status::ok) return fail(L, s);
+                if (partial) L.ps.work = L.wk + L.wk_dW;
                 record(L, L.ps, L.t_out[j]);
             }
             L.out_i = j;
@@ -835,16 +893,20 @@ Outcome run(Loop& L, long long max_steps) {
             }
         if (!changed && fsal) {
             L.f = dop853 ? L.K8.row(12).transpose() : L.K.row(6).transpose();
+            L.wk_f = dop853 ? L.wk_K[12] : L.wk_K[6];
             L.have_f = true;
         } else if (have_p1 && (!L.ctrl || L.ctrl->stateless())) {
             for (int i = 0; i < n; ++i) {
                 L.f[i] = L.yq1[n + i];
                 L.f[n + i] = L.p1.qdd[i];
             }
+            L.wk_f = L.p1.power;
             L.have_f = true;
         } else {
             L.have_f = false;
         }
+        L.wk = work_at(L, t_new);
+        L.wk_on = false;
         L.t = t_new;
         L.y = L.yq1;
         if (!L.fric.empty()) {

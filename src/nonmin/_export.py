@@ -78,8 +78,9 @@ def columns(traj: Any, model: Any | None = None) -> dict[str, tuple[np.ndarray, 
 
     ``t``; ``q_<c>``, ``qd_<c>``, ``qdd_<c>``, ``fc_<c>`` per coordinate c; ``u_<a>`` per
     actuator; ``rank``, ``cond``, ``mu``, ``energy``, ``phi_norm``,
-    ``velocity_residual_norm``, ``friction_work``, ``impact_loss`` (the energy balance's
-    recorded terms, J; zeros for a trajectory without them); ``active_<k>`` (0/1) per constraint.
+    ``velocity_residual_norm``, ``friction_work``, ``impact_loss``, ``work`` (the energy
+    balance's recorded terms, J; zeros for a trajectory without them, ``work`` NaN: not
+    recorded); ``active_<k>`` (0/1) per constraint.
     """
     names = tuple(traj.coordinate_names)
     units = coordinate_units(model, names)
@@ -104,13 +105,16 @@ def columns(traj: Any, model: Any | None = None) -> dict[str, tuple[np.ndarray, 
 
 
 #: The energy bookkeeping a trajectory records (nonmin.sim.Trajectory: friction work, impact loss).
-_BALANCE = ("friction_work", "impact_loss")
+_BALANCE = ("friction_work", "impact_loss", "work")
 
 
 def _balance(traj: Any, key: str) -> np.ndarray:
-    """A recorded energy array (T,) of the trajectory, zeros when it has none."""
+    """A recorded energy array (T,) of the trajectory, zeros when it has none (``work``: NaN,
+    "not recorded")."""
     a = getattr(traj, key, None)
-    return np.zeros(len(traj)) if a is None or np.shape(a) != (len(traj),) else np.asarray(a, dtype=float)
+    if a is None or np.shape(a) != (len(traj),):
+        return np.full(len(traj), np.nan) if key == "work" else np.zeros(len(traj))
+    return np.asarray(a, dtype=float)
 
 
 def _metadata(traj: Any) -> dict[str, Any]:
@@ -180,7 +184,7 @@ def to_xarray(traj: Any, model: Any | None = None) -> Any:
 
     Variables ``q``, ``qd``, ``qdd``, ``f_c`` (t, coordinate), ``u`` (t, actuator),
     ``active`` (t, constraint), and ``rank``, ``cond``, ``mu``, ``energy``, ``phi_norm``,
-    ``velocity_residual_norm``, ``friction_work``, ``impact_loss`` (t); ``coordinate_unit``
+    ``velocity_residual_norm``, ``friction_work``, ``impact_loss``, ``work`` (t); ``coordinate_unit``
     (coordinate); the metadata JSON in
     ``attrs["nonmin"]``.
     """

@@ -297,6 +297,7 @@ class EngineResult(NamedTuple):
     slip: tuple[tuple[int, float, float], ...] = ()  # friction contacts' (slip, d0, d1) at the end
     painleve: tuple[int, float, float] | None = None  # (friction contact, t, factor) when met
     friction_work: float = 0.0  # the friction forces' work (J) from the run's start to (t, y)
+    work: float = 0.0  # the work of controllers and applied forces (J) from the run's start to (t, y)
 
 
 def run(
@@ -317,6 +318,7 @@ def run(
     passage_seed: tuple[FloatArray, FloatArray] | None = None,
     friction: list[tuple[int, int, float, int, float, float]] | None = None,
     work0: float = 0.0,
+    ctrl_work0: float = 0.0,
 ) -> EngineResult:
     """Run the engine loop to ``opts.t1``, a handover or a watched event.
 
@@ -326,7 +328,8 @@ def run(
     (restitution per constraint, impact velocity threshold)`` configures the engine's event
     layer (engine/src/sim_events.cpp), which locates and applies contact events itself when no
     user guard is watched (``transition`` and ``events`` of the result). ``work0``: the friction
-    forces' work done before the start or resume (the samples' ``friction_work`` continue it).
+    forces' work done before the start or resume (the samples' ``friction_work`` continue it);
+    ``ctrl_work0`` the work of controllers and applied forces (the samples' ``work`` continue it).
     """
     eng = _engine()
     tv = np.zeros(0) if t_out is None else np.ascontiguousarray(t_out, dtype=np.float64)
@@ -339,6 +342,7 @@ def run(
     if friction:  # Coulomb friction (engine/src/sim_friction.cpp): (normal, tangent, mu, slip)
         loop.set_friction(friction)
         loop.friction_work = float(work0)
+    loop.work = float(ctrl_work0)
 
     def fric_end() -> dict[str, Any]:
         if not friction:
@@ -357,7 +361,7 @@ def run(
         code = loop.start(t0, np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float))
         if code != eng.SIM_DONE:
             y0 = np.concatenate((q, qd))
-            return EngineResult(False, t0, y0, 0.0, 0, 0, 0, 0, True, False, str(loop.message), [], **fric_end())
+            return EngineResult(False, t0, y0, 0.0, 0, 0, 0, 0, True, False, str(loop.message), [], **fric_end(), work=float(loop.work))
         if passage_seed is not None and passage_seed[0].size:
             loop.seed_passages(np.ascontiguousarray(passage_seed[0], dtype=float),
                                np.ascontiguousarray(passage_seed[1], dtype=float).ravel())  # fmt: skip
@@ -369,7 +373,7 @@ def run(
     if friction and not loop.arm_friction():  # the friction guards at the state reached
         return EngineResult(True, float(loop.t), np.asarray(loop.y), float(loop.h), int(loop.n_steps), 0, 0,
                             int(loop.out_i), True, False, str(loop.message), list(loop.guard_values),
-                            **fric_end())  # fmt: skip
+                            **fric_end(), work=float(loop.work))  # fmt: skip
     code = eng.SIM_DONE
     chunk = 16
     t1 = float(opts.t1)
@@ -388,4 +392,4 @@ def run(
                         int(loop.n_rhs), int(loop.n_rejected), int(loop.out_i),
                         code == eng.SIM_HANDOVER, code == eng.SIM_EVENT, str(loop.message),
                         list(loop.guard_values), code == eng.SIM_TRANSITION,
-                        tuple(loop.events) if code == eng.SIM_TRANSITION else (), **fric_end())  # fmt: skip
+                        tuple(loop.events) if code == eng.SIM_TRANSITION else (), **fric_end(), work=float(loop.work))  # fmt: skip

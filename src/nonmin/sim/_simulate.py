@@ -42,7 +42,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from functools import partial
 from typing import Any, NamedTuple
 
@@ -61,12 +61,16 @@ from ..errors import (
     ZenoError,
 )
 from ..model import ConstraintTerms, Model, State
-from . import _durable, _engine, _friction
+from . import _dop853_tableau, _durable, _engine, _friction
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
 from ._impulses import impact_losses, with_impulses
 from ._integrators import (
+    _DP_B,
+    DOP853,
     METHODS,
     RK4,
+    DormandPrince5,
+    ImplicitMidpoint,
     Integrator,
     SingularPassages,
     StepperState,
@@ -120,6 +124,65 @@ class _Point(NamedTuple):
     velocity: FloatArray
     holonomic: NDArray[np.bool_]
     energy: float
+    power: float = 0.0  #: q̇ᵀ(B u + f_passive + f_c) = q̇ᵀ(M q̈ − h): the power of W (J/s)
+    work: float = float("nan")  #: W here when a partial step's own quadrature gave it
+
+
+class _WorkQuadrature:
+    """W = ∫ q̇ᵀ(B u + f_passive + f_c) dt in the general driver, as the engine's ``wk_*``
+    (engine/src/sim_loop.cpp): W at the state reached, and the step being recorded (W and the
+    power at both ends; samples inside it read the cubic Hermite interpolant)."""
+
+    def __init__(self) -> None:
+        self.W = 0.0
+        self.step: tuple[float, float, float, float, float, float] | None = None
+
+    def set_step(self, t0: float, h: float, dW: float, P0: float, P1: float) -> None:
+        self.step = (t0, h, self.W, self.W + dW, P0, P1)
+
+    def at(self, t: float) -> float:
+        if self.step is None:
+            return self.W
+        t0, h, W0, W1, P0, P1 = self.step
+        if not math.isfinite(P1):  # (no evaluation at the step end: its mean power)
+            P1 = (W1 - W0) / h
+        u = min(max((t - t0) / h, 0.0), 1.0)
+        if u == 1.0:
+            return W1
+        if u == 0.0:
+            return W0
+        u2, u3 = u * u, u * u * u
+        return ((2 * u3 - 3 * u2 + 1) * W0 + (u3 - 2 * u2 + u) * h * P0 + (-2 * u3 + 3 * u2) * W1
+                + (u3 - u2) * h * P1)  # fmt: skip
+
+    def end_power(self, P1: float) -> None:
+        """The power at the step end, once known (DOP853's continuous extension evaluates F there)."""
+        if self.step is not None and not math.isfinite(self.step[5]):
+            self.step = (*self.step[:5], P1)
+
+    def commit(self, W: float) -> None:
+        self.W = float(W)
+        self.step = None
+
+
+def _step_work(integ: Integrator, powers: list[float], f_pow: float | None, h: float, fsal: bool = False) -> float:
+    """The work's increment over one step (or partial step) of ``integ``, from the powers of
+    the right-hand-side evaluations it made (``powers``, in order; ``f_pow``: the power of the
+    F it was given), combined with the method's own weights b (the engine's rk4_advance,
+    midpoint_solve, dp_step, d8_combine). NaN for a method without known weights."""
+    if isinstance(integ, RK4):
+        P = ([f_pow, *powers[-3:]] if f_pow is not None else powers[-4:])
+        return h / 6.0 * (((P[0] + 2.0 * P[1]) + 2.0 * P[2]) + P[3])
+    if isinstance(integ, ImplicitMidpoint):
+        return h * powers[-1]
+    if isinstance(integ, DormandPrince5):
+        P0 = f_pow if f_pow is not None else powers[0]
+        return h * float(_DP_B @ np.array([P0, *powers[-6:]]))
+    if isinstance(integ, DOP853):
+        P0 = f_pow if f_pow is not None else powers[0]
+        stages = powers[-12:-1] if fsal else powers[-11:]
+        return h * float(np.asarray(_dop853_tableau.B)[:12] @ np.array([P0, *stages]))
+    return float("nan")
 
 
 #: Drift-aware rank tolerance factor (see :func:`drift_rank_rtol`). The spurious singular value
@@ -180,6 +243,8 @@ class _System:
     n_rhs: int = 0
     need_lambda: bool = False
     unilateral: tuple[str, ...] = ()
+    #: the powers of W at the right-hand-side evaluations of the step being taken (rhs)
+    powers: list[float] = field(default_factory=list)
 
     def rtol_at(self, ct: ConstraintTerms) -> float:
         """Rank tolerance at a (possibly off-manifold) state: see :func:`drift_rank_rtol`."""
@@ -206,6 +271,9 @@ class _System:
         qdd = forward_dynamics(terms.M, g, ct.A, self.stab.bias(ct), rtol=self.rtol_at(ct))
         if not np.all(np.isfinite(qdd)):
             raise SimulationError(f"non-finite acceleration at t = {t:.12g}")
+        # the power of W, q̇ᵀ(B u + f_passive + f_c) = q̇ᵀ(M q̈ − h): the work's quadrature
+        # (_step_work) combines the powers of a step's evaluations with the method's weights
+        self.powers.append(float(qd @ (terms.M @ qdd - terms.h)))
         return np.concatenate((qd, qdd))
 
     def point(self, t: float, q: FloatArray, qd: FloatArray) -> _Point:
@@ -224,7 +292,7 @@ class _System:
             lam = np.zeros(0)
         energy = 0.5 * float(qd @ terms.M @ qd) + self.model.potential_energy(q)
         return _Point(t, q, qd, qdd, f_c, u, int(sol.rank), mu, L, lam, ct.A, ct.gamma,
-                      ct.phi, ct.velocity, ct.holonomic, energy)
+                      ct.phi, ct.velocity, ct.holonomic, energy, float(qd @ (terms.M @ qdd - terms.h)))
 
     def free_gap_acceleration(self, t: float, q: FloatArray, qd: FloatArray, name: str) -> float:
         """Acceleration of constraint ``name``'s gap if it were inactive."""
@@ -325,12 +393,14 @@ class _Recorder:
     """Samples, row by row (general driver) or in array blocks (compiled engine), in order."""
 
     KEYS = ("t", "q", "qd", "qdd", "f_c", "u", "active_mask", "rank", "cond", "mu", "energy",
-            "phi_norm", "velocity_residual_norm", "friction_work")  # fmt: skip
+            "phi_norm", "velocity_residual_norm", "friction_work", "work")  # fmt: skip
 
     def __init__(self, model: Model) -> None:
         #: the friction forces' work up to the state reached (the engine's EngineResult.friction_work):
         #: the value of the rows added here and of engine blocks without friction
         self.work = 0.0
+        #: the work of controllers and applied forces (the general driver's quadrature)
+        self.quad = _WorkQuadrature()
         self.names = model.constraint_names
         self.n, self.k = model.n, model.k
         self.blocks: list[dict[str, Any]] = []
@@ -368,12 +438,15 @@ class _Recorder:
         c["phi_norm"].append(float(np.max(np.abs(hol))) if hol.size else 0.0)
         c["velocity_residual_norm"].append(float(np.max(np.abs(p.velocity))) if p.velocity.size else 0.0)
         c["friction_work"].append(self.work)
+        c["work"].append(p.work if np.isfinite(p.work) else self.quad.at(p.t))
 
     def extend(self, block: dict[str, Any]) -> None:
         """Append a block of samples (arrays with the keys of :meth:`arrays`)."""
         self._flush()
         if "friction_work" not in block:
             block["friction_work"] = np.full(len(block["t"]), self.work)
+        if "work" not in block:
+            block["work"] = np.full(len(block["t"]), np.nan)
         self.blocks.append(block)
         self.count += len(block["t"])
 
@@ -401,6 +474,7 @@ class _Recorder:
             "phi_norm": np.asarray(c["phi_norm"], dtype=float),
             "velocity_residual_norm": np.asarray(c["velocity_residual_norm"], dtype=float),
             "friction_work": np.asarray(c["friction_work"], dtype=float),
+            "work": np.asarray(c["work"], dtype=float),
         }
 
     def arrays(self) -> dict[str, Any]:
@@ -829,6 +903,7 @@ def simulate(
             n_steps += er.steps
             n_rejected += er.n_rejected
             system.n_rhs += er.n_rhs
+            rec.quad.commit(er.work)
             t = er.t
             out_i = er.out_i if t_out is not None else 0
             q, qd = er.y[:n].copy(), er.y[n:].copy()
@@ -871,6 +946,7 @@ def simulate(
                 return np.concatenate((qq, vv))
 
         recent_events: list[float] = []
+        f_pow = float("nan")  # the power of W at the state of state.f
         disarmed: set[int] = set()
 
         def fpoint(tt: float, qq: FloatArray, vv: FloatArray, sl: Mapping[str, tuple[float, ...]]) -> _Point:
@@ -891,7 +967,7 @@ def simulate(
                         resume=(t, state.y, state.h if integ.adaptive else h_init, n_steps, out_i),
                         watch=_engine_watch(system, watches, gvals, disarmed, rearm_tol), guards=guards,
                         contact=contact_opts, friction=_friction.engine_contacts(model, slip) if fcs else None,
-                        work0=rec.work,
+                        work0=rec.work, ctrl_work0=rec.quad.W,
                     )  # fmt: skip
                 finally:
                     if ccb is not None:
@@ -912,6 +988,7 @@ def simulate(
                     er = fstep.er
                 if fcs:
                     rec.work = er.friction_work
+                rec.quad.commit(er.work)
                 for i, g in zip(g_idx, er.guards):
                     gvals[i] = g
                 if fcs:
@@ -996,16 +1073,26 @@ def simulate(
                 # F at the step start: the method needs it anyway, output samples inside the
                 # step need it for the continuous extension
                 state = state._replace(f=system.rhs(state.t, state.y))
+                f_pow = system.powers[-1]
             h_star = _end_at_passage(integ, passages, stab, system.active, state, t1)
             if h_star is not None and state.f is None:
                 state = state._replace(f=system.rhs(state.t, state.y))
+                f_pow = system.powers[-1]
             y_start, f_start, t_start = state.y, state.f, state.t
+            fp_start = f_pow if f_start is not None else None
+            system.powers.clear()
             res = integ.step(system.rhs, state, t1 if h_star is None else t_start + h_star, project_y, passages) \
                 if passages is not None else integ.step(system.rhs, state, t1, project_y)  # fmt: skip
             n_rejected += res.n_rejected
             n_steps += 1
             h = res.h
             t_new = res.state.t
+            # the work's increment over the step, from its stage powers (the method's weights)
+            d8_fsal = isinstance(integ, DOP853) and res.state.f is not None
+            dW_step = _step_work(integ, system.powers, fp_start, h, d8_fsal) if system.powers else float("nan")
+            P0_step = fp_start if fp_start is not None else (system.powers[0] if system.powers else float("nan"))
+            P1_step = system.powers[-1] if (isinstance(integ, DormandPrince5) or d8_fsal) else float("nan")
+            h_work = h
             dense_star = None
             if h_star is not None:
                 # the run ends at a predicted singular instant: the step placed past it was
@@ -1015,20 +1102,25 @@ def simulate(
                 qf, vf = stab.project(model, t_new, res.state.y[:n].copy(), res.state.y[n:].copy(),
                                       system.active, rank_rtol)  # fmt: skip
                 pf = system.point(t_new, qf, vf)
+                P1_step = pf.power
                 dense_star = partial(_fixed_step_dense, y_start, f_start, np.concatenate((qf, vf)),
                                      np.concatenate((vf, pf.qdd)), t_start, h)  # fmt: skip
                 ys = dense_star(t1)
                 res = res._replace(state=StepperState(t1, ys, None, res.state.h))
                 h, t_new = t1 - t_start, t1
 
-            def at(s: float, _y: FloatArray = y_start, _f: Any = f_start, _t: float = t_start) -> _Point:
-                """Projected state after a partial step of size s from the step start."""
+            def at(s: float, _y: FloatArray = y_start, _f: Any = f_start, _t: float = t_start,
+                   _fp: float | None = fp_start) -> _Point:  # fmt: skip
+                """Projected state after a partial step of size s from the step start (W there:
+                the partial step's own quadrature)."""
                 if s <= 0.0:
-                    yy = _y
+                    yy, dw = _y, 0.0
                 else:
+                    mark = len(system.powers)
                     yy = integ.advance(system.rhs, _t, _y, _f, s)
+                    dw = _step_work(integ, system.powers[mark:], _fp if _f is not None else None, s)
                 qq, vv = stab.project(model, _t + s, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
-                return system.point(_t + s, qq, vv)
+                return system.point(_t + s, qq, vv)._replace(work=rec.quad.W + dw)
 
             if dense_star is None:
                 q1, qd1 = stab.project(model, t_new, res.state.y[:n].copy(), res.state.y[n:].copy(),
@@ -1043,6 +1135,9 @@ def simulate(
             # the full evaluation at the step end is needed for guards, recording, or the
             # continuous extension of a fixed-step method (then it is also the next step's F)
             p1 = system.point(t_new, q1, qd1) if (watches or t_out is None or inside) else None
+            if p1 is not None and dense_star is None:
+                P1_step = p1.power
+            rec.quad.set_step(t_start, h_work, dW_step, P0_step, P1_step)
             if inside:
                 assert p1 is not None and f_start is not None
                 dense = partial(_fixed_step_dense, y_start, f_start, np.concatenate((q1, qd1)),
@@ -1058,7 +1153,10 @@ def simulate(
                     return _p if _p is not None else system.point(_tn, _q, _v)
                 if _d is None:
                     return at(s)
+                mark = len(system.powers)
                 yy = _d(_t + s)
+                if len(system.powers) > mark:  # DOP853's extension: F(t + h, y1) first
+                    rec.quad.end_power(system.powers[mark])
                 qq, vv = stab.project_sample(model, _t + s, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
                 return system.point(_t + s, qq, vv)
 
@@ -1111,6 +1209,7 @@ def simulate(
                 _sample_t_eval(rec, t_out, out_i, t_start, te, out_at, system)
                 out_i = _advance_out(t_out, out_i, te)
                 rec.add(pe, system.active)
+                rec.quad.commit(pe.work if np.isfinite(pe.work) else rec.quad.at(te))  # (W continuous)
                 terminal = False
                 h_cap = 0.0
                 label = ""
@@ -1176,6 +1275,7 @@ def simulate(
             out_i = _advance_out(t_out, out_i, t_new + end_tol)
             if t_out is None and p1 is not None:
                 rec.add(p1, system.active)
+            rec.quad.commit(rec.quad.at(t_new))
             t = t_new
             gvals = new_g
             if passages is not None:
@@ -1183,9 +1283,11 @@ def simulate(
                                  model.constraint_terms(t, q1, qd1, system.active).A)  # fmt: skip
             changed = not (np.array_equal(q1, res.state.y[:n]) and np.array_equal(qd1, res.state.y[n:]))
             f_next = None if changed else res.state.f
+            f_pow = P1_step if f_next is not None else float("nan")  # (FSAL: the last stage's)
             if f_next is None and p1 is not None and controller is None:
                 # the full evaluation at the (projected) step end is F(t, y) of the next step
                 f_next = np.concatenate((qd1, p1.qdd))
+                f_pow = p1.power
             state = StepperState(t, np.concatenate((q1, qd1)), f_next, res.state.h)
             if controller is not None and hasattr(controller, "update"):
                 system.cstate = _durable.user_call("controller.update", t, controller.update, t, q1, qd1,
@@ -1687,7 +1789,7 @@ def _friction_run(
             run_kw["program"], opts=opts, active_mask=run_kw["active_mask"], t_out=run_kw["t_out"], sink=sink,
             progress=_Quiet(), controller=ccb, compiled=creg, guards=g0, contact=run_kw["contact"],
             resume=(er.t, er.y, min(er.h, s) if h_fixed is None else h_fixed, er.steps, er.out_i),
-            friction=_friction.engine_contacts(system.model, slip), work0=er.friction_work,
+            friction=_friction.engine_contacts(system.model, slip), work0=er.friction_work, ctrl_work0=er.work,
         )  # fmt: skip
     finally:
         opts.t1 = t1

@@ -46,8 +46,9 @@ _ARRAYS = (
 )
 
 #: The energy bookkeeping the simulation records besides ``energy`` (shape (N,), J): saved with
-#: the other arrays, optional on load (files written before them get zeros).
-_BALANCE = ("friction_work", "impact_loss")
+#: the other arrays, optional on load (files written before them get zeros; ``work``: NaN, the
+#: marker of "not recorded", with which :func:`nonmin.viz.energy_balance` computes W itself).
+_BALANCE = ("friction_work", "impact_loss", "work")
 
 
 class Status(enum.Enum):
@@ -99,6 +100,14 @@ class Trajectory:
         ``Reset``, ``E⁻ − E⁺``. It steps at the event's second sample (the one after it).
         With W the work of applied forces, ``E − E₀ − W − friction_work + impact_loss`` is the
         integration drift (:func:`nonmin.viz.energy_balance`).
+    work : ndarray, shape (N,)
+        W, the work of controllers, actuators, dampers and the constraint forces of driven
+        (rheonomic) constraints from the start (J): ``∫ q̇ᵀ(B u + f_passive + f_c) dt``, integrated
+        by the integrator itself as a quadrature state, its stage powers combined with the
+        method's own weights (no evaluation of its own), so that ``E − E₀ − W − friction_work +
+        impact_loss`` converges at the method's order (samples inside a step read the cubic
+        Hermite interpolant of W; samples from a partial step its own quadrature). NaN where not
+        recorded (files written before it, batch runs, steps of a custom integrator).
     constraint_names, coordinate_names, actuator_names : tuple of str
     events : tuple of EventRecord
     status : Status
@@ -138,12 +147,13 @@ class Trajectory:
     reactions: dict[str, Any] = field(default_factory=dict)
     friction_work: FloatArray | None = None
     impact_loss: FloatArray | None = None
+    work: FloatArray | None = None
 
     def __post_init__(self) -> None:
         N = int(np.shape(self.t)[0]) if np.ndim(self.t) else 0
-        for name in _BALANCE:  # not recorded (a batch run, an old file): zeros
+        for name in _BALANCE:  # not recorded (a batch run, an old file): zeros (work: NaN)
             if getattr(self, name) is None:
-                object.__setattr__(self, name, np.zeros(N))
+                object.__setattr__(self, name, np.full(N, np.nan) if name == "work" else np.zeros(N))
         for name in (*_ARRAYS, *_BALANCE):
             arr = getattr(self, name)
             if isinstance(arr, np.ndarray):

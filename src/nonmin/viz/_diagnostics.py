@@ -83,10 +83,13 @@ class EnergyBalance(NamedTuple):
     energy : ndarray
         ``E = T + V`` at each sample.
     work : ndarray
-        ``W(t) = ∫ q̇ᵀ (B u + f_passive + f_c) dt`` from t₀ (Simpson's rule on the samples):
-        the work of actuators/controllers, dampers and of the constraint forces of rheonomic
-        (driven) constraints; scleronomic constraints do no work (``A q̇ = 0``). Zero when no
-        model was given (``known`` is then False).
+        ``W(t) = ∫ q̇ᵀ (B u + f_passive + f_c) dt`` from t₀: the work of actuators/controllers,
+        dampers and of the constraint forces of rheonomic (driven) constraints; scleronomic
+        constraints do no work (``A q̇ = 0``). The trajectory's ``work`` when the simulation
+        recorded it (integrated with the method's own stage weights: the balance is then the
+        integration error alone); else Simpson's rule on the samples' power (a trajectory
+        without it: an old file, a batch run), zero when no model was given either (``known``
+        is then False).
     balance : ndarray
         ``E − E₀ − W − friction + impacts``: the integration error (drift) alone. For a
         conservative system without contacts W = 0 and this is ``E − E₀``.
@@ -112,8 +115,9 @@ def energy_balance(traj: Any, model: Any | None = None) -> EnergyBalance | None:
     """The energy balance ``E − E₀ − W − W_fr + L_imp`` of a trajectory (see
     :class:`EnergyBalance`).
 
-    ``W_fr`` and ``L_imp`` are read from the trajectory (``friction_work``, ``impact_loss``:
-    the simulation records them, viz does not recompute the dynamics); W is computed here.
+    ``W``, ``W_fr`` and ``L_imp`` are read from the trajectory (``work``, ``friction_work``,
+    ``impact_loss``: the simulation records them, viz does not recompute the dynamics); W is
+    computed here only for a trajectory that did not record it (``work`` NaN).
 
     Parameters
     ----------
@@ -133,6 +137,10 @@ def energy_balance(traj: Any, model: Any | None = None) -> EnergyBalance | None:
     e = np.asarray(e, dtype=float)
     t = np.asarray(traj.t, dtype=float)
     fr, imp = (_recorded(traj, name, e) for name in ("friction_work", "impact_loss"))
+    w = getattr(traj, "work", None)
+    if w is not None and np.shape(w) == e.shape and e.size and bool(np.all(np.isfinite(w))):
+        w = np.asarray(w, dtype=float)
+        return EnergyBalance(e, w, e - e[0] - w - fr + imp, True, fr, imp)
     if model is None:
         return EnergyBalance(e, np.zeros_like(e), e - e[0] - fr + imp, False, fr, imp)
     qd = np.asarray(traj.qd, dtype=float)

@@ -191,6 +191,7 @@ struct Samples {
     int n = 0, k = 0, c = 0;
     std::vector<double> t, q, qd, qdd, f_c, u, cond, mu, energy, phi_norm, vel_norm;
     std::vector<double> fr_work;  // cumulative work of the friction forces (J; sim_friction.cpp)
+    std::vector<double> work;     // cumulative work of controllers and applied forces (J; work_at)
     std::vector<std::int64_t> rank;
     std::vector<std::uint8_t> active;
     std::size_t size() const { return t.size(); }
@@ -217,6 +218,8 @@ struct Point {
     int rank = 0;
     double mu = 0.0, cond = 1.0, energy = 0.0, phi_norm = 0.0, vel_norm = 0.0;
     double fr_power = 0.0;  // power of the slipping contacts' friction forces, Σ F e·v_t (W)
+    double power = 0.0;     // power of controllers and applied forces, q̇ᵀ(B u + f_passive + f_c) (W)
+    double work = std::numeric_limits<double>::quiet_NaN();  // W here when a partial step gave it exactly
 };
 
 // One transition applied by the engine's event layer (the fields of nonmin.sim.EventRecord).
@@ -348,6 +351,18 @@ struct Loop {
     Vec fw_f0, fw_f1, fw_ym;
     Point fw_p;
 
+    // the work of controllers and applied forces, W = ∫ q̇ᵀ(B u + f_passive + f_c) dt, as a
+    // quadrature state of the integrator (no evaluation of its own): every rhs() leaves its power
+    // in wk_P (q̇ᵀ(M q̈ − h), the friction forces' power taken out), each method combines its
+    // stage powers with its own weights b into wk_dW (the increment of its last advance over
+    // [t, t + h]); wk_f is the power of L.f, wk_K the stages' (dopri5: 7, dop853: 13). wk: W at
+    // (L.t, L.y); the step being recorded: W0 at t0, W1 at t0 + h, the powers P0, P1 there
+    // (samples inside it read the cubic Hermite interpolant; work_at)
+    double wk_P = 0.0, wk_f = 0.0, wk_dW = 0.0, wk = 0.0;
+    double wk_K[16] = {};
+    bool wk_on = false;
+    double wk_t0 = 0.0, wk_h = 0.0, wk_W0 = 0.0, wk_W1 = 0.0, wk_P0 = 0.0, wk_P1 = 0.0;
+
     // the engine's event layer (sim/events.hpp, sim_events.cpp): what the last transition did
     std::vector<EventInfo> events;
     std::shared_ptr<struct EventScratch> evs;
@@ -381,6 +396,10 @@ Outcome run(Loop& L, long long max_steps);
 // The pieces, exposed for tests and for the event layer.
 Status evaluate(Loop& L, double t, const double* q, const double* qd, unsigned need);
 double drift_rank_rtol(Loop& L);
+// W (the work of controllers and applied forces) at time t of the step being recorded
+double work_at(const Loop& L, double t);
+// the power q̇ᵀ(M q̈ − h) − (friction power) of the evaluation just made (L.T at (t, q, q̇))
+double work_power(const Loop& L, const double* qd, const double* qdd);
 Status rhs(Loop& L, double t, const double* y, double* out);
 Status point(Loop& L, double t, const double* q, const double* qd, Point& p, bool diagnostics);
 Status project(Loop& L, double t, double* y, const ProjectionOptions& po);
