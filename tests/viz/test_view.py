@@ -78,6 +78,27 @@ def test_grasp_scene_has_every_body_and_plays(grasp):
         v.stop()
 
 
+def test_playback_plays_at_its_speed():
+    """Play advances the shown frame with the wall clock times ``speed``: at speed 0.01 the
+    slider block stays at its first sample for 0.6 s of playing, at speed 1 it moves (issue 23:
+    play, scrub, speed)."""
+    from nonmin import library
+
+    mech = library.get("slider_crank")
+    traj = nonmin.simulate(mech, (0.0, 1.0), dt=1e-2, progress=False)
+    pos = {}
+    for speed in (0.01, 1.0):
+        v = view(traj, mech.model, port=0, open_browser=False, autoplay=True, speed=speed)
+        try:
+            block = v.node("/sliders/slider")
+            p0 = np.array(block.position, dtype=float)
+            time.sleep(0.6)
+            pos[speed] = float(np.linalg.norm(np.array(block.position, dtype=float) - p0))
+        finally:
+            v.stop()
+    assert pos[0.01] == 0.0 and pos[1.0] > 1e-3, pos
+
+
 def test_model_alone_and_planar_model():
     from nonmin import library
 
