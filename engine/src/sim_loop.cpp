@@ -130,6 +130,8 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
     L.ctrl = ctrl;
     L.opt = opt;
     L.ws = prog.make_workspace();
+    for (const ConstraintInfo& c : prog.constraints())
+        if (c.kind == ConstraintKind::rheonomic || c.kind == ConstraintKind::nonholonomic) L.wk_fc = true;
     L.T = prog.make_terms();
     L.n = n;
     L.k = prog.k();
@@ -336,11 +338,19 @@ Status rhs(Loop& L, double t, const double* y, double* out) {
     return Status::ok;
 }
 
-// q̇ᵀ(B u + f_passive + f_c) = q̇ᵀ(M q̈ − h) (M q̈ = h + f_passive + B u + f_c), less the
-// friction forces' power (their work is W_fr, recorded apart); O(n²), no evaluation
+// q̇ᵀ(B u + f_passive) = q̇ᵀ(g − h) (L.g of the evaluation just made); with rheonomic (or
+// nonholonomic) constraints, whose forces work, q̇ᵀ(B u + f_passive + f_c) = q̇ᵀ(M q̈ − h)
+// (M q̈ = h + f_passive + B u + f_c) less the friction forces' power (their work is W_fr,
+// recorded apart). Scleronomic constraint forces do no work on the manifold (A q̇ = 0): their
+// power at a stage state off it (O(h²) there) is the integrator's error, not work, and is left
+// to the drift. O(n) or O(n²), no evaluation.
 double work_power(const Loop& L, const double* qd, const double* qdd) {
     const int n = L.n;
     double p = 0.0;
+    if (!L.wk_fc) {
+        for (int i = 0; i < n; ++i) p += qd[i] * (L.g[i] - L.T.h[i]);
+        return p;
+    }
     for (int i = 0; i < n; ++i) {
         double mi = -L.T.h[i];
         for (int j = 0; j < n; ++j) mi += L.T.M(i, j) * qdd[j];

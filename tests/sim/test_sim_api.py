@@ -106,7 +106,7 @@ def test_to_csv_and_outputs(tmp_path) -> None:  # type: ignore[no-untyped-def]
     p = tmp_path / "pend.csv"
     tr.to_csv(p)
     data = np.loadtxt(p, delimiter=",", skiprows=1)
-    assert data.shape == (len(tr), 1 + 4 * 2 + 6 + 2 + 1)  # (+ friction_work, impact_loss)
+    assert data.shape == (len(tr), 1 + 4 * 2 + 6 + 3 + 1)  # (+ friction_work, impact_loss, work)
     assert np.array_equal(data[:, 0], tr.t)
     header = p.read_text().splitlines()[0].split(",")
     assert header[0] == "t" and "q_x" in header and "active_rod" in header

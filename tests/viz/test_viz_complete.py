@@ -65,8 +65,14 @@ def test_energy_balance_separates_work_from_drift(arm_wall):
     b = energy_balance(tr, mech.model)
     assert np.max(np.abs(b.work)) < 1e-12
     assert np.allclose(b.balance, tr.energy - tr.energy[0], atol=1e-12)
-    # without the model, the panel says W is unknown
-    assert energy_balance(tr).known is False
+    # the simulation recorded W (Trajectory.work): known without the model too; a trajectory
+    # without it (NaN: an old file, a batch run) and no model: the panel says W is unknown
+    assert energy_balance(tr).known is True
+    from dataclasses import replace
+
+    old = replace(tr, work=np.full(len(tr), np.nan))
+    assert energy_balance(old).known is False
+    assert np.allclose(energy_balance(old, mech.model).work, tr.work, atol=1e-12)
 
 
 def test_plot_units_legends_integer_rank_and_balance(arm_wall):

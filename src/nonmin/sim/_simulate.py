@@ -245,6 +245,11 @@ class _System:
     unilateral: tuple[str, ...] = ()
     #: the powers of W at the right-hand-side evaluations of the step being taken (rhs)
     powers: list[float] = field(default_factory=list)
+    #: a rheonomic or nonholonomic constraint: the constraint forces work (_power)
+    working_constraints: bool = False
+
+    def __post_init__(self) -> None:
+        self.working_constraints = any(c.kind in ("rheonomic", "nonholonomic") for c in self.model.constraints)
 
     def rtol_at(self, ct: ConstraintTerms) -> float:
         """Rank tolerance at a (possibly off-manifold) state: see :func:`drift_rank_rtol`."""
@@ -271,10 +276,19 @@ class _System:
         qdd = forward_dynamics(terms.M, g, ct.A, self.stab.bias(ct), rtol=self.rtol_at(ct))
         if not np.all(np.isfinite(qdd)):
             raise SimulationError(f"non-finite acceleration at t = {t:.12g}")
-        # the power of W, q̇ᵀ(B u + f_passive + f_c) = q̇ᵀ(M q̈ − h): the work's quadrature
-        # (_step_work) combines the powers of a step's evaluations with the method's weights
-        self.powers.append(float(qd @ (terms.M @ qdd - terms.h)))
+        # the power of W (_power): the work's quadrature (_step_work) combines the powers of a
+        # step's evaluations with the method's weights
+        self.powers.append(self._power(terms, g, qd, qdd))
         return np.concatenate((qd, qdd))
+
+    def _power(self, terms: Any, g: FloatArray, qd: FloatArray, qdd: FloatArray) -> float:
+        """``q̇ᵀ(B u + f_passive) = q̇ᵀ(g − h)``; with rheonomic (or nonholonomic) constraints,
+        whose forces work, ``q̇ᵀ(B u + f_passive + f_c) = q̇ᵀ(M q̈ − h)`` (the engine's
+        work_power: scleronomic constraint forces do no work on the manifold, their power at a
+        stage state off it is the integrator's error, left to the drift)."""
+        if self.working_constraints:
+            return float(qd @ (terms.M @ qdd - terms.h))
+        return float(qd @ (g - terms.h))
 
     def point(self, t: float, q: FloatArray, qd: FloatArray) -> _Point:
         """Everything recorded at a sample (one more model evaluation)."""
@@ -292,7 +306,7 @@ class _System:
             lam = np.zeros(0)
         energy = 0.5 * float(qd @ terms.M @ qd) + self.model.potential_energy(q)
         return _Point(t, q, qd, qdd, f_c, u, int(sol.rank), mu, L, lam, ct.A, ct.gamma,
-                      ct.phi, ct.velocity, ct.holonomic, energy, float(qd @ (terms.M @ qdd - terms.h)))
+                      ct.phi, ct.velocity, ct.holonomic, energy, self._power(terms, g, qd, qdd))
 
     def free_gap_acceleration(self, t: float, q: FloatArray, qd: FloatArray, name: str) -> float:
         """Acceleration of constraint ``name``'s gap if it were inactive."""

@@ -353,12 +353,13 @@ struct Loop {
 
     // the work of controllers and applied forces, W = ∫ q̇ᵀ(B u + f_passive + f_c) dt, as a
     // quadrature state of the integrator (no evaluation of its own): every rhs() leaves its power
-    // in wk_P (q̇ᵀ(M q̈ − h), the friction forces' power taken out), each method combines its
+    // in wk_P (work_power), each method combines its
     // stage powers with its own weights b into wk_dW (the increment of its last advance over
     // [t, t + h]); wk_f is the power of L.f, wk_K the stages' (dopri5: 7, dop853: 13). wk: W at
     // (L.t, L.y); the step being recorded: W0 at t0, W1 at t0 + h, the powers P0, P1 there
     // (samples inside it read the cubic Hermite interpolant; work_at)
     double wk_P = 0.0, wk_f = 0.0, wk_dW = 0.0, wk = 0.0;
+    bool wk_fc = false;  // the constraint forces work (a rheonomic or nonholonomic constraint)
     double wk_K[16] = {};
     bool wk_on = false;
     double wk_t0 = 0.0, wk_h = 0.0, wk_W0 = 0.0, wk_W1 = 0.0, wk_P0 = 0.0, wk_P1 = 0.0;
