@@ -127,7 +127,7 @@ def _view(*args, **kw):
 
 
 @pytest.mark.parametrize("name", ["slider_crank", "arm2r_wall", "dual_arm_grasp", "five_bar",
-                                  "A01_pendulum", "A02_n_four_bar", "crossed_four_bar"])
+                                  "A01_pendulum", "A02_n_four_bar", "crossed_four_bar", "foot_friction"])
 def test_planar_models_show_every_element_of_their_2d_drawing(name):
     """Each element the 2-D drawing has (ground pins, walls, guides, slider blocks, point
     masses) is a node of the 3-D scene; the bars and joints are drawn."""

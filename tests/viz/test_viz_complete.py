@@ -124,6 +124,7 @@ def test_legend_of_the_15_coordinate_n_four_bar():
     ("slider_crank", {"block", "guide", "pin", "bar"}),
     ("A01_pendulum", {"mass", "rod"}),
     ("A02_n_four_bar", {"pin", "bar", "joint"}),
+    ("foot_friction", {"wall", "bar", "joint"}),  # its floor contacts (heel, toe) are walls
 ])
 def test_every_element_has_a_drawing(name, kinds):
     mech = library.get(name)
