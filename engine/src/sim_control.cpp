@@ -31,6 +31,34 @@ double norm2(const double* x, int len) {
     return std::sqrt(s);
 }
 
+// x = (DA)⁺ D b from the certified LQ of D A held in lq (d: D's diagonal, m ≤ n live rows): the
+// same operations, in the same order, as Solver::min_norm on that A when it takes the certified
+// LQ (its null-space form when n − m ≤ m, else the rows V of the orthogonal factor), so the same
+// bits, without factorizing A again. cv: m entries of scratch; V: m × n (used when n − m > m).
+void held_min_norm(const linalg::LQWork& lq, const double* d, int m, int n, const double* b, double* cv, double* V,
+                   double* x) {
+    const int ld = lq.m_max;
+    for (int i = 0; i < m; ++i) {  // cv = L⁻¹ D b (lq_certified's)
+        const double* Ri = lq.Li.data() + static_cast<long>(i) * ld;
+        double s = 0.0;
+        for (int k = 0; k <= i; ++k) s += Ri[k] * (d[k] * b[k]);
+        cv[i] = s;
+    }
+    if (n - m <= m) {
+        linalg::lq_min_norm(lq, m, n, cv, x);  // (−x)
+        for (int j = 0; j < n; ++j) x[j] = -x[j];
+        return;
+    }
+    linalg::lq_rows(lq, m, n, 0, m, V);
+    for (int j = 0; j < n; ++j) x[j] = 0.0;
+    for (int k = 0; k < m; ++k) {
+        const double ck = cv[k];
+        const double* Vk = V + static_cast<long>(k) * n;
+        for (int j = 0; j < n; ++j) x[j] -= Vk[j] * ck;
+    }
+    for (int j = 0; j < n; ++j) x[j] = -x[j];
+}
+
 }  // namespace
 
 // ------------------------------------------------------------------------------ signals
@@ -123,6 +151,10 @@ Projected::Projected(const Program& prog, ControlSpec spec)
         *v = Vec::Zero(n);
     for (Memo& mm : memo_) mm.q = mm.v = mm.a = Vec::Zero(n);
     Z_ = Mat::Zero(n, n);
+    ZMs_ = Mat::Zero(n, n);
+    Ss_ = Mat::Zero(n, n);
+    xs_ = Vec::Zero(n);
+    ys_ = Vec::Zero(n);
     uraw_ = Vec::Zero(k);
     us_ = Vec::Zero(k);
     zf_ = Vec::Zero(n);
@@ -181,6 +213,12 @@ void Projected::attach(const Terms& T, const Mat& A, int m, const std::vector<in
     sq_.assign(static_cast<std::size_t>(mr), 0.0);
     cq_.assign(static_cast<std::size_t>(mr) + 1, 0.0);
     lq_ = linalg::LQWork(mr, n);
+    lqr_ = linalg::LQWork(mr, n);
+    Br_.assign(static_cast<std::size_t>(mr) * (n + 1), 0.0);
+    dqr_.assign(static_cast<std::size_t>(mr), 0.0);
+    sqr_.assign(static_cast<std::size_t>(mr), 0.0);
+    cqr_.assign(static_cast<std::size_t>(mr) + 1, 0.0);
+    Vh_.assign(static_cast<std::size_t>(mr) * n, 0.0);
     hv_ = Vec::Zero(std::max(n, k) + 1);
     Ar_ = Mat::Zero(std::max(std::max(mp, m), 1), n);
     br_ = Vec::Zero(std::max(std::max(mp, m), 1));
@@ -439,6 +477,15 @@ Status Projected::desired(double t, const double* q) {
     const int n = n_;
     const bool tracker = s_.law == Law::computed_torque;
     Status s;
+    if (tracker && s_.qblocks.empty()) {  // (no sign to decide: the reference's values are not needed)
+        for (const Memo& mm : memo_)
+            if (mm.t == t && mm.signs == 0) {
+                qs_ = mm.q;
+                vs_ = mm.v;
+                as_ = mm.a;
+                return Status::ok;
+            }
+    }
     if (tracker) {
         if ((s = s_.reference->eval(t, qs_.data(), vs_.data(), as_.data())) != Status::ok) return s;
     } else {
@@ -473,25 +520,34 @@ Status Projected::desired(double t, const double* q) {
         if ((s = prog_->evaluate(t, qs_.data(), vs_.data(), mask_.data(), NEED_A | NEED_VELOCITY, Tr_, *ws_)) !=
             Status::ok)
             return s;
-        for (int i = 0; i < m_; ++i) {
+        const int m = m_;
+        for (int i = 0; i < m; ++i) {
             const int r = rows_[static_cast<std::size_t>(i)];
             Ar_.row(i) = Tr_.A.row(r);
             br_[i] = Tr_.velocity[r];
         }
-        if ((s = min_norm_true(Ar_, m_, br_.data(), xr_.data())) != Status::ok) return s;
+        // both projections solve with A(q*): one certified LQ of D A(q*) for the two (the bits of
+        // Solver::min_norm, which min_norm_true takes at full rank), else min_norm_true each
+        const int live = linalg::equilibrate(Ar_.data(), m, n, nullptr, rtol_, Br_.data(), dqr_.data(), sqr_.data());
+        const bool held = live == m && m >= linalg::QR_MIN_ROWS && m <= n && m <= linalg::DENSE_INVERSE_MAX_ROWS &&
+                          linalg::lq_certified(Br_.data(), m, n, rtol_, lqr_, cqr_.data()) != linalg::LQ_NONE;
+        auto solve = [&](const double* b) -> Status {
+            if (!held) return min_norm_true(Ar_, m, b, xr_.data());
+            if (!finite(b, m)) return Status::not_finite;
+            held_min_norm(lqr_, dqr_.data(), m, n, b, cqr_.data(), Vh_.data(), xr_.data());
+            return Status::ok;
+        };
+        if ((s = solve(br_.data())) != Status::ok) return s;
         for (int j = 0; j < n; ++j) vs_[j] -= xr_[j];
-        // project_acceleration: q̈* − A⁺(A q̈* + γ) at (q*, q̇*)
-        if ((s = prog_->evaluate(t, qs_.data(), vs_.data(), mask_.data(), NEED_A | NEED_GAMMA, Tr_, *ws_)) !=
-            Status::ok)
+        // project_acceleration: q̈* − A⁺(A q̈* + γ) at (q*, q̇*) (A(q*) as above)
+        if ((s = prog_->evaluate(t, qs_.data(), vs_.data(), mask_.data(), NEED_GAMMA, Tr_, *ws_)) != Status::ok)
             return s;
-        for (int i = 0; i < m_; ++i) {
-            const int r = rows_[static_cast<std::size_t>(i)];
-            Ar_.row(i) = Tr_.A.row(r);
-            double a = Tr_.gamma[r];
-            for (int j = 0; j < n; ++j) a += Tr_.A(r, j) * as_[j];
+        for (int i = 0; i < m; ++i) {
+            double a = Tr_.gamma[rows_[static_cast<std::size_t>(i)]];
+            for (int j = 0; j < n; ++j) a += Ar_(i, j) * as_[j];
             br_[i] = a;
         }
-        if ((s = min_norm_true(Ar_, m_, br_.data(), xr_.data())) != Status::ok) return s;
+        if ((s = solve(br_.data())) != Status::ok) return s;
         for (int j = 0; j < n; ++j) as_[j] -= xr_[j];
     }
     Memo& mm = memo_[static_cast<std::size_t>(memo_next_)];
@@ -547,8 +603,13 @@ Status Projected::law(double t, const double* q, const double* qd, const Terms& 
         }
         if (m > 0) {
             for (int i = 0; i < m; ++i) br_[i] = T.gamma[rows_[static_cast<std::size_t>(i)]];
-            const SolveInfo info = solver_.min_norm(A.data(), m, br_.data(), rtol_, w_.data());
-            if (info.status != Status::ok) return info.status;
+            if (lq_valid_) {  // step 1's certified LQ of D A: Solver::min_norm's bits, no new factorization
+                if (!finite(br_.data(), m)) return Status::not_finite;
+                held_min_norm(lq_, dq_.data(), m, n, br_.data(), cq_.data(), Vh_.data(), w_.data());
+            } else {
+                const SolveInfo info = solver_.min_norm(A.data(), m, br_.data(), rtol_, w_.data());
+                if (info.status != Status::ok) return info.status;
+            }
             for (int j = 0; j < n; ++j) w_[j] = -w_[j];
         } else {
             w_.setZero();
@@ -692,6 +753,89 @@ Status Projected::actuate(const Terms& T) {
     return Status::ok;
 }
 
+// c₀ (f_c of solve_dynamics(M, g, A, γ)) and sf_ = f_∥ − M M̄⁻¹ P f_∥ in the null-space form,
+// from step 1's certified LQ of D A (lq_valid_): w = −(DA)⁺Dγ by held_min_norm, S = Z M Zᵀ
+// (d × d, Z_ the same rows as the solver's basis) and its Cholesky factor; q̈ = w + Zᵀ S⁻¹ Z(g − M w),
+// c₀ = M q̈ − g (Solver's null-space form), and M̄⁻¹ P f_∥ = Zᵀ S⁻¹ Z f_∥ (M̄ = μVᵀV + ZᵀSZ). Equal
+// to the solver's values to round-off, without its second factorization of A nor M̄'s n × n
+// factor. False (nothing decided) when step 1 has no certified LQ, an input is not finite or S
+// is not numerically positive definite: then the solver decides (and reports).
+bool Projected::force_terms_null(const Terms& T, const double* g, const double* gamma) {
+    const int n = n_, m = m_, d = n_ - rank_;
+    if (!lq_valid_ || !finite(g, n) || !finite(gamma, m)) return false;
+    held_min_norm(lq_, dq_.data(), m, n, gamma, cq_.data(), Vh_.data(), xs_.data());
+    for (int j = 0; j < n; ++j) xs_[j] = -xs_[j];  // w
+    double smax = 0.0;
+    for (int a = 0; a < d; ++a) {  // ZM = Z M, S = ZM Zᵀ (lower triangle)
+        for (int j = 0; j < n; ++j) ZMs_(a, j) = 0.0;
+        for (int i = 0; i < n; ++i) {
+            const double c = Z_(a, i);
+            for (int j = 0; j < n; ++j) ZMs_(a, j) += c * T.M(i, j);
+        }
+        for (int c = 0; c <= a; ++c) {
+            double s = 0.0;
+            for (int j = 0; j < n; ++j) s += ZMs_(a, j) * Z_(c, j);
+            Ss_(a, c) = s;
+        }
+        smax = std::max(smax, Ss_(a, a));
+    }
+    for (int j = 0; j < d; ++j) {  // Cholesky S = L Lᵀ in place (lower)
+        double p = Ss_(j, j);
+        for (int c = 0; c < j; ++c) p -= Ss_(j, c) * Ss_(j, c);
+        if (!(p > 1e-14 * smax)) return false;
+        const double l = std::sqrt(p);
+        Ss_(j, j) = l;
+        for (int i = j + 1; i < d; ++i) {
+            double s = Ss_(i, j);
+            for (int c = 0; c < j; ++c) s -= Ss_(i, c) * Ss_(j, c);
+            Ss_(i, j) = s / l;
+        }
+    }
+    // x ← Zᵀ S⁻¹ Z x (x: n entries; uses ys_)
+    auto null_solve = [&](double* x) {
+        for (int a = 0; a < d; ++a) {
+            double s = 0.0;
+            for (int i = 0; i < n; ++i) s += Z_(a, i) * x[i];
+            ys_[a] = s;
+        }
+        for (int a = 0; a < d; ++a) {
+            double s = ys_[a];
+            for (int c = 0; c < a; ++c) s -= Ss_(a, c) * ys_[c];
+            ys_[a] = s / Ss_(a, a);
+        }
+        for (int a = d - 1; a >= 0; --a) {
+            double s = ys_[a];
+            for (int c = a + 1; c < d; ++c) s -= Ss_(c, a) * ys_[c];
+            ys_[a] = s / Ss_(a, a);
+        }
+        for (int i = 0; i < n; ++i) {
+            double s = 0.0;
+            for (int a = 0; a < d; ++a) s += Z_(a, i) * ys_[a];
+            x[i] = s;
+        }
+    };
+    for (int i = 0; i < n; ++i) {  // q̈ = w + Zᵀ S⁻¹ Z (g − M w)
+        double s = g[i];
+        for (int j = 0; j < n; ++j) s -= T.M(i, j) * xs_[j];
+        qtmp_[i] = s;
+    }
+    null_solve(qtmp_.data());
+    for (int i = 0; i < n; ++i) qtmp_[i] += xs_[i];
+    for (int i = 0; i < n; ++i) {  // c₀ = M q̈ − g
+        double s = 0.0;
+        for (int j = 0; j < n; ++j) s += T.M(i, j) * qtmp_[j];
+        c0_[i] = s - g[i];
+    }
+    for (int i = 0; i < n; ++i) pf_[i] = fpar_[i];  // S f_∥ = f_∥ − M Zᵀ S⁻¹ Z f_∥
+    null_solve(pf_.data());
+    for (int i = 0; i < n; ++i) {
+        double a = fpar_[i];
+        for (int j = 0; j < n; ++j) a -= T.M(i, j) * pf_[j];
+        sf_[i] = a;
+    }
+    return true;
+}
+
 // ForceControl.actuation: [PB; EB] u = [f_∥; E(c₀ − S f_∥) − λ*] by SVD, minimum norm.
 Status Projected::actuate_force(double t, const Terms& T, const Mat& A) {
     const int n = n_, k = k_, m = m_, d = n_ - rank_;
@@ -707,32 +851,33 @@ Status Projected::actuate_force(double t, const Terms& T, const Mat& A) {
         }
         if (!finite(lam_.data(), mf)) return Status::not_finite;
     }
-    // c₀ = f_c of solve_dynamics(M, h + f_p, A, γ, rtol), with μ and M̄'s Cholesky factor
+    // c₀ = f_c of solve_dynamics(M, h + f_p, A, γ, rtol) and S f_∥ = f_∥ − M M̄⁻¹ P f_∥: from
+    // step 1's LQ in the null-space form when it holds (force_terms_null), else by the solver
+    // with μ and M̄'s Cholesky factor
     for (int i = 0; i < n; ++i) gtmp_[i] = T.h[i] + T.f_passive[i];
     for (int i = 0; i < m; ++i) br_[i] = T.gamma[rows_[static_cast<std::size_t>(i)]];
-    SolveOptions so;
-    so.rtol = rtol_;
-    const SolveInfo info =
-        solver_.solve(T.M.data(), gtmp_.data(), A.data(), m, br_.data(), so, qtmp_.data(), c0_.data(), nullptr,
-                      Mbar_L_.data());
-    if (info.status != Status::ok) return info.status;
-    // S f_∥ = f_∥ − M M̄⁻¹ P f_∥
-    project(fpar_.data(), pf_.data());
-    ensure_pb(T);
-    for (int i = 0; i < n; ++i) {  // L y = P f_∥
-        double a = pf_[i];
-        for (int j = 0; j < i; ++j) a -= Mbar_L_(i, j) * pf_[j];
-        pf_[i] = a / Mbar_L_(i, i);
-    }
-    for (int i = n - 1; i >= 0; --i) {  // Lᵀ x = y
-        double a = pf_[i];
-        for (int j = i + 1; j < n; ++j) a -= Mbar_L_(j, i) * pf_[j];
-        pf_[i] = a / Mbar_L_(i, i);
-    }
-    for (int i = 0; i < n; ++i) {
-        double a = fpar_[i];
-        for (int j = 0; j < n; ++j) a -= T.M(i, j) * pf_[j];
-        sf_[i] = a;
+    if (!force_terms_null(T, gtmp_.data(), br_.data())) {
+        SolveOptions so;
+        so.rtol = rtol_;
+        const SolveInfo info = solver_.solve(T.M.data(), gtmp_.data(), A.data(), m, br_.data(), so, qtmp_.data(),
+                                             c0_.data(), nullptr, Mbar_L_.data());
+        if (info.status != Status::ok) return info.status;
+        project(fpar_.data(), pf_.data());
+        for (int i = 0; i < n; ++i) {  // L y = P f_∥
+            double a = pf_[i];
+            for (int j = 0; j < i; ++j) a -= Mbar_L_(i, j) * pf_[j];
+            pf_[i] = a / Mbar_L_(i, i);
+        }
+        for (int i = n - 1; i >= 0; --i) {  // Lᵀ x = y
+            double a = pf_[i];
+            for (int j = i + 1; j < n; ++j) a -= Mbar_L_(j, i) * pf_[j];
+            pf_[i] = a / Mbar_L_(i, i);
+        }
+        for (int i = 0; i < n; ++i) {
+            double a = fpar_[i];
+            for (int j = 0; j < n; ++j) a -= T.M(i, j) * pf_[j];
+            sf_[i] = a;
+        }
     }
     // E: the commanded rows of (A⁺)ᵀ. With the certified LQ of step 1 (full row rank), A⁺ =
     // (DA)⁺D = Qᵀ L⁻¹ D: row f of E is d_f (L⁻¹ e_f)ᵀ Q; else A's own SVD truncated to the rank.
@@ -760,11 +905,8 @@ Status Projected::actuate_force(double t, const Terms& T, const Mat& A) {
             }
         }
     }
-    // G = [PB; EB], rhs = [f_∥; E(c₀ − S f_∥) − λ*]
-    for (int i = 0; i < n; ++i) {
-        for (int j = 0; j < k; ++j) Gf_(i, j) = PB_(i, j);
-        rhs_[i] = fpar_[i];
-    }
+    // G = [PB; EB], rhs = [f_∥; E(c₀ − S f_∥) − λ*] (PB, G's first n rows, for the SVD path only)
+    for (int i = 0; i < n; ++i) rhs_[i] = fpar_[i];
     for (int f = 0; f < mf; ++f) {
         double r = -lam_[f];
         for (int j = 0; j < n; ++j) r += E_(f, j) * (c0_[j] - sf_[j]);
@@ -808,6 +950,9 @@ Status Projected::actuate_force(double t, const Terms& T, const Mat& A) {
         }
     }
     ++svd_actuations;
+    ensure_pb(T);
+    for (int i = 0; i < n; ++i)
+        for (int j = 0; j < k; ++j) Gf_(i, j) = PB_(i, j);
     svd_g_.compute(Gf_);
     const auto& sv = svd_g_.singularValues();
     const auto& U = svd_g_.matrixU();

@@ -126,6 +126,7 @@ class Projected : public Controller {
     bool certified_min_norm(Mat& W, Mat& Lw, int rows, int k, const double* rhs, double fro, double bscale, double* y,
                             double* u);
     Status actuate_force(double t, const Terms& T, const Mat& A);
+    bool force_terms_null(const Terms& T, const double* g, const double* gamma);
     void record();
     double sigma_min_pb();
 
@@ -154,6 +155,8 @@ class Projected : public Controller {
     std::vector<double> Bq_, dq_, sq_, cq_;  // the certified LQ's input and scratch
     linalg::LQWork lq_;
     bool lq_valid_ = false;  // lq_ holds the certified LQ of D A of the last law evaluation
+    linalg::LQWork lqr_;  // the tracker's certified LQ of D A(q*) (velocity and acceleration projections)
+    std::vector<double> Br_, dqr_, sqr_, cqr_, Vh_;
     Mat V_, Z_, Hq_;  // V: r × n (P = I − VᵀV), Z: (n − r) × n (rows); Householder scratch
     Vec hv_, hw_;    // Householder scratch
     // step 2
@@ -177,6 +180,8 @@ class Projected : public Controller {
     // force control
     Mat Mbar_L_, E_, Gf_, Atrue_, Wf_, Lf_;
     Vec rhsf_, yf_;
+    Mat ZMs_, Ss_;  // Z M and S = Z M Zᵀ's Cholesky factor (force_terms_null)
+    Vec xs_, ys_;
     Vec c0_, qtmp_, gtmp_, rhs_, lam_, sf_, pf_;
     // the state of the last law evaluation
     double last_t_ = std::numeric_limits<double>::quiet_NaN();
