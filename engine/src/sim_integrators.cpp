@@ -212,10 +212,13 @@ void dp_dense(const Loop& L, double t0, double h, double tt, double* out) {
 // crossed four-bar, DOP853 rtol 1e-10: steps down to 2e-8 s, ends at σ ~ 2e-6, 1.9e-5 J kicks).
 // A step that would end inside ends at its near edge, or, from there, crosses the zone to its
 // far edge: `forced`, the error control then accepts it (it cannot be shrunk without ending
-// inside). Returns the step to attempt.
+// inside). Returns the step to attempt. DOPRI5 caps the half-width at PASSAGE_ZONE_STEP times
+// the step it entered with (d_cap): its forced step is then no longer than a step its error
+// control accepted (uncapped, A02 N = 40 at rtol 1e-8 crossed 2d ≫ h and failed at t = 4.4 s).
 constexpr double PASSAGE_ZONE_SIGMA = 1e-3;
+constexpr double PASSAGE_ZONE_STEP = 0.5;
 
-double passage_zone(const Loop& L, double t, double h, bool& forced) {
+double passage_zone(const Loop& L, double t, double h, bool& forced, double d_cap = inf) {
     forced = false;
     const Passages& P = L.pas;
     if (!L.opt.passages || !P.have_star || P.count < 2) return h;
@@ -223,7 +226,7 @@ double passage_zone(const Loop& L, double t, double h, bool& forced) {
     const double slope = (P.ss[c - 2] - P.ss[c - 1]) / (P.ts[c - 1] - P.ts[c - 2]);
     if (!(slope > 0.0) || !std::isfinite(slope)) return h;
     const double g = P.t_star - t;
-    const double d = PASSAGE_ZONE_SIGMA / slope;
+    const double d = std::min(PASSAGE_ZONE_SIGMA / slope, d_cap);
     if (!(g > 0.0)) return h;
     const double end = g - h;  // the step end's distance before t* (negative: after)
     if (end >= d || end <= -d) return h;  // ends outside the zone
@@ -254,9 +257,10 @@ Status dp_step(Loop& L, double& h_acc, double& t_new) {
     const double h_min = L.opt.h_min_factor * std::max(1.0, std::abs(t));
     const bool proj = L.opt.stab == Stabilization::projection;
     const double noise = passage_noise(L);
-    const bool forced = false;  // (the passage zone is DOP853's: with DOPRI5 it failed on A02 N = 40)
+    bool forced = false;
+    const double d_cap = PASSAGE_ZONE_STEP * h;
     while (true) {
-        h = clip(t, passage_place(L, t, h), t_bound);
+        h = clip(t, passage_zone(L, t, passage_place(L, t, h), forced, d_cap), t_bound);
         if (h < h_min) {
             L.message = "dopri5: step size underflow";
             return Status::not_finite;
@@ -585,16 +589,17 @@ constexpr double PASSAGE_BAND = 0.05;
 constexpr double PASSAGE_NOISE = 100.0;
 constexpr double PASSAGE_STAGE_K = 30.0;
 constexpr double PASSAGE_SIGMA = 2e-4;
-constexpr double PASSAGE_WIDEN_MAX = 64.0;
+constexpr double PASSAGE_WIDEN_MAX = 2.0;
+constexpr double PASSAGE_TREND = 1e-9;
 
 // _integrators.passage_time over the history ts, ss (count ≥ 2)
 bool passage_time(const Passages& P, double& out) {
     const int c = P.count;
-    if (c < 2 || !(P.ss[c - 1] < P.ss[c - 2])) return false;
+    if (c < 2 || !(P.ss[c - 1] < (1.0 - PASSAGE_TREND) * P.ss[c - 2])) return false;
     const double t0 = P.ts[c - 2], t1 = P.ts[c - 1], s0 = P.ss[c - 2], s1 = P.ss[c - 1];
     const double lin = t1 + s1 * (t1 - t0) / (s0 - s1);
     out = lin;
-    if (c < 3 || !(P.ss[c - 2] < P.ss[c - 3])) return true;
+    if (c < 3 || !(P.ss[c - 2] < (1.0 - PASSAGE_TREND) * P.ss[c - 3])) return true;
     const double ta = P.ts[c - 3], sa = P.ss[c - 3];
     const double d1 = (s0 - sa) / (t0 - ta);
     const double d2 = (s1 - s0) / (t1 - t0);

@@ -66,6 +66,9 @@ def test_passage_time_is_exact_for_a_linear_and_a_quadratic_sigma() -> None:
     assert passage_time(ts, [(1.0 - t) * (2.0 - t) for t in ts]) == pytest.approx(1.0, abs=1e-12)
     assert passage_time(ts[1:], [0.3, 0.4]) is None  # increasing: nothing ahead
     assert passage_time([0.1], [0.3]) is None
+    # a constant indicator that changes by round-off (A01: one row, σ = 1 ± eps) predicts nothing
+    eps = float(np.finfo(float).eps)
+    assert passage_time(ts, [1.0, 1.0 - eps, 1.0 - 3 * eps]) is None
 
 
 @pytest.mark.parametrize("fractions", [(0.25, 0.75), (0.45, 0.55, 0.65)])

@@ -179,6 +179,14 @@ PASSAGE_FLOOR = 1e-7
 #: next to the instant; too large: long forced steps), DOPRI5 3.9e-7 / 4.2e-7 J with 1e-4 / 1e-3.
 PASSAGE_ZONE_SIGMA = 1e-3
 
+#: :class:`DormandPrince5` uses the zone with its half-width capped at ``PASSAGE_ZONE_STEP``
+#: times the step it entered with: its forced crossing is then no longer than a step its error
+#: control accepted. Without the zone DOPRI5 walked into A02 N = 40's passage at t = 3.2096 s
+#: (rtol 1e-10: steps down to 1.4e-7 s, one kick of 1.2e-5 J, 10.3 s CPU over 20 s); with the
+#: uncapped zone its forced step crossed 2d ≫ h and failed (rtol 1e-8, t = 4.4 s). Capped at
+#: 0.5: 8.2e-7 J, 2.2 s CPU (A02 N = 2 rtol 1e-10: B0 5.8e-7 → 1.5e-8 m).
+PASSAGE_ZONE_STEP = 0.5
+
 #: Round-off of a projected state near a singular configuration, relative to ``eps·(1 + |y|)``
 #: and divided by the indicator σ (the projection's sensitivity: the tangent space turns by
 #: δq/σ): :class:`DormandPrince5` adds ``noise = PASSAGE_NOISE·eps/σ`` (× (1 + |y_i|)) to its
@@ -207,9 +215,21 @@ PASSAGE_STAGE_K = 30.0
 #: 5e-5 / 1e-4 / 2e-4). A longer passage step costs its samples (quintic Hermite over H) and
 #: its own truncation error: 2e-4 measured best of 1e-4, 2e-4, 5e-4 (A02 N = 2, 10 s, samples
 #: every 0.01 s, energy at dt 2.5e-4 / 1e-4 / 5e-5: 2.0e-11 / 7.3e-11 / 1.3e-10 J; 5e-4 gave
-#: 1.3e-9 J at a sample inside the passage step of 1.4e-3 s).
+#: 1.3e-9 J at a sample inside the passage step of 1.4e-3 s). The cap ``PASSAGE_WIDEN_MAX = 2``
+#: keeps H ∝ h, so the passage step's error falls with dt at the method's order: with 64 the
+#: step was H = PASSAGE_SIGMA/(¼|σ̇|) whatever dt, and on A02 N = 40 (20 s, samples every 0.1 s)
+#: its samples' energy stayed at 1.5e-5 J for dt 2e-3 and 1e-3; with 2: 2.2e-6 / 1.1e-7 J
+#: (targets 1 and 2 of issue 18 unchanged: A02 N = 2 ≤ 1.3e-10 J, crossed four-bar ≤ 2.2e-8 J).
 PASSAGE_SIGMA = 2e-4
-PASSAGE_WIDEN_MAX = 64.0
+PASSAGE_WIDEN_MAX = 2.0
+
+#: The indicator *decreases* (a passage is predicted) only when it falls by more than this
+#: fraction per step end: a constant σ_min that changes by round-off (A01, one row: σ = 1 ±
+#: eps) gave a quadratic root next to t and a passage zone of half-width 1e-3/(eps/h), whose
+#: forced step jumped DOP853 over the rest of the run (A01, 2000 s, rtol 1e-10,
+#: ``Projection(energy=True)``: one step from t = 1748.6 s to the end, energy 2.4e93 J,
+#: reported SUCCESS; after: 5.3e-15 J).
+PASSAGE_TREND = 1e-9
 
 
 def _passage_start(m: int) -> FloatArray:
@@ -354,7 +374,7 @@ class SingularPassages:
             return True
         return self.t_star is not None and t < self.t_star and self.t_star - t <= (1.0 + PASSAGE_BAND) * h
 
-    def zone(self, t: float, h: float) -> tuple[float, bool]:
+    def zone(self, t: float, h: float, d_cap: float = math.inf) -> tuple[float, bool]:
         """DOP853: the step to attempt so that no step ends within the zone
         ``|t − t*| < d`` of the predicted instant, ``d = PASSAGE_ZONE_SIGMA/|dσ/dt|``, and whether
         it is *forced* (it crosses the zone from its near edge: the error control accepts it,
@@ -363,14 +383,15 @@ class SingularPassages:
         the steps walks them into it (measured, crossed four-bar, DOP853 at rtol 1e-10: steps
         down to 2e-8 s, ends at σ ~ 2e-6, energy kicks of 1.9e-5 J). With DOPRI5 it helped A02
         N = 2 (B0 5.8e-7 → 1.5e-8 m at rtol 1e-10) but made A02 N = 40 fail (t = 4.54 s, rtol
-        1e-8), so DOPRI5 does not use it. The engine computes the same (``passage_zone``)."""
+        1e-8) when uncapped: DOPRI5 passes ``d_cap`` (:data:`PASSAGE_ZONE_STEP`). The engine
+        computes the same (``passage_zone``)."""
         if self.t_star is None or len(self._t) < 2:
             return h, False
         slope = (self._s[-2] - self._s[-1]) / (self._t[-1] - self._t[-2])
         g = self.t_star - t
         if not (slope > 0.0 and math.isfinite(slope)) or not g > 0.0:
             return h, False
-        d = PASSAGE_ZONE_SIGMA / slope
+        d = min(PASSAGE_ZONE_SIGMA / slope, d_cap)
         end = g - h
         if end >= d or end <= -d:
             return h, False
@@ -383,11 +404,11 @@ def passage_time(ts: list[float], ss: list[float]) -> float | None:
     """Extrapolated zero of ``σ_min(t)`` from its values at the last step ends (None unless
     it decreases over the last two): the root ahead of the quadratic through three
     decreasing values when it has one, else the linear extrapolation of the last two."""
-    if len(ts) < 2 or not ss[-1] < ss[-2]:
+    if len(ts) < 2 or not ss[-1] < (1.0 - PASSAGE_TREND) * ss[-2]:
         return None
     t0, t1, s0, s1 = ts[-2], ts[-1], ss[-2], ss[-1]
     lin = t1 + s1 * (t1 - t0) / (s0 - s1)
-    if len(ts) < 3 or not ss[-2] < ss[-3]:
+    if len(ts) < 3 or not ss[-2] < (1.0 - PASSAGE_TREND) * ss[-3]:
         return lin
     # Newton form of the quadratic through the three points, root nearest after t1
     ta, sa = ts[-3], ss[-3]
@@ -778,9 +799,14 @@ class DormandPrince5(Integrator):
         rejected = 0
         h_min = self.h_min_factor * max(1.0, abs(t))
         noise = float(getattr(place, "noise", 0.0))
-        forced = False  # (the passage zone is DOP853's: with DOPRI5 it failed on A02 N = 40)
+        zone = getattr(place, "zone", None)
+        forced = False
+        d_cap = PASSAGE_ZONE_STEP * h
         while True:
-            h = _clip(t, h if place is None else place(t, h), t_bound)
+            h = h if place is None else place(t, h)
+            if zone is not None:
+                h, forced = zone(t, h, d_cap)
+            h = _clip(t, h, t_bound)
             if h < h_min:
                 raise SimulationError(
                     f"dopri5: step size underflow at t = {t:.12g} (h = {h:.3g} < {h_min:.3g}); "
