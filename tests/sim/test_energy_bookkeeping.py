@@ -326,3 +326,40 @@ def test_work_across_impacts_pushed_bouncing_ball(method: str, engine: str) -> N
     bal = energy_balance(tr, m)
     assert bal is not None and np.max(np.abs(tr.impact_loss)) > 0.5
     assert np.max(np.abs(bal.balance)) < 1e-7
+
+
+def test_midpoint_work_of_a_halved_step_sums_its_sub_steps() -> None:
+    """The general driver's midpoint quadrature when ImplicitMidpoint halves a step (the
+    fixed-point iteration fails for the full step; max_iter = 2 forces it here): the work is
+    Σ width × power at each sub-step's converged middle, read back from the evaluations' times
+    (_midpoint_work) — against the sub-steps taken one by one."""
+    from nonmin.sim._integrators import ImplicitMidpoint
+    from nonmin.sim._simulate import _step_work
+
+    lam = 30.0
+    calls: list[tuple[float, float]] = []
+
+    def fun(t: float, y: np.ndarray) -> np.ndarray:
+        calls.append((t, float(y[0] ** 2 + t)))  # a "power" known at each evaluation
+        return np.array([-lam * y[0] + math.sin(t)])
+
+    integ = ImplicitMidpoint(dt=0.1, max_iter=6, xtol=1e-13)
+    t0, h, y0 = 0.2, 0.1, np.array([1.0])
+    y1 = integ.advance(fun, t0, y0, None, h)
+    got = _step_work(integ, [p for _, p in calls], None, h, times=[t for t, _ in calls], t0=t0)
+    # the same sub-steps one by one: each sub-step's last evaluation is its converged middle
+    subs: list[tuple[float, float]] = []
+
+    def walk(t: float, y: np.ndarray, hh: float, depth: int) -> np.ndarray:
+        calls.clear()
+        r = integ._solve(fun, t, y, None, hh)
+        if r is not None:
+            subs.append((hh, calls[-1][1]))
+            return r
+        ym = walk(t, y, 0.5 * hh, depth - 1)
+        return walk(t + 0.5 * hh, ym, 0.5 * hh, depth - 1)
+
+    y1b = walk(t0, y0, h, integ.max_halvings)
+    assert len(subs) > 1  # the step was halved
+    assert np.allclose(y1, y1b, rtol=0, atol=1e-14)
+    assert got == pytest.approx(sum(w * p for w, p in subs), rel=1e-14)

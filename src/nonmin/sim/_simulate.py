@@ -165,7 +165,32 @@ class _WorkQuadrature:
         self.step = None
 
 
-def _step_work(integ: Integrator, powers: list[float], f_pow: float | None, h: float, fsal: bool = False) -> float:
+def _midpoint_work(powers: list[float], times: list[float], t0: float, h: float) -> float:
+    """The implicit midpoint rule's work over [t0, t0 + h] taken as sub-steps when the step was
+    halved (ImplicitMidpoint._advance): walking back from the step end, the last evaluation
+    before the end of the part left is the converged one at the middle m of the last sub-step
+    [2m − end, end] (the calls at its start belong to it, the failed attempts come before its
+    halves); each sub-step adds its width times that power (the engine's midpoint_advance)."""
+    end = t0 + h
+    tol = 1e-12 * max(1.0, abs(t0), abs(h))
+    dw = 0.0
+    i = len(powers) - 1
+    while end > t0 + tol and i >= 0:
+        while i >= 0 and not (t0 + tol < times[i] < end - tol):
+            i -= 1
+        if i < 0:
+            return float("nan")
+        m = times[i]
+        dw += 2.0 * (end - m) * powers[i]
+        end = 2.0 * m - end
+        i -= 1
+    return dw
+
+
+def _step_work(
+    integ: Integrator, powers: list[float], f_pow: float | None, h: float, fsal: bool = False,
+    times: list[float] | None = None, t0: float | None = None,
+) -> float:  # fmt: skip
     """The work's increment over one step (or partial step) of ``integ``, from the powers of
     the right-hand-side evaluations it made (``powers``, in order; ``f_pow``: the power of the
     F it was given), combined with the method's own weights b (the engine's rk4_advance,
@@ -174,7 +199,9 @@ def _step_work(integ: Integrator, powers: list[float], f_pow: float | None, h: f
         P = ([f_pow, *powers[-3:]] if f_pow is not None else powers[-4:])
         return h / 6.0 * (((P[0] + 2.0 * P[1]) + 2.0 * P[2]) + P[3])
     if isinstance(integ, ImplicitMidpoint):
-        return h * powers[-1]
+        if times is None or t0 is None:
+            return h * powers[-1]
+        return _midpoint_work(powers, times, t0, h)
     if isinstance(integ, DormandPrince5):
         P0 = f_pow if f_pow is not None else powers[0]
         return h * float(_DP_B @ np.array([P0, *powers[-6:]]))
@@ -245,6 +272,7 @@ class _System:
     unilateral: tuple[str, ...] = ()
     #: the powers of W at the right-hand-side evaluations of the step being taken (rhs)
     powers: list[float] = field(default_factory=list)
+    power_t: list[float] = field(default_factory=list)  #: (their times)
     #: a rheonomic or nonholonomic constraint: the constraint forces work (_power)
     working_constraints: bool = False
 
@@ -279,6 +307,7 @@ class _System:
         # the power of W (_power): the work's quadrature (_step_work) combines the powers of a
         # step's evaluations with the method's weights
         self.powers.append(self._power(terms, g, qd, qdd))
+        self.power_t.append(float(t))
         return np.concatenate((qd, qdd))
 
     def _power(self, terms: Any, g: FloatArray, qd: FloatArray, qdd: FloatArray) -> float:
@@ -1095,6 +1124,7 @@ def simulate(
             y_start, f_start, t_start = state.y, state.f, state.t
             fp_start = f_pow if f_start is not None else None
             system.powers.clear()
+            system.power_t.clear()
             res = integ.step(system.rhs, state, t1 if h_star is None else t_start + h_star, project_y, passages) \
                 if passages is not None else integ.step(system.rhs, state, t1, project_y)  # fmt: skip
             n_rejected += res.n_rejected
@@ -1103,7 +1133,8 @@ def simulate(
             t_new = res.state.t
             # the work's increment over the step, from its stage powers (the method's weights)
             d8_fsal = isinstance(integ, DOP853) and res.state.f is not None
-            dW_step = _step_work(integ, system.powers, fp_start, h, d8_fsal) if system.powers else float("nan")
+            dW_step = (_step_work(integ, system.powers, fp_start, h, d8_fsal, system.power_t, t_start)
+                       if system.powers else float("nan"))  # fmt: skip
             P0_step = fp_start if fp_start is not None else (system.powers[0] if system.powers else float("nan"))
             P1_step = system.powers[-1] if (isinstance(integ, DormandPrince5) or d8_fsal) else float("nan")
             h_work = h
@@ -1132,7 +1163,8 @@ def simulate(
                 else:
                     mark = len(system.powers)
                     yy = integ.advance(system.rhs, _t, _y, _f, s)
-                    dw = _step_work(integ, system.powers[mark:], _fp if _f is not None else None, s)
+                    dw = _step_work(integ, system.powers[mark:], _fp if _f is not None else None, s,
+                                    times=system.power_t[mark:], t0=_t)  # fmt: skip
                 qq, vv = stab.project(model, _t + s, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
                 return system.point(_t + s, qq, vv)._replace(work=rec.quad.W + dw)
 
