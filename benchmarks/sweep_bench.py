@@ -83,7 +83,7 @@ def crank_errors(theta: np.ndarray, th0: np.ndarray, om0: np.ndarray, t: np.ndar
 # --------------------------------------------------------------------------- nonmin
 
 
-def nonmin_batch(th0: np.ndarray, om0: np.ndarray, threads: int, dt: float = DT) -> tuple[float, Any]:
+def nonmin_batch(th0: np.ndarray, om0: np.ndarray, threads: int | None, dt: float = DT) -> tuple[float, Any]:
     from nonmin import library
     from nonmin.library._planar import _cfb_coordinates
     from nonmin.sim import simulate_batch
@@ -173,9 +173,13 @@ def main() -> int:
     ap.add_argument("--json", default=str(HERE / "results" / "sweep_bench.json"))
     ap.add_argument("--work-precision", action="store_true",
                     help="only the work-precision comparison with mujoco.rollout over a range of dt for both")
+    ap.add_argument("--batch-vs-single", action="store_true",
+                    help="only the batch (1 thread and the default thread count) against simulate one by one")
     args = ap.parse_args()
     if args.work_precision:
         return work_precision(args)
+    if args.batch_vs_single:
+        return batch_vs_single(args)
     load0 = os.getloadavg()
     th0, om0 = states(args.runs, 2026)
     t = np.linspace(0.0, T_FINAL, 201)
@@ -311,6 +315,47 @@ def work_precision(args: Any) -> int:
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).with_name("sweep_bench_work_precision.json").write_text(
         json.dumps({"load": [load0, load1], "rows": rows}, indent=1), encoding="utf-8")
+    return 0
+
+
+def batch_vs_single(args: Any) -> int:
+    """Wall time per run of the batch on 1 thread and on the default thread count (threads=None:
+    every core) against the same runs through ``simulate`` one by one; interleaved rounds, medians.
+    The batch runs the first ``--runs`` states, ``simulate`` the first ``--single`` of them."""
+    load0 = os.getloadavg()
+    th0, om0 = states(args.runs, 2026)
+    paths: dict[str, Any] = {
+        "nonmin simulate one by one": lambda: nonmin_single(th0[: args.single], om0[: args.single]),
+        "nonmin batch, 1 thread": lambda: nonmin_batch(th0, om0, 1),
+        f"nonmin batch, default threads ({os.cpu_count()} cores)": lambda: nonmin_batch(th0, om0, None),
+    }
+    walls: dict[str, list[float]] = {k: [] for k in paths}
+    outs: dict[str, Any] = {}
+    for _ in range(args.repeat):
+        for k, fn in paths.items():
+            w, out = fn()
+            walls[k].append(w / (args.single if "one by one" in k else args.runs))
+            outs[k] = out
+    per = {k: statistics.median(v) for k, v in walls.items()}
+    b1, bd = outs["nonmin batch, 1 thread"], outs[list(paths)[2]]
+    same = bool(np.array_equal(b1.q[: args.single], outs["nonmin simulate one by one"]))
+    same_t = bool(np.array_equal(b1.q, bd.q))
+    load1 = os.getloadavg()
+    print(f"load average before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, after {load1[0]:.2f} {load1[1]:.2f} "
+          f"{load1[2]:.2f}\n\n{args.runs} runs (batch) / {args.single} runs (one by one) of the crossed four-bar "
+          f"over {T_FINAL} s, RK4 dt = {DT}, medians of {args.repeat} interleaved rounds\n")  # fmt: skip
+    print("| path | per run (ms) | ratio to one by one |")
+    print("|---|---|---|")
+    base = per["nonmin simulate one by one"]
+    for k, v in per.items():
+        print(f"| {k} | {v * 1e3:.3f} | {v / base:.3f} |")
+    print(f"\nbatch (1 thread) equals simulate bitwise on the {args.single} runs: {same}; "
+          f"batch 1 thread equals batch default threads bitwise: {same_t}; failed runs: "
+          f"{int(np.count_nonzero(~b1.success))}")  # fmt: skip
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).with_name("sweep_bench_batch_vs_single.json").write_text(
+        json.dumps({"load": [load0, load1], "per_run_s": per, "walls": walls, "equal": [same, same_t]}, indent=1),
+        encoding="utf-8")  # fmt: skip
     return 0
 
 
