@@ -869,7 +869,8 @@ def simulate(
             "stabilization": repr(stab),
             "contact": bool(contact),
             "restitution": restitution,
-            "controller": None if controller is None else repr(controller),
+            # the controller's type, not its repr: a repr prints every gain array (~1 ms a call)
+            "controller": None if controller is None else _type_name(controller),
             "events": [e.name for e in events],
             "rank_rtol": rank_rtol,
             "engine": engine,
@@ -1866,3 +1867,12 @@ def _friction_after_user(
         q, qd = proj.project(model, t, q, qd, act_f, rank_rtol)
     system.active = act_f
     return q, qd, dict(slip)
+
+
+def _type_name(obj: Any) -> str:
+    """``module.Type`` of a value, or the name of a plain function (run metadata)."""
+    name = getattr(obj, "__qualname__", None)
+    if callable(obj) and name is not None and not isinstance(obj, type):
+        return f"{getattr(obj, '__module__', '?')}.{name}"
+    t = type(obj)
+    return f"{t.__module__}.{t.__qualname__}"
