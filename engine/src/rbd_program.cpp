@@ -470,7 +470,8 @@ void TreeProgram::apply_T(const TreeScratch<S>& ws, const double* xq, S* xv) con
 
 template <class S>
 NONMIN_FLATTEN Status TreeProgram::residuals(const ResidualQuery& rq, const S* q, const S* qd, TreeScratch<S>& ws,
-                                             S* rd, S* rl, S* rc, const TreeData* fixed, bool seeded) const {
+                                             S* rd, S* rl, S* rc, const TreeData* fixed, bool seeded,
+                                             bool dynamics) const {
     using std::isfinite;
     const TreeModel& model = d_.model;
     const int nq = model.nq, nv = model.nv;
@@ -498,11 +499,13 @@ NONMIN_FLATTEN Status TreeProgram::residuals(const ResidualQuery& rq, const S* q
         forward_kinematics(model, ws.data, ws.qn.data(), true);
     }
     forward_motion(model, ws.data, ws.v.data(), ws.fv.data());
-    rnea(model, ws.data, ws.fv.data(), ws.tau.data());  // M_v a_v + C_v v + g_v
-    for (int k = 0; k < nv; ++k) ws.tau[k] += d_.damping[k] * ws.v[k];
-    if (rq.u != nullptr)
-        for (int c = 0; c < k_; ++c) ws.tau[d_.actuated[static_cast<std::size_t>(c)]] -= rq.u[c];
-    apply_Tt(ws, ws.tau.data(), rd);
+    if (dynamics) {
+        rnea(model, ws.data, ws.fv.data(), ws.tau.data());  // M_v a_v + C_v v + g_v
+        for (int k = 0; k < nv; ++k) ws.tau[k] += d_.damping[k] * ws.v[k];
+        if (rq.u != nullptr)
+            for (int c = 0; c < k_; ++c) ws.tau[d_.actuated[static_cast<std::size_t>(c)]] -= rq.u[c];
+        apply_Tt(ws, ws.tau.data(), rd);
+    }
     const int nlam = rq.nlam;
     for (int i = 0; i < nlam * nq; ++i) rl[i] = S(0.0);
     for (int r = 0; r < m_all_; ++r) rc[r] = S(0.0);
@@ -677,6 +680,42 @@ Status TreeProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) c
     }
     if (rq.nlam > 2) return Status::bad_shape;
     bool have_fixed = false;
+    const bool analytic = !quat_;
+    if (analytic) {
+        // M a − g's tangents from the analytic derivatives of RNEA (v = q̇, a_v = a, T = 1)
+        const Status st = normalize<double>(rq.q, ws);
+        if (st != Status::ok) return st;
+        for (int i = 0; i < nq; ++i)
+            if (!std::isfinite(rq.qd[i])) return Status::not_finite;
+        forward_kinematics(d_.model, ws.data, ws.qn.data(), true);
+        have_fixed = true;
+        if (ws.dtq.rows() != nq) {
+            ws.dtq.resize(nq, nq);
+            ws.dtv.resize(nq, nq);
+        }
+        rnea_derivatives(d_.model, ws.data, rq.qd, rq.a, ws.dtq.data(), ws.dtv.data());
+        for (int k = 0; k < nq; ++k) ws.dtv(k, k) += d_.damping[k];
+        for (int j = 0; j < rq.nd; ++j) {
+            double* o = rq.r_dyn + static_cast<std::ptrdiff_t>(j) * nq;
+            const double* dq = rq.dq + static_cast<std::ptrdiff_t>(j) * nq;
+            const double* dqd = rq.dqd + static_cast<std::ptrdiff_t>(j) * nq;
+            for (int i = 0; i < nq; ++i) o[i] = 0.0;
+            // dtq, dtv hold column k (∂τ/∂q_k) contiguously at k nq (rnea_derivatives' layout)
+            const double* Dq = ws.dtq.data();
+            const double* Dv = ws.dtv.data();
+            for (int k = 0; k < nq; ++k) {
+                if (dq[k] != 0.0)
+                    for (int i = 0; i < nq; ++i) o[i] += Dq[k * nq + i] * dq[k];
+                if (dqd[k] != 0.0)
+                    for (int i = 0; i < nq; ++i) o[i] += Dv[k * nq + i] * dqd[k];
+            }
+        }
+        if (rq.nlam == 0) {  // no active rows: nothing else moves
+            for (int j = 0; j < rq.nd; ++j)
+                for (int r = 0; r < m_all_; ++r) rq.r_con[static_cast<std::ptrdiff_t>(j) * m_all_ + r] = 0.0;
+            return Status::ok;
+        }
+    }
     for (int j0 = 0; j0 < rq.nd; j0 += W) {
         const int w = std::min(W, rq.nd - j0);
         bool moves_q = false;  // a chunk of q̇ directions only: the kinematics at q in double
@@ -692,9 +731,9 @@ Status TreeProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) c
         seed_directions<W>(rq, nq, j0, w, ws.wq.data(), ws.wqd.data());
         if (seed) seed_kinematics(rq, j0, w, ws);
         const Status st = residuals<DualW>(rq, ws.wq.data(), ws.wqd.data(), *ws.wide, ws.wrd.data(), ws.wrl.data(),
-                                           ws.wrc.data(), moves_q ? nullptr : &ws.data, seed);
+                                           ws.wrc.data(), moves_q ? nullptr : &ws.data, seed, !analytic);
         if (st != Status::ok) return st;
-        scatter_lanes<W>(ws.wrd.data(), nq, j0, w, nq, rq.r_dyn);
+        if (!analytic) scatter_lanes<W>(ws.wrd.data(), nq, j0, w, nq, rq.r_dyn);
         scatter_lanes<W>(ws.wrl.data(), rq.nlam * nq, j0, w, static_cast<std::ptrdiff_t>(rq.nlam) * nq, rq.r_lam);
         scatter_lanes<W>(ws.wrc.data(), m_all_, j0, w, m_all_, rq.r_con);
     }

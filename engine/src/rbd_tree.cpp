@@ -292,6 +292,116 @@ Eigen::Matrix<double, 6, 1> col6_dot(const TreeData& data, int j, int k) {  // �
 
 }  // namespace
 
+namespace {
+
+using Vec6 = Eigen::Matrix<double, 6, 1>;
+
+Force mat_force(const Mat6& K, const Motion& m) {  // K (lin, ang) applied to a motion
+    Vec6 x;
+    x << m.lin, m.ang;
+    const Vec6 y = K * x;
+    return Force{y.head<3>(), y.tail<3>()};
+}
+
+double col_dot(const TreeData& data, int col, const Force& f) {
+    return data.J.col(col).head<3>().dot(f.lin) + data.J.col(col).tail<3>().dot(f.ang);
+}
+
+bool in_subtree(const TreeModel& model, int j, int k) {  // j ⪰ k (parent < child)
+    while (j > k) j = model.joints[j].parent;
+    return j == k;
+}
+
+}  // namespace
+
+void rnea_derivatives(const TreeModel& model, TreeData& data, const double* v, const double* a, double* dtau_dq,
+                      double* dtau_dv) {
+    const int nj = static_cast<int>(model.joints.size());
+    const int nv = model.nv;
+    forward_motion(model, data, v, a);
+    // per body: α with the gravity offset, f = I α + ν ×* I ν, momentum, K = ν×* I − I ν×
+    for (int i = 0; i < nj; ++i) {
+        data.oa[i].lin -= model.gravity;
+        const Inertia& I = data.oI[i];
+        const Motion& nu = data.ov[i];
+        data.oh[i] = I * nu;
+        data.of[i] = I * data.oa[i];
+        data.of[i] += cross_force(nu, data.oh[i]);
+        data.Ic[i] = I;
+        const Mat6 Im = inertia_matrix(I);
+        const Mat6 X = motion_cross(nu);
+        data.Bc[i].noalias() = -X.transpose() * Im;
+        data.Bc[i].noalias() -= Im * X;
+    }
+    // subtree sums (children have larger indices)
+    for (int i = nj - 1; i > 0; --i) {
+        const int p = model.joints[i].parent;
+        if (p < 0) continue;
+        data.of[p] += data.of[i];
+        data.oh[p] += data.oh[i];
+        data.Ic[p] += data.Ic[i];
+        data.Bc[p] += data.Bc[i];
+    }
+    for (int i = 0; i < nv * nv; ++i) {
+        dtau_dq[i] = 0.0;
+        dtau_dv[i] = 0.0;
+    }
+    for (int k = 0; k < nj; ++k) {
+        const Joint& jk = model.joints[k];
+        Motion nup, agp;  // the parent's velocity and acceleration (world: at rest, gravity offset)
+        if (jk.parent >= 0) {
+            nup = data.ov[jk.parent];
+            agp = data.oa[jk.parent];
+        } else {
+            agp.lin = -model.gravity;
+        }
+        for (int c = 0; c < joint_nv(jk.type); ++c) {
+            const int col = jk.iv + c;
+            Motion xi;
+            xi.lin = data.J.col(col).head<3>();
+            xi.ang = data.J.col(col).tail<3>();
+            const Motion eta = cross(xi, nup);
+            Motion bq = cross(xi, agp);  // ξ × α_p − η × ν_p
+            const Motion en = cross(eta, nup);
+            bq.lin -= en.lin;
+            bq.ang -= en.ang;
+            Motion bv;  // −2 ξ × ν_p
+            bv.lin = -2.0 * eta.lin;
+            bv.ang = -2.0 * eta.ang;
+            Force Sqk, Svk;
+            for (int j = k; j < nj; ++j) {
+                if (!in_subtree(model, j, k)) continue;
+                Force Sq = data.Ic[j] * bq;
+                Sq += cross_force(eta, data.oh[j]);
+                Sq += mat_force(data.Bc[j], eta);
+                Force Sv = data.Ic[j] * bv;
+                Sv += cross_force(xi, data.oh[j]);
+                Sv += mat_force(data.Bc[j], xi);
+                const Joint& jj = model.joints[j];
+                for (int d = 0; d < joint_nv(jj.type); ++d) {
+                    dtau_dq[col * nv + jj.iv + d] = -col_dot(data, jj.iv + d, Sq);
+                    dtau_dv[col * nv + jj.iv + d] = col_dot(data, jj.iv + d, Sv);
+                }
+                if (j == k) {
+                    Sqk = Sq;
+                    Svk = Sv;
+                }
+            }
+            // strict ancestors: J_jᵀ (ξ ×* F_k − S_k) and J_jᵀ Sv_k
+            Force Fq = cross_force(xi, data.of[k]);
+            Fq.lin -= Sqk.lin;
+            Fq.ang -= Sqk.ang;
+            for (int j = jk.parent; j >= 0; j = model.joints[j].parent) {
+                const Joint& jj = model.joints[j];
+                for (int d = 0; d < joint_nv(jj.type); ++d) {
+                    dtau_dq[col * nv + jj.iv + d] = col_dot(data, jj.iv + d, Fq);
+                    dtau_dv[col * nv + jj.iv + d] = col_dot(data, jj.iv + d, Svk);
+                }
+            }
+        }
+    }
+}
+
 void coriolis(const TreeModel& model, TreeData& data, double* C, int ld) {
     const int nj = static_cast<int>(model.joints.size());
     for (int r = 0; r < model.nv; ++r)  // entries of unrelated joints stay zero

@@ -78,7 +78,8 @@ struct TreeDataT {
           ov(model.joints.size()),
           oa(model.joints.size()),
           of(model.joints.size()),
-          Bc(model.joints.size()) {}
+          Bc(model.joints.size()),
+          oh(model.joints.size()) {}
 
     std::vector<SE3T<S>> oMi;       // joint placements in the world
     Eigen::Matrix<S, 6, Eigen::Dynamic> J;  // 6 × nv: world joint motion subspaces
@@ -87,7 +88,8 @@ struct TreeDataT {
     std::vector<MotionT<S>> ov;     // body spatial velocities
     std::vector<MotionT<S>> oa;     // body spatial accelerations (without gravity)
     std::vector<ForceT<S>> of;      // subtree forces (rnea scratch)
-    std::vector<Eigen::Matrix<S, 6, 6>> Bc;  // composite Coriolis operators (coriolis)
+    std::vector<Eigen::Matrix<S, 6, 6>> Bc;  // composite Coriolis operators (coriolis); rnea_derivatives: K_j
+    std::vector<ForceT<S>> oh;      // subtree momenta Σ I_i ν_i (rnea_derivatives scratch)
 };
 using TreeData = TreeDataT<double>;
 
@@ -118,6 +120,21 @@ void rnea(const TreeModel& model, TreeDataT<S>& data, const S* a, S* tau);
 // (S) Gravitational potential energy −Σ m_i gᵀ c_i. Needs forward_kinematics.
 template <class S>
 S potential_energy(const TreeModel& model, const TreeDataT<S>& data);
+
+// Analytic first derivatives of rnea for a tree without quaternion joints (v = q̇; revolute,
+// prismatic, translation): dtau_dq(:, k) = ∂τ/∂q_k and dtau_dv(:, k) = ∂τ/∂v_k (nv × nv each,
+// column-major), at the velocity v and acceleration a; the armature term M_a a has no q and no v
+// dependence. Needs forward_kinematics (with inertias); overwrites ov, oa, of, Ic, Bc, oh.
+// Derivation (docs/theory.md, "Analytic derivatives of RNEA"): moving q_k moves the subtree of
+// joint k rigidly with the twist ξ = J_k, so δJ_j = ξ × J_j, δI_i = ξ×* I_i − I_i ξ×,
+// δν_i = ξ × (ν_i − ν_p), δα_i = ξ × (α_i − α_p) − (ξ × ν_p) × (ν_i − ν_p) (p = k's parent, α
+// with the gravity offset); with the composite inertia Ic_j, momentum Hc_j = Σ I_i ν_i,
+// K_j = Σ (ν_i×* I_i − I_i ν_i×) and subtree force F_j over i ⪰ j, and η = ξ × ν_p:
+//   ∂τ_j/∂q_k = −J_jᵀ [Ic_j (ξ × α_p − η × ν_p) + η ×* Hc_j + K_j η]        (j ⪰ k)
+//   ∂τ_j/∂q_k = J_jᵀ (ξ ×* F_k) + (the j = k bracket with J_j)                 (j ≺ k)
+//   ∂τ_j/∂v_k = J_jᵀ [K_m ξ + ξ ×* Hc_m − 2 Ic_m (ξ × ν_p)],  m = j if j ⪰ k, else k.
+void rnea_derivatives(const TreeModel& model, TreeData& data, const double* v, const double* a,
+                      double* dtau_dq, double* dtau_dv);
 
 // A frame's world placement, and its world-aligned kinematics (LOCAL_WORLD_ALIGNED in
 // Pinocchio): origin velocity, angular velocity, classical acceleration of the origin and

@@ -114,6 +114,7 @@ struct TreeWorkspace : Workspace, TreeScratch<double> {
     std::vector<DualW> wq, wqd, wrd, wrl, wrc;
     std::vector<Vec3> xl, xa;  // per joint and lane: world twists of the seeded directions
     Vec dv;                    // nv: one lane's velocity-space direction
+    Mat dtq, dtv;              // nv × nv: ∂τ/∂q, ∂τ/∂v of rnea_derivatives (trees without quaternions)
 };
 
 class TreeProgram : public Program {
@@ -126,9 +127,11 @@ class TreeProgram : public Program {
                             const std::uint8_t* active, unsigned need, Terms& out, Terms& tangent,
                             Workspace& ws) const override;
     bool differentiable() const override { return true; }
-    // The residuals of ResidualQuery in one pass per DUAL_WIDTH directions: M a − h − f_p − B u
-    // = Tᵀ (rnea(q, v, T a + Ṫ q̇) + d ⊙ v − S u) (one RNEA, no CRBA), A a + γ = the frame
-    // accelerations at the joint acceleration T a + Ṫ q̇, Aᵀ λ from the rows.
+    // The residuals of ResidualQuery: M a − h − f_p − B u = Tᵀ (rnea(q, v, T a + Ṫ q̇) + d ⊙ v − S u)
+    // (one RNEA, no CRBA), A a + γ = the frame accelerations at the joint acceleration T a + Ṫ q̇,
+    // Aᵀ λ from the rows. Trees without quaternions: the first residual's tangents from the
+    // analytic rnea_derivatives (tree.hpp), the rows' on DualW without the RNEA; with
+    // quaternions: everything in one pass per DUAL_WIDTH directions on DualW.
     Status residual_tangents(const ResidualQuery& rq, Workspace& ws) const override;
     std::unique_ptr<Workspace> make_workspace() const override;
 
@@ -171,9 +174,10 @@ class TreeProgram : public Program {
     // fixed: when not null, the kinematics at q in double (directions that do not move q: the
     // placements, motion subspaces and inertias are copied instead of recomputed on S).
     // seeded: ws.data already holds the kinematics at q with their tangents (seed_kinematics).
+    // dynamics false: rd is not computed (the constraint rows only).
     template <class S>
     Status residuals(const ResidualQuery& rq, const S* q, const S* qd, TreeScratch<S>& ws, S* rd, S* rl,
-                     S* rc, const TreeData* fixed, bool seeded = false) const;
+                     S* rc, const TreeData* fixed, bool seeded = false, bool dynamics = true) const;
     // The kinematics at q on DualW for the w directions rq.dq[j0 ..] (programs without
     // quaternions, v = q̇): values from fx (double), lane l's tangent from the world twist of
     // each body along direction l — δ(oMi) = ξ_i × oMi, δJ_c = ξ_i × J_c, δ(oI_i) the motion
