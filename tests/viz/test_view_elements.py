@@ -226,3 +226,39 @@ def test_no_drawn_node_inherits_another_nodes_pose(which):
                     assert np.allclose(h.position, 0.0) and np.allclose(h.wxyz, [1, 0, 0, 0]), (name, parent)
     finally:
         v.stop()
+
+
+def test_robot_viewer_draws_a_contact_plane_where_the_model_puts_it():
+    """A UR5 with its tool above a tilted plane (``FrameConstraint.contact``): the plane is a
+    node through the plane frame's origin, its slab normal (the box's z) along the plane's
+    normal in the world — the geometry of the contact's own gap."""
+    import pinocchio as pin
+
+    from nonmin.model.robots import FrameConstraint, RobotModel
+
+    urdf = (Path(pin.__file__).resolve().parents[4] / "share" / "example-robot-data" / "robots"
+            / "ur_description" / "urdf" / "ur5_robot.urdf")
+    if not urdf.is_file():
+        pytest.skip("example-robot-data is not installed")
+    q0 = np.array([0.2, -1.0, 1.3, -0.6, 0.9, 0.4])
+    free = RobotModel.from_urdf(urdf)
+    tool = free.frame_placement(q0, "ee_link")[:3, 3]
+    normal = np.array([0.0, 0.6, 0.8])
+    H = np.eye(4)
+    H[:3, 3] = tool - 0.05 * normal  # 5 cm below the tool along the normal
+    floor = FrameConstraint.contact("floor", "ee_link", plane_placement=H, normal=normal)
+    model = RobotModel.from_urdf(urdf, constraints=[floor], joint_limits="ignore")
+    traj = nonmin.simulate(model, (0.0, 0.02), q0, np.zeros(6), dt=1e-2, progress=False)
+    v = _view(traj, model)
+    try:
+        v.show_time(0.0)
+        h = v.node("/planes/floor")
+        np.testing.assert_allclose(np.asarray(h.position), H[:3, 3], atol=1e-6)
+        w, x, y, z = np.asarray(h.wxyz, dtype=float)
+        # the box's z axis in the world: third column of the rotation of (w, x, y, z)
+        zw = np.array([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)])
+        np.testing.assert_allclose(zw, normal, atol=1e-6)
+        # the tool is 5 cm above it, along the normal
+        assert abs(normal @ (tool - np.asarray(h.position)) - 0.05) < 1e-6
+    finally:
+        v.stop()
