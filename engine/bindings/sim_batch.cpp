@@ -117,6 +117,7 @@ void bind_sim_batch(nb::module_& m) {
             arr2("velocity_residual_norm", out.vel_norm);
             arr2("cond", out.cond);
             arr2("mu", out.mu);
+            arr2("work", out.work);
             auto rank = owned<std::int64_t>({k, N}, -1);
             out.rank = rank.data();
             d["rank"] = rank;

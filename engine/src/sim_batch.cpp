@@ -82,6 +82,7 @@ void copy_sample(const BatchOutput& out, const Samples& R, std::size_t j, std::s
     put(R.vel_norm, 1, out.vel_norm);
     put(R.cond, 1, out.cond);
     put(R.mu, 1, out.mu);
+    put(R.work, 1, out.work);
     if (out.rank) out.rank[row] = R.rank[j];
     if (out.active && c) std::memcpy(out.active + row * c, R.active.data() + j * c, c);
 }
@@ -159,6 +160,7 @@ void run_one(const BatchInput& in, const BatchOutput& out, int i, ThreadLoops& l
     L.rec.clear();  // keeps the buffers' capacity
     L.n_rhs = 0;
     L.n_rejected = 0;
+    L.wk = 0.0;  // W of this run from its start (the loop is reused run after run)
     if (in.contact || !in.ctrl_protos.empty()) {
         // a contact run left the loop in another active set; controllers start afresh per run
         E.ctrls.made.clear();
@@ -204,6 +206,7 @@ void run_one(const BatchInput& in, const BatchOutput& out, int i, ThreadLoops& l
         copy_rows(R.vel_norm, S, 1, out.vel_norm ? out.vel_norm + rs : nullptr);
         copy_rows(R.cond, S, 1, out.cond ? out.cond + rs : nullptr);
         copy_rows(R.mu, S, 1, out.mu ? out.mu + rs : nullptr);
+        copy_rows(R.work, S, 1, out.work ? out.work + rs : nullptr);
         copy_rows(R.rank, S, 1, out.rank ? out.rank + rs : nullptr);
         if (out.active && c) std::memcpy(out.active + rs * c, R.active.data(), S * c);
     } else {  // samples at events too: each output time gets the last sample at that time
@@ -212,7 +215,7 @@ void run_one(const BatchInput& in, const BatchOutput& out, int i, ThreadLoops& l
             if (p) p += rs * w;
         };
         shift(o1.q, n), shift(o1.qd, n), shift(o1.qdd, n), shift(o1.f_c, n), shift(o1.u, nu);
-        shift(o1.energy, 1), shift(o1.phi_norm, 1), shift(o1.vel_norm, 1), shift(o1.cond, 1), shift(o1.mu, 1);
+        shift(o1.energy, 1), shift(o1.phi_norm, 1), shift(o1.vel_norm, 1), shift(o1.cond, 1), shift(o1.mu, 1), shift(o1.work, 1);
         shift(o1.rank, 1), shift(o1.active, c);
         std::size_t p = 0;
         for (std::size_t j = 0; j < R.size(); ++j) {

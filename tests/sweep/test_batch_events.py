@@ -47,7 +47,7 @@ def _same(bt: Any, i: int, ref: Any, tol: float) -> None:
     j = np.searchsorted(ref.t, T_EVAL, side="right") - 1
     assert np.all(ref.t[j] == T_EVAL)
     np.testing.assert_array_equal(tr.active_mask, ref.active_mask[j])
-    for key in ("q", "qd", "energy"):
+    for key in ("q", "qd", "energy", "work"):
         np.testing.assert_allclose(getattr(tr, key), getattr(ref, key)[j], rtol=0, atol=tol, err_msg=key)
     assert tr.n_steps == ref.n_steps
 
@@ -85,8 +85,12 @@ def test_regulated_runs_use_the_compiled_controller_bitwise() -> None:
     for i in range(k):
         ref = simulate(mech, 0.3, mech.state.q, V[i], controller=ctl, dt=1e-3, t_eval=t, progress=False)
         assert ref.metadata["engine"] == "engine"
-        for key in ("q", "qd", "u", "energy"):
+        for key in ("q", "qd", "u", "energy", "work"):
             np.testing.assert_array_equal(getattr(bt[i], key), getattr(ref, key), err_msg=key)
+        # the controller's work is recorded by the batch too: the energy balance closes
+        assert np.all(np.isfinite(bt.work[i])) and abs(bt.work[i, -1]) > 1e-3
+        bal = bt.energy[i] - bt.energy[i, 0] - bt.work[i]
+        assert float(np.max(np.abs(bal))) < 1e-6 * float(np.max(np.abs(bt.work[i])))
     assert float(np.max(np.abs(bt.u))) == 3.0  # (saturated somewhere: the clip is exercised)
 
 
@@ -104,6 +108,7 @@ def test_regulated_contact_runs_switch_controllers_with_the_active_set(arm: Any)
                        progress=False)  # fmt: skip
         assert ref.events and ref.events[0].name == "impact:wall"
         _same(bt, i, ref, 1e-8)
+        assert abs(bt.work[i, -1]) > 1e-3  # (the regulator works: W is compared above)
 
 
 def test_user_events_are_made_one_by_one_by_simulate(arm: Any) -> None:

@@ -42,10 +42,10 @@ FloatArray = NDArray[np.float64]
 MAX_BATCH_BYTES = 4 * 2**30
 
 #: Per-sample arrays a batch can record (``record=``); the scalars (energy, phi_norm,
-#: velocity_residual_norm, rank, cond, mu) are always recorded.
+#: velocity_residual_norm, rank, cond, mu, work) are always recorded.
 RECORDABLE = ("q", "qd", "qdd", "f_c", "u")
 
-_SCALARS = ("energy", "phi_norm", "velocity_residual_norm", "cond", "mu")
+_SCALARS = ("energy", "phi_norm", "velocity_residual_norm", "cond", "mu", "work")
 
 
 @dataclass(frozen=True, eq=False)
@@ -73,6 +73,9 @@ class BatchTrajectory:
     engine : tuple of str, length k
         Which path ran each run: ``"batch"`` (the batched engine loop), ``"batch, then
         simulate"`` (the engine handed a failure over), ``"simulate"`` (not covered by the batch).
+    work : ndarray, shape (k, N), or None
+        W, the work of controllers and applied forces (:attr:`Trajectory.work`), integrated by
+        each run's method (NaN where not reached).
     events : tuple of tuple of EventRecord, length k
         The events of each run (automatic contact; user events of runs made by simulate).
     active_mask : ndarray of bool, shape (k, N, c), or None
@@ -106,6 +109,7 @@ class BatchTrajectory:
     metadata: dict[str, Any] = field(default_factory=dict, repr=False)
     events: tuple[tuple[EventRecord, ...], ...] = ()
     active_mask: NDArray[np.bool_] | None = None
+    work: FloatArray | None = None
 
     def __len__(self) -> int:
         return len(self.status)
@@ -160,6 +164,7 @@ class BatchTrajectory:
             actuator_names=self.actuator_names, active=tuple(self.active[j] for j in idx),
             runs=tuple(self.runs[j] for j in idx), metadata=self.metadata,
             events=tuple(self.events[j] for j in idx) if self.events else (), active_mask=pick(self.active_mask),
+            work=pick(self.work),
         )  # fmt: skip
 
     def _run(self, j: int) -> Trajectory:
@@ -182,6 +187,7 @@ class BatchTrajectory:
             cond=self.cond[j, :N].copy(), mu=self.mu[j, :N].copy(), energy=self.energy[j, :N].copy(),
             phi_norm=self.phi_norm[j, :N].copy(),
             velocity_residual_norm=self.velocity_residual_norm[j, :N].copy(),
+            work=None if self.work is None else self.work[j, :N].copy(),
             constraint_names=self.constraint_names, coordinate_names=self.coordinate_names,
             actuator_names=self.actuator_names, status=self.status[j], message=self.message[j],
             n_steps=int(self.n_steps[j]), n_rhs=int(self.n_rhs[j]), n_rejected=int(self.n_rejected[j]),
@@ -518,7 +524,7 @@ def simulate_batch(
     return BatchTrajectory(
         t=t_out, q=d.get("q"), qd=d.get("qd"), qdd=d.get("qdd"), f_c=d.get("f_c"), u=d.get("u"),
         energy=d["energy"], phi_norm=d["phi_norm"], velocity_residual_norm=d["velocity_residual_norm"],
-        cond=d["cond"], mu=d["mu"], rank=d["rank"], status=tuple(status), message=tuple(message),
+        cond=d["cond"], mu=d["mu"], work=d["work"], rank=d["rank"], status=tuple(status), message=tuple(message),
         n_steps=np.asarray(d["n_steps"], dtype=np.int64), n_rhs=np.asarray(d["n_rhs"], dtype=np.int64),
         n_rejected=np.asarray(d["n_rejected"], dtype=np.int64), engine=tuple(engines),
         coordinate_names=model.coordinate_names, constraint_names=names, actuator_names=model.actuator_names,

@@ -151,7 +151,7 @@ class Trajectory:
 
     def __post_init__(self) -> None:
         N = int(np.shape(self.t)[0]) if np.ndim(self.t) else 0
-        for name in _BALANCE:  # not recorded (a batch run, an old file): zeros (work: NaN)
+        for name in _BALANCE:  # not recorded (an old file): zeros (work: NaN)
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.full(N, np.nan) if name == "work" else np.zeros(N))
         for name in (*_ARRAYS, *_BALANCE):

@@ -72,7 +72,7 @@ struct BatchOutput {
     double* f_c = nullptr;  // k × N × n   (REC_FC)
     double* u = nullptr;    // k × N × nu  (REC_U)
     double* energy = nullptr, *phi_norm = nullptr, *vel_norm = nullptr, *cond = nullptr,
-           *mu = nullptr;   // k × N
+           *mu = nullptr, *work = nullptr;  // k × N (work: W of controllers and applied forces)
     std::int64_t* rank = nullptr;  // k × N
     std::uint8_t* active = nullptr;  // k × N × c: the active set of each sample (contact runs)
     std::int32_t* outcome = nullptr;  // k: Outcome (done = the run reached t1)
