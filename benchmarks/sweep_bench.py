@@ -56,6 +56,20 @@ T_FINAL = 2.0
 DT = 1e-3
 
 
+
+def _interleaved(paths: dict[str, Any], args: Any) -> tuple[dict[str, float], dict[str, Any], dict[str, list[float]]]:
+    """Every path once per round, ``args.repeat`` rounds: the median wall time per run of each
+    (one by one: over ``args.single`` runs, else ``args.runs``), each path's last output and the
+    wall times per run of every round."""
+    walls: dict[str, list[float]] = {k: [] for k in paths}
+    outs: dict[str, Any] = {}
+    for _ in range(args.repeat):
+        for k, fn in paths.items():
+            w, out = fn()
+            walls[k].append(w / (args.single if "one by one" in k else args.runs))
+            outs[k] = out
+    return {k: statistics.median(v) for k, v in walls.items()}, outs, walls
+
 def states(k: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
     th = rng.uniform(0.0, 2 * math.pi, k)
@@ -196,14 +210,7 @@ def main() -> int:
     }
     for h in coarse_dt:
         paths[f"nonmin batch, 1 thread, dt = {h:g}"] = lambda h=h: nonmin_batch(th0, om0, 1, h)
-    walls: dict[str, list[float]] = {k: [] for k in paths}
-    outs: dict[str, Any] = {}
-    for _ in range(args.repeat):
-        for k, fn in paths.items():
-            w, out = fn()
-            walls[k].append(w / (args.single if "one by one" in k else args.runs))
-            outs[k] = out
-    per = {k: statistics.median(v) for k, v in walls.items()}
+    per, outs, _ = _interleaved(paths, args)
     q_single, bt = outs["nonmin simulate one by one"], outs["nonmin batch, 1 thread"]
     ang_def, ang_stiff = outs["mujoco.rollout default, 1 thread"], outs["mujoco.rollout stiff, 1 thread"]
     coarse = {h: (None, outs[f"nonmin batch, 1 thread, dt = {h:g}"]) for h in coarse_dt}
@@ -329,14 +336,7 @@ def batch_vs_single(args: Any) -> int:
         "nonmin batch, 1 thread": lambda: nonmin_batch(th0, om0, 1),
         f"nonmin batch, default threads ({os.cpu_count()} cores)": lambda: nonmin_batch(th0, om0, None),
     }
-    walls: dict[str, list[float]] = {k: [] for k in paths}
-    outs: dict[str, Any] = {}
-    for _ in range(args.repeat):
-        for k, fn in paths.items():
-            w, out = fn()
-            walls[k].append(w / (args.single if "one by one" in k else args.runs))
-            outs[k] = out
-    per = {k: statistics.median(v) for k, v in walls.items()}
+    per, outs, walls = _interleaved(paths, args)
     b1, bd = outs["nonmin batch, 1 thread"], outs[list(paths)[2]]
     same = bool(np.array_equal(b1.q[: args.single], outs["nonmin simulate one by one"]))
     same_t = bool(np.array_equal(b1.q, bd.q))

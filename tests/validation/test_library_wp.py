@@ -7,10 +7,6 @@ five free bodies (Exudyn) follow P3 of the library's spatial model over the firs
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -18,17 +14,12 @@ from nonmin import library, simulate
 
 pytest.importorskip("pinocchio")
 
-_PATH = Path(__file__).resolve().parents[2] / "benchmarks" / "library_wp.py"
 T = 1.0
 
 
 @pytest.fixture(scope="module")
-def wp():  # type: ignore[no-untyped-def]
-    spec = importlib.util.spec_from_file_location("library_wp", _PATH)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["library_wp"] = mod
-    spec.loader.exec_module(mod)
+def wp(load_benchmark):  # type: ignore[no-untyped-def]
+    mod = load_benchmark("library_wp")
     # a 1 s horizon and its reference: P3 of the library's spatial A04 every 0.01 s
     mod.HORIZON["A04_bricard"] = T
     mech = library.get("A04_bricard")

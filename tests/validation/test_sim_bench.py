@@ -6,25 +6,15 @@ state and energy, and short peer runs that follow the exact reference.
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from nonmin import library
 
-_PATH = Path(__file__).resolve().parents[2] / "benchmarks" / "sim_bench.py"
-
 
 @pytest.fixture(scope="module")
-def sb():  # type: ignore[no-untyped-def]
-    spec = importlib.util.spec_from_file_location("sim_bench", _PATH)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["sim_bench"] = mod
-    spec.loader.exec_module(mod)
+def sb(load_benchmark):  # type: ignore[no-untyped-def]
+    mod = load_benchmark("sim_bench")
     return mod
 
 
