@@ -136,29 +136,7 @@ def ur5_point_closure() -> tuple[RobotModel, State]:
     MissingDependencyError
         When Pinocchio or example-robot-data (extra ``test``) is not installed.
     """
-    from pathlib import Path
-
-    from ...errors import MissingDependencyError
-
-    try:
-        import pinocchio as pin
-    except ImportError:
-        raise MissingDependencyError(
-            "ur5_point_closure needs Pinocchio: pip install 'nonmin[pin]'"
-        ) from None
-    root = Path(pin.__file__).resolve().parents[4] / "share" / "example-robot-data" / "robots"
-    urdf = root / "ur_description" / "urdf" / "ur5_robot.urdf"
-    if not urdf.exists():
-        raise MissingDependencyError(
-            f"ur5_point_closure needs example-robot-data's UR5 ({urdf} is missing): "
-            "pip install example-robot-data"
-        )
-    q_guess = np.array(UR5_Q_GUESS)
-    free = RobotModel.from_urdf(urdf, joint_limits="ignore")
-    oMe = free.frame_placement(q_guess, "ee_link")
-    con = FrameConstraint.point("closure", "ee_link", placement_b=oMe)
-    model = RobotModel.from_urdf(urdf, constraints=[con], joint_limits="ignore")
-    return model, assemble(model, q_guess)
+    return example_robot_closure("ur5", "point")
 
 
 #: example-robot-data arms of :func:`example_robot_closure`: (URDF under robots/, tool frame,
