@@ -1,11 +1,14 @@
 """Work–precision of nonmin's methods on the library mechanisms that ``sim_bench.py`` has no
 peer models of: A03 Andrews' squeezing mechanism (0.03 s, the Test Set's stiff problem: angles
-at 0.03 s against its PSIDE reference) and A04 Bricard (10 s, one redundant constraint: P3
-against a fine DOP853 run whose turning points match the quadrature period to 2e-12 s; energy
-and closure), with MuJoCo on A04 (``--peers``: its Euler, default and stiff equalities). Every method over its steps or tolerances; the rows have the
+at 0.03 s against its PSIDE reference; energy and closure every 1e-3 s) and A04 Bricard (10 s,
+one redundant constraint: P3 against a fine DOP853 run whose turning points match the quadrature
+period to 2e-12 s; energy and closure). ``--peers`` adds MuJoCo, Pinocchio and Exudyn over their
+settings on both (A03's peer models: ``andrews_peers.py``). nonmin runs two models of each: the
+library's and a second formulation (A03: the same equations compiled from SymPy; A04: a tree of
+hinges closed by one hinge). Every method over its steps or tolerances; the rows have the
 format of ``sim_bench.py``'s, so ``work_precision.py`` draws them.
 
-Run ``python benchmarks/library_wp.py --peers --json results/library_wp.json`` then
+Run ``python benchmarks/library_wp.py --peers --cpu --json results/library_wp.json`` then
 ``python benchmarks/work_precision.py results/library_wp.json``.
 """
 
@@ -33,14 +36,20 @@ CONFIGS: dict[str, list[dict[str, Any]]] = {
     "A03_andrews": [
         *({"method": "rk4", "dt": dt} for dt in (1e-5, 5e-6, 2e-6)),
         *({"method": m, "rtol": r, "atol": r} for m in ("dopri5", "dop853") for r in (1e-6, 1e-8, 1e-10, 1e-12)),
+        # the same equations (M, V, g1 … g6 of the Test Set) given as SymPy expressions: the
+        # symbolic source compiles them to a tape the engine evaluates (the library's model is
+        # Python methods, called back from the engine at every evaluation)
+        *({"model": "symbolic", "method": "rk4", "dt": dt} for dt in (1e-3, 5e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 5e-6, 2e-6)),
+        *({"model": "symbolic", "method": m, "rtol": r, "atol": r}
+          for m in ("dopri5", "dop853") for r in (1e-2, 1e-3, 1e-4, 1e-6, 1e-8, 1e-10, 1e-12)),
     ],
     "A04_bricard": [
         *({"method": "rk4", "dt": dt} for dt in (0.2, 0.1, 5e-2, 2e-2, 1e-2, 5e-3, 2e-3, 1e-3)),
         *({"method": m, "rtol": r, "atol": r * 1e-2} for m in ("dopri5", "dop853") for r in (1e-4, 1e-6, 1e-8, 1e-10)),
         # the same mechanism as a tree of five hinges closed by one hinge constraint (n = 5):
         # nonmin's robot source on the Pinocchio model that the Pinocchio peer uses
-        *({"model": "robot", "method": "rk4", "dt": dt} for dt in (0.4, 0.2, 0.1, 5e-2, 2e-2, 1e-2, 5e-3, 2e-3, 1e-3, 5e-4)),
-        *({"model": "robot", "method": m, "rtol": r, "atol": r * 1e-2} for m in ("dopri5", "dop853") for r in (1e-4, 1e-6, 1e-8, 1e-10, 1e-12)),
+        *({"model": "robot", "method": "rk4", "dt": dt} for dt in (0.4, 0.2, 0.1, 5e-2, 2e-2, 1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4)),
+        *({"model": "robot", "method": m, "rtol": r, "atol": r * 1e-2} for m in ("dopri5", "dop853") for r in (1e-4, 1e-6, 1e-8, 1e-10, 1e-12, 1e-13)),
     ],
 }
 HORIZON = {"A03_andrews": 0.03, "A04_bricard": 10.0}
@@ -361,6 +370,39 @@ def run_exudyn_a04(dt: float, rho: float, repeat: int) -> dict[str, Any]:
                      list(closure), round(T / dt))
 
 
+def _andrews() -> Any:
+    """``benchmarks/andrews_peers.py`` (A03's peer models), imported beside this script."""
+    if "andrews_peers" not in sys.modules:
+        sys.path.insert(0, str(HERE))
+        import andrews_peers  # noqa: F401
+
+        sys.path.remove(str(HERE))
+    return sys.modules["andrews_peers"]
+
+
+#: A03 peers over their ranges (andrews_peers.py): MuJoCo's Euler and RK4 with its default and
+#: stiff equalities (implicitfast equals Euler here: no velocity-dependent forces), Pinocchio's
+#: loop (semi-implicit Euler, RK4; Baumgarte Kp 0 and 1e4), Exudyn's generalized-α.
+A03_MUJOCO_DTS = (2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 5e-6, 2e-6, 1e-6)
+A03_PIN_DTS = (1e-4, 5e-5, 2e-5, 1e-5, 5e-6, 2e-6)
+A03_PIN_SETTINGS = tuple((m, kp) for m in ("euler", "rk4") for kp in (0.0, 1e4))
+A03_EXUDYN_DTS = (2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 5e-6, 2e-6)
+
+
+def a03_peers(engines: list[str], repeat: int) -> list[Any]:
+    ap = _andrews()
+    out: list[Any] = []
+    if "mujoco" in engines:
+        out += [functools.partial(ap.run_mujoco, dt, st, integ, repeat)
+                for integ in ("Euler", "RK4") for st in ("default", "stiff") for dt in A03_MUJOCO_DTS]
+    if "pinocchio" in engines:
+        out += [functools.partial(ap.run_pinocchio, dt, m, kp, repeat) for m, kp in A03_PIN_SETTINGS
+                for dt in A03_PIN_DTS if m == "rk4" or dt >= 5e-6]  # fmt: skip
+    if "exudyn" in engines:
+        out += [functools.partial(ap.run_exudyn, dt, rho, repeat) for rho in EXUDYN_RHOS for dt in A03_EXUDYN_DTS]
+    return out
+
+
 def a04_robot() -> Any:
     """A04 with nonmin's robot source: :func:`a04_pinocchio_model` (five hinges, n = 5) closed by
     a :meth:`~nonmin.model.robots.FrameConstraint.hinge` between rod5 and the ground at J6
@@ -371,6 +413,49 @@ def a04_robot() -> Any:
                                placement_b=np.array([0.0, 0.0, 1.0]))
     return RobotModel.from_pinocchio(a04_pinocchio_model(), constraints=[j6], gravity=[0.0, -9.81, 0.0],
                                      joint_limits="ignore", name="A04_bricard_robot")
+
+
+_A03_SYMBOLIC: list[Any] = []
+
+
+def a03_symbolic() -> Any:
+    """A03 with nonmin's symbolic source: the Test Set's M(q), V = c0 (ℓ − l0)²/2 − mom·β and
+    g1 … g6 (the library model's equations, ``nonmin.library.AndrewsModel``) as SymPy
+    expressions, compiled to the engine's expression tape (needs SymPy)."""
+    if _A03_SYMBOLIC:
+        return _A03_SYMBOLIC[0]
+    import sympy as sp
+
+    from nonmin.library import AndrewsModel
+    from nonmin.model.symbolic import SymbolicConstraint, SymbolicModel
+
+    p = AndrewsModel()
+    q = sp.symbols("beta Theta gamma Phi delta Omega epsilon")
+    be, th, ga, ph, de, om, ep = q
+    m1, m2, m3, m4, m5, m6, m7 = p.m
+    i1, i2, i3, i4, i5, i6, i7 = p.I
+    ee, zz = p.e - p.ea, p.zf - p.fa
+    M = sp.zeros(7, 7)
+    M[0, 0] = m1 * p.ra**2 + m2 * (p.rr**2 - 2 * p.da * p.rr * sp.cos(th) + p.da**2) + i1 + i2
+    M[1, 0] = M[0, 1] = m2 * (p.da**2 - p.da * p.rr * sp.cos(th)) + i2
+    M[1, 1] = m2 * p.da**2 + i2
+    M[2, 2] = m3 * (p.sa**2 + p.sb**2) + i3
+    M[3, 3] = m4 * ee**2 + i4
+    M[4, 3] = M[3, 4] = m4 * (ee**2 + p.zt * ee * sp.sin(ph)) + i4
+    M[4, 4] = m4 * (p.zt**2 + 2 * p.zt * ee * sp.sin(ph) + ee**2) + m5 * (p.ta**2 + p.tb**2) + i4 + i5
+    M[5, 5] = m6 * zz**2 + i6
+    M[6, 5] = M[5, 6] = m6 * (zz**2 - p.u * zz * sp.sin(om)) + i6
+    M[6, 6] = m6 * (zz**2 - 2 * p.u * zz * sp.sin(om) + p.u**2) + m7 * (p.ua**2 + p.ub**2) + i6 + i7
+    xd = p.sd * sp.cos(ga) + p.sc * sp.sin(ga) + p.xb
+    yd = p.sd * sp.sin(ga) - p.sc * sp.cos(ga) + p.yb
+    V = p.c0 * (sp.sqrt((xd - p.xc) ** 2 + (yd - p.yc) ** 2) - p.l0) ** 2 / 2 - p.mom * be
+    ex, ey = p.rr * sp.cos(be) - p.d * sp.cos(be + th), p.rr * sp.sin(be) - p.d * sp.sin(be + th)
+    g = [ex - p.ss * sp.sin(ga) - p.xb, ey + p.ss * sp.cos(ga) - p.yb,
+         ex - p.e * sp.sin(ph + de) - p.zt * sp.cos(de) - p.xa, ey + p.e * sp.cos(ph + de) - p.zt * sp.sin(de) - p.ya,
+         ex - p.zf * sp.cos(om + ep) - p.u * sp.sin(ep) - p.xa, ey - p.zf * sp.sin(om + ep) + p.u * sp.cos(ep) - p.ya]  # fmt: skip
+    cons = [SymbolicConstraint.holonomic(name, g[r0:r0 + 2]) for name, r0 in (("loop_B", 0), ("loop_A1", 2), ("loop_A2", 4))]
+    _A03_SYMBOLIC.append(SymbolicModel.from_mass_matrix("A03_andrews_symbolic", q=q, M=M, V=V, constraints=cons))
+    return _A03_SYMBOLIC[0]
 
 
 def a04_robot_p3(robot: Any, q: np.ndarray) -> np.ndarray:
@@ -392,15 +477,21 @@ def run(name: str, cfg: dict[str, Any], repeat: int) -> dict[str, Any]:
 
     T = HORIZON[name]
     cfg = dict(cfg)
-    robot = cfg.pop("model", None) == "robot"
-    mech: Any = a04_robot() if robot else library.get(name)
-    t_eval = np.array([0.0, T]) if name == "A03_andrews" else np.round(np.arange(0.0, T + 1e-9, SAMPLE["dt"]), 10)
+    kind = cfg.pop("model", None)
+    robot = kind == "robot"
+    mech: Any = a04_robot() if robot else a03_symbolic() if kind == "symbolic" else library.get(name)
+    # A03: every 1e-3 s (the peers' samples: energy and closure along the run; the error at 0.03 s)
+    t_eval = np.round(np.arange(0.0, T + 1e-12, 1e-3 if name == "A03_andrews" else SAMPLE["dt"]), 10)
     walls = []
     tr = None
     for _ in range(repeat + 1):  # one warm-up run
         t0 = CLOCK[0]()
         if robot:
             tr = simulate(mech, (0.0, T), np.zeros(5), np.zeros(5), t_eval=t_eval, throw=False, progress=False, **cfg)
+        elif kind == "symbolic":
+            from nonmin.library._andrews import ANDREWS_Q0
+
+            tr = simulate(mech, (0.0, T), ANDREWS_Q0, np.zeros(7), t_eval=t_eval, throw=False, progress=False, **cfg)
         else:
             tr = simulate(mech, (0.0, T), t_eval=t_eval, throw=False, progress=False, **cfg)
         walls.append(CLOCK[0]() - t0)
@@ -415,7 +506,7 @@ def run(name: str, cfg: dict[str, Any], repeat: int) -> dict[str, Any]:
     if name == "A04_bricard" and tr.success:
         p3 = a04_robot_p3(mech, np.asarray(tr.q)) if robot else np.asarray(tr.outputs(mech.model)["P3.position"])
         err = float(np.max(np.abs(p3 - a04_fine_reference()["P3"])))
-    setting = ("robot tree+hinge " if robot else "") + f"{cfg['method']} projection" + (f" rtol={cfg['rtol']:g}" if "rtol" in cfg else "")
+    setting = ("robot tree+hinge " if robot else "symbolic tape " if kind == "symbolic" else "") + f"{cfg['method']} projection" + (f" rtol={cfg['rtol']:g}" if "rtol" in cfg else "")
     ok = bool(tr.success)
     return {
         "engine": "nonmin", "setting": setting + f" [{tr.metadata.get('engine')}]", "mechanism": name,
@@ -431,18 +522,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", default=str(HERE / "results" / "library_wp.json"))
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--mechanisms", default="A03_andrews,A04_bricard")
-    ap.add_argument("--peers", action="store_true", help="add the peers on A04 (--peer-engines)")
+    ap.add_argument("--peers", action="store_true", help="add the peers (--peer-engines)")
     ap.add_argument("--peer-engines", default="mujoco,pinocchio,exudyn",
-                    help="peers on A04: MuJoCo (Euler, default and stiff equalities), Pinocchio "
-                         "(constraintDynamics loop, Euler/RK4, Kp 0/100), Exudyn (gen-alpha)")
+                    help="peers: MuJoCo (A04 Euler, A03 Euler and RK4; default and stiff equalities), Pinocchio "
+                         "(constraintDynamics loop, Euler/RK4, A04 Kp 0/100, A03 Kp 0/1e4), Exudyn (gen-alpha)")
     ap.add_argument("--peers-only", action="store_true", help="skip nonmin's rows (merge files later)")
-    ap.add_argument("--models", default="spatial,robot",
-                    help="nonmin's A04 models: spatial (the library's, n = 35), robot (tree + hinge, n = 5)")
+    ap.add_argument("--models", default="spatial,robot,library,symbolic",
+                    help="nonmin's models: A04 spatial (the library's, n = 35) and robot (tree + hinge, n = 5); "
+                         "A03 library (the hand-written Python model) and symbolic (the same equations "
+                         "compiled from SymPy)")
     ap.add_argument("--sample", type=float, default=0.01, help="A04 output interval (s), a multiple of 0.01")
     ap.add_argument("--cpu", action="store_true", help="time with the process's CPU time instead of wall time")
     a = ap.parse_args(argv)
     if a.cpu:
         CLOCK[0] = time.process_time
+        _andrews().CLOCK[0] = time.process_time
     SAMPLE["dt"] = float(a.sample)
     load = os.getloadavg()
     out: dict[str, Any] = {"command": "python benchmarks/library_wp.py " + " ".join(sys.argv[1:] if argv is None else argv),
@@ -451,15 +545,19 @@ def main(argv: list[str] | None = None) -> int:
                            "clock": "process CPU time" if a.cpu else "wall time"}  # fmt: skip
     for name in a.mechanisms.split(","):
         rows = []
-        engines = a.peer_engines.split(",") if name == "A04_bricard" and a.peers else []
+        engines = a.peer_engines.split(",") if a.peers else []
         peers: list[Any] = []
+        if name == "A03_andrews":
+            peers = a03_peers(engines, a.repeat)
+            engines = []
         if "mujoco" in engines:
             peers += [functools.partial(run_mujoco_a04, dt, st, a.repeat) for st in ("default", "stiff") for dt in MUJOCO_DTS]
         if "pinocchio" in engines:
             peers += [functools.partial(run_pinocchio_a04, dt, m, kp, a.repeat) for m, kp in PIN_SETTINGS for dt in PIN_DTS]
         if "exudyn" in engines:
             peers += [functools.partial(run_exudyn_a04, dt, rho, a.repeat) for rho in EXUDYN_RHOS for dt in EXUDYN_DTS]
-        mine = [c for c in CONFIGS[name] if c.get("model", "spatial") in a.models.split(",")]
+        default_model = "spatial" if name == "A04_bricard" else "library"
+        mine = [c for c in CONFIGS[name] if c.get("model", default_model) in a.models.split(",")]
         for cfg in [*(mine if not a.peers_only else []), *peers]:
             r = cfg() if callable(cfg) else run(name, cfg, a.repeat)
             rows.append(r)

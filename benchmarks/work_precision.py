@@ -23,9 +23,10 @@ from pathlib import Path
 from typing import Any
 
 HERE = Path(__file__).resolve().parent
-MEASURES = (("error_vs_reference_max", "position error [m]"), ("energy_drift", "energy drift [J]"),
-            ("closure_max", "closure error [m]"))  # fmt: skip
+MEASURES = [("error_vs_reference_max", "position error [m]"), ("energy_drift", "energy drift [J]"),
+            ("closure_max", "closure error [m]")]  # fmt: skip
 FLOOR = 1e-16  # round-off: errors below are drawn here
+XLABEL = ["wall time per simulated second [s]"]
 CAP = 10.0
 
 
@@ -50,9 +51,17 @@ def _ok(r: dict[str, Any]) -> bool:
     return str(r.get("status", "")).startswith("ok") and bool(r.get("on_branch")) and r.get("wall_per_sim_s")
 
 
-def gaps(rows: list[dict[str, Any]], closure_floor: float = 1e-13) -> list[dict[str, Any]]:
+#: Values below these count as equal when runs are matched (``--floor``): the closure's
+#: round-off, and by default nothing else. A reference of finite accuracy or an energy at
+#: round-off gets its own floor per run of this script (e.g. ``--floor error=1e-11``).
+FLOORS = {"error_vs_reference_max": 0.0, "energy_drift": 0.0, "closure_max": 1e-13}
+_FLOOR_KEYS = {"error": "error_vs_reference_max", "energy": "energy_drift", "closure": "closure_max"}
+
+
+def gaps(rows: list[dict[str, Any]], floors: dict[str, float] | None = None) -> list[dict[str, Any]]:
     """For every peer point on the branch: the fastest nonmin point with every measure ≤ the
-    peer's (closures below ``closure_floor`` equal), and the ratio of wall times."""
+    peer's (values below ``floors``, default :data:`FLOORS`, equal), and the ratio of wall times."""
+    fl = {**FLOORS, **(floors or {})}
     mine = [r for r in rows if r["engine"] == "nonmin" and _ok(r)]
     res = []
     for p in rows:
@@ -60,8 +69,8 @@ def gaps(rows: list[dict[str, Any]], closure_floor: float = 1e-13) -> list[dict[
             continue
         best = None
         for r in mine:
-            if all(p.get(k) is None or (r.get(k) is not None and float(r[k]) <= max(
-                    float(p[k]), closure_floor if k == "closure_max" else 0.0)) for k, _ in MEASURES):  # fmt: skip
+            if all(p.get(k) is None or (r.get(k) is not None and float(r[k]) <= max(float(p[k]), fl[k]))
+                   for k, _ in MEASURES):  # fmt: skip
                 if best is None or r["wall_per_sim_s"] < best["wall_per_sim_s"]:
                     best = r
         res.append({"peer": p, "nonmin": best,
@@ -98,7 +107,7 @@ def plot(mech: str, rows: list[dict[str, Any]], out: Path, note: str = "") -> No
                         "x", color=ln.get_color(), ms=7)  # fmt: skip
             ax.set_xscale("log")
             ax.set_yscale("log")
-            ax.set_xlabel("wall time per simulated second [s]")
+            ax.set_xlabel(XLABEL[0])
             ax.set_ylabel(label)
             ax.grid(True, which="major", alpha=0.3)
     axes[0].legend(fontsize=7, loc="best")
@@ -109,13 +118,15 @@ def plot(mech: str, rows: list[dict[str, Any]], out: Path, note: str = "") -> No
     plt.close(fig)
 
 
-def markdown(mechs: dict[str, list[dict[str, Any]]]) -> str:
+def markdown(mechs: dict[str, list[dict[str, Any]]], floors: dict[str, float] | None = None) -> str:
     lines = []
+    if floors:
+        lines += ["Equal below: " + ", ".join(f"{k} {v:g}" for k, v in floors.items()), ""]
     for mech, rows in mechs.items():
         lines += [f"### {mech}", "",
                   "| peer | dt | err [m] | dE [J] | wall/s | fastest nonmin at least as accurate | wall/s | nonmin / peer |",
                   "|---|---|---|---|---|---|---|---|"]  # fmt: skip
-        for g in sorted(gaps(rows), key=lambda g: g["peer"]["wall_per_sim_s"]):
+        for g in sorted(gaps(rows, floors), key=lambda g: g["peer"]["wall_per_sim_s"]):
             p, b = g["peer"], g["nonmin"]
             who = "none" if b is None else f"{b['setting']}" + (f" dt={b['dt']:g}" if b.get("dt") else "")
             lines.append(
@@ -134,14 +145,27 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=str(HERE.parent / "docs" / "img"))
     ap.add_argument("--markdown", default=None, help="write the gap tables here")
     ap.add_argument("--note", default="", help="a second title line (e.g. when and at what machine load)")
+    ap.add_argument("--floor", action="append", default=[], metavar="MEASURE=VALUE",
+                    help="count values of a measure (error, energy, closure) below VALUE as equal when "
+                         "matching runs (a reference's own accuracy, round-off); repeatable")
+    ap.add_argument("--xlabel", default="wall time per simulated second [s]",
+                    help="the x axis (e.g. 'CPU time per simulated second [s]' for --cpu runs)")
+    ap.add_argument("--error-label", default=None, help="the first panel's y label (e.g. 'angle error [rad]')")
     a = ap.parse_args(argv)
+    floors = {}
+    for f in a.floor:
+        key, _, val = f.partition("=")
+        floors[_FLOOR_KEYS[key.strip()]] = float(val)
+    XLABEL[0] = a.xlabel
+    if a.error_label:
+        MEASURES[0] = (MEASURES[0][0], a.error_label)
     mechs = merge(a.json)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     for mech, rows in mechs.items():
         plot(mech, rows, out / f"work_precision_{mech}.png", a.note)
         print(f"wrote {out / f'work_precision_{mech}.png'} ({len(rows)} points)")
-    md = markdown(mechs)
+    md = markdown(mechs, floors)
     if a.markdown:
         Path(a.markdown).write_text(md)
     print(md)
