@@ -715,6 +715,10 @@ Status TreeProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) c
                 for (int r = 0; r < m_all_; ++r) rq.r_con[static_cast<std::ptrdiff_t>(j) * m_all_ + r] = 0.0;
             return Status::ok;
         }
+        if (rows_analytic(rq.active)) {  // the rows' tangents from the frames' kinematics
+            row_tangents(rq, ws);
+            return Status::ok;
+        }
     }
     for (int j0 = 0; j0 < rq.nd; j0 += W) {
         const int w = std::min(W, rq.nd - j0);
@@ -738,6 +742,290 @@ Status TreeProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) c
         scatter_lanes<W>(ws.wrc.data(), m_all_, j0, w, m_all_, rq.r_con);
     }
     return Status::ok;
+}
+
+// ---------------------------------------------------------------- analytic row tangents
+// (trees without quaternion joints; docs/theory.md, "Analytic derivatives of the constraint rows")
+
+bool TreeProgram::rows_analytic(const std::uint8_t* active) const {
+    for (std::size_t ci = 0; ci < d_.constraints.size(); ++ci) {
+        if (!active[ci]) continue;
+        switch (d_.constraints[ci].type) {
+            case RowType::point:
+            case RowType::weld:
+            case RowType::hinge:
+            case RowType::planar_point:
+            case RowType::planar_weld:
+            case RowType::path_driver:
+            case RowType::joint_coupling:
+            case RowType::joint_limit:
+            case RowType::joint_driver: break;
+            default: return false;
+        }
+    }
+    return true;
+}
+
+void TreeProgram::frame_tangents(const Frame& f, const TreeWorkspace& ws, FrameTangent* tq, FrameTangent* tv) const {
+    const TreeModel& model = d_.model;
+    const TreeData& D = ws.data;
+    for (int k = 0; k < model.nv; ++k) {
+        tq[k] = FrameTangent();
+        tv[k] = FrameTangent();
+    }
+    if (f.joint < 0) return;
+    const int i = f.joint;
+    const Vec3 p = frame_placement(model, D, f).p;
+    const Motion& nu = D.ov[i];
+    const Motion& al = D.oa[i];  // with the gravity offset: only differences and its angular part enter
+    const Vec3& w = nu.ang;
+    const Vec3 vp = nu.lin + w.cross(p);
+    for (int jk = i; jk >= 0; jk = model.joints[jk].parent) {
+        const Joint& jt = model.joints[jk];
+        Motion nup, alp;  // the parent's velocity and acceleration (world: at rest, gravity offset)
+        if (jt.parent >= 0) {
+            nup = D.ov[jt.parent];
+            alp = D.oa[jt.parent];
+        } else {
+            alp.lin = -model.gravity;
+        }
+        Motion nrel, arel;  // ν_i − ν_p, α_i − α_p
+        nrel.lin = nu.lin - nup.lin;
+        nrel.ang = nu.ang - nup.ang;
+        arel.lin = al.lin - alp.lin;
+        arel.ang = al.ang - alp.ang;
+        for (int c = 0; c < joint_nv(jt.type); ++c) {
+            const int col = jt.iv + c;
+            Motion xi;
+            xi.lin = D.J.col(col).head<3>();
+            xi.ang = D.J.col(col).tail<3>();
+            const Vec3 dpt = xi.lin + xi.ang.cross(p);  // velocity of the point p in the twist ξ
+            const Motion eta = cross(xi, nup);
+            // along q̇_k: δν_i = ξ, δα_i = ξ × ν_i − 2 ξ × ν_p
+            Motion dav = cross(xi, nu);
+            dav.lin -= 2.0 * eta.lin;
+            dav.ang -= 2.0 * eta.ang;
+            FrameTangent& v = tv[col];
+            v.dw = xi.ang;
+            v.dv = dpt;
+            v.dal = dav.ang;
+            v.da = dav.lin + dav.ang.cross(p) + xi.ang.cross(vp) + w.cross(dpt);
+            // along q_k: the subtree moves rigidly with ξ: δp = ξ(p), δR = [ξ_ω]× R,
+            // δν_i = ξ × (ν_i − ν_p), δα_i = ξ × (α_i − α_p) − (ξ × ν_p) × (ν_i − ν_p)
+            const Motion dn = cross(xi, nrel);
+            Motion daq = cross(xi, arel);
+            const Motion en = cross(eta, nrel);
+            daq.lin -= en.lin;
+            daq.ang -= en.ang;
+            FrameTangent& t = tq[col];
+            t.dp = dpt;
+            t.dth = xi.ang;
+            t.dw = dn.ang;
+            t.dv = dn.lin + dn.ang.cross(p) + w.cross(dpt);
+            t.dal = daq.ang;
+            t.da = daq.lin + daq.ang.cross(p) + al.ang.cross(dpt) + dn.ang.cross(vp) + w.cross(t.dv);
+        }
+    }
+}
+
+void TreeProgram::add_wrench_tangents(const Frame& f, const Force& F, const Force* dF, int l, TreeWorkspace& ws) const {
+    if (f.joint < 0) return;
+    const TreeModel& model = d_.model;
+    const TreeData& D = ws.data;
+    const int n = model.nv, i = f.joint;
+    Mat& out = ws.dlq;
+    // the wrench's own change: J_jᵀ δF
+    for (int k = 0; k < n; ++k) {
+        const Force& d = dF[k];
+        if (d.lin.isZero(0.0) && d.ang.isZero(0.0)) continue;
+        for (int j = i; j >= 0; j = model.joints[j].parent) {
+            const Joint& jt = model.joints[j];
+            for (int c = 0; c < joint_nv(jt.type); ++c) {
+                const int col = jt.iv + c;
+                out(k, l * n + col) += D.J.col(col).head<3>().dot(d.lin) + D.J.col(col).tail<3>().dot(d.ang);
+            }
+        }
+    }
+    // the motion subspaces of the subtree of k: δJ_j = ξ_k × J_j for j ⪰ k
+    for (int jk = i; jk >= 0; jk = model.joints[jk].parent) {
+        const Joint& jtk = model.joints[jk];
+        for (int ck = 0; ck < joint_nv(jtk.type); ++ck) {
+            const int k = jtk.iv + ck;
+            Motion xi;
+            xi.lin = D.J.col(k).head<3>();
+            xi.ang = D.J.col(k).tail<3>();
+            // (ξ × J_j)·F = J_j · (−ξ ×* F)
+            const Force xf = cross_force(xi, F);
+            for (int j = i; j >= jk; j = model.joints[j].parent) {
+                const Joint& jt = model.joints[j];
+                for (int c = 0; c < joint_nv(jt.type); ++c) {
+                    const int col = jt.iv + c;
+                    out(k, l * n + col) -= D.J.col(col).head<3>().dot(xf.lin) + D.J.col(col).tail<3>().dot(xf.ang);
+                }
+            }
+        }
+    }
+}
+
+NONMIN_FLATTEN void TreeProgram::row_tangents(const ResidualQuery& rq, TreeWorkspace& ws) const {
+    const TreeModel& model = d_.model;
+    const TreeData& D = ws.data;
+    const int n = model.nv, nlam = rq.nlam;
+    if (ws.dcq.rows() != n || ws.dcq.cols() != m_all_) {
+        ws.dcq.resize(n, m_all_);
+        ws.dcv.resize(n, m_all_);
+        ws.dlq.resize(n, 2 * n);
+        for (auto* v : {&ws.tqa, &ws.tva, &ws.tqb, &ws.tvb}) v->assign(static_cast<std::size_t>(n), FrameTangent());
+        ws.dF.assign(static_cast<std::size_t>(n), Force());
+    }
+    ws.dcq.setZero();
+    ws.dcv.setZero();
+    ws.dlq.setZero();
+    FrameTangent *tqa = ws.tqa.data(), *tva = ws.tva.data(), *tqb = ws.tqb.data(), *tvb = ws.tvb.data();
+    Force* dF = ws.dF.data();
+    const double* a = rq.a;
+    const Vec3 zero = Vec3::Zero();
+    for (std::size_t ci = 0; ci < d_.constraints.size(); ++ci) {
+        if (!rq.active[ci]) continue;
+        const TreeConstraint& c = d_.constraints[ci];
+        const int r0 = constraints_[ci].row;
+        const double* lam = rq.lam + r0;  // λ_l of row r0 + r: lam[l m_all + r]
+        if (c.type == RowType::joint_limit || c.type == RowType::joint_driver) continue;  // constant rows
+        if (c.type == RowType::joint_coupling) {
+            if (c.iq2 < 0) continue;
+            const auto& co = c.coef;
+            const double x = rq.q[c.iq2] - c.ref2, qd2 = rq.qd[c.iq2];
+            const double d2 = 2 * co[2] + 6 * co[3] * x + 12 * co[4] * x * x;
+            const double d3 = 6 * co[3] + 24 * co[4] * x;
+            // A a + γ = a₁ − d₁(x) a₂ − d₂(x) q̇₂²;  Aᵀλ = λ (e₁ − d₁(x) e₂)
+            ws.dcq(c.iq2, r0) = -d2 * a[c.iq2] - d3 * qd2 * qd2;
+            ws.dcv(c.iq2, r0) = -2.0 * d2 * qd2;
+            for (int l = 0; l < nlam; ++l) ws.dlq(c.iq2, l * n + c.iq2) -= lam[l * m_all_] * d2;
+            continue;
+        }
+        // frame rows: coefficients (lin, ang) on frame a and frame b of each row with constant
+        // world coefficients; hinge rows 3, 4 below
+        const Frame& fa = d_.frames[c.frame_a];
+        const Frame& fb = d_.frames[c.frame_b];
+        frame_tangents(fa, ws, tqa, tva);
+        frame_tangents(fb, ws, tqb, tvb);
+        Vec3 la[6], aa[6];  // frame b's coefficients are their negatives
+        int nc = 0;
+        switch (c.type) {
+            case RowType::point:
+            case RowType::weld:
+            case RowType::hinge:
+                for (int i = 0; i < 3; ++i) la[nc] = Vec3::Unit(i), aa[nc++] = zero;
+                if (c.type == RowType::weld)
+                    for (int i = 0; i < 3; ++i) la[nc] = zero, aa[nc++] = Vec3::Unit(i);
+                break;
+            case RowType::planar_point:
+            case RowType::planar_weld:
+                la[nc] = c.u1, aa[nc++] = zero;
+                la[nc] = c.u2, aa[nc++] = zero;
+                if (c.type == RowType::planar_weld) la[nc] = zero, aa[nc++] = c.axis;
+                break;
+            case RowType::path_driver:  // e_i · (p_b − p_a): frame a's coefficient −e_i
+                for (int i = 0; i < 3; ++i)
+                    if (c.drv[i] >= 0) la[nc] = -Vec3::Unit(i), aa[nc++] = zero;
+                break;
+            default: break;
+        }
+        for (int k = 0; k < n; ++k) {
+            for (int r = 0; r < nc; ++r) {
+                ws.dcq(k, r0 + r) = la[r].dot(tqa[k].da - tqb[k].da) + aa[r].dot(tqa[k].dal - tqb[k].dal);
+                ws.dcv(k, r0 + r) = la[r].dot(tva[k].da - tvb[k].da) + aa[r].dot(tva[k].dal - tvb[k].dal);
+            }
+        }
+        const SE3 Xa = frame_placement(model, D, fa), Xb = frame_placement(model, D, fb);
+        // hinge: rows 3 + i = r_i·(α_a − α_b) + ṙ_i·(ω_a − ω_b), r_i = U_i × K, U_i = R_a u_i, K = R_b k,
+        // ṙ_i = (ω_a × U_i) × K + U_i × (ω_b × K)
+        const bool hinge = c.type == RowType::hinge;
+        Vec3 U[2], r[2], rd[2], K = zero, wa = zero, wb = zero, dal = zero;
+        if (hinge) {
+            if (fa.joint >= 0) wa = D.ov[fa.joint].ang, dal += D.oa[fa.joint].ang;
+            if (fb.joint >= 0) wb = D.ov[fb.joint].ang, dal -= D.oa[fb.joint].ang;
+            K = Xb.R * c.axis;
+            for (int i = 0; i < 2; ++i) {
+                U[i] = Xa.R * (i == 0 ? c.u1 : c.u2);
+                r[i] = U[i].cross(K);
+                rd[i] = wa.cross(U[i]).cross(K) + U[i].cross(wb.cross(K));
+            }
+            const Vec3 dw = wa - wb;
+            for (int k = 0; k < n; ++k)
+                for (int i = 0; i < 2; ++i) {
+                    for (int pass = 0; pass < 2; ++pass) {  // 0: q_k, 1: q̇_k
+                        const FrameTangent& A = pass == 0 ? tqa[k] : tva[k];
+                        const FrameTangent& B = pass == 0 ? tqb[k] : tvb[k];
+                        const Vec3 dU = A.dth.cross(U[i]), dK = B.dth.cross(K);
+                        const Vec3 dr = dU.cross(K) + U[i].cross(dK);
+                        const Vec3 drd = (A.dw.cross(U[i]) + wa.cross(dU)).cross(K) + wa.cross(U[i]).cross(dK) +
+                                         dU.cross(wb.cross(K)) + U[i].cross(B.dw.cross(K) + wb.cross(dK));
+                        const double val = dr.dot(dal) + r[i].dot(A.dal - B.dal) + drd.dot(dw) + rd[i].dot(A.dw - B.dw);
+                        (pass == 0 ? ws.dcq : ws.dcv)(k, r0 + 3 + i) = val;
+                    }
+                }
+        }
+        // Aᵀλ_l: the wrenches λ_l puts on the two frames (force at the world origin) and their
+        // changes along q_k at fixed bodies (the points move; the hinge's r_i turns)
+        for (int l = 0; l < nlam; ++l) {
+            Vec3 fl = zero, tau = zero;
+            for (int rr = 0; rr < nc; ++rr) {
+                const double lv = lam[l * m_all_ + rr];
+                fl += lv * la[rr];
+                tau += lv * aa[rr];
+            }
+            double lh[2] = {0.0, 0.0};
+            if (hinge)
+                for (int i = 0; i < 2; ++i) {
+                    lh[i] = lam[l * m_all_ + 3 + i];
+                    tau += lh[i] * r[i];
+                }
+            for (int side = 0; side < 2; ++side) {
+                const Frame& f = side == 0 ? fa : fb;
+                if (f.joint < 0) continue;
+                const double s = side == 0 ? 1.0 : -1.0;
+                const Vec3& p = side == 0 ? Xa.p : Xb.p;
+                const FrameTangent* tq = side == 0 ? tqa : tqb;
+                Force F;
+                F.lin = s * fl;
+                F.ang = s * tau + p.cross(F.lin);
+                for (int k = 0; k < n; ++k) {
+                    dF[k].lin.setZero();
+                    dF[k].ang = tq[k].dp.cross(F.lin);
+                    if (hinge && (lh[0] != 0.0 || lh[1] != 0.0))
+                        for (int i = 0; i < 2; ++i) {
+                            const Vec3 dU = tqa[k].dth.cross(U[i]), dK = tqb[k].dth.cross(K);
+                            dF[k].ang += (s * lh[i]) * (dU.cross(K) + U[i].cross(dK));
+                        }
+                }
+                add_wrench_tangents(f, F, dF, l, ws);
+            }
+        }
+    }
+    // the tangents along rq's directions (the pipeline's seeds are unit vectors: one row each)
+    for (int j = 0; j < rq.nd; ++j) {
+        const double* dq = rq.dq + static_cast<std::ptrdiff_t>(j) * n;
+        const double* dqd = rq.dqd + static_cast<std::ptrdiff_t>(j) * n;
+        double* rc = rq.r_con + static_cast<std::ptrdiff_t>(j) * m_all_;
+        double* rl = rq.r_lam + static_cast<std::ptrdiff_t>(j) * nlam * n;
+        for (int r = 0; r < m_all_; ++r) rc[r] = 0.0;
+        for (int r = 0; r < nlam * n; ++r) rl[r] = 0.0;
+        for (int k = 0; k < n; ++k) {
+            if (dq[k] != 0.0) {
+                const double x = dq[k];
+                const double* cq = ws.dcq.row(k).data();
+                const double* lq = ws.dlq.row(k).data();
+                for (int r = 0; r < m_all_; ++r) rc[r] += x * cq[r];
+                for (int r = 0; r < nlam * n; ++r) rl[r] += x * lq[r];
+            }
+            if (dqd[k] != 0.0) {
+                const double x = dqd[k];
+                const double* cv = ws.dcv.row(k).data();
+                for (int r = 0; r < m_all_; ++r) rc[r] += x * cv[r];
+            }
+        }
+    }
 }
 
 // The evaluation on the scalar S; the drivers are functions of t alone, evaluated in double.

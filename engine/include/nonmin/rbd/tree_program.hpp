@@ -103,6 +103,15 @@ struct TreeScratch {
     std::vector<double> treg;    // registers of the drivers' expression tapes (functions of t)
 };
 
+// The first derivatives of one frame's world kinematics (frame_kinematics) along one
+// coordinate direction, at fixed joint acceleration: its origin's displacement dp and rotation
+// dth (q directions; zero along q̇), angular velocity dw, origin velocity dv, classical origin
+// acceleration da and angular acceleration dal (row_tangents).
+struct FrameTangent {
+    Vec3 dp = Vec3::Zero(), dth = Vec3::Zero(), dw = Vec3::Zero(), dv = Vec3::Zero(), da = Vec3::Zero(),
+         dal = Vec3::Zero();
+};
+
 struct TreeWorkspace : Workspace, TreeScratch<double> {
     explicit TreeWorkspace(const TreeDescription& d) : TreeScratch<double>(d) {}
     // evaluate_tangent's scratch: dual copies of the state and of the terms (made at first use)
@@ -115,6 +124,13 @@ struct TreeWorkspace : Workspace, TreeScratch<double> {
     std::vector<Vec3> xl, xa;  // per joint and lane: world twists of the seeded directions
     Vec dv;                    // nv: one lane's velocity-space direction
     Mat dtq, dtv;              // nv × nv: ∂τ/∂q, ∂τ/∂v of rnea_derivatives (trees without quaternions)
+    // row_tangents' scratch (made at first use): ∂(A a + γ)/∂q_k, ∂(A a + γ)/∂q̇_k (row k of
+    // dcq, dcv: nv × m_all) and ∂(Aᵀλ_l)/∂q_k (row k of dlq: nv × 2 nv); per frame side and
+    // column k the tangents of its kinematics along q_k (tq) and q̇_k (tv); the side's wrench
+    // tangents along q_k (dF).
+    Mat dcq, dcv, dlq;
+    std::vector<FrameTangent> tqa, tva, tqb, tvb;
+    std::vector<Force> dF;
 };
 
 class TreeProgram : public Program {
@@ -130,8 +146,9 @@ class TreeProgram : public Program {
     // The residuals of ResidualQuery: M a − h − f_p − B u = Tᵀ (rnea(q, v, T a + Ṫ q̇) + d ⊙ v − S u)
     // (one RNEA, no CRBA), A a + γ = the frame accelerations at the joint acceleration T a + Ṫ q̇,
     // Aᵀ λ from the rows. Trees without quaternions: the first residual's tangents from the
-    // analytic rnea_derivatives (tree.hpp), the rows' on DualW without the RNEA; with
-    // quaternions: everything in one pass per DUAL_WIDTH directions on DualW.
+    // analytic rnea_derivatives (tree.hpp), the rows' from row_tangents (analytic, when every
+    // active row has them: rows_analytic) or else on DualW without the RNEA; with quaternions:
+    // everything in one pass per DUAL_WIDTH directions on DualW.
     Status residual_tangents(const ResidualQuery& rq, Workspace& ws) const override;
     std::unique_ptr<Workspace> make_workspace() const override;
 
@@ -183,6 +200,19 @@ class TreeProgram : public Program {
     // each body along direction l — δ(oMi) = ξ_i × oMi, δJ_c = ξ_i × J_c, δ(oI_i) the motion
     // of its mass points — instead of differentiating the forward kinematics.
     void seed_kinematics(const ResidualQuery& rq, int j0, int w, TreeWorkspace& ws) const;
+    // Whether every active constraint has analytic row tangents (row_tangents): point, weld,
+    // hinge, planar_point, planar_weld, path_driver and the joint-space rows.
+    bool rows_analytic(const std::uint8_t* active) const;
+    // The tangents of A a + γ and Aᵀλ_l (rq.r_con, rq.r_lam) along rq's directions from the
+    // analytic derivatives of the frames' kinematics (programs without quaternions; needs
+    // rnea_derivatives' forward_motion at (q̇, a) in ws.data, accelerations with the gravity
+    // offset). Derivation in docs/theory.md ("Analytic derivatives of the constraint rows").
+    void row_tangents(const ResidualQuery& rq, TreeWorkspace& ws) const;
+    // One frame's tangents along every coordinate (tq: q_k, tv: q̇_k; zero outside its support).
+    void frame_tangents(const Frame& f, const TreeWorkspace& ws, FrameTangent* tq, FrameTangent* tv) const;
+    // dlq(k, l nv + ·) += ∂(J_fᵀ F)/∂q_k for the wrench F (world origin) carried by frame f's
+    // body, with dF[k] its own change along q_k at fixed body (coefficient changes, moved point).
+    void add_wrench_tangents(const Frame& f, const Force& F, const Force* dF, int l, TreeWorkspace& ws) const;
 
     // T is the identity on runs of coordinates (iq .. iq+len ↔ iv .. iv+len) and a small block
     // on each quaternion joint (quaternion qs..qs+4 ↔ angular velocity a..a+3; free flyer also
