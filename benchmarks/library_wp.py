@@ -419,42 +419,15 @@ _A03_SYMBOLIC: list[Any] = []
 
 
 def a03_symbolic() -> Any:
-    """A03 with nonmin's symbolic source: the Test Set's M(q), V = c0 (ℓ − l0)²/2 − mom·β and
-    g1 … g6 (the library model's equations, ``nonmin.library.AndrewsModel``) as SymPy
-    expressions, compiled to the engine's expression tape (needs SymPy)."""
+    """A03 with nonmin's symbolic source: the library model's own equations as SymPy
+    expressions (``AndrewsModel.symbolic()``: the Test Set's M(q), V = c0 (ℓ − l0)²/2 − mom·β
+    and g1 … g6), compiled to the engine's expression tape at first use (needs SymPy). The
+    library model runs the same tape, shipped precompiled."""
     if _A03_SYMBOLIC:
         return _A03_SYMBOLIC[0]
-    import sympy as sp
-
     from nonmin.library import AndrewsModel
-    from nonmin.model.symbolic import SymbolicConstraint, SymbolicModel
 
-    p = AndrewsModel()
-    q = sp.symbols("beta Theta gamma Phi delta Omega epsilon")
-    be, th, ga, ph, de, om, ep = q
-    m1, m2, m3, m4, m5, m6, m7 = p.m
-    i1, i2, i3, i4, i5, i6, i7 = p.I
-    ee, zz = p.e - p.ea, p.zf - p.fa
-    M = sp.zeros(7, 7)
-    M[0, 0] = m1 * p.ra**2 + m2 * (p.rr**2 - 2 * p.da * p.rr * sp.cos(th) + p.da**2) + i1 + i2
-    M[1, 0] = M[0, 1] = m2 * (p.da**2 - p.da * p.rr * sp.cos(th)) + i2
-    M[1, 1] = m2 * p.da**2 + i2
-    M[2, 2] = m3 * (p.sa**2 + p.sb**2) + i3
-    M[3, 3] = m4 * ee**2 + i4
-    M[4, 3] = M[3, 4] = m4 * (ee**2 + p.zt * ee * sp.sin(ph)) + i4
-    M[4, 4] = m4 * (p.zt**2 + 2 * p.zt * ee * sp.sin(ph) + ee**2) + m5 * (p.ta**2 + p.tb**2) + i4 + i5
-    M[5, 5] = m6 * zz**2 + i6
-    M[6, 5] = M[5, 6] = m6 * (zz**2 - p.u * zz * sp.sin(om)) + i6
-    M[6, 6] = m6 * (zz**2 - 2 * p.u * zz * sp.sin(om) + p.u**2) + m7 * (p.ua**2 + p.ub**2) + i6 + i7
-    xd = p.sd * sp.cos(ga) + p.sc * sp.sin(ga) + p.xb
-    yd = p.sd * sp.sin(ga) - p.sc * sp.cos(ga) + p.yb
-    V = p.c0 * (sp.sqrt((xd - p.xc) ** 2 + (yd - p.yc) ** 2) - p.l0) ** 2 / 2 - p.mom * be
-    ex, ey = p.rr * sp.cos(be) - p.d * sp.cos(be + th), p.rr * sp.sin(be) - p.d * sp.sin(be + th)
-    g = [ex - p.ss * sp.sin(ga) - p.xb, ey + p.ss * sp.cos(ga) - p.yb,
-         ex - p.e * sp.sin(ph + de) - p.zt * sp.cos(de) - p.xa, ey + p.e * sp.cos(ph + de) - p.zt * sp.sin(de) - p.ya,
-         ex - p.zf * sp.cos(om + ep) - p.u * sp.sin(ep) - p.xa, ey - p.zf * sp.sin(om + ep) + p.u * sp.cos(ep) - p.ya]  # fmt: skip
-    cons = [SymbolicConstraint.holonomic(name, g[r0:r0 + 2]) for name, r0 in (("loop_B", 0), ("loop_A1", 2), ("loop_A2", 4))]
-    _A03_SYMBOLIC.append(SymbolicModel.from_mass_matrix("A03_andrews_symbolic", q=q, M=M, V=V, constraints=cons))
+    _A03_SYMBOLIC.append(AndrewsModel().symbolic().replace(name="A03_andrews_symbolic"))
     return _A03_SYMBOLIC[0]
 
 

@@ -14,9 +14,13 @@ mom·β``, ``f_g = −∂V/∂q``.
 
 from __future__ import annotations
 
+import json
 import math
+import weakref
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from importlib import resources
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -89,6 +93,78 @@ class AndrewsModel(Model):
     fa: float = 0.01421
 
     has_outputs = True
+
+    def engine_program(self) -> Any:
+        """The model as the engine's ``TapeProgram``: its M, h, A, γ, φ and V run compiled.
+
+        The expression tape ships with the package (``nonmin/data/tapes/A03_andrews.json``, no
+        SymPy at run time): it is :meth:`symbolic`'s tape, with every field of the model as a
+        parameter input, so a :func:`dataclasses.replace` variant only changes the parameter
+        values. ``nonmin.library._andrews.write_tape()`` writes it again (needs SymPy);
+        ``tests/library/test_andrews_engine.py`` checks it against this class's own formulas
+        and against a fresh SymPy compilation.
+        """
+        prog = _PROGRAMS.get(self)
+        if prog is None:
+            from .. import _engine  # type: ignore[attr-defined]  # the compiled extension
+
+            tape = _shipped_tape()
+            pvals = [_param_value(self, name) for name in tape["params"]]
+            cons = [(c.name, 0, c.dim) for c in self.constraints]
+            i32 = np.int32
+            prog = _engine.TapeProgram(
+                7, 0, cons, np.asarray(tape["op"], i32), np.asarray(tape["a"], i32),
+                np.asarray(tape["b"], i32), np.asarray(tape["c"], float),
+                np.asarray(tape["out_target"], i32), np.asarray(tape["out_index"], i32),
+                np.asarray(tape["out_reg"], i32), pvals,
+            )  # fmt: skip
+            _PROGRAMS[self] = prog
+        return prog
+
+    def symbolic(self) -> Any:
+        """The same model as a :class:`~nonmin.model.symbolic.SymbolicModel` (needs SymPy).
+
+        M(q) as in :meth:`mass_matrix`, ``V = c0 (ℓ − l0)²/2 − mom·β``, the six closure
+        residuals g1 … g6 as holonomic constraints (``loop_B``, ``loop_A1``, ``loop_A2``). Every
+        field is a parameter: the tuples ``m`` and ``I`` as ``m0`` … ``m6``, ``I0`` … ``I6``,
+        the scalars by their field names; the values are this model's.
+        """
+        import sympy as sp
+
+        from ..model.symbolic import SymbolicConstraint, SymbolicModel
+
+        names = _param_names()
+        P = {name: sp.Symbol(name) for name in names}
+        q = sp.symbols(" ".join(ANGLE_NAMES))
+        be, th, ga, ph, de, om, ep = q
+        m = [P[f"m{i}"] for i in range(7)]
+        Ii = [P[f"I{i}"] for i in range(7)]
+        ee, zz = P["e"] - P["ea"], P["zf"] - P["fa"]
+        rr, da, zt, u = P["rr"], P["da"], P["zt"], P["u"]
+        M = sp.zeros(7, 7)
+        M[0, 0] = m[0] * P["ra"] ** 2 + m[1] * (rr**2 - 2 * da * rr * sp.cos(th) + da**2) + Ii[0] + Ii[1]
+        M[1, 0] = M[0, 1] = m[1] * (da**2 - da * rr * sp.cos(th)) + Ii[1]
+        M[1, 1] = m[1] * da**2 + Ii[1]
+        M[2, 2] = m[2] * (P["sa"] ** 2 + P["sb"] ** 2) + Ii[2]
+        M[3, 3] = m[3] * ee**2 + Ii[3]
+        M[4, 3] = M[3, 4] = m[3] * (ee**2 + zt * ee * sp.sin(ph)) + Ii[3]
+        M[4, 4] = m[3] * (zt**2 + 2 * zt * ee * sp.sin(ph) + ee**2) + m[4] * (P["ta"] ** 2 + P["tb"] ** 2) + Ii[3] + Ii[4]
+        M[5, 5] = m[5] * zz**2 + Ii[5]
+        M[6, 5] = M[5, 6] = m[5] * (zz**2 - u * zz * sp.sin(om)) + Ii[5]
+        M[6, 6] = m[5] * (zz**2 - 2 * u * zz * sp.sin(om) + u**2) + m[6] * (P["ua"] ** 2 + P["ub"] ** 2) + Ii[5] + Ii[6]
+        xd = P["sd"] * sp.cos(ga) + P["sc"] * sp.sin(ga) + P["xb"]
+        yd = P["sd"] * sp.sin(ga) - P["sc"] * sp.cos(ga) + P["yb"]
+        V = P["c0"] * (sp.sqrt((xd - P["xc"]) ** 2 + (yd - P["yc"]) ** 2) - P["l0"]) ** 2 / 2 - P["mom"] * be
+        d, ss, e, zf = P["d"], P["ss"], P["e"], P["zf"]
+        ex, ey = rr * sp.cos(be) - d * sp.cos(be + th), rr * sp.sin(be) - d * sp.sin(be + th)
+        g = [
+            ex - ss * sp.sin(ga) - P["xb"], ey + ss * sp.cos(ga) - P["yb"],
+            ex - e * sp.sin(ph + de) - zt * sp.cos(de) - P["xa"], ey + e * sp.cos(ph + de) - zt * sp.sin(de) - P["ya"],
+            ex - zf * sp.cos(om + ep) - u * sp.sin(ep) - P["xa"], ey - zf * sp.sin(om + ep) + u * sp.cos(ep) - P["ya"],
+        ]  # fmt: skip
+        cons = [SymbolicConstraint.holonomic(name, g[r0 : r0 + 2]) for name, r0 in LOOPS]
+        params = {P[name]: _param_value(self, name) for name in names}
+        return SymbolicModel.from_mass_matrix(self.name, q=q, M=M, V=V, constraints=cons, params=params)
 
     @property
     def coordinate_names(self) -> tuple[str, ...]:  # type: ignore[override]
@@ -285,6 +361,62 @@ class AndrewsModel(Model):
         return out
 
 
+#: Engine programs of live models (built on first use; not part of a model's value or pickle).
+_PROGRAMS: weakref.WeakKeyDictionary[AndrewsModel, Any] = weakref.WeakKeyDictionary()
+_TAPE: list[dict[str, Any]] = []
+TAPE_FILE = "A03_andrews.json"
+
+
+def _param_names() -> list[str]:
+    """The tape's parameter inputs: ``m0`` … ``m6``, ``I0`` … ``I6``, then the scalar fields."""
+    out: list[str] = []
+    for f in fields(AndrewsModel):
+        if f.name == "name":
+            continue
+        if f.name in ("m", "I"):
+            out += [f"{f.name}{i}" for i in range(7)]
+        else:
+            out.append(f.name)
+    return out
+
+
+def _param_value(model: AndrewsModel, name: str) -> float:
+    if name[0] in "mI" and name[1:].isdigit():
+        return float(getattr(model, name[0])[int(name[1:])])
+    return float(getattr(model, name))
+
+
+def _shipped_tape() -> dict[str, Any]:
+    """The tape of :meth:`AndrewsModel.symbolic` as shipped (read once; plain JSON, no code)."""
+    if not _TAPE:
+        text = resources.files("nonmin").joinpath("data", "tapes", TAPE_FILE).read_text("utf-8")
+        tape = json.loads(text)
+        if sorted(tape.get("params", ())) != sorted(_param_names()):
+            raise RuntimeError(
+                f"nonmin/data/tapes/{TAPE_FILE} does not match AndrewsModel's fields: regenerate it "
+                "with nonmin.library._andrews.write_tape()"
+            )
+        _TAPE.append(tape)
+    return _TAPE[0]
+
+
+def tape_record(model: AndrewsModel | None = None) -> dict[str, Any]:
+    """:meth:`AndrewsModel.symbolic`'s expression tape as the JSON record that ships (needs SymPy)."""
+    from ..model.symbolic._model import _tape_of
+
+    sym = (model or AndrewsModel()).symbolic()
+    tape = _tape_of(sym.compiled)
+    if tape is None:  # pragma: no cover - every function of the model is on the tape
+        raise RuntimeError("the Andrews model did not compile to a tape")
+    return {
+        "model": "A03_andrews",
+        "generator": "nonmin.library._andrews.write_tape() (AndrewsModel.symbolic(), nonmin.model.symbolic._tape)",
+        "n_inputs": int(tape.n_inputs),
+        "params": [str(s) for s in sym.compiled.param_symbols],  # the tape's input order
+        **{k: getattr(tape, k).tolist() for k in ("op", "a", "b", "c", "out_target", "out_index", "out_reg")},
+    }
+
+
 @register("A03_andrews")
 def a03_andrews(*, t_final: float = 0.03) -> Mechanism:
     """Andrews' squeezing mechanism (IFToMM A03; Hairer–Wanner II §VII.7; Test Set ``andrews``).
@@ -307,3 +439,18 @@ def a03_andrews(*, t_final: float = 0.03) -> Mechanism:
             "Solvers, problem andrews; IFToMM benchmark A03"
         ),
     )
+
+
+
+def write_tape(path: str | None = None) -> str:
+    """Write :func:`tape_record` to the shipped file (or ``path``); returns the path (needs SymPy).
+
+    Run after changing :meth:`AndrewsModel.symbolic` or the tape compiler:
+    ``python -c "from nonmin.library._andrews import write_tape; print(write_tape())"``.
+    """
+    from pathlib import Path
+
+    out = Path(path) if path is not None else Path(__file__).resolve().parents[1] / "data" / "tapes" / TAPE_FILE
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(tape_record(), separators=(",", ":")) + "\n", encoding="utf-8")
+    return str(out)
