@@ -11,6 +11,8 @@ and 2 finger slides) and ``panda_weld`` (Panda, a weld: 6 rows, n = 9). Peers:
 * ``nonmin-engine``: ``nonmin.linear.dynamics_derivatives`` (the pipeline in C++: the kernel at
   the state, the tangents of three residuals of the model terms in multi-direction forward
   mode, the kernel's derivative at its rank), with its Python validation and result object.
+* ``nonmin-out``: the same call with ``out=`` (the previous call's result overwritten in
+  place: no allocation, no new arrays; the loop form, as Pinocchio's calls reuse its ``Data``).
 * ``nonmin-raw``: the engine's binding alone (``_engine.forward_derivatives`` into a new
   output block, views of the three Jacobians), to separate the wrapper's cost.
 * ``nonmin-numpy``: the NumPy specification (terms' tangents from the engine, kernel in NumPy).
@@ -95,9 +97,11 @@ def _peers(
         _engine.forward_derivatives(prog, scratch, 0.0, q0, v, tau, None, mask, 1e-10, blk)
         return blk[2 : 2 + n], blk[2 + n : 2 + 2 * n], blk[2 + 2 * n : 2 + 3 * n]
 
+    held = dynamics_derivatives(model, q0, v, f=tau)
     peers: dict[str, Callable[[], Any]] = {
         "pinocchio": pin_call,
         "nonmin-engine": lambda: dynamics_derivatives(model, q0, v, f=tau),
+        "nonmin-out": lambda: dynamics_derivatives(model, q0, v, f=tau, out=held),
         "nonmin-raw": raw_call,
     }
     if with_numpy:
@@ -208,7 +212,9 @@ def _run_case(case: str, args: argparse.Namespace) -> dict[str, Any]:
         "agreement": agreement, "load": [load0, load1],
     }  # fmt: skip
     if args.instructions:
-        ins = _instructions(case, ["pinocchio", "nonmin-engine", "nonmin-raw"], max(args.calls, 300))
+        ins = _instructions(
+            case, ["pinocchio", "nonmin-engine", "nonmin-out", "nonmin-raw"], max(args.calls, 300)
+        )
         print("  instructions per call (callgrind):")
         for k, c in ins.items():
             print(f"  {k:15s} {c:11.0f}   ratio {c / ins['pinocchio']:.2f}")

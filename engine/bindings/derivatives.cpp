@@ -12,9 +12,25 @@
 #include "program_common.hpp"
 #include "register.hpp"
 
+#include <Python.h>
+#define NPY_NO_DEPRECATED_API NPY_1_7_API_VERSION
+#include <numpy/arrayobject.h>
+
 namespace nonmin::bindings {
 
+namespace {
+// An exact numpy.ndarray of float64 (native byte order, aligned, C-contiguous) with nd dimensions.
+PyArrayObject* f64_array(PyObject* o, int nd) {
+    if (!PyArray_CheckExact(o)) return nullptr;
+    auto* a = reinterpret_cast<PyArrayObject*>(o);
+    if (PyArray_NDIM(a) != nd || PyArray_TYPE(a) != NPY_DOUBLE || !PyArray_ISCARRAY_RO(a) || !PyArray_ISNOTSWAPPED(a))
+        return nullptr;
+    return a;
+}
+}  // namespace
+
 void bind_derivatives(nb::module_& m) {
+    if (_import_array() < 0) throw nb::python_error();  // NumPy's C API table (this file's copy)
     m.def(
         "term_tangents",
         [](const Program& p, double t, CArr1 q, CArr1 qd, CArr2 dq, CArr2 dqd, CMask active, unsigned need) {
@@ -101,58 +117,60 @@ void bind_derivatives(nb::module_& m) {
         .def(nb::init<const Program&>(), nb::arg("program"));
     m.def(
         "forward_derivatives",
-        [](const Program& p, DerivativeScratch& s, double t, CArr1 q, CArr1 qd, nb::object f, nb::object u,
-           CMask active, double rtol, nb::ndarray<double, nb::ndim<2>, nb::c_contig, nb::device::cpu> res) {
-            const auto n = static_cast<std::size_t>(p.n());
-            const auto k = static_cast<std::size_t>(p.k());
-            if (q.shape(0) != n || qd.shape(0) != n)
-                raise_error("ShapeError", "q and qd must have shape (" + std::to_string(n) + ",)");
-            if (active.shape(0) != p.constraints().size())
-                raise_error("ShapeError", "active must be a mask of shape (" +
+        [](const Program& p, DerivativeScratch& s, double t, nb::handle q, nb::handle qd, nb::handle f, nb::handle u,
+           nb::handle active, double rtol, nb::handle res) {
+            // arrays through NumPy's C API (a few loads each; nanobind's ndarray import was ~2 k
+            // instructions per array, a tenth of the whole call on a Panda)
+            const long n = p.n(), k = p.k();
+            auto vec = [](nb::handle o, long len, const char* name) -> const double* {
+                PyArrayObject* a = f64_array(o.ptr(), 1);
+                if (a == nullptr || PyArray_DIM(a, 0) != len)
+                    raise_error("ShapeError", std::string(name) + " must be a C-contiguous float64 array of shape (" +
+                                                  std::to_string(len) + ",)");
+                return static_cast<const double*>(PyArray_DATA(a));
+            };
+            const double* qp = vec(q, n, "q");
+            const double* qdp = vec(qd, n, "qd");
+            const double* fp = f.is_none() ? nullptr : vec(f, n, "f");
+            const double* up = u.is_none() || k == 0 ? nullptr : vec(u, k, "u");
+            PyArrayObject* am = PyArray_CheckExact(active.ptr()) ? reinterpret_cast<PyArrayObject*>(active.ptr()) : nullptr;
+            if (am == nullptr || PyArray_NDIM(am) != 1 || PyArray_TYPE(am) != NPY_UINT8 || !PyArray_ISCARRAY_RO(am) ||
+                PyArray_DIM(am, 0) != static_cast<npy_intp>(p.constraints().size()))
+                raise_error("ShapeError", "active must be a uint8 mask of shape (" +
                                               std::to_string(p.constraints().size()) + ",)");
+            const auto* mask = static_cast<const std::uint8_t*>(PyArray_DATA(am));
+            PyArrayObject* ar = f64_array(res.ptr(), 2);
+            if (ar == nullptr || !PyArray_ISWRITEABLE(ar) || PyArray_DIM(ar, 0) != 2 + 6 * n + 2 * k ||
+                PyArray_DIM(ar, 1) != n)
+                raise_error("ShapeError", "out must be a writeable C-contiguous float64 array of shape (2 + 6n + 2k, n) = (" +
+                                              std::to_string(2 + 6 * n + 2 * k) + ", " + std::to_string(n) + ")");
             if (s.dq.size() != p.n()) raise_error("ShapeError", "scratch made for another program");
-            if (res.shape(0) != 2 + 6 * n + 2 * k || res.shape(1) != n)
-                raise_error("ShapeError", "out must have shape (2 + 6n + 2k, n) = (" + std::to_string(2 + 6 * n + 2 * k) +
-                                              ", " + std::to_string(n) + ")");
-            const double* fp = nullptr;
-            const double* up = nullptr;
-            CArr1 fa, ua;
-            if (!f.is_none()) {
-                fa = nb::cast<CArr1>(f);
-                if (fa.shape(0) != n) raise_error("ShapeError", "f must have shape (" + std::to_string(n) + ",)");
-                fp = fa.data();
-            }
-            if (!u.is_none()) {
-                ua = nb::cast<CArr1>(u);
-                if (ua.shape(0) != k) raise_error("ShapeError", "u must have shape (" + std::to_string(k) + ",)");
-                up = ua.data();
-            }
             // the boundary's finiteness check (the Python wrapper leaves it here: one pass in C++)
-            auto finite = [](const double* x, std::size_t len, const char* name) {
-                for (std::size_t i = 0; i < len; ++i)
+            auto finite = [](const double* x, long len, const char* name) {
+                for (long i = 0; i < len; ++i)
                     if (!std::isfinite(x[i]))
                         raise_error("NonFiniteError", std::string(name) + " must be finite, got a non-finite entry at index " +
                                                           std::to_string(i));
             };
-            finite(q.data(), n, "q");
-            finite(qd.data(), n, "qd");
+            finite(qp, n, "q");
+            finite(qdp, n, "qd");
             if (fp != nullptr) finite(fp, n, "f");
             if (up != nullptr) finite(up, k, "u");
             DerivativeOutputs& out = s.out;
             Status st;
             if (p.thread_safe()) {
                 nb::gil_scoped_release release;
-                st = forward_derivatives(p, s, t, q.data(), qd.data(), fp, up, active.data(), rtol, out);
+                st = forward_derivatives(p, s, t, qp, qdp, fp, up, mask, rtol, out);
             } else {
-                st = forward_derivatives(p, s, t, q.data(), qd.data(), fp, up, active.data(), rtol, out);
+                st = forward_derivatives(p, s, t, qp, qdp, fp, up, mask, rtol, out);
             }
             if (st != Status::ok) raise_status(st, "forward_derivatives");
-            double* at = res.data();
-            auto put = [&](const double* src, std::size_t len) {
-                if (len) std::memcpy(at, src, len * sizeof(double));
+            double* at = static_cast<double*>(PyArray_DATA(ar));
+            auto put = [&](const double* src, long len) {
+                if (len) std::memcpy(at, src, static_cast<std::size_t>(len) * sizeof(double));
                 at += len;
             };
-            const std::size_t nn = n * n;
+            const long nn = n * n;
             put(out.qdd.data(), n);
             put(out.fc.data(), n);
             put(out.dqdd_dq.data(), nn);  // row-major n × n
@@ -161,14 +179,9 @@ void bind_derivatives(nb::module_& m) {
             put(out.dfc_dq.data(), nn);
             put(out.dfc_dqd.data(), nn);
             put(out.dfc_df.data(), nn);
-            if (k > 0) {  // ∂/∂u = ∂/∂f · B (u held fixed in the state derivatives), stored transposed (k × n)
-                Mat& DU = s.DU;
-                DU.resize(p.k(), p.n());
-                DU.noalias() = (out.dqdd_df * s.val.B).transpose();
-                put(DU.data(), n * k);
-                DU.noalias() = (out.dfc_df * s.val.B).transpose();
-                put(DU.data(), n * k);
-            }
+            // ∂/∂u = ∂/∂f · B (u held fixed in the state derivatives), stored transposed (k × n)
+            put(out.dqdd_du_t.data(), n * k);
+            put(out.dfc_du_t.data(), n * k);
             return out.rank;
         },
         nb::arg("program"), nb::arg("scratch"), nb::arg("t"), nb::arg("q"), nb::arg("qd"), nb::arg("f").none(),
@@ -176,8 +189,9 @@ void bind_derivatives(nb::module_& m) {
         "q̈, f_c and their derivatives at one state (forward-mode model terms, the kernel's derivative at its "
         "rank; nonmin/derivatives.hpp) written into out, shape (2 + 6n + 2k, n), by rows: q̈, f_c, "
         "∂q̈/∂q, ∂q̈/∂q̇, ∂q̈/∂f, ∂f_c/∂q, ∂f_c/∂q̇, ∂f_c/∂f (n rows each), (∂q̈/∂u)ᵀ, (∂f_c/∂u)ᵀ (k rows each: "
-        "∂/∂f · B(q)). Returns the rank used. f (n) and u (k) may be None; NonFiniteError names a non-finite "
-        "argument.");
+        "∂/∂f · B(q)). Returns the rank used. q, qd (n), f (n or None), u (k or None): C-contiguous float64 "
+        "arrays (ShapeError otherwise; the Python wrapper converts); active: the uint8 mask. NonFiniteError "
+        "names a non-finite argument.");
     m.def("differentiable", [](const Program& p) { return p.differentiable(); }, nb::arg("program"),
           "Whether the program evaluates on dual numbers (term_tangents).");
 }

@@ -8,6 +8,7 @@
 #include <Eigen/Cholesky>
 #include "nonmin/svd.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -26,7 +27,11 @@ DerivativeScratch::DerivativeScratch(const Program& p)
       Rdyn(Mat::Zero(2 * p.n(), p.n())),
       Rlam(Mat::Zero(2 * p.n(), 2 * p.n())),
       Rcon(Mat::Zero(2 * p.n(), p.m_all())),
-      lam(Mat::Zero(2, p.m_all())) {
+      lam(Mat::Zero(2, p.m_all())),
+      lq(p.m_all(), p.n()),
+      Bq(Mat::Zero(std::max(p.m_all(), 1), p.n() + 1)),
+      E(Mat::Zero(p.n(), p.n())),
+      cv(Vec::Zero(std::max(p.m_all(), 1))) {
     const int n = p.n();
     for (int j = 0; j < n; ++j) {
         DQ(j, j) = 1.0;
@@ -93,7 +98,35 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
     Mat& Z = s.Z;
     G.setZero(n, m);
     int r = 0;
-    if (m > 0) {
+    bool certified = false;
+    if (m > 0 && m <= n && m <= linalg::DENSE_INVERSE_MAX_ROWS) {
+        // the certified LQ: every row live and full rank proved (else the SVD decides)
+        bool live = true;
+        for (int i = 0; i < m; ++i) live = live && d[i] != 0.0;
+        if (live) {
+            Mat& B = s.Bq;
+            for (int i = 0; i < m; ++i) {
+                for (int c = 0; c < n; ++c) B(i, c) = Ae(i, c);
+                B(i, n) = ge[i];
+            }
+            if (linalg::lq_certified(B.data(), m, n, rtol, s.lq, s.cv.data()) == linalg::LQ_INVERSE &&
+                s.lq.rank == m) {
+                r = m;
+                certified = true;
+                Mat& E = s.E;  // rows 0 … m − 1: Q (D A = L Q), rows m … n − 1: Z
+                linalg::lq_rows(s.lq, m, n, 0, n, E.data());
+                const double* Li = s.lq.Li.data();  // L⁻¹, row k at k · m_max (lower)
+                const int ld = s.lq.m_max;
+                for (int k = 0; k < m; ++k)  // G = Qᵀ L⁻¹
+                    for (int i = 0; i <= k; ++i) {
+                        const double l = Li[k * ld + i];
+                        if (l != 0.0) G.col(i) += l * E.row(k).transpose();
+                    }
+                Z = E.bottomRows(n - m).transpose();
+            }
+        }
+    }
+    if (m > 0 && !certified) {
         Eigen::JacobiSVD<Mat>& svd = s.svd;
         svd.compute(Ae, Eigen::ComputeFullU | Eigen::ComputeFullV);
         const Vec& sv = svd.singularValues();
@@ -104,7 +137,7 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
         const Mat& U = svd.matrixU();
         for (int i = 0; i < r; ++i) G.noalias() += (V.col(i) / sv[i]) * U.col(i).transpose();
         Z = V.rightCols(n - r);
-    } else {
+    } else if (m == 0) {
         Z.setIdentity(n, n);
     }
     const int kz = n - r;
@@ -170,9 +203,10 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
     st = p.residual_tangents(rq, *s.ws);
     if (st == Status::not_differentiable) st = residuals_by_direction(p, s, rq);
     if (st != Status::ok) return st;
-    // the kernel's derivative over the 2n columns: Q δq̈ = −G (C + Gᵀ L1), C = D (δA q̈ + δγ)
+    // the kernel's derivative over the 2n columns: Q δq̈ = −G (C + Gᵀ L1), C = D (δA q̈ + δγ);
+    // M Q δq̈ = −(M G) C (M G: n × m, once)
     Mat& AQ = s.AQ;
-    AQ.setZero(n, nd);
+    Mat& MAQ = s.MAQ;
     if (m > 0) {
         Mat& C = s.C;
         C.resize(m, nd);
@@ -180,35 +214,50 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
         // + Gᵀ δAeᵀ ρ (L1: rows n .. 2n of each Rlam row)
         C.noalias() += G.transpose().lazyProduct(s.Rlam.rightCols(n).transpose());
         AQ.noalias() = -G.lazyProduct(C);
+        s.MG.noalias() = M.lazyProduct(G);
+        MAQ.noalias() = -s.MG.lazyProduct(C);
+    } else {
+        AQ.setZero(n, nd);
+        MAQ.setZero(n, nd);
     }
-    Mat& DQDD = s.DQDD;
+    Mat& DQDD = s.DQDD;  // δq̈ over the 2n columns
+    Mat& DFC = s.DFC;    // δf_c = δ(M q̈ − g) + M δq̈
     DQDD = AQ;
+    DFC = s.Rdyn.transpose();
+    DFC += MAQ;
     if (kz > 0) {
         Mat& T1 = s.T1;  // −δ(M q̈ − g) + δAeᵀ λe − M Q δq̈ (n × 2n)
         T1.noalias() = -s.Rdyn.transpose();
         if (m > 0) T1.noalias() += s.Rlam.leftCols(n).transpose();
-        T1.noalias() -= M.lazyProduct(AQ);
+        T1 -= MAQ;
         s.RHS.noalias() = Z.transpose().lazyProduct(T1);
         llt.solveInPlace(s.RHS);
         DQDD.noalias() += Z.lazyProduct(s.RHS);
+        DFC.noalias() += s.MZ.lazyProduct(s.RHS);
     }
     out.dqdd_dq = DQDD.leftCols(n);
     out.dqdd_dqd = DQDD.rightCols(n);
-    out.dfc_dq.noalias() = M.lazyProduct(out.dqdd_dq);
-    out.dfc_dq += s.Rdyn.topRows(n).transpose();
-    out.dfc_dqd.noalias() = M.lazyProduct(out.dqdd_dqd);
-    out.dfc_dqd += s.Rdyn.bottomRows(n).transpose();
-    // ∂/∂f: δg = e_j, nothing else moves: δq̈ = Z S⁻¹ Zᵀ e_j
+    out.dfc_dq = DFC.leftCols(n);
+    out.dfc_dqd = DFC.rightCols(n);
+    // ∂/∂f: δg = e_j, nothing else moves: δq̈ = Z S⁻¹ Zᵀ e_j, δf_c = M δq̈ − e_j; ∂/∂u = ∂/∂f · B
+    const Mat& B = s.val.B;
     if (kz > 0) {
-        Mat& ZS = s.ZS;
+        Mat& ZS = s.ZS;  // S⁻¹ Zᵀ (kz × n)
         ZS = Z.transpose();
         llt.solveInPlace(ZS);
         out.dqdd_df.noalias() = Z.lazyProduct(ZS);
+        out.dfc_df.noalias() = s.MZ.lazyProduct(ZS);
+        out.dfc_df.diagonal().array() -= 1.0;
+        s.ZSB.noalias() = ZS.lazyProduct(B);  // kz × k
+        out.dqdd_du_t.noalias() = s.ZSB.transpose().lazyProduct(Z.transpose());
+        out.dfc_du_t.noalias() = s.ZSB.transpose().lazyProduct(s.MZ.transpose());
+        out.dfc_du_t -= B.transpose();
     } else {
         out.dqdd_df.setZero(n, n);
+        out.dfc_df = -Mat::Identity(n, n);
+        out.dqdd_du_t.setZero(k, n);
+        out.dfc_du_t = -B.transpose();
     }
-    out.dfc_df.noalias() = M.lazyProduct(out.dqdd_df);
-    out.dfc_df.diagonal().array() -= 1.0;
     return Status::ok;
 }
 

@@ -103,3 +103,32 @@ def test_row_tangents_match_dual_numbers_and_differences(case):
                 fd[:, k] = (p - m) / (2 * h)
             got = getattr(ours, key)
             assert np.abs(got - fd).max() <= 1e-7 * max(1.0, float(np.abs(fd).max())), key
+
+
+def test_out_reuses_the_result_in_place():
+    """``out=``: the earlier result's arrays are overwritten in place (same objects, the values
+    of a fresh call at the new state); a result of another size or of the NumPy backend is
+    refused with InputError."""
+    import nonmin
+    from nonmin.model.robots import FrameConstraint
+
+    model = _panda([FrameConstraint.point("c", "panda_hand")])
+    rng = np.random.default_rng(2)
+    q0 = np.array([0.1, -0.5, 0.2, -2.0, 0.1, 1.6, 0.8, 0.02, 0.03])
+    first = dynamics_derivatives(model, q0, rng.standard_normal(9))
+    arrays = [first.qdd, first.dqdd_dq, first.dfc_df, first.dqdd_du]
+    q, qd, f = q0 + 0.1 * rng.standard_normal(9), rng.standard_normal(9), rng.standard_normal(9)
+    again = dynamics_derivatives(model, q, qd, f=f, out=first)
+    fresh = dynamics_derivatives(model, q, qd, f=f)
+    assert again is first
+    assert all(a is b for a, b in zip(arrays, [again.qdd, again.dqdd_dq, again.dfc_df, again.dqdd_du]))
+    for key in ("qdd", "f_c", "dqdd_dq", "dqdd_dqd", "dqdd_df", "dqdd_du", "dfc_dq", "dfc_dqd", "dfc_du"):
+        assert np.array_equal(getattr(again, key), getattr(fresh, key)), key
+    assert again.rank == fresh.rank == 3
+    with pytest.raises(nonmin.errors.InputError, match="out must"):
+        dynamics_derivatives(model, q, qd, out=dynamics_derivatives(model, q, qd, backend="numpy"))
+    from nonmin.model.robots import example_robot_closure
+
+    other, state = example_robot_closure("ur5", "point")  # n = 6
+    with pytest.raises(nonmin.errors.InputError, match="out must"):
+        dynamics_derivatives(other, state.q, out=first)

@@ -15,13 +15,16 @@
 // (q, q̇) at once; the kernel's part is then a few dense products over the 2n columns.
 //
 // The rank decision is the core's (rule of docs/theory.md: vanished rows, unit rows, singular
-// values ≤ rtol σ_max dropped), made here with Eigen's JacobiSVD of the equilibrated rows.
+// values ≤ rtol σ_max dropped): the certified LQ of the equilibrated rows when it proves that
+// the rule keeps every row (DA = L Q: G = Qᵀ L⁻¹, Z the LQ's remaining orthonormal rows; the
+// core's shortcut, linalg.hpp), else Eigen's JacobiSVD of the equilibrated rows.
 #pragma once
 #include <memory>
 #include <vector>
 
 #include <Eigen/Cholesky>
 
+#include "linalg.hpp"
 #include "program.hpp"
 #include "svd.hpp"
 
@@ -32,6 +35,7 @@ struct DerivativeOutputs {
     Mat dqdd_dq, dqdd_dqd;  // n × n (column j: along e_j)
     Mat dqdd_df;            // n × n
     Mat dfc_dq, dfc_dqd, dfc_df;
+    Mat dqdd_du_t, dfc_du_t;  // k × n: (∂q̈/∂u)ᵀ, (∂f_c/∂u)ᵀ (∂/∂f · B(q))
     int rank = 0;
 };
 
@@ -45,12 +49,14 @@ struct DerivativeScratch {
     Mat Rdyn, Rlam, Rcon;     // 2n × n, 2n × 2n (two λ), 2n × m_all: residual tangents
     Mat lam;                  // 2 × m_all: D λe and D ρ on the active rows
     std::vector<int> rows;    // active rows
-    Mat Ae, G, Z, MZ, Sm, C, T1, AQ, RHS, DQDD, ZS;
+    Mat Ae, G, Z, MZ, MG, Sm, C, T1, AQ, MAQ, RHS, DQDD, DFC, ZS, ZSB;
     Vec d, ge, g, Gge, w1, w2;
     Eigen::LLT<Mat> llt;
     Eigen::JacobiSVD<Mat> svd;
+    linalg::LQWork lq;      // the certified LQ of D A (full rank proved: no SVD)
+    Mat Bq, E;              // m × (n + 1): [D A | D γ]; n × n: the LQ's orthogonal factor
+    Vec cv;
     DerivativeOutputs out;  // the bindings' outputs (no allocation per call)
-    Mat DU;                 // k × n: (∂q̈/∂u)ᵀ, (∂f_c/∂u)ᵀ (the bindings)
 };
 // q̈, f_c and their derivatives at (t, q, qd) with applied force f (n; nullptr: 0) and actuator
 // inputs u (k; nullptr: 0, f += B(q) u with u held fixed). Status::not_positive_definite when

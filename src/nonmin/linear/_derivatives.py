@@ -336,6 +336,7 @@ def dynamics_derivatives(
     active: Iterable[str] | None = None,
     rtol: float | None = None,
     backend: str = "engine",
+    out: DynamicsDerivatives | None = None,
 ) -> DynamicsDerivatives:
     """``q̈``, ``f_c`` and their derivatives ∂/∂q, ∂/∂q̇, ∂/∂f, ∂/∂u at one state.
 
@@ -362,6 +363,10 @@ def dynamics_derivatives(
         ``"engine"``: the whole pipeline in C++ (``engine/src/derivatives.cpp``);
         ``"numpy"``: the terms' tangents from the engine, the kernel derivative in NumPy (the
         readable specification; same results to round-off).
+    out : DynamicsDerivatives, optional
+        A result of an earlier ``backend="engine"`` call on a model of the same sizes (n, k):
+        its arrays are overwritten in place and it is returned (no allocation, no new arrays:
+        for calls in a loop; its earlier values are lost).
 
     Returns
     -------
@@ -373,22 +378,19 @@ def dynamics_derivatives(
         The model has no differentiable engine program.
     ShapeError, NonFiniteError
         Bad q, qd, u or f.
+    InputError
+        ``out`` is not a result of the engine backend with these sizes.
     NotPositiveDefiniteError
         M is not positive definite on N(A).
     """
+    if backend == "engine":
+        # the boundary check is cheap here: the model's sizes, program, scratch and masks are
+        # prepared once per model (per thread), shapes and types checked in Python, finiteness
+        # in the binding (one C++ pass, NonFiniteError naming the argument)
+        return _engine_derivatives(model, q, qd, u, f, t, active, rtol, out)
     if not isinstance(model, Model):
         raise InputError(f"model must be a nonmin Model, got {type(model).__name__}")
     n, k = model.n, model.k
-    if backend == "engine":
-        # the boundary check is cheap here: shapes and types in Python, finiteness in the
-        # binding (one C++ pass, NonFiniteError naming the argument)
-        tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
-        return _engine_derivatives(
-            model, float(t), _array(q, "q", n), _array(qd, "qd", n, True),
-            None if u is None or k == 0 else _array(u, "u", k),
-            None if f is None else _array(f, "f", n),
-            model.resolve_active(active), tol,
-        )  # fmt: skip
     qv = _vector(q, "q", n)
     vv = _vector(qd, "qd", n)
     uv = _vector(u, "u", k)
@@ -423,72 +425,113 @@ def dynamics_derivatives(
     )
 
 
-#: Per-thread cache of the C++ pipeline, per model: (model, program, scratch, masks by active
-#: set). A few models at a time; the program and its scratch are made once per model.
+#: Per-thread cache of the C++ pipeline, per model (a few models at a time): the program and its
+#: scratch are made once per model.
 _LOCAL = threading.local()
+_F64 = np.dtype(np.float64)
 
 
-def _prepared(model: Model, act: frozenset[str]) -> tuple[Any, Any, NDArray[np.uint8]]:
-    cache: dict[int, tuple[Model, Any, Any, dict[frozenset[str], NDArray[np.uint8]]]] | None
-    cache = getattr(_LOCAL, "prepared", None)
+class _Prepared:
+    """One model's engine pipeline: program, scratch, sizes, the default active set's mask."""
+
+    __slots__ = ("default", "default_mask", "k", "masks", "model", "n", "prog", "scratch", "shape", "zeros")
+
+    def __init__(self, model: Model) -> None:
+        self.model = model
+        self.prog = _program(model)
+        self.scratch = _engine().DerivativeScratch(self.prog)
+        self.n, self.k = int(model.n), int(model.k)
+        self.shape = (2 + 6 * self.n + 2 * self.k, self.n)  # the output block (the binding's doc)
+        self.zeros = np.zeros(self.n)
+        self.zeros.flags.writeable = False
+        self.masks: dict[frozenset[str], NDArray[np.uint8]] = {}
+        self.default = model.default_active
+        self.default_mask = self.mask(model.resolve_active(None))
+
+    def mask(self, act: frozenset[str]) -> NDArray[np.uint8]:
+        got = self.masks.get(act)
+        if got is None:
+            got = self.masks[act] = self.model.active_mask(act)
+        return got
+
+
+def _prepared(model: Model) -> _Prepared:
+    cache: dict[int, _Prepared] | None = getattr(_LOCAL, "prepared", None)
     if cache is None:
         cache = _LOCAL.prepared = {}
     got = cache.get(id(model))
-    if got is None or got[0] is not model:
+    if got is None or got.model is not model:
+        if not isinstance(model, Model):
+            raise InputError(f"model must be a nonmin Model, got {type(model).__name__}")
         if len(cache) >= 16:
             cache.clear()
-        prog = _program(model)
-        got = (model, prog, _engine().DerivativeScratch(prog), {})
-        cache[id(model)] = got
-    masks = got[3]
-    mask = masks.get(act)
-    if mask is None:
-        mask = masks[act] = model.active_mask(act)
-    return got[1], got[2], mask
+        got = cache[id(model)] = _Prepared(model)
+    return got
 
 
 def _engine_derivatives(
     model: Model,
+    q: ArrayLike,
+    qd: ArrayLike | None,
+    u: ArrayLike | None,
+    f: ArrayLike | None,
     t: float,
-    q: FloatArray,
-    qd: FloatArray,
-    u: FloatArray | None,
-    f: FloatArray | None,
-    act: frozenset[str],
-    tol: float,
+    active: Iterable[str] | None,
+    rtol: float | None,
+    out: DynamicsDerivatives | None,
 ) -> DynamicsDerivatives:
-    """The C++ pipeline (engine/src/derivatives.cpp), with the program and scratch cached."""
-    prog, scratch, mask = _prepared(model, act)
-    n, k = model.n, model.k
-    blk = np.empty((2 + 6 * n + 2 * k, n))  # every output, one allocation (rows: the binding's doc)
+    """The C++ pipeline (engine/src/derivatives.cpp) into one output block (or ``out``'s)."""
+    prep = _prepared(model)
+    n, k = prep.n, prep.k
+    if active is None and model.default_active is prep.default:
+        mask = prep.default_mask
+    else:
+        mask = prep.mask(model.resolve_active(active))
+    tol = DEFAULT_RTOL if rtol is None else resolve_rtol(rtol)
+    qv = _array(q, "q", n)
+    qdv = prep.zeros if qd is None else _array(qd, "qd", n)
+    uv = None if u is None or k == 0 else _array(u, "u", k)
+    fv = None if f is None else _array(f, "f", n)
+    blk: FloatArray | None
+    if out is None:
+        blk = np.empty(prep.shape)  # every output, one allocation
+    else:
+        blk = out.__dict__.get("_block") if type(out) is DynamicsDerivatives else None
+        if blk is None or blk.shape != prep.shape:
+            raise InputError(
+                "out must be a DynamicsDerivatives returned by an earlier engine call on a model "
+                f"with n = {n}, k = {k}, got {type(out).__name__}"
+                + ("" if blk is None else f" of a model with block shape {blk.shape}")
+            )
     try:
-        rank = _engine().forward_derivatives(prog, scratch, t, q, qd, f, u, mask, tol, blk)
+        rank = _engine().forward_derivatives(
+            prep.prog, prep.scratch, float(t), qv, qdv, fv, uv, mask, tol, blk
+        )
     except NotPositiveDefiniteError as exc:
         raise NotPositiveDefiniteError(
             f"M is not positive definite on N(A) at this state ({exc})"
         ) from None
+    if out is not None:
+        out.__dict__["rank"] = rank
+        return out
     e = 2 + 6 * n
-    out = object.__new__(DynamicsDerivatives)  # frozen: fill its fields without __setattr__
-    out.__dict__.update(
+    res = object.__new__(DynamicsDerivatives)  # frozen: fill its fields without __setattr__
+    res.__dict__.update(
         qdd=blk[0], f_c=blk[1], rank=rank,
         dqdd_dq=blk[2 : 2 + n], dqdd_dqd=blk[2 + n : 2 + 2 * n], dqdd_df=blk[2 + 2 * n : 2 + 3 * n],
         dqdd_du=blk[e : e + k].T,
         dfc_dq=blk[2 + 3 * n : 2 + 4 * n], dfc_dqd=blk[2 + 4 * n : 2 + 5 * n], dfc_df=blk[2 + 5 * n : e],
         dfc_du=blk[e + k : e + 2 * k].T,
+        _block=blk,
     )  # fmt: skip
-    return out
+    return res
 
 
-def _array(x: ArrayLike | None, name: str, n: int, zero: bool = False) -> FloatArray:
-    """x as a float64 C-contiguous (n,) array (None: zeros if `zero`); finiteness is checked
-    by the engine's binding."""
-    if type(x) is np.ndarray and x.dtype == np.float64 and x.shape == (n,) and x.flags.c_contiguous:
+def _array(x: ArrayLike | None, name: str, n: int) -> FloatArray:
+    """x as a float64 C-contiguous (n,) array; finiteness is checked by the engine's binding."""
+    if type(x) is np.ndarray and x.dtype is _F64 and x.shape == (n,) and x.flags.c_contiguous:
         return x
-    if x is None and zero:
-        return np.zeros(n)
     arr = np.ascontiguousarray(x, dtype=np.float64)
     if arr.shape != (n,):
         raise ShapeError(f"{name} must have shape ({n},), got shape {arr.shape}")
     return arr
-
-
