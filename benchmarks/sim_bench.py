@@ -510,13 +510,13 @@ def run_exudyn(mech: BarMechanism, dt: float, *, spectral_radius: float = 0.9,
     w0 = 1 if warmup else 0  # untimed warm-up runs
     for rep in range(repeat + w0):
         _sc, mbs, sens_q, sens_v, s = build()
-        t0 = time.perf_counter()
+        t0 = CLOCK[0]()
         try:
             ok = mbs.SolveDynamic(s)
         except Exception as exc:  # Exudyn raises on Newton failure
             ok = False
             status = f"failed: {type(exc).__name__}: {str(exc).splitlines()[0][:80]}"
-        t1 = time.perf_counter()
+        t1 = CLOCK[0]()
         if ok is False and status == "ok":
             status = "failed: SolveDynamic returned False"
         if rep >= w0:
@@ -626,7 +626,7 @@ def run_mujoco(mech: BarMechanism, dt: float, setting: str, *, repeat: int = 3,
         mujoco.mj_forward(model, data)
         qpos_hist[0] = data.qpos
         qvel_hist[0] = data.qvel
-        t0 = time.perf_counter()
+        t0 = CLOCK[0]()
         step = mujoco.mj_step
         k = 0
         for n in range(1, nsteps + 1):
@@ -635,7 +635,7 @@ def run_mujoco(mech: BarMechanism, dt: float, setting: str, *, repeat: int = 3,
                 k += 1
                 qpos_hist[k] = data.qpos
                 qvel_hist[k] = data.qvel
-        t1 = time.perf_counter()
+        t1 = CLOCK[0]()
         if rep >= w0:
             walls.append(t1 - t0)
         if not np.all(np.isfinite(data.qpos)):
@@ -726,7 +726,7 @@ def run_pinocchio(mech: BarMechanism, dt: float, *, kp: float = 100.0, mu: float
         qh[0] = q
         vh[0] = v
         k = 0
-        t0 = time.perf_counter()
+        t0 = CLOCK[0]()
         for n in range(1, nsteps + 1):
             a = pin.constraintDynamics(model, data, q, v, tau, cms, cdatas, prox)
             v = v + dt * a
@@ -735,7 +735,7 @@ def run_pinocchio(mech: BarMechanism, dt: float, *, kp: float = 100.0, mu: float
                 k += 1
                 qh[k] = q
                 vh[k] = v
-        t1 = time.perf_counter()
+        t1 = CLOCK[0]()
         if rep >= w0:
             walls.append(t1 - t0)
         if not np.all(np.isfinite(q)):
@@ -812,7 +812,9 @@ def _nonmin_body_names(bar: BarMechanism) -> list[str]:
 
 def run_nonmin(bar: BarMechanism, method: str, *, dt: float | None = None,
                rtol: float = 1e-8, atol: float = 1e-10, stabilization: str = "projection",
-               engine: str = "auto", repeat: int = 3, warmup: bool = True) -> RunResult:
+               engine: str = "auto", samples: str = "grid", repeat: int = 3, warmup: bool = True) -> RunResult:
+    """``samples="grid"``: samples every ``SAMPLE_DT`` (dense output, projected); ``"steps"``: the
+    step ends only (``t_eval=None``, as the peers record theirs), errors at those instants."""
     from nonmin.sim import simulate
 
     mech = nonmin_mechanism(bar)
@@ -822,7 +824,7 @@ def run_nonmin(bar: BarMechanism, method: str, *, dt: float | None = None,
     if mismatch > 1e-12:
         raise RuntimeError(f"{bar.name}: nonmin's initial state differs from the peers' by "
                            f"{mismatch:.2e}")
-    t_eval = sample_times(bar.t_final)
+    t_eval = sample_times(bar.t_final) if samples == "grid" else None
     kw: dict[str, Any] = {"method": method, "stabilization": stabilization, "t_eval": t_eval,
                           "engine": engine}
     if dt is not None:
@@ -839,9 +841,9 @@ def run_nonmin(bar: BarMechanism, method: str, *, dt: float | None = None,
                  **{**kw, "t_eval": None})  # fmt: skip
     w0 = 1 if warmup else 0  # untimed warm-up runs
     for rep in range(repeat + w0):
-        t0 = time.perf_counter()
+        t0 = CLOCK[0]()
         traj = simulate(mech, (0.0, bar.t_final), throw=False, progress=False, **kw)
-        t1 = time.perf_counter()
+        t1 = CLOCK[0]()
         if rep >= w0:
             walls.append(t1 - t0)
         if not traj.success:
@@ -855,8 +857,8 @@ def run_nonmin(bar: BarMechanism, method: str, *, dt: float | None = None,
     assert traj is not None
     com = _nonmin_to_com(bar, mech.model, np.asarray(traj.q), np.asarray(traj.qd))
     used = str(traj.metadata.get("engine", "python"))
-    setting = (f"{method} {stabilization}" + (f" rtol={rtol:g}" if "dt" not in kw else "")
-               + f" [{used}]")
+    setting = (f"{method} {stabilization}" + (" step ends" if samples == "steps" else "")
+               + (f" rtol={rtol:g}" if "dt" not in kw else "") + f" [{used}]")
     return RunResult("nonmin", setting, bar.name, dt, np.asarray(traj.t), com,
                      walls if status == "ok" else [], status,
                      extra={"n_steps": traj.n_steps, "n_rhs": traj.n_rhs, "nonmin_engine": used,
@@ -867,6 +869,39 @@ def run_nonmin(bar: BarMechanism, method: str, *, dt: float | None = None,
 # driver
 # ---------------------------------------------------------------------------------------------
 PeerSpec = tuple[str, dict[str, Any]]
+
+
+#: The clock of every timed run: wall time, or the process's CPU time (``--cpu``).
+CLOCK: list[Callable[[], float]] = [time.perf_counter]
+
+#: ``--wp``: every peer over its range (issue 18, target 4), coarse steps included.
+WP_DTS = (1e-2, 5e-3, 2e-3, 1e-3, 1e-4)
+
+
+def wp_configs(mech: BarMechanism) -> list[PeerSpec]:
+    """The work–precision settings: Exudyn's generalized-α at spectral radius 0.6 / 0.9 / 1.0,
+    MuJoCo default and stiff, Pinocchio's loop with Kp = 100 and 0, each at dt 1e-2 … 1e-4
+    (1e-2 … 1e-3 on A02 N = 40), and nonmin's RK4 steps and DOPRI5/DOP853 tolerances."""
+    dts = [dt for dt in WP_DTS if mech.nb <= 10 or dt >= 1e-3]
+    cfg: list[PeerSpec] = []
+    for rho in (0.6, 0.9, 1.0):
+        cfg += [("exudyn", {"dt": dt, "spectral_radius": rho}) for dt in dts]
+    for setting in ("default", "stiff"):
+        cfg += [("mujoco", {"dt": dt, "setting": setting}) for dt in dts]
+    for kp in (100.0, 0.0):
+        cfg += [("pinocchio", {"dt": dt, "kp": kp}) for dt in dts]
+    return cfg + NONMIN_CONFIGS.get(mech.name, []) + WP_STEP_ENDS.get(mech.name, [])
+
+
+#: nonmin's coarse end recorded at its step ends (``samples="steps"``): no dense output and no
+#: projection per sample, as the peers record theirs (``--wp``).
+WP_STEP_ENDS: dict[str, list[PeerSpec]] = {
+    name: [*(("nonmin", {"method": "rk4", "dt": dt, "samples": "steps"}) for dt in dts),
+           *(("nonmin", {"method": m, "rtol": r, "atol": r * 1e-2, "samples": "steps"})
+             for m in ("dopri5", "dop853") for r in (1e-2, 1e-3, 1e-4, 1e-6))]
+    for name, dts in (("crossed_four_bar", (1e-2, 2e-2, 3e-2, 4e-2, 5e-2)), ("A02_N2", (1e-2, 2e-2, 4e-2, 5e-2)),
+                      ("A02_N40", (2e-2, 5e-2, 1e-1)))
+}  # fmt: skip
 
 
 def default_configs(mech: BarMechanism, quick: bool) -> list[PeerSpec]:
@@ -1135,7 +1170,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--combine", nargs="+", default=None, metavar="JSON",
                     help="merge result files of earlier runs (e.g. one per mechanism run in "
                     "parallel) into --json and --markdown, running nothing")
+    ap.add_argument("--cpu", action="store_true", help="time with the process's CPU time instead of wall time")
+    ap.add_argument("--wp", action="store_true",
+                    help="work–precision: every peer over its range (wp_configs), nonmin's steps and tolerances")
     args = ap.parse_args(argv)
+    if args.cpu:
+        CLOCK[0] = time.process_time
     if args.combine:
         parts = [json.loads(Path(f).read_text(encoding="utf-8")) for f in args.combine]
         merged = dict(parts[0])
@@ -1184,10 +1224,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         "command": "python " + " ".join([Path(sys.argv[0]).name, *(argv or sys.argv[1:])]),
         "date_utc": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "machine": machine_info(), "repeat": repeat, "quick": args.quick,
+        "clock": "process CPU time" if args.cpu else "wall time",
         "mechanisms": {}, "discussion": _discussion(),
     }
     for mech in mechs:
-        cfgs = [c for c in default_configs(mech, args.quick) if c[0] in engines
+        cfgs = [c for c in (wp_configs(mech) if args.wp else default_configs(mech, args.quick)) if c[0] in engines
                 and (args.only is None or re.search(args.only, f"{c[0]} {c[1]}"))]
         rows = run_mechanism(mech, cfgs, repeat)
         results["mechanisms"][mech.name] = {"t_final": mech.t_final, "notes": mech.notes,
