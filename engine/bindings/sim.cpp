@@ -292,7 +292,8 @@ void bind_sim(nb::module_& m) {
         .def_rw("sym_rtol", &sim::Options::sym_rtol)
         .def_rw("t1", &sim::Options::t1)
         .def_rw("max_steps", &sim::Options::max_steps)
-        .def_rw("passages", &sim::Options::passages);
+        .def_rw("passages", &sim::Options::passages)
+        .def_rw("partial_samples", &sim::Options::partial_samples);
 
     m.attr("SIM_DONE") = static_cast<int>(sim::Outcome::done);
     m.attr("SIM_HANDOVER") = static_cast<int>(sim::Outcome::handover);

@@ -916,6 +916,13 @@ bool passage_stages(const Loop& L, double t, double h) {
     return P.have_star && P.t_star > t && P.t_star - t <= (1.0 + PASSAGE_BAND) * h;
 }
 
+// _integrators.SingularPassages.holds
+bool passage_holds(const Loop& L, double t, double h) {
+    const Passages& P = L.pas;
+    if (!L.opt.passages || !P.have_star) return false;
+    return P.t_star > t && P.t_star - t <= (1.0 + PASSAGE_BAND) * h;
+}
+
 void hermite_quintic(int n, const double* y0, const double* f0, const double* y1, const double* f1,
                      double h, double s, double* out) {
     const double t = s / h;

@@ -699,6 +699,7 @@ Outcome run(Loop& L, long long max_steps) {
         const double h_before = L.h;
         double h = 0.0, t_new = 0.0;
         double h_wk = 0.0, dW_step = 0.0;  // the step the work's increment dW_step is over
+        bool dense_samples = true;         // adaptive: samples from the continuous extension
         bool end_star_p = false;           // L.ps: the point at the end of a step taken past t1
         bool fsal = false;
         if (adapt) {
@@ -711,7 +712,13 @@ Outcome run(Loop& L, long long max_steps) {
             dW_step = L.wk_dW;
             // dopri5: L.K.row(6) = F(t_new, y1 raw); dop853: L.K8.row(12) when evaluated
             fsal = !dop853 || L.d8_fsal;
-            if (dop853 && !L.every && L.out_i < n_out &&
+            // samples inside the step: a partial step of the method from its start (its error
+            // is a local error of the method, ≤ the step's), except next to a singular passage,
+            // where the continuous extension keeps the stages off the instant (_simulate.py:
+            // ADAPTIVE_PARTIAL_SAMPLES)
+            dense_samples = !L.opt.partial_samples ||
+                            (L.any_active && passage_holds(L, t_start, h));
+            if (dop853 && dense_samples && !L.every && L.out_i < n_out &&
                 L.t_out[L.out_i] < t_new - 1e-12 * std::max(1.0, std::abs(t_new)) &&
                 (s = d8_dense_setup(L)) != Status::ok)  // a sample inside the step
                 return fail(L, s);
@@ -865,7 +872,13 @@ Outcome run(Loop& L, long long max_steps) {
                 }
                 const double tt = t_start + sj;
                 bool partial = false;  // W there from the partial step's own quadrature
-                if (dop853) {
+                if (adapt && !dense_samples) {  // the method's own partial step (K overwritten)
+                    if ((s = dop853 ? d8_advance(L, t_start, L.y0, &L.f, sj, L.yp)
+                                    : dp_advance(L, t_start, L.y0, &L.f, sj, L.yp)) != Status::ok)
+                        return fail(L, s);
+                    if (!dop853) fsal = false;  // (K.row(6) overwritten; K8's row 12 is not)
+                    partial = true;
+                } else if (dop853) {
                     d8_dense(L, tt, L.yp.data());
                 } else if (adapt) {
                     dp_dense(L, t_start, h, tt, L.yp.data());
@@ -882,7 +895,8 @@ Outcome run(Loop& L, long long max_steps) {
                     }
                     partial = true;
                 }
-                if ((s = (adapt || (f_start && have_p1)) ? stab_project_sample(L, tt, L.yp.data())
+                if ((s = ((adapt && dense_samples) || (!adapt && f_start && have_p1))
+                             ? stab_project_sample(L, tt, L.yp.data())
                                                           : stab_project(L, tt, L.yp.data())) != Status::ok)
                     return fail(L, s);
                 if ((s = point(L, tt, L.yp.data(), L.yp.data() + n, L.ps, true)) != Status::ok) return fail(L, s);

@@ -374,6 +374,11 @@ class SingularPassages:
             return True
         return self.t_star is not None and t < self.t_star and self.t_star - t <= (1.0 + PASSAGE_BAND) * h
 
+    def holds(self, t: float, h: float) -> bool:
+        """Whether the step of size ``h`` from ``t`` holds the predicted singular instant
+        (adaptive methods then take its output samples from the continuous extension)."""
+        return self.t_star is not None and t < self.t_star and self.t_star - t <= (1.0 + PASSAGE_BAND) * h
+
     def zone(self, t: float, h: float, d_cap: float = math.inf) -> tuple[float, bool]:
         """DOP853: the step to attempt so that no step ends within the zone
         ``|t − t*| < d`` of the predicted instant, ``d = PASSAGE_ZONE_SIGMA/|dσ/dt|``, and whether

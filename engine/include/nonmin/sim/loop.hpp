@@ -87,6 +87,9 @@ struct Options {
     double t1 = 1.0;
     long long max_steps = 10000000;
     bool passages = true;  // singularity-aware step placement (the integrator's `passages`)
+    // adaptive methods: samples inside a step from a partial step of the method (else from
+    // the continuous extension; next to a singular passage always the extension)
+    bool partial_samples = true;
 };
 
 // Singularity-aware step placement (nonmin.sim._integrators.SingularPassages): the indicator
@@ -420,6 +423,9 @@ double passage_place(const Loop& L, double t, double h);
 // Whether the RK4 step of size h from t projects its stage states: the indicator changes by
 // more than 1/PASSAGE_STAGE_K of itself within the step, or the predicted instant is inside it.
 bool passage_stages(const Loop& L, double t, double h);
+// Whether the step of size h from t holds the predicted singular instant (adaptive methods
+// then sample it from the continuous extension)
+bool passage_holds(const Loop& L, double t, double h);
 // SingularPassages.noise: PASSAGE_NOISE·eps/σ at the last step end (0 without one).
 double passage_noise(const Loop& L);
 
