@@ -48,6 +48,12 @@ ANDREWS_LAMBDA0 = np.array([98.5668703962410896057654982170, -6.1226883442556626
 
 ANGLE_NAMES = ("beta", "Theta", "gamma", "Phi", "delta", "Omega", "epsilon")
 LOOPS = (("loop_B", 0), ("loop_A1", 2), ("loop_A2", 4))
+#: The three loop closures (built once: the engine's drivers ask for them at every call).
+_CONSTRAINTS = (
+    ConstraintSpec("loop_B", "holonomic", 2, "g1, g2: loop through B"),
+    ConstraintSpec("loop_A1", "holonomic", 2, "g3, g4: loop through A (Φ, δ)"),
+    ConstraintSpec("loop_A2", "holonomic", 2, "g5, g6: loop through A (Ω, ε)"),
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -172,11 +178,7 @@ class AndrewsModel(Model):
 
     @property
     def constraints(self) -> tuple[ConstraintSpec, ...]:  # type: ignore[override]
-        return (
-            ConstraintSpec("loop_B", "holonomic", 2, "g1, g2: loop through B"),
-            ConstraintSpec("loop_A1", "holonomic", 2, "g3, g4: loop through A (Φ, δ)"),
-            ConstraintSpec("loop_A2", "holonomic", 2, "g5, g6: loop through A (Ω, ε)"),
-        )
+        return _CONSTRAINTS
 
     @property
     def actuator_names(self) -> tuple[str, ...]:  # type: ignore[override]
