@@ -53,7 +53,7 @@ from ..core._fast import get_backend
 from ..core.linalg import SPD_RTOL
 from ..errors import InputError
 from ..model import Model
-from . import _durable
+from . import _durable, _integrators
 from ._integrators import DOP853, RK4, DormandPrince5, ImplicitMidpoint
 from ._stabilization import Baumgarte, NoStabilization, Projection
 
@@ -274,6 +274,7 @@ def options(
     o.t1 = float(t1)
     o.max_steps = int(max_steps)
     o.passages = bool(getattr(integ, "passages", True))
+    o.partial_samples = bool(_integrators.ADAPTIVE_PARTIAL_SAMPLES)
     return o
 
 

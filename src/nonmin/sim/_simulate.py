@@ -61,7 +61,7 @@ from ..errors import (
     ZenoError,
 )
 from ..model import ConstraintTerms, Model, State
-from . import _dop853_tableau, _durable, _engine, _friction
+from . import _dop853_tableau, _durable, _engine, _friction, _integrators
 from ._events import Activate, Deactivate, Event, EventRecord, Reset, describe_transition
 from ._impulses import impact_losses, with_impulses
 from ._integrators import (
@@ -96,15 +96,6 @@ DEFAULT_DT = 1e-3
 #: 9.9e-8 J, 2043 steps; crossed four-bar: 1.2e-7, 2.6e-7 J, 2635 steps). It changes neither
 #: dopri5 at rtol 1e-8, nor RK4 (dt = 1e-3) on these mechanisms, nor A03 Andrews at 0.03 s.
 ADAPTIVE_RANK_RTOL = 1e-6
-
-#: Adaptive methods take an output sample inside a step from a partial step of the method from
-#: the step start (projected as a step end), not from the continuous extension, unless the step
-#: holds a predicted singular instant (the extension keeps the stages off it). The extension's
-#: error is not controlled: measured, A02 N = 40, 20 s, samples every 0.1 s, rtol 1e-10 (atol
-#: rtol/100), energy error at the samples / at the step ends: DOPRI5 8.2e-7 / 2.6e-7 J, DOP853
-#: 1.8e-7 / 1.0e-7 J (rtol 1e-12: 1.7e-8 / 3.7e-9 J); with partial steps the samples are at the
-#: step ends' level (2.6e-7, 1.0e-7, 6.7e-9 J) for 6–15 % more evaluations.
-ADAPTIVE_PARTIAL_SAMPLES = True
 
 #: Absolute tolerance (s) of event location (Brent's method).
 EVENT_XTOL = 1e-13
@@ -1186,7 +1177,7 @@ def simulate(
                                               system.active, rank_rtol)  # fmt: skip
             end_tol = 1e-12 * max(1.0, abs(t_new))
             dense = res.dense if dense_star is None else dense_star
-            if (integ.adaptive and ADAPTIVE_PARTIAL_SAMPLES and dense_star is None
+            if (integ.adaptive and _integrators.ADAPTIVE_PARTIAL_SAMPLES and dense_star is None
                     and not (system.active and passages is not None and passages.holds(t_start, h))):
                 dense = None  # samples inside: the method's partial steps (`at`), not the extension
             inside = (dense is None and not integ.adaptive and f_start is not None and t_out is not None
