@@ -69,6 +69,7 @@ void bind_program(nb::module_& m) {
     m.attr("NEED_B") = static_cast<unsigned>(NEED_B);
     m.attr("NEED_ENERGY") = static_cast<unsigned>(NEED_ENERGY);
     m.attr("NEED_ALL") = static_cast<unsigned>(NEED_ALL);
+    m.attr("NEED_GRAVITY") = static_cast<unsigned>(NEED_GRAVITY);
 
     nb::class_<Terms>(m, "Terms",
                       "Outputs of one Program evaluation (arrays are views into the object).")
@@ -76,6 +77,7 @@ void bind_program(nb::module_& m) {
         .def_prop_ro("h", [](Terms& t) { return view(t.h, nb::handle()); }, nb::rv_policy::reference_internal)
         .def_prop_ro("f_passive", [](Terms& t) { return view(t.f_passive, nb::handle()); },
                      nb::rv_policy::reference_internal)
+        .def_prop_ro("f_g", [](Terms& t) { return view(t.f_g, nb::handle()); }, nb::rv_policy::reference_internal)
         .def_prop_ro("B", [](Terms& t) { return view(t.B, nb::handle()); }, nb::rv_policy::reference_internal)
         .def_prop_ro("A", [](Terms& t) { return view(t.A, nb::handle()); }, nb::rv_policy::reference_internal)
         .def_prop_ro("gamma", [](Terms& t) { return view(t.gamma, nb::handle()); },
@@ -166,6 +168,7 @@ void bind_program(nb::module_& m) {
         .def_prop_ro("m_all", &Program::m_all)
         .def_prop_ro("constant_mass", &Program::constant_mass)
         .def_prop_ro("thread_safe", &Program::thread_safe)
+        .def_prop_ro("gravity_in_pass", &Program::gravity_in_pass)
         .def_prop_ro(
             "constraints",
             [](const Program& p) {

@@ -1,6 +1,8 @@
 // TreeProgram: a robot's M, h, f_p, B, constraint rows and energy from the tree algorithms
 // (see nonmin/rbd/tree_program.hpp for the formulas). No allocation in evaluate().
 #include <cmath>
+#include <cstring>
+#include <type_traits>
 #include <string>
 
 #include "nonmin/rbd/tree_program.hpp"
@@ -53,12 +55,14 @@ TreeScratch<S>::TreeScratch(const TreeDescription& d)
       a0(VecS::Zero(d.model.nv)),
       tau(VecS::Zero(d.model.nv)),
       fv(VecS::Zero(d.model.nv)),
+      zv(VecS::Zero(d.model.nv)),
       Mv(MatS::Zero(d.model.nv, d.model.nv)),
       R(d.model.joints.size(), Mat3T<S>::Identity()),
       Tq(d.model.joints.size(), Mat34T<S>::Zero()),
       Y(MatS::Zero(7, d.model.nv)),
       Lv(MatS::Zero(2, d.model.nv)),
-      tq(VecS::Zero(d.model.nq)) {
+      tq(VecS::Zero(d.model.nq)),
+      fk_q(static_cast<std::size_t>(d.model.nq), 0.0) {
     int m = 0;
     for (const TreeConstraint& c : d.constraints) m += row_count(c);
     Av = MatS::Zero(m, d.model.nv);
@@ -665,6 +669,7 @@ NONMIN_FLATTEN void TreeProgram::seed_kinematics(const ResidualQuery& rq, int j0
 
 Status TreeProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) const {
     TreeWorkspace& ws = static_cast<TreeWorkspace&>(wsb);
+    ws.fk_valid = false;  // (writes ws.data)
     constexpr int W = DUAL_WIDTH;
     const int nq = d_.model.nq;
     if (!ws.wide) {
@@ -1057,9 +1062,38 @@ Status TreeProgram::eval(double t, const S* q, const S* qd, const std::uint8_t* 
                 d_.constraints[c].type != RowType::joint_limit &&
                 d_.constraints[c].type != RowType::joint_driver)
                 any_frame = true;
+    const bool want_g = need & NEED_GRAVITY;
     const bool motion = want_h || (want_gamma && any_frame);
-    const bool dynamics = want_M || want_h || want_energy;
-    if (dynamics || any_frame) forward_kinematics(model, ws.data, ws.qn.data(), dynamics);
+    const bool dynamics = want_M || want_h || want_energy || want_g;
+    if (dynamics || any_frame) {
+        if constexpr (std::is_same_v<S, double>) {
+            // the loop evaluates at one q several times (the projection's last evaluation and the
+            // next stage, the guards, a controller's projections): the kinematics of the same q
+            // (bitwise) are kept. (A q with a NaN never matches: normalize() rejected it.)
+            // The inertias are added when first needed (body_inertias: the same bits as
+            // forward_kinematics with `inertias`).
+            const std::size_t bytes = sizeof(double) * static_cast<std::size_t>(nq);
+            if (!(ws.fk_valid && std::memcmp(ws.fk_q.data(), q, bytes) == 0)) {
+                forward_kinematics(model, ws.data, ws.qn.data(), dynamics);
+                ws.fk_valid = true;
+                ws.fk_inertias = dynamics;
+                std::memcpy(ws.fk_q.data(), q, bytes);
+            } else if (dynamics && !ws.fk_inertias) {
+                body_inertias(model, ws.data);
+                ws.fk_inertias = true;
+            }
+        } else {
+            forward_kinematics(model, ws.data, ws.qn.data(), dynamics);
+        }
+    }
+    if (want_g) {
+        // f_g = h(t, q, 0) on this pass's kinematics: the motion and RNEA passes of an
+        // evaluation at q̇ = 0 (v = Ṫq̇ = 0), before the pass at q̇ overwrites the motion
+        forward_motion(model, ws.data, ws.zv.data(), ws.zv.data());
+        rnea(model, ws.data, ws.zv.data(), ws.tau.data());
+        ws.tau = -ws.tau;
+        apply_Tt(ws, ws.tau.data(), out.f_g.data());
+    }
     if (motion) forward_motion(model, ws.data, ws.v.data(), ws.a0.data());
 
     if (want_M || want_energy) {
@@ -1195,6 +1229,7 @@ void TreeProgram::add_Tdot_row(const TreeWorkspace& ws, const double* q, const d
 
 Status TreeProgram::coriolis_matrix(const double* q, const double* qd, TreeWorkspace& ws,
                                     double* C) const {
+    ws.fk_valid = false;  // (writes ws.data)
     const TreeModel& model = d_.model;
     const int nq = model.nq, nv = model.nv;
     Status st = normalize(q, ws);
@@ -1224,6 +1259,7 @@ Status TreeProgram::coriolis_matrix(const double* q, const double* qd, TreeWorks
 
 Status TreeProgram::jacobian_dot(const double* q, const double* qd, const std::uint8_t* active,
                                  TreeWorkspace& ws, double* Adot) const {
+    ws.fk_valid = false;  // (writes ws.data)
     const TreeModel& model = d_.model;
     const int nq = model.nq, nv = model.nv;
     Status st = normalize(q, ws);

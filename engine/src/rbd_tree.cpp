@@ -101,6 +101,15 @@ NONMIN_FLATTEN void forward_kinematics(const TreeModel& model, TreeDataT<S>& dat
 }
 
 template <class S>
+NONMIN_FLATTEN void body_inertias(const TreeModel& model, TreeDataT<S>& data) {
+    const int nj = static_cast<int>(model.joints.size());
+    for (int i = 0; i < nj; ++i) {
+        const Joint& jt = model.joints[i];
+        data.oI[i] = InertiaT<S>::from_body(jt.mass, jt.com, jt.inertia, data.oMi[i]);
+    }
+}
+
+template <class S>
 NONMIN_FLATTEN void forward_motion(const TreeModel& model, TreeDataT<S>& data, const S* v, const S* a) {
     const int nj = static_cast<int>(model.joints.size());
     for (int i = 0; i < nj; ++i) {
@@ -236,6 +245,7 @@ NONMIN_FLATTEN void add_jacobian_row(const TreeModel& model, const TreeDataT<S>&
 #define NONMIN_RBD_INSTANTIATE(S)                                                                     \
     template void forward_kinematics<S>(const TreeModel&, TreeDataT<S>&, const S*, bool);             \
     template void forward_motion<S>(const TreeModel&, TreeDataT<S>&, const S*, const S*);             \
+    template void body_inertias<S>(const TreeModel&, TreeDataT<S>&);                                 \
     template void crba<S>(const TreeModel&, TreeDataT<S>&, S*, int);                                   \
     template void rnea<S>(const TreeModel&, TreeDataT<S>&, const S*, S*);                              \
     template S potential_energy<S>(const TreeModel&, const TreeDataT<S>&);                             \

@@ -124,6 +124,7 @@ Status TimeSignal::eval(double t, double* x, double* v, double* a) {
 Projected::Projected(const Program& prog, ControlSpec spec)
     : prog_(&prog), s_(std::move(spec)), n_(prog.n()), k_(prog.k()),
       rtol_(s_.rtol > 0.0 ? s_.rtol : DEFAULT_RTOL),
+      gravity_in_pass_(s_.law == Law::regulator && prog.gravity_in_pass()),
       solver_(prog.m_all() + prog.n() + static_cast<int>(s_.fixed.size()) + 1, prog.n()) {
     const int n = n_, k = k_;
     if (s_.Kp.rows() != n || s_.Kp.cols() != n || s_.Kd.rows() != n || s_.Kd.cols() != n ||
@@ -254,7 +255,7 @@ Status Projected::update(double t, const double* q, const double* qd, const std:
     bool same = t == last_t_;
     for (int i = 0; same && i < n_; ++i) same = q[i] == last_q_[i] && qd[i] == last_qd_[i];
     if (!same) {
-        const unsigned need = NEED_M | NEED_H | NEED_B | NEED_A | NEED_GAMMA;
+        const unsigned need = NEED_M | NEED_H | NEED_B | NEED_A | NEED_GAMMA | this->need();
         Status s = prog_->evaluate(t, q, qd, active, need, Tu_, *ws_);
         if (s != Status::ok) return s;
         for (int i = 0; i < m_; ++i) Au_.row(i) = Tu_.A.row(rows_[static_cast<std::size_t>(i)]);
@@ -581,9 +582,15 @@ Status Projected::law(double t, const double* q, const double* qd, const Terms& 
             if (dot < 0.0)
                 for (int i : b) qs_[i] = -qs_[i];
         }
-        if ((s = prog_->evaluate(t, q, zero_.data(), mask_.data(), NEED_H, Tg_, *ws_)) != Status::ok) return s;
+        // f_g = h(t, q, 0): from the caller's evaluation when the program gives it in the same
+        // pass (need(): bitwise the h of an evaluation at q̇ = 0), else by an evaluation of its own
+        const Vec* fg = &T.f_g;
+        if (!gravity_in_pass_) {
+            if ((s = prog_->evaluate(t, q, zero_.data(), mask_.data(), NEED_H, Tg_, *ws_)) != Status::ok) return s;
+            fg = &Tg_.h;
+        }
         for (int i = 0; i < n; ++i) {
-            double a = Tg_.h[i];
+            double a = (*fg)[i];
             for (int j = 0; j < n; ++j) a += s_.Kp(i, j) * (q[j] - qs_[j]) + s_.Kd(i, j) * qd[j];
             w_[i] = a;
         }

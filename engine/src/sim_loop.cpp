@@ -308,7 +308,7 @@ Status forces_and_bias(Loop& L, double t, const double* q, const double* qd) {
 unsigned dyn_need(const Loop& L) {
     unsigned need = NEED_M | NEED_H | NEED_A | NEED_GAMMA | NEED_PHI;
     if (L.opt.stab == Stabilization::baumgarte) need |= NEED_VELOCITY;
-    if (L.ctrl) need |= NEED_B;
+    if (L.ctrl) need |= NEED_B | L.ctrl->need();
     return need;
 }
 

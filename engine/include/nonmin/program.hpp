@@ -47,6 +47,9 @@ enum Need : unsigned {
     NEED_B = 1u << 6,
     NEED_ENERGY = 1u << 7,    // kinetic + potential energy
     NEED_ALL = 0xffu,
+    // f_g = h(t, q, 0) into Terms::f_g, from the same kinematics as the other terms (programs
+    // with gravity_in_pass() only; not part of NEED_ALL)
+    NEED_GRAVITY = 1u << 8,
 };
 
 // Outputs of one evaluation. Sized once by Program::make_terms(); evaluate() writes in place.
@@ -60,6 +63,7 @@ struct TermsOf {
     MatS M;          // n × n, symmetric
     VecS h;          // n
     VecS f_passive;  // n
+    VecS f_g;        // n: h(t, q, 0) (NEED_GRAVITY)
     MatS B;          // n × k
     MatS A;          // m_all × n
     VecS gamma;      // m_all
@@ -72,6 +76,7 @@ struct TermsOf {
         M = MatS::Zero(n, n);
         h = VecS::Zero(n);
         f_passive = VecS::Zero(n);
+        f_g = VecS::Zero(n);
         B = MatS::Zero(n, k);
         A = MatS::Zero(m_all, n);
         gamma = VecS::Zero(m_all);
@@ -165,6 +170,10 @@ class Program {
         (void)rq, (void)ws;
         return Status::not_differentiable;
     }
+
+    // Whether evaluate() answers NEED_GRAVITY (f_g = h(t, q, 0), bitwise the h of an evaluation
+    // at q̇ = 0) from the kinematics of the same pass; otherwise a caller evaluates h at q̇ = 0.
+    virtual bool gravity_in_pass() const { return false; }
 
     // True when M does not depend on q (planar absolute coordinates): the loop may validate and
     // factor it once.

@@ -101,6 +101,11 @@ using TreeData = TreeDataT<double>;
 template <class S>
 void forward_kinematics(const TreeModel& model, TreeDataT<S>& data, const S* q, bool inertias = true);
 
+// (S) The world body inertias oI of the placements in data: what forward_kinematics adds with
+// `inertias` (the same operations on the same placements: the same bits).
+template <class S>
+void body_inertias(const TreeModel& model, TreeDataT<S>& data);
+
 // (S) Spatial velocities ν_i and accelerations α_i (without gravity) for Pinocchio's joint
 // velocity v and acceleration a (nv each; a == nullptr means a = 0). Needs forward_kinematics.
 template <class S>

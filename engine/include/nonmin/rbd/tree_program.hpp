@@ -92,6 +92,7 @@ struct TreeScratch {
     explicit TreeScratch(const TreeDescription& d);
     TreeDataT<S> data;
     VecS qn, v, a0, tau, fv;
+    VecS zv;  // nv zeros (the motion at q̇ = 0 of NEED_GRAVITY)
     MatS Mv;  // nv × nv
     MatS Av;  // m_all × nv (frame rows in velocity space, robots with quaternions)
     std::vector<Mat3T<S>> R;     // per joint: rotation of its quaternion (free flyer, spherical)
@@ -101,6 +102,12 @@ struct TreeScratch {
     VecS tq;                     // nq scratch (residuals)
     FrameKinematicsT<S> ka, kb;
     std::vector<double> treg;    // registers of the drivers' expression tapes (functions of t)
+    // evaluate()'s kinematics cache (S = double): data's placements, motion subspaces (and the
+    // inertias when fk_inertias) are forward_kinematics at fk_q (bit for bit), so an evaluation
+    // at the same q skips it. Only evaluate() sets fk_valid; every other writer of data clears it.
+    bool fk_valid = false;
+    bool fk_inertias = false;
+    std::vector<double> fk_q;
 };
 
 // The first derivatives of one frame's world kinematics (frame_kinematics) along one
@@ -143,6 +150,7 @@ class TreeProgram : public Program {
                             const std::uint8_t* active, unsigned need, Terms& out, Terms& tangent,
                             Workspace& ws) const override;
     bool differentiable() const override { return true; }
+    bool gravity_in_pass() const override { return true; }
     // The residuals of ResidualQuery: M a − h − f_p − B u = Tᵀ (rnea(q, v, T a + Ṫ q̇) + d ⊙ v − S u)
     // (one RNEA, no CRBA), A a + γ = the frame accelerations at the joint acceleration T a + Ṫ q̇,
     // Aᵀ λ from the rows. Trees without quaternions: the first residual's tangents from the

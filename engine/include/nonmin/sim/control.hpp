@@ -103,6 +103,7 @@ class Projected : public Controller {
     Status control(double t, const double* q, const double* qd, const std::uint8_t* active, double* u) override;
     Status update(double t, const double* q, const double* qd, const std::uint8_t* active) override;
     bool stateless() const override { return true; }  // update() only records
+    unsigned need() const override { return gravity_in_pass_ ? NEED_GRAVITY : 0u; }
     std::unique_ptr<Controller> clone() const override { return std::make_unique<Projected>(*prog_, s_); }
 
     // ControlState.record's counters over the accepted steps seen
@@ -136,6 +137,7 @@ class Projected : public Controller {
     bool stale_ = false;                        // the loop's active set is another one
     int n_, k_;
     double rtol_;
+    bool gravity_in_pass_;  // the regulator's f_g from the loop's evaluation (Program::gravity_in_pass)
     std::vector<std::uint8_t> mask_;
     // the loop's evaluation
     const Terms* T_ = nullptr;

@@ -128,6 +128,9 @@ class Controller {
     }
     virtual Status control(double t, const double* q, const double* qd, const std::uint8_t* active,
                            double* u) = 0;
+    // What control() reads from the loop's evaluation beyond M, h, f_p, B, A, γ (Need bits: e.g.
+    // NEED_GRAVITY, so that f_g comes from the same pass instead of an evaluation of its own).
+    virtual unsigned need() const { return 0u; }
     // Whether u depends on (t, q, qd) only (not on what update() records): then F at the
     // projected step end, evaluated for the sample, is also the next step's first stage.
     virtual bool stateless() const { return false; }
