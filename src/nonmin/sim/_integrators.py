@@ -258,7 +258,9 @@ def singular_indicator(A: FloatArray, v: FloatArray | None = None) -> tuple[floa
     iterations (Cholesky of G) from ``v`` (the vector of the previous call) or a fixed start
     until the Rayleigh quotient (an upper bound of λ_min) settles; returns the estimate and the
     vector to pass next time. 0 when G is not positive definite (a singular or redundant A).
-    The engine (``engine/src/sim_integrators.cpp``, ``singular_indicator``) computes the same.
+    The engine (``engine/src/sim_integrators.cpp``, ``singular_indicator``) computes the same;
+    up to :data:`PASSAGE_DENSE_ROWS` rows by tridiagonalization and Newton's method on
+    ``det(T − xI)`` from 0 (``sym_min_eigenvalue``), equal to ``eigvalsh``'s to round-off.
     """
     m = A.shape[0]
     if m == 0:

@@ -112,7 +112,7 @@ struct Passages {
     Mat B, G, C;                 // equilibrated live rows (k × n), Gram (k × k), its Cholesky
     Vec x, y, v, w;              // iteration vectors (k); v: the vector kept between calls
     int v_len = -1;              // length of v (−1: none kept)
-    Eigen::SelfAdjointEigenSolver<Mat> eig;  // up to PASSAGE_DENSE_ROWS live rows
+    Vec tri;  // up to PASSAGE_DENSE_ROWS live rows: the tridiagonal form of G and scratch (4 mr)
     std::vector<int> live, order, first, col_ptr, col_rows;
 };
 
