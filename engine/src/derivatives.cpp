@@ -42,6 +42,29 @@ DerivativeScratch::DerivativeScratch(const Program& p)
 
 namespace {
 
+inline int kz_of(int n, int r) { return n - r; }
+
+// C (r × c, leading dimension ldc) = alpha · op(A) · B (+ C when acc), all row-major: op(A)(i, l)
+// is A[i lda + l], or A[l lda + i] when tA (A stored kk × r); B is kk × c (ldb). Row i of C
+// accumulates alpha op(A)(i, l) · B's row l (contiguous, vectorized; zero entries skipped): at
+// these sizes (n ≤ ~20, 2n columns) Eigen's coefficient-based lazy products on row-major
+// transposed blocks cost ~4× the instructions.
+void mul(bool tA, const double* A, int lda, const double* B, int ldb, double* C, int ldc, int r, int kk, int c,
+         double alpha, bool acc) {
+    for (int i = 0; i < r; ++i) {
+        double* __restrict Ci = C + static_cast<std::ptrdiff_t>(i) * ldc;
+        if (!acc)
+            for (int j = 0; j < c; ++j) Ci[j] = 0.0;
+        for (int l = 0; l < kk; ++l) {
+            double a = tA ? A[static_cast<std::ptrdiff_t>(l) * lda + i] : A[static_cast<std::ptrdiff_t>(i) * lda + l];
+            if (a == 0.0) continue;
+            a *= alpha;
+            const double* __restrict Bl = B + static_cast<std::ptrdiff_t>(l) * ldb;
+            for (int j = 0; j < c; ++j) Ci[j] += a * Bl[j];
+        }
+    }
+}
+
 // The residual tangents one direction at a time from evaluate_tangent (programs without
 // residual_tangents: SymPy tapes).
 Status residuals_by_direction(const Program& p, DerivativeScratch& s, const ResidualQuery& rq) {
@@ -141,8 +164,13 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
         Z.setIdentity(n, n);
     }
     const int kz = n - r;
-    s.MZ.noalias() = M.lazyProduct(Z);
-    s.Sm.noalias() = Z.transpose().lazyProduct(s.MZ);
+    Mat& Zt = s.Zt;  // Zᵀ, Zᵀ M (kz × n), S = Zᵀ M Z
+    Mat& ZtM = s.ZtM;
+    Zt = Z.transpose();
+    ZtM.resize(kz_of(n, r), n);
+    s.Sm.resize(kz_of(n, r), kz_of(n, r));
+    mul(false, Zt.data(), n, M.data(), n, ZtM.data(), n, kz_of(n, r), n, n, 1.0, false);
+    mul(false, ZtM.data(), n, Z.data(), kz_of(n, r), s.Sm.data(), kz_of(n, r), kz_of(n, r), n, kz_of(n, r), 1.0, false);
     Eigen::LLT<Mat>& llt = s.llt;
     llt.compute(s.Sm);
     if (kz > 0) {
@@ -203,59 +231,73 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
     st = p.residual_tangents(rq, *s.ws);
     if (st == Status::not_differentiable) st = residuals_by_direction(p, s, rq);
     if (st != Status::ok) return st;
-    // the kernel's derivative over the 2n columns: Q δq̈ = −G (C + Gᵀ L1), C = D (δA q̈ + δγ);
-    // M Q δq̈ = −(M G) C (M G: n × m, once)
-    Mat& AQ = s.AQ;
-    Mat& MAQ = s.MAQ;
+    // the kernel's derivative over the 2n directions, one row per direction (the residuals'
+    // layout): Q δq̈ = −G (C + Gᵀ L1), C = D (δA q̈ + δγ); M Q δq̈ = −(M G) C
+    Mat& AQ = s.AQ;    // (Q δq̈)ᵀ: nd × n
+    Mat& MAQ = s.MAQ;  // (M Q δq̈)ᵀ
+    AQ.resize(nd, n);
+    MAQ.resize(nd, n);
+    const int ldl = 2 * n;  // Rlam's rows: [δAeᵀ λe | δAeᵀ ρ]
     if (m > 0) {
-        Mat& C = s.C;
-        C.resize(m, nd);
-        for (int i = 0; i < m; ++i) C.row(i) = d[i] * s.Rcon.col(rows[i]).transpose();
-        // + Gᵀ δAeᵀ ρ (L1: rows n .. 2n of each Rlam row)
-        C.noalias() += G.transpose().lazyProduct(s.Rlam.rightCols(n).transpose());
-        AQ.noalias() = -G.lazyProduct(C);
-        s.MG.noalias() = M.lazyProduct(G);
-        MAQ.noalias() = -s.MG.lazyProduct(C);
+        Mat& C = s.C;  // Cᵀ: nd × m
+        C.resize(nd, m);
+        for (int j = 0; j < nd; ++j)
+            for (int i = 0; i < m; ++i) C(j, i) = d[i] * s.Rcon(j, rows[i]);
+        // + Gᵀ δAeᵀ ρ
+        mul(false, s.Rlam.data() + n, ldl, G.data(), m, C.data(), m, nd, n, m, 1.0, true);
+        s.Gt = G.transpose();
+        s.MG.resize(m, n);  // Gᵀ M = (M G)ᵀ
+        mul(false, s.Gt.data(), n, M.data(), n, s.MG.data(), n, m, n, n, 1.0, false);
+        mul(false, C.data(), m, s.Gt.data(), n, AQ.data(), n, nd, m, n, -1.0, false);
+        mul(false, C.data(), m, s.MG.data(), n, MAQ.data(), n, nd, m, n, -1.0, false);
     } else {
-        AQ.setZero(n, nd);
-        MAQ.setZero(n, nd);
+        AQ.setZero();
+        MAQ.setZero();
     }
-    Mat& DQDD = s.DQDD;  // δq̈ over the 2n columns
-    Mat& DFC = s.DFC;    // δf_c = δ(M q̈ − g) + M δq̈
+    Mat& DQDD = s.DQDD;  // δq̈ᵀ
+    Mat& DFC = s.DFC;    // δf_cᵀ = δ(M q̈ − g)ᵀ + (M δq̈)ᵀ
     DQDD = AQ;
-    DFC = s.Rdyn.transpose();
+    DFC = s.Rdyn;
     DFC += MAQ;
     if (kz > 0) {
-        Mat& T1 = s.T1;  // −δ(M q̈ − g) + δAeᵀ λe − M Q δq̈ (n × 2n)
-        T1.noalias() = -s.Rdyn.transpose();
-        if (m > 0) T1.noalias() += s.Rlam.leftCols(n).transpose();
+        Mat& T1 = s.T1;  // (−δ(M q̈ − g) + δAeᵀ λe − M Q δq̈)ᵀ (nd × n)
+        T1 = -s.Rdyn;
+        if (m > 0) T1 += s.Rlam.leftCols(n);
         T1 -= MAQ;
-        s.RHS.noalias() = Z.transpose().lazyProduct(T1);
-        llt.solveInPlace(s.RHS);
-        DQDD.noalias() += Z.lazyProduct(s.RHS);
-        DFC.noalias() += s.MZ.lazyProduct(s.RHS);
+        Mat& RHS = s.RHS;  // (S⁻¹ Zᵀ T1)ᵀ = T1ᵀ Z S⁻¹ (nd × kz)
+        RHS.resize(nd, kz);
+        mul(false, T1.data(), n, Z.data(), kz, RHS.data(), kz, nd, n, kz, 1.0, false);
+        auto RHSt = RHS.transpose();
+        llt.solveInPlace(RHSt);
+        mul(false, RHS.data(), kz, Zt.data(), n, DQDD.data(), n, nd, kz, n, 1.0, true);
+        mul(false, RHS.data(), kz, ZtM.data(), n, DFC.data(), n, nd, kz, n, 1.0, true);
     }
-    out.dqdd_dq = DQDD.leftCols(n);
-    out.dqdd_dqd = DQDD.rightCols(n);
-    out.dfc_dq = DFC.leftCols(n);
-    out.dfc_dqd = DFC.rightCols(n);
+    out.dqdd_dq = DQDD.topRows(n).transpose();  // column k: along e_k
+    out.dqdd_dqd = DQDD.bottomRows(n).transpose();
+    out.dfc_dq = DFC.topRows(n).transpose();
+    out.dfc_dqd = DFC.bottomRows(n).transpose();
     // ∂/∂f: δg = e_j, nothing else moves: δq̈ = Z S⁻¹ Zᵀ e_j, δf_c = M δq̈ − e_j; ∂/∂u = ∂/∂f · B
     const Mat& B = s.val.B;
+    out.dqdd_df.resize(n, n);
+    out.dfc_df.resize(n, n);
+    out.dqdd_du_t.resize(k, n);
+    out.dfc_du_t.resize(k, n);
     if (kz > 0) {
         Mat& ZS = s.ZS;  // S⁻¹ Zᵀ (kz × n)
-        ZS = Z.transpose();
+        ZS = Zt;
         llt.solveInPlace(ZS);
-        out.dqdd_df.noalias() = Z.lazyProduct(ZS);
-        out.dfc_df.noalias() = s.MZ.lazyProduct(ZS);
+        mul(false, Z.data(), kz, ZS.data(), n, out.dqdd_df.data(), n, n, kz, n, 1.0, false);
+        mul(true, ZtM.data(), n, ZS.data(), n, out.dfc_df.data(), n, n, kz, n, 1.0, false);
         out.dfc_df.diagonal().array() -= 1.0;
-        s.ZSB.noalias() = ZS.lazyProduct(B);  // kz × k
-        out.dqdd_du_t.noalias() = s.ZSB.transpose().lazyProduct(Z.transpose());
-        out.dfc_du_t.noalias() = s.ZSB.transpose().lazyProduct(s.MZ.transpose());
+        s.ZSB.resize(kz, k);  // S⁻¹ Zᵀ B
+        mul(false, ZS.data(), n, B.data(), k, s.ZSB.data(), k, kz, n, k, 1.0, false);
+        mul(true, s.ZSB.data(), k, Zt.data(), n, out.dqdd_du_t.data(), n, k, kz, n, 1.0, false);
+        mul(true, s.ZSB.data(), k, ZtM.data(), n, out.dfc_du_t.data(), n, k, kz, n, 1.0, false);
         out.dfc_du_t -= B.transpose();
     } else {
-        out.dqdd_df.setZero(n, n);
+        out.dqdd_df.setZero();
         out.dfc_df = -Mat::Identity(n, n);
-        out.dqdd_du_t.setZero(k, n);
+        out.dqdd_du_t.setZero();
         out.dfc_du_t = -B.transpose();
     }
     return Status::ok;

@@ -49,7 +49,7 @@ struct DerivativeScratch {
     Mat Rdyn, Rlam, Rcon;     // 2n × n, 2n × 2n (two λ), 2n × m_all: residual tangents
     Mat lam;                  // 2 × m_all: D λe and D ρ on the active rows
     std::vector<int> rows;    // active rows
-    Mat Ae, G, Z, MZ, MG, Sm, C, T1, AQ, MAQ, RHS, DQDD, DFC, ZS, ZSB;
+    Mat Ae, G, Gt, Z, Zt, ZtM, MG, Sm, C, T1, AQ, MAQ, RHS, DQDD, DFC, ZS, ZSB;  // (2n-direction ones: one row each)
     Vec d, ge, g, Gge, w1, w2;
     Eigen::LLT<Mat> llt;
     Eigen::JacobiSVD<Mat> svd;

@@ -79,7 +79,9 @@ struct TreeDataT {
           oa(model.joints.size()),
           of(model.joints.size()),
           Bc(model.joints.size()),
-          oh(model.joints.size()) {}
+          oh(model.joints.size()),
+          cw(static_cast<std::size_t>(model.nv)),
+          cy(static_cast<std::size_t>(model.nv)) {}
 
     std::vector<SE3T<S>> oMi;       // joint placements in the world
     Eigen::Matrix<S, 6, Eigen::Dynamic> J;  // 6 × nv: world joint motion subspaces
@@ -90,6 +92,8 @@ struct TreeDataT {
     std::vector<ForceT<S>> of;      // subtree forces (rnea scratch)
     std::vector<Eigen::Matrix<S, 6, 6>> Bc;  // composite Coriolis operators (coriolis); rnea_derivatives: K_j
     std::vector<ForceT<S>> oh;      // subtree momenta Σ I_i ν_i (rnea_derivatives scratch)
+    // rnea_derivatives, per velocity column c of joint j: Ic_j J_c and K_jᵀ J_c − J_c ×* Hc_j
+    std::vector<ForceT<S>> cw, cy;
 };
 using TreeData = TreeDataT<double>;
 
@@ -129,7 +133,7 @@ S potential_energy(const TreeModel& model, const TreeDataT<S>& data);
 // Analytic first derivatives of rnea for a tree without quaternion joints (v = q̇; revolute,
 // prismatic, translation): dtau_dq(:, k) = ∂τ/∂q_k and dtau_dv(:, k) = ∂τ/∂v_k (nv × nv each,
 // column-major), at the velocity v and acceleration a; the armature term M_a a has no q and no v
-// dependence. Needs forward_kinematics (with inertias); overwrites ov, oa, of, Ic, Bc, oh.
+// dependence. Needs forward_kinematics (with inertias); overwrites ov, oa, of, Ic, Bc, oh, cw, cy.
 // Derivation (docs/theory.md, "Analytic derivatives of RNEA"): moving q_k moves the subtree of
 // joint k rigidly with the twist ξ = J_k, so δJ_j = ξ × J_j, δI_i = ξ×* I_i − I_i ξ×,
 // δν_i = ξ × (ν_i − ν_p), δα_i = ξ × (α_i − α_p) − (ξ × ν_p) × (ν_i − ν_p) (p = k's parent, α
