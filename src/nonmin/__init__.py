@@ -29,17 +29,11 @@ The most used names are re-exported here: :func:`simulate`, :class:`Trajectory`,
 
 from typing import TYPE_CHECKING, Any
 
-from . import analysis as analysis
-from . import control as control
 from . import core as core
 from . import errors as errors
-from . import library as library
 from . import model as model
 from . import sim as sim
-from . import sweeps as sweeps
 from ._version import __version__ as __version__
-from .analysis import inverse_dynamics as inverse_dynamics
-from .analysis import reactions as reactions
 from .core import constraint_force as constraint_force
 from .core import forward_dynamics as forward_dynamics
 from .core import impact_map as impact_map
@@ -58,10 +52,27 @@ from .sim import check_model as check_model
 from .sim import load_trajectory as load_trajectory
 from .sim import simulate as simulate
 from .sim import simulate_batch as simulate_batch
-from .sweeps import sweep as sweep
 
-#: Names imported on first access (module ``__getattr__``): nonmin.linear and its entry points.
+if TYPE_CHECKING:  # the names below are imported on first access (module ``__getattr__``)
+    from . import analysis as analysis
+    from . import control as control
+    from . import library as library
+    from . import sweeps as sweeps
+    from .analysis import inverse_dynamics as inverse_dynamics
+    from .analysis import reactions as reactions
+    from .sweeps import sweep as sweep
+
+#: Names imported on first access (module ``__getattr__``), so that ``import nonmin`` loads only
+#: what a simulation needs (issue 17, target 1: ``import nonmin`` <= 0.3 s): the mechanism
+#: library, the controllers, inverse dynamics and reactions, the sweeps, nonmin.linear.
 _LAZY = {
+    "analysis": ("nonmin.analysis", None),
+    "inverse_dynamics": ("nonmin.analysis", "inverse_dynamics"),
+    "reactions": ("nonmin.analysis", "reactions"),
+    "control": ("nonmin.control", None),
+    "library": ("nonmin.library", None),
+    "sweeps": ("nonmin.sweeps", None),
+    "sweep": ("nonmin.sweeps", "sweep"),
     "linear": ("nonmin.linear", None),
     "linearize": ("nonmin.linear", "linearize"),
     "equilibrium": ("nonmin.linear", "equilibrium"),
@@ -81,6 +92,9 @@ if not TYPE_CHECKING:  # (mypy would read every unknown submodule, the compiled 
         value = mod if spec[1] is None else getattr(mod, spec[1])
         globals()[name] = value
         return value
+
+    def __dir__() -> list[str]:
+        return sorted(set(globals()) | set(_LAZY))
 
 
 __all__ = [
