@@ -53,7 +53,7 @@ double row_norm_pattern(const double* x, int n, const int* cols, int e) {
 }
 
 int equilibrate_pattern(const double* A, int m, int n, const int* start, const int* cols,
-                        const double* b, double rtol, double* B, double* d, double* norms) {
+                        const double* b, double rtol, double* B, double* d, double* norms, bool b_zero) {
     const int ld = n + 1;
     double big = 0.0;
     for (int i = 0; i < m; ++i) {
@@ -67,7 +67,7 @@ int equilibrate_pattern(const double* A, int m, int n, const int* start, const i
     for (int i = 0; i < m; ++i) {
         double* Bi = B + static_cast<long>(i) * ld;
         const double* Ai = A + static_cast<long>(i) * n;
-        std::fill(Bi, Bi + ld, 0.0);
+        if (!b_zero) std::fill(Bi, Bi + ld, 0.0);  // (b_zero: B is all zero already)
         if (norms[i] > thr) {
             const double di = 1.0 / norms[i];
             for (int t = start[i]; t < start[i + 1]; ++t) Bi[cols[t]] = Ai[cols[t]] * di;
@@ -75,6 +75,7 @@ int equilibrate_pattern(const double* A, int m, int n, const int* start, const i
             d[i] = di;
             ++live;
         } else {
+            Bi[n] = 0.0;
             d[i] = 0.0;
         }
     }

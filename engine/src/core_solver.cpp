@@ -40,6 +40,7 @@ struct Solver::Impl {
     double h_mu = 0.0;
     std::vector<double> Ui, Tj, db;
     std::vector<int> lrows;  // the live rows (a known pattern's rows after compaction)
+    bool b_zero = true;      // B is all zero (a known pattern's entries are zeroed after use)
 
     Impl(int m_max_, int n_)
         : m_max(m_max_), n(n_) {
@@ -496,9 +497,21 @@ SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* 
     }
     // ------------------------------------------------------------------ 2.–3. rank policy
     const int live = pst ? linalg::equilibrate_pattern(A, m, n, pst, pco, gamma, opt.rtol, B.data(), d.data(),
-                                                       sig.data())
+                                                       sig.data(), b_zero)
                          : linalg::equilibrate(A, m, n, gamma, opt.rtol, B.data(), d.data(), sig.data());
     const int r = rank_decision(m, live, opt.rtol, pst, pco);
+    // B back to zero over the pattern when the rank decision left its rows in place (no vanished
+    // row compacted, no Jacobi rotation: the certified LQ and the SVD only read B); else the next
+    // pattern call clears B in full
+    b_zero = pst && live == m && (lqmode != linalg::LQ_NONE || m > JACOBI_MAX_ROWS);
+    if (b_zero) {
+        const int ld = n + 1;
+        for (int i = 0; i < m; ++i) {
+            double* Bi = B.data() + static_cast<long>(i) * ld;
+            for (int t = pst[i]; t < pst[i + 1]; ++t) Bi[pco[t]] = 0.0;
+            Bi[n] = 0.0;
+        }
+    }
     info.rank = r;
     info.method = lqmode;
     info.null_space_form = zmode;
@@ -687,6 +700,7 @@ int Solver::range_basis(const double* A, int m, double rtol, double* Vout) {
     const int n = s.n;
     const int live = linalg::equilibrate(A, m, n, nullptr, rtol, s.B.data(), s.d.data(),
                                          s.sig.data());
+    s.b_zero = false;
     const int r = s.rank_decision(m, live, rtol);
     if (s.zmode && s.lqmode != linalg::LQ_NONE)  // the decision kept Z: form Q
         linalg::lq_rows(s.lq, r, n, 0, r, s.V.data());

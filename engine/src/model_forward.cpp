@@ -34,6 +34,14 @@ ForwardScratch::ForwardScratch(const Program& p, const std::uint8_t* act)
         gamma = Vec::Zero(m);
     }
     g = Vec::Zero(p.n());
+    const RowPattern& pat = p.a_pattern();
+    if (pat.known()) {
+        pat_start.push_back(0);
+        for (int r : rows) {
+            pat_cols.insert(pat_cols.end(), pat.row(r), pat.row(r) + pat.count(r));
+            pat_start.push_back(static_cast<int>(pat_cols.size()));
+        }
+    }
 }
 
 SolveInfo forward_dynamics(const Program& p, ForwardScratch& s, double t, const double* q,
@@ -46,6 +54,10 @@ SolveInfo forward_dynamics(const Program& p, ForwardScratch& s, double t, const 
     info.status = p.evaluate(t, q, qd, s.active.data(), need, s.terms, *s.ws);
     if (info.status != Status::ok) return info;
     SolveOptions o = opt;
+    if (!s.pat_start.empty() && o.a_start == nullptr) {
+        o.a_start = s.pat_start.data();
+        o.a_cols = s.pat_cols.data();
+    }
     if (constant) {
         if (!s.mass_known) {
             // validate the constant M once (finite, symmetric); diagonal M takes the fast path

@@ -25,6 +25,9 @@ struct ForwardScratch {
     Mat A;   // gathered active rows (when not contiguous)
     Vec gamma;
     Vec g;   // h + f_passive
+    // A's known row pattern restricted to the active rows (program.hpp's RowPattern; empty:
+    // unknown): the solve reads only those entries (SolveOptions::a_start, results bitwise equal)
+    std::vector<int> pat_start, pat_cols;
     bool mass_known = false;  // constant M evaluated and validated once
     unsigned known = 0;       // SolveOptions::known for a constant M
 };

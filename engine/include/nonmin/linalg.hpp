@@ -40,9 +40,11 @@ double row_norm_pattern(const double* x, int n, const int* cols, int e);
 
 // equilibrate for an A whose row i is 0 outside the columns cols[start[i]] … cols[start[i+1]−1]
 // (a RowPattern of A's m rows, program.hpp): reads only those entries, writes the same B, d and
-// norms bitwise.
+// norms bitwise. b_zero: B is all zero on entry (the caller keeps it so between calls), so only the
+// pattern's entries and the last column are written instead of every row in full.
 int equilibrate_pattern(const double* A, int m, int n, const int* start, const int* cols,
-                        const double* b, double rtol, double* B, double* d, double* norms);
+                        const double* b, double rtol, double* B, double* d, double* norms,
+                        bool b_zero = false);
 
 // Rule 3 for few rows: one-sided (Hestenes) Jacobi SVD of the rows of B (m × (n + 1),
 // augmented: the rotations act on the last column too). At convergence the rows are mutually
