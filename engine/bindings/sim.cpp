@@ -297,6 +297,17 @@ void bind_sim(nb::module_& m) {
 
     m.attr("SIM_DONE") = static_cast<int>(sim::Outcome::done);
     m.attr("SIM_HANDOVER") = static_cast<int>(sim::Outcome::handover);
+    m.def(
+        "sym_min_eigenvalue",
+        [](nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu> G) {
+            const auto k = G.shape(0);
+            if (k == 0 || G.shape(1) != k) raise_typed("ShapeError", "G must be a nonempty square matrix");
+            std::vector<double> X(G.data(), G.data() + k * k), d(k), e(3 * k);
+            return sim::sym_min_eigenvalue(X.data(), static_cast<int>(k), d.data(), e.data());
+        },
+        nb::arg("G"),
+        "The passage indicator's smallest eigenvalue of a symmetric matrix (its lower triangle; "
+        "tests compare it with numpy.linalg.eigvalsh).");
     m.attr("SIM_EVENT") = static_cast<int>(sim::Outcome::event);
     m.attr("SIM_TRANSITION") = static_cast<int>(sim::Outcome::transition);
 

@@ -617,12 +617,15 @@ bool passage_time(const Passages& P, double& out) {
     return true;
 }
 
+
+}  // namespace
+
 // The smallest eigenvalue of the symmetric k × k matrix X (row-major, its lower triangle read,
 // destroyed), k ≤ PASSAGE_DENSE_ROWS: Householder reduction to tridiagonal form (Golub & Van
-// Loan, Alg. 8.3.1; diagonal into d, subdiagonal into e, k entries each), then bisection on the
-// Sturm counts of T − x I (the LDLᵀ pivots' signs, LAPACK dlaebz's guard pivmin) from T's
-// Gershgorin interval until the bracket is at round-off (2 eps of its ends, or eps ‖T‖ near 0).
-// Both stages are backward stable, so the value is within ~k eps ‖X‖ of the exact one, as a
+// Loan, Alg. 8.3.1; diagonal into d, subdiagonal into e, k entries each), then Newton's method
+// on det(T − x I) from x = 0 (below), and where it cannot proceed bisection on the Sturm counts
+// of T − x I (the LDLᵀ pivots' signs, LAPACK dlaebz's guard pivmin) from T's Gershgorin interval
+// until the bracket is at round-off (2 eps of its ends, or eps ‖T‖ near 0). Both stages are backward stable, so the value is within ~k eps ‖X‖ of the exact one, as a
 // dense eigensolver's (Eigen's SelfAdjointEigenSolver, NumPy's eigvalsh in the Python driver),
 // at a fraction of its cost: no eigenvectors, no QR sweeps over the whole spectrum.
 double sym_min_eigenvalue(double* X, int k, double* d, double* e) {
@@ -745,8 +748,6 @@ double sym_min_eigenvalue(double* X, int k, double* d, double* e) {
     }
     return 0.5 * (lo + hi);
 }
-
-}  // namespace
 
 void passage_setup(Loop& L) {
     Passages& P = L.pas;

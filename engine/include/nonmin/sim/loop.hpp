@@ -416,6 +416,12 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po);
 // vector is kept in L.pas.
 double singular_indicator(Loop& L, const Mat& A, int m);
 
+// The smallest eigenvalue of the symmetric k × k matrix X (row-major; its lower triangle is
+// read and X destroyed): Householder tridiagonalization, then Newton's method on the Sturm
+// pivots from 0 (bisection where it cannot proceed); within ~k eps ‖X‖ of the exact value. d, e:
+// scratch of k and 3k entries. The indicator's dense path (k ≤ 32 live rows); bound for tests.
+double sym_min_eigenvalue(double* X, int k, double* d, double* e);
+
 // Size the scratch of the indicator and set the method's fractions (make_loop).
 void passage_setup(Loop& L);
 
