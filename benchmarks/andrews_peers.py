@@ -267,24 +267,16 @@ def run_pinocchio(dt: float, method: str, kp: float, repeat: int, mu: float = 1e
     points at E, Baumgarte ``Kp``, ``Kd = 2√Kp``), semi-implicit Euler or RK4; the spring's
     torque on γ and ``mom`` on β as joint torques."""
     import pinocchio as pin
+    from pin_loops import point_closures  # beside this script
 
     p = params()
     bs = bodies(p)
     model = pinocchio_model()
     data = model.createData()
     names = list(bs)
-    cms = []
-    for a, b in CLOSURES:
-        cm = pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, model, 1 + names.index(a),
-                                      pin.SE3(np.eye(3), np.array([*bs[a]["points"]["E"], 0.0])),
-                                      1 + names.index(b), pin.SE3(np.eye(3), np.array([*bs[b]["points"]["E"], 0.0])),
-                                      pin.ReferenceFrame.LOCAL)  # fmt: skip
-        cm.m_baumgarte_parameters.Kp = kp
-        cm.m_baumgarte_parameters.Kd = 2.0 * math.sqrt(kp)
-        cms.append(cm)
-    cdatas = [cm.createData() for cm in cms]
-    prox = pin.ProximalSettings(1e-12, mu, 50)
-    pin.initConstraintDynamics(model, data, cms, cdatas)
+    pairs = [(1 + names.index(a), [*bs[a]["points"]["E"], 0.0], 1 + names.index(b), [*bs[b]["points"]["E"], 0.0])
+             for a, b in CLOSURES]  # fmt: skip
+    cms, cdatas, prox = point_closures(model, data, pairs, kp, mu)
     xb, yb, sd, sc, xc, yc, c0, l0, mom = p.xb, p.yb, p.sd, p.sc, p.xc, p.yc, p.c0, p.l0, p.mom
     tau = np.zeros(7)
 

@@ -224,6 +224,7 @@ def a04_pinocchio_model() -> Any:
 def run_pinocchio_a04(dt: float, method: str, kp: float, repeat: int, mu: float = 1e-8) -> dict[str, Any]:
     """One Pinocchio run of A04 over 10 s (Python loop of ``constraintDynamics``)."""
     import pinocchio as pin
+    from pin_loops import point_closures  # beside this script
 
     model = a04_pinocchio_model()
     parent = model.njoints - 1
@@ -231,16 +232,8 @@ def run_pinocchio_a04(dt: float, method: str, kp: float, repeat: int, mu: float 
     # rod5's frame sits at J5 = (0, -1, 1): the points (0, 1, 0) and (1, 1, 0) of it are J6's axis
     local = (np.array([0.0, 1.0, 0.0]), np.array([1.0, 1.0, 0.0]))
     world = (np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 1.0]))
-    cms = []
-    for a, b in zip(local, world, strict=True):
-        cm = pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, model, parent, pin.SE3(np.eye(3), a),
-                                      0, pin.SE3(np.eye(3), b), pin.ReferenceFrame.LOCAL)
-        cm.m_baumgarte_parameters.Kp = kp
-        cm.m_baumgarte_parameters.Kd = 2.0 * np.sqrt(kp)
-        cms.append(cm)
-    cdatas = [cm.createData() for cm in cms]
-    prox = pin.ProximalSettings(1e-12, mu, 50)
-    pin.initConstraintDynamics(model, data, cms, cdatas)
+    pairs = [(parent, a, 0, b) for a, b in zip(local, world, strict=True)]
+    cms, cdatas, prox = point_closures(model, data, pairs, kp, mu)
     tau = np.zeros(model.nv)
     T = HORIZON["A04_bricard"]
     n = round(T / dt)

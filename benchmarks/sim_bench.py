@@ -652,9 +652,12 @@ def run_mujoco(mech: BarMechanism, dt: float, setting: str, *, repeat: int = 3,
                      status)
 
 
+
+
 def run_pinocchio(mech: BarMechanism, dt: float, *, kp: float = 100.0, mu: float = 1e-8,
                   repeat: int = 3, warmup: bool = True) -> RunResult:
     import pinocchio as pin
+    from pin_loops import point_closures  # beside this script
 
     model = pin.Model()
     model.gravity.linear = np.array([0.0, -G, 0.0])
@@ -694,19 +697,8 @@ def run_pinocchio(mech: BarMechanism, dt: float, *, kp: float = 100.0, mu: float
         jid[i] = j
     qidx = np.array([model.joints[jid[i]].idx_q for i in range(mech.nb)])
     data = model.createData()
-    cms = []
-    for i, j in mech.closures:
-        cm = pin.RigidConstraintModel(
-            pin.ContactType.CONTACT_3D, model, jid[i],
-            pin.SE3(np.eye(3), np.array([mech.lengths[i], 0.0, 0.0])), jid[j],
-            pin.SE3(np.eye(3), np.array([mech.lengths[j], 0.0, 0.0])),
-            pin.ReferenceFrame.LOCAL)
-        cm.m_baumgarte_parameters.Kp = kp
-        cm.m_baumgarte_parameters.Kd = 2.0 * math.sqrt(kp)
-        cms.append(cm)
-    cdatas = [cm.createData() for cm in cms]
-    prox = pin.ProximalSettings(1e-12, mu, 50)
-    pin.initConstraintDynamics(model, data, cms, cdatas)
+    pairs = [(jid[i], [mech.lengths[i], 0.0, 0.0], jid[j], [mech.lengths[j], 0.0, 0.0]) for i, j in mech.closures]
+    cms, cdatas, prox = point_closures(model, data, pairs, kp, mu)
     q0 = np.zeros(model.nq)
     v0 = np.zeros(model.nv)
     v0[qidx] = [mech.rates0[i] - (mech.rates0[k] if kind == "bar" else 0.0)

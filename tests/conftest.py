@@ -69,10 +69,14 @@ def load_benchmark() -> Callable[[str], ModuleType]:
     """``load_benchmark("sim_bench")``: a script of ``benchmarks/`` imported as a module (the
     tests that check the peer models the benchmarks run)."""
 
+    here = Path(__file__).resolve().parents[1] / "benchmarks"
+    if str(here) not in sys.path:  # the scripts import their helpers beside them (pin_loops)
+        sys.path.append(str(here))
+
     def load(name: str) -> ModuleType:
         if name in sys.modules:
             return sys.modules[name]
-        path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+        path = here / f"{name}.py"
         spec = importlib.util.spec_from_file_location(name, path)
         assert spec is not None and spec.loader is not None
         mod = importlib.util.module_from_spec(spec)

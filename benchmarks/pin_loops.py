@@ -1,0 +1,39 @@
+"""Pinocchio's loop closures as the benchmarks' Pinocchio peers build them (one place).
+
+``point_closures`` makes the 3-D point constraints (``CONTACT_3D`` between two joint frames,
+local reference frame), sets Baumgarte's gains ``Kp`` and ``Kd = 2 √Kp`` on each, and prepares
+the data and the proximal solver for a Python loop of ``pinocchio.constraintDynamics``. Used by
+``sim_bench.py`` (planar bar mechanisms), ``library_wp.py`` (A04 Bricard) and
+``andrews_peers.py`` (A03 Andrews).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from typing import Any
+
+import numpy as np
+
+
+def point_closures(
+    model: Any, data: Any, pairs: Iterable[tuple[int, Any, int, Any]], kp: float, mu: float
+) -> tuple[list[Any], list[Any], Any]:
+    """Point closures ``(joint_a, point_a, joint_b, point_b)`` (points as 3-vectors in the joints'
+    frames) for ``model``/``data``: the constraint models, their data, the proximal settings
+    (absolute accuracy 1e-12, regularization ``mu``, at most 50 iterations), initialized."""
+    import pinocchio as pin
+
+    cms = []
+    for ja, pa, jb, pb in pairs:
+        cm = pin.RigidConstraintModel(
+            pin.ContactType.CONTACT_3D, model, int(ja), pin.SE3(np.eye(3), np.asarray(pa, dtype=float)),
+            int(jb), pin.SE3(np.eye(3), np.asarray(pb, dtype=float)), pin.ReferenceFrame.LOCAL,
+        )  # fmt: skip
+        cm.m_baumgarte_parameters.Kp = kp
+        cm.m_baumgarte_parameters.Kd = 2.0 * math.sqrt(kp)
+        cms.append(cm)
+    cdatas = [cm.createData() for cm in cms]
+    prox = pin.ProximalSettings(1e-12, mu, 50)
+    pin.initConstraintDynamics(model, data, cms, cdatas)
+    return cms, cdatas, prox
