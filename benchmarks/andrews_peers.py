@@ -267,7 +267,7 @@ def run_pinocchio(dt: float, method: str, kp: float, repeat: int, mu: float = 1e
     points at E, Baumgarte ``Kp``, ``Kd = 2√Kp``), semi-implicit Euler or RK4; the spring's
     torque on γ and ``mom`` on β as joint torques."""
     import pinocchio as pin
-    from pin_loops import point_closures  # beside this script
+    from pin_loops import point_closures, step  # beside this script
 
     p = params()
     bs = bodies(p)
@@ -305,16 +305,7 @@ def run_pinocchio(dt: float, method: str, kp: float, repeat: int, mu: float = 1e
                 vs.append(v.copy())
             if k == n:
                 break
-            if method == "euler":  # semi-implicit (symplectic) Euler
-                v = v + dt * acc(q, v)
-                q = q + dt * v
-            else:
-                k1 = acc(q, v).copy()
-                k2 = acc(q + 0.5 * dt * v, v + 0.5 * dt * k1).copy()
-                k3 = acc(q + 0.5 * dt * (v + 0.5 * dt * k1), v + 0.5 * dt * k2).copy()
-                k4 = acc(q + dt * (v + 0.5 * dt * k2), v + dt * k3)
-                q = q + dt * (v + dt / 6.0 * (k1 + k2 + k3))
-                v = v + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            q, v = step(acc, q, v, dt, method)
             if not math.isfinite(v[0]) or abs(v[0]) > 1e8:
                 ok = False
                 break

@@ -224,7 +224,7 @@ def a04_pinocchio_model() -> Any:
 def run_pinocchio_a04(dt: float, method: str, kp: float, repeat: int, mu: float = 1e-8) -> dict[str, Any]:
     """One Pinocchio run of A04 over 10 s (Python loop of ``constraintDynamics``)."""
     import pinocchio as pin
-    from pin_loops import point_closures  # beside this script
+    from pin_loops import point_closures, step  # beside this script
 
     model = a04_pinocchio_model()
     parent = model.njoints - 1
@@ -261,16 +261,7 @@ def run_pinocchio_a04(dt: float, method: str, kp: float, repeat: int, mu: float 
                 closure.append(max(float(np.abs(M5.act(a) - b).max()) for a, b in zip(local, world, strict=True)))
             if k == n:
                 break
-            if method == "euler":  # semi-implicit (symplectic) Euler
-                v = v + dt * acc(q, v)
-                q = q + dt * v
-            else:
-                k1v = acc(q, v)
-                k2v = acc(q + 0.5 * dt * v, v + 0.5 * dt * k1v)
-                k3v = acc(q + 0.5 * dt * (v + 0.5 * dt * k1v), v + 0.5 * dt * k2v)
-                k4v = acc(q + dt * (v + 0.5 * dt * k2v), v + dt * k3v)
-                q = q + dt * (v + dt / 6.0 * (k1v + k2v + k3v))
-                v = v + dt / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+            q, v = step(acc, q, v, dt, method)
             if not np.isfinite(v[0]):
                 ok = False
                 break

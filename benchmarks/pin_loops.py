@@ -37,3 +37,16 @@ def point_closures(
     prox = pin.ProximalSettings(1e-12, mu, 50)
     pin.initConstraintDynamics(model, data, cms, cdatas)
     return cms, cdatas, prox
+
+
+def step(acc: Any, q: np.ndarray, v: np.ndarray, dt: float, method: str) -> tuple[np.ndarray, np.ndarray]:
+    """One step of the peers' Python loops on ``q̈ = acc(q, v)`` (vector-space coordinates):
+    ``"euler"`` semi-implicit (symplectic) Euler, else classical RK4 in its second-order form."""
+    if method == "euler":
+        v = v + dt * acc(q, v)
+        return q + dt * v, v
+    k1 = acc(q, v)
+    k2 = acc(q + 0.5 * dt * v, v + 0.5 * dt * k1)
+    k3 = acc(q + 0.5 * dt * (v + 0.5 * dt * k1), v + 0.5 * dt * k2)
+    k4 = acc(q + dt * (v + 0.5 * dt * k2), v + dt * k3)
+    return q + dt * (v + dt / 6.0 * (k1 + k2 + k3)), v + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
