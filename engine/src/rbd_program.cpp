@@ -787,13 +787,8 @@ void TreeProgram::frame_tangents(const Frame& f, const TreeWorkspace& ws, FrameT
     const Vec3 vp = nu.lin + w.cross(p);
     for (int jk = i; jk >= 0; jk = model.joints[jk].parent) {
         const Joint& jt = model.joints[jk];
-        Motion nup, alp;  // the parent's velocity and acceleration (world: at rest, gravity offset)
-        if (jt.parent >= 0) {
-            nup = D.ov[jt.parent];
-            alp = D.oa[jt.parent];
-        } else {
-            alp.lin = -model.gravity;
-        }
+        Motion nup, alp;  // the parent's velocity and acceleration
+        parent_motion(model, D, jk, nup, alp);
         Motion nrel, arel;  // ν_i − ν_p, α_i − α_p
         nrel.lin = nu.lin - nup.lin;
         nrel.ang = nu.ang - nup.ang;
@@ -801,9 +796,7 @@ void TreeProgram::frame_tangents(const Frame& f, const TreeWorkspace& ws, FrameT
         arel.ang = al.ang - alp.ang;
         for (int c = 0; c < joint_nv(jt.type); ++c) {
             const int col = jt.iv + c;
-            Motion xi;
-            xi.lin = D.J.col(col).head<3>();
-            xi.ang = D.J.col(col).tail<3>();
+            const Motion xi = joint_twist(D, col);
             const Vec3 dpt = xi.lin + xi.ang.cross(p);  // velocity of the point p in the twist ξ
             const Motion eta = cross(xi, nup);
             // along q̇_k: δν_i = ξ, δα_i = ξ × ν_i − 2 ξ × ν_p
@@ -856,9 +849,7 @@ void TreeProgram::add_wrench_tangents(const Frame& f, const Force& F, const Forc
         const Joint& jtk = model.joints[jk];
         for (int ck = 0; ck < joint_nv(jtk.type); ++ck) {
             const int k = jtk.iv + ck;
-            Motion xi;
-            xi.lin = D.J.col(k).head<3>();
-            xi.ang = D.J.col(k).tail<3>();
+            const Motion xi = joint_twist(D, k);
             // (ξ × J_j)·F = J_j · (−ξ ×* F)
             const Force xf = cross_force(xi, F);
             for (int j = i; j >= jk; j = model.joints[j].parent) {

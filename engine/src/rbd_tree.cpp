@@ -291,10 +291,7 @@ Mat6 force_cross_bar(const Force& f) {  // ν ↦ ν ×* f (skew-symmetric)
 Eigen::Matrix<double, 6, 1> col6(const TreeData& data, int k) { return data.J.col(k); }
 
 Eigen::Matrix<double, 6, 1> col6_dot(const TreeData& data, int j, int k) {  // ν_j × J_k
-    Motion S;
-    S.lin = data.J.col(k).head<3>();
-    S.ang = data.J.col(k).tail<3>();
-    const Motion d = cross(data.ov[j], S);
+    const Motion d = cross(data.ov[j], joint_twist(data, k));
     Eigen::Matrix<double, 6, 1> out;
     out << d.lin, d.ang;
     return out;
@@ -363,9 +360,7 @@ void rnea_derivatives(const TreeModel& model, TreeData& data, const double* v, c
         const Joint& jj = model.joints[j];
         for (int d = 0; d < joint_nv(jj.type); ++d) {
             const int c = jj.iv + d;
-            Motion Jc;
-            Jc.lin = data.J.col(c).head<3>();
-            Jc.ang = data.J.col(c).tail<3>();
+            const Motion Jc = joint_twist(data, c);
             data.cw[c] = data.Ic[j] * Jc;
             Vec6 x;
             x << Jc.lin, Jc.ang;
@@ -378,18 +373,11 @@ void rnea_derivatives(const TreeModel& model, TreeData& data, const double* v, c
     auto dot = [](const Force& f, const Motion& m) { return f.lin.dot(m.lin) + f.ang.dot(m.ang); };
     for (int k = 0; k < nj; ++k) {
         const Joint& jk = model.joints[k];
-        Motion nup, agp;  // the parent's velocity and acceleration (world: at rest, gravity offset)
-        if (jk.parent >= 0) {
-            nup = data.ov[jk.parent];
-            agp = data.oa[jk.parent];
-        } else {
-            agp.lin = -model.gravity;
-        }
+        Motion nup, agp;  // the parent's velocity and acceleration
+        parent_motion(model, data, k, nup, agp);
         for (int c = 0; c < joint_nv(jk.type); ++c) {
             const int col = jk.iv + c;
-            Motion xi;
-            xi.lin = data.J.col(col).head<3>();
-            xi.ang = data.J.col(col).tail<3>();
+            const Motion xi = joint_twist(data, col);
             const Motion eta = cross(xi, nup);
             Motion bq = cross(xi, agp);  // ξ × α_p − η × ν_p
             const Motion en = cross(eta, nup);

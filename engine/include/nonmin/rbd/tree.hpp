@@ -97,6 +97,28 @@ struct TreeDataT {
 };
 using TreeData = TreeDataT<double>;
 
+// Column col of the world motion subspaces J (forward_kinematics) as a twist ξ.
+inline Motion joint_twist(const TreeData& data, int col) {
+    Motion xi;
+    xi.lin = data.J.col(col).template head<3>();
+    xi.ang = data.J.col(col).template tail<3>();
+    return xi;
+}
+
+// The spatial velocity and acceleration of joint j's parent as data holds them (ov, oa); for a
+// root joint the world: at rest, with the gravity offset −g as its acceleration.
+inline void parent_motion(const TreeModel& model, const TreeData& data, int j, Motion& nu_p, Motion& al_p) {
+    const int p = model.joints[static_cast<std::size_t>(j)].parent;
+    if (p >= 0) {
+        nu_p = data.ov[static_cast<std::size_t>(p)];
+        al_p = data.oa[static_cast<std::size_t>(p)];
+    } else {
+        nu_p = Motion();
+        al_p = Motion();
+        al_p.lin = -model.gravity;
+    }
+}
+
 // The algorithms below marked "(S)" are templates on the scalar, instantiated for double and
 // Dual in rbd_tree.cpp; the others are double only.
 
