@@ -267,7 +267,7 @@ def run_pinocchio(dt: float, method: str, kp: float, repeat: int, mu: float = 1e
     points at E, Baumgarte ``Kp``, ``Kd = 2√Kp``), semi-implicit Euler or RK4; the spring's
     torque on γ and ``mom`` on β as joint torques."""
     import pinocchio as pin
-    from pin_loops import point_closures, step  # beside this script
+    from pin_loops import point_closures, timed_runs  # beside this script
 
     p = params()
     bs = bodies(p)
@@ -291,28 +291,19 @@ def run_pinocchio(dt: float, method: str, kp: float, repeat: int, mu: float = 1e
 
     n = round(T_FINAL / dt)
     every = max(1, round(SAMPLE_DT / dt))
-    walls: list[float] = []
     qs: list[np.ndarray] = []
     vs: list[np.ndarray] = []
-    ok = True
-    for rep in range(repeat + 1):
-        q, v = q0()[TREE_FROM_TESTSET].copy(), np.zeros(7)
-        qs, vs = [], []
-        t0 = CLOCK[0]()
-        for k in range(n + 1):
-            if k % every == 0:
-                qs.append(q.copy())
-                vs.append(v.copy())
-            if k == n:
-                break
-            q, v = step(acc, q, v, dt, method)
-            if not math.isfinite(v[0]) or abs(v[0]) > 1e8:
-                ok = False
-                break
-        if rep:
-            walls.append(CLOCK[0]() - t0)
-        if not ok:
-            break
+
+    def start() -> tuple[np.ndarray, np.ndarray]:
+        qs.clear()
+        vs.clear()
+        return q0()[TREE_FROM_TESTSET].copy(), np.zeros(7)
+
+    def sample(q: np.ndarray, v: np.ndarray) -> None:
+        qs.append(q.copy())
+        vs.append(v.copy())
+
+    walls, ok = timed_runs(acc, start, sample, dt, n, every, method, repeat, CLOCK[0], limit=1e8)
     energy = [float(pin.computeKineticEnergy(model, data, qq, vv)) + potential(qq[TESTSET_FROM_TREE], p)
               for qq, vv in zip(qs, vs, strict=True)] if ok else []  # fmt: skip
     Q = [qq[TESTSET_FROM_TREE] for qq in qs]

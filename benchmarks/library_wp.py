@@ -224,7 +224,7 @@ def a04_pinocchio_model() -> Any:
 def run_pinocchio_a04(dt: float, method: str, kp: float, repeat: int, mu: float = 1e-8) -> dict[str, Any]:
     """One Pinocchio run of A04 over 10 s (Python loop of ``constraintDynamics``)."""
     import pinocchio as pin
-    from pin_loops import point_closures, step  # beside this script
+    from pin_loops import point_closures, timed_runs  # beside this script
 
     model = a04_pinocchio_model()
     parent = model.njoints - 1
@@ -243,32 +243,24 @@ def run_pinocchio_a04(dt: float, method: str, kp: float, repeat: int, mu: float 
     def acc(q: np.ndarray, v: np.ndarray) -> np.ndarray:
         return pin.constraintDynamics(model, data, q, v, tau, cms, cdatas, prox)
 
-    walls: list[float] = []
     p3: list[Any] = []
     energy: list[float] = []
     closure: list[float] = []
-    ok = True
-    for rep in range(repeat + 1):
-        q, v = np.zeros(model.nq), np.zeros(model.nv)
-        p3, energy, closure = [], [], []
-        t0 = CLOCK[0]()
-        for k in range(n + 1):
-            if k % every == 0:
-                pin.forwardKinematics(model, data, q)
-                p3.append(data.oMi[rod3].translation.copy())
-                energy.append(float(pin.computeMechanicalEnergy(model, data, q, v)))
-                M5 = data.oMi[parent]
-                closure.append(max(float(np.abs(M5.act(a) - b).max()) for a, b in zip(local, world, strict=True)))
-            if k == n:
-                break
-            q, v = step(acc, q, v, dt, method)
-            if not np.isfinite(v[0]):
-                ok = False
-                break
-        if rep:
-            walls.append(CLOCK[0]() - t0)
-        if not ok:
-            break
+
+    def start() -> tuple[np.ndarray, np.ndarray]:
+        p3.clear()
+        energy.clear()
+        closure.clear()
+        return np.zeros(model.nq), np.zeros(model.nv)
+
+    def sample(q: np.ndarray, v: np.ndarray) -> None:
+        pin.forwardKinematics(model, data, q)
+        p3.append(data.oMi[rod3].translation.copy())
+        energy.append(float(pin.computeMechanicalEnergy(model, data, q, v)))
+        M5 = data.oMi[parent]
+        closure.append(max(float(np.abs(M5.act(a) - b).max()) for a, b in zip(local, world, strict=True)))
+
+    walls, ok = timed_runs(acc, start, sample, dt, n, every, method, repeat, CLOCK[0])
     setting = f"{'semi-implicit Euler' if method == 'euler' else 'RK4'} prox Kp={kp:g}"
     return _peer_row("pinocchio", setting, dt, walls, ok, p3, energy, closure, n)
 

@@ -50,3 +50,32 @@ def step(acc: Any, q: np.ndarray, v: np.ndarray, dt: float, method: str) -> tupl
     k3 = acc(q + 0.5 * dt * (v + 0.5 * dt * k1), v + 0.5 * dt * k2)
     k4 = acc(q + dt * (v + 0.5 * dt * k2), v + dt * k3)
     return q + dt * (v + dt / 6.0 * (k1 + k2 + k3)), v + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+
+
+def timed_runs(
+    acc: Any, start: Any, sample: Any, dt: float, n: int, every: int, method: str, repeat: int,
+    clock: Any, limit: float = math.inf,
+) -> tuple[list[float], bool]:
+    """``repeat + 1`` runs of ``n`` steps of :func:`step` (the first one a warm-up, not timed).
+
+    ``start()`` returns the initial ``(q, v)`` and resets what ``sample(q, v)`` records; ``sample``
+    is called at every ``every``-th step and at the end. A run stops as diverged when ``v[0]`` is
+    not finite or exceeds ``limit`` in size. Returns the timed runs' ``clock()`` times and
+    whether every run finished (a diverged run ends the repeats)."""
+    walls: list[float] = []
+    for rep in range(repeat + 1):
+        q, v = start()
+        t0 = clock()
+        for k in range(n + 1):
+            if k % every == 0:
+                sample(q, v)
+            if k == n:
+                break
+            q, v = step(acc, q, v, dt, method)
+            if not math.isfinite(v[0]) or abs(v[0]) > limit:
+                if rep:  # (the diverged run's time so far, as the peers' rows report it)
+                    walls.append(clock() - t0)
+                return walls, False
+        if rep:
+            walls.append(clock() - t0)
+    return walls, True
