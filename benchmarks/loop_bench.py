@@ -14,7 +14,11 @@ one warm-up (which includes any compilation).
 
 ``--contact-overhead`` (issue #17, target 3): the UR5 on the floor against the same run without
 contact (``EventSet(contact=False)``: no floor, no joint limits), RK4 dt = 1e-3, 3 s sampled every
-10 ms, runs interleaved, ratio of the medians.
+10 ms, runs interleaved, ratio of the medians. And the target's like-for-like case: the UR5 of
+target 2 (its tool point pinned, ``ur5_point``, with the joint limits of its URDF) whose elbow
+falls onto the floor it stands on (a unilateral contact of ``forearm_link`` with the plane
+z = 0), against that robot without the floor (``closed``, its uncontrolled run) and without the
+floor and the limits (``closed_no_limits``).
 
     python benchmarks/loop_bench.py [--repeat 3] [--engines engine,python] [--json out.json]
     python benchmarks/loop_bench.py --contact-overhead [--repeat 15]
@@ -73,28 +77,47 @@ def _ur5_floor() -> tuple[Any, np.ndarray]:
     return model, q0
 
 
+def _ur5_point_floor() -> tuple[Any, Any, np.ndarray]:
+    """The UR5 of target 2 (``ur5_point``: its tool point pinned, the joint limits of its URDF)
+    and the same robot standing on a floor, the plane z = 0 of its base: its elbow
+    (``forearm_link``, 0.45 m above it at the start) falls onto the floor (at t ≈ 0.8 s) and
+    stays there (a unilateral contact ``"floor"``, plastic)."""
+    from nonmin.model.robots import FrameConstraint
+
+    closed, q0 = _robot("ur5_point")
+    floor = FrameConstraint.contact("floor", "forearm_link", plane_placement=np.eye(4))
+    return closed, closed.replace(robot_constraints=(*closed.robot_constraints, floor)), q0
+
+
 def contact_overhead(repeat: int, T: float = 3.0) -> dict[str, Any]:
     """The UR5 on the floor against the same run without contact, and against the floor as a
-    bilateral constraint held from the start (no events: the cost of the constraint itself).
-    Wall and CPU (process) time, runs interleaved, medians; ratios to ``no_contact``."""
+    bilateral constraint held from the start (no events: the cost of the constraint itself);
+    and the like-for-like case of the target, the pinned UR5 whose elbow falls onto the floor
+    (:func:`_ur5_point_floor`) against the same robot without the floor. Wall and CPU (process)
+    time, runs interleaved, medians; ratios to ``no_contact`` (``wall_ratio``, ``cpu_ratio``)
+    and, for the closed-loop runs, to ``closed`` (``*_ratio_closed``)."""
     from nonmin.sim import EventSet
 
     model, q0 = _ur5_floor()
+    closed, closed_floor, qc = _ur5_point_floor()
     te = np.linspace(0.0, T, round(100 * T) + 1)
     qb = q0.copy()  # the bilateral reference starts on the floor (its tool point assembled)
     qb = nonmin.model.assemble(model, qb, active={"floor"}).q
-    runs: dict[str, tuple[Any, dict[str, Any]]] = {
-        "contact": (q0, {}),
-        "no_contact": (q0, {"events": EventSet(contact=False)}),
-        "floor_bilateral": (qb, {"events": EventSet(contact=False), "active": {"floor"}}),
+    runs: dict[str, tuple[Any, Any, dict[str, Any]]] = {
+        "contact": (model, q0, {}),
+        "no_contact": (model, q0, {"events": EventSet(contact=False)}),
+        "floor_bilateral": (model, qb, {"events": EventSet(contact=False), "active": {"floor"}}),
+        "closed": (closed, qc, {}),
+        "closed_no_limits": (closed, qc, {"events": EventSet(contact=False)}),
+        "closed_floor": (closed_floor, qc, {}),
     }
     wall: dict[str, list[float]] = {k: [] for k in runs}
     cpu: dict[str, list[float]] = {k: [] for k in runs}
     trs: dict[str, Any] = {}
     for i in range(repeat + 1):
-        for name, (q, kw) in runs.items():
+        for name, (mdl, q, kw) in runs.items():
             w, c = time.perf_counter(), time.process_time()
-            trs[name] = nonmin.simulate(model, T, q, np.zeros(6), dt=1e-3, t_eval=te, engine="engine",
+            trs[name] = nonmin.simulate(mdl, T, q, np.zeros(6), dt=1e-3, t_eval=te, engine="engine",
                                         progress=False, **kw)  # fmt: skip
             if i:  # (the first round is the warm-up)
                 wall[name].append(time.perf_counter() - w)
@@ -106,7 +129,12 @@ def contact_overhead(repeat: int, T: float = 3.0) -> dict[str, Any]:
                      "wall_ratio": statistics.median(wall[name]) / statistics.median(wall["no_contact"]),
                      "cpu_ratio": statistics.median(cpu[name]) / statistics.median(cpu["no_contact"]),
                      "events": len(trs[name].events), "n_rhs": trs[name].n_rhs}  # fmt: skip
+        if name.startswith("closed"):
+            out[name]["wall_ratio_closed"] = statistics.median(wall[name]) / statistics.median(wall["closed"])
+            out[name]["cpu_ratio_closed"] = statistics.median(cpu[name]) / statistics.median(cpu["closed"])
     out["contact_events"] = [(round(e.t, 4), e.name) for e in trs["contact"].events]
+    out["closed_events"] = [(round(e.t, 4), e.name) for e in trs["closed"].events]
+    out["closed_floor_events"] = [(round(e.t, 4), e.name) for e in trs["closed_floor"].events]
     return out
 
 
