@@ -19,8 +19,9 @@ namespace {
 
 using IntArr = nb::ndarray<nb::numpy, int>;
 
+// Uninitialized: forward_batch writes every entry (batch.hpp).
 IntArr new_int_array(std::size_t N) {
-    int* data = new int[N > 0 ? N : 1]();
+    int* data = new int[N > 0 ? N : 1];
     nb::capsule owner(data, [](void* p) noexcept { delete[] static_cast<int*>(p); });
     std::size_t shape[1] = {N};
     return IntArr(data, 1, shape, owner);
@@ -49,8 +50,8 @@ void bind_batch(nb::module_& m) {
                 fp = f->data();
                 f_stride = f->shape(0) == 1 ? 0 : static_cast<int>(n);
             }
-            NpArr qdd = new_array({N, n});
-            NpArr fc = want_force ? new_array({N, n}) : new_array({0});
+            NpArr qdd = new_array({N, n}, false);  // written in full by forward_batch
+            NpArr fc = want_force ? new_array({N, n}, false) : new_array({0});
             IntArr rank = new_int_array(N);
             IntArr status = new_int_array(N);
             SolveOptions opt;

@@ -136,7 +136,7 @@ void bind_program(nb::module_& m) {
                 if (q.shape(0) != N || qd.shape(0) != N)
                     raise_error("ShapeError", "t, q and qd must have the same number of states (rows)");
                 check_state(p, q.shape(1), qd.shape(1), f.active.size());
-                NpArr qdd = new_array({N, n});
+                NpArr qdd = new_array({N, n}, false);  // written in full by forward_batch
                 std::vector<int> status(N, 0);
                 BatchOutputs out;
                 out.qdd = qdd.data();

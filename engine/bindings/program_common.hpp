@@ -49,11 +49,12 @@ using NpArr = nb::ndarray<nb::numpy, double>;
     }
 }
 
-// A new C-contiguous float64 NumPy array of the given shape (owned by a capsule).
-inline NpArr new_array(std::vector<std::size_t> shape) {
+// A new C-contiguous float64 NumPy array of the given shape (owned by a capsule), zero-filled,
+// or left uninitialized (zero = false) for an output the engine writes in full.
+inline NpArr new_array(std::vector<std::size_t> shape, bool zero = true) {
     std::size_t size = 1;
     for (std::size_t s : shape) size *= s;
-    double* data = new double[size > 0 ? size : 1]();
+    double* data = zero ? new double[size > 0 ? size : 1]() : new double[size > 0 ? size : 1];
     nb::capsule owner(data, [](void* p) noexcept { delete[] static_cast<double*>(p); });
     return NpArr(data, shape.size(), shape.data(), owner);
 }

@@ -248,7 +248,8 @@ int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* 
         for (int k = 0; k < n; ++k) {
             const double x = Bi[k];
             Wi[k] = x;
-            if (x != 0.0) w.Lr[k] = i;
+            const int last = w.Lr[k];
+            w.Lr[k] = x != 0.0 ? i : last;  // (a select, not a branch: the pattern is irregular)
         }
     }
     // a row whose residual is at round-off level is skipped (skip_redundant; else never)

@@ -115,3 +115,34 @@ def test_bad_inputs_are_typed_and_name_the_state():
     V[4, 0] = np.nan
     with pytest.raises(NonFiniteError, match="state 4"):
         model.forward_dynamics(Q, V)
+
+
+def test_threaded_chunks_write_every_state():
+    """Threads take chunks of states from a shared counter and the outputs are not zero-filled
+    beforehand: every state's q̈, f_c, rank and status are written, a failed state's q̈ and f_c
+    read 0, and the results are those of one thread bit for bit."""
+    from nonmin import _engine
+    from nonmin._validation import SYMMETRY_RTOL
+    from nonmin.core.linalg import DEFAULT_RTOL, SPD_RTOL
+
+    mech = MECHS[1][1]
+    model = mech.model
+    Q, V = _states(mech, 3001, seed=2)
+    bad = [5, 1234, 2999]
+    V[bad, 1] = np.nan
+    t = np.zeros(len(Q))
+    mask = model.active_mask(mech.state.active)
+
+    def run(threads):
+        return _engine.forward_batch(model.engine_program(), t, Q, V, mask, None, DEFAULT_RTOL, SPD_RTOL,
+                                     SYMMETRY_RTOL, 0.0, threads, True)
+
+    qdd1, fc1, rank1, status1, nbad1 = run(1)
+    for _ in range(3):  # fresh (uninitialized) output buffers each call
+        qdd2, fc2, rank2, status2, nbad2 = run(2)
+        assert nbad1 == nbad2 == len(bad)
+        assert np.flatnonzero(status2).tolist() == bad and np.array_equal(status1, status2)
+        assert np.array_equal(qdd1, qdd2) and np.array_equal(fc1, fc2) and np.array_equal(rank1, rank2)
+        assert not np.any(qdd2[bad]) and not np.any(fc2[bad])
+        ok = np.setdiff1d(np.arange(len(Q)), bad)
+        assert np.all(np.isfinite(qdd2[ok])) and np.all(rank2[ok] == rank2[0])

@@ -1,8 +1,9 @@
 // Model + kernel over a batch of states: for each state i, evaluate the Program at
 // (t_i, q_i, qd_i) under one active set, then solve the projection dynamics (forward_dynamics of
-// forward.hpp) for q̈_i and f_c,i. Threads over contiguous chunks of the batch, each with its own
-// ForwardScratch (preallocated once per call); a single state and the same state inside a
-// batch give bitwise identical results (same code, same order of operations).
+// forward.hpp) for q̈_i and f_c,i. Threads (the calling one included) take chunks of consecutive
+// states from a shared counter, each with its own ForwardScratch (preallocated once per call);
+// a single state and the same state inside a batch give bitwise identical results (same code,
+// same order of operations), whatever the thread and the chunk.
 #pragma once
 #include <cstdint>
 
@@ -11,6 +12,8 @@
 
 namespace nonmin {
 
+// Every entry is written (the arrays may be uninitialized memory: the threads touch their pages
+// first); a failed state's q̈ and f_c read 0.
 struct BatchOutputs {
     double* qdd = nullptr;  // N × n (required)
     double* f_c = nullptr;  // N × n or null
