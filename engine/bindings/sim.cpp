@@ -494,6 +494,15 @@ void bind_sim(nb::module_& m) {
             },
             "Append the friction guards at the current state (after start/resume); False when its "
             "evaluation failed (message, painleve say why).")
+        .def(
+            "arm_guards",
+            [](SimLoop& s) {
+                const Status st = sim::arm_guards(*s.loop);
+                if (st != Status::ok) s.loop->message = "kernel status " + std::to_string(static_cast<int>(st));
+                return st == Status::ok;
+            },
+            "The contact guards' values at the first point (after start), in place of those given; "
+            "False when their evaluation failed (message says why).")
         .def_prop_ro(
             "friction_slip",
             [](const SimLoop& s) {

@@ -389,6 +389,18 @@ Status contact_guards(Loop& L, double t, const double* q, const double* qd, cons
     return Status::ok;
 }
 
+// The contact guards' values at the run's first point (after start(): L.p1 is the point
+// evaluated at (L.t, L.y), L.Ac its rows): the Python driver's _guard_values at its first point
+// (the gaps from one evaluation, the release forces from release_forces).
+Status arm_guards(Loop& L) {
+    if (L.guards.empty()) return Status::ok;
+    bool fired = false;
+    const Status s = contact_guards(L, L.t, L.y.data(), L.y.data() + L.n, L.p1.f_c.data(), fired);
+    if (s != Status::ok) return s;
+    for (std::size_t i = 0; i < L.guards.size(); ++i) L.guards[i].g = L.guard_new[i];
+    return Status::ok;
+}
+
 // ------------------------------------------------------------------------------ location
 
 namespace {

@@ -323,8 +323,9 @@ def run(
 ) -> EngineResult:
     """Run the engine loop to ``opts.t1``, a handover or a watched event.
 
-    Either ``start = (t0, q0, qd0)`` (initial projection, evaluation and sample) or ``resume =
-    (t, y, h, n_steps, out_i)`` (a state the general driver reached). Every block of samples is
+    Either ``start = (t0, q0, qd0)`` (initial projection, evaluation and sample; the values
+    given with ``guards`` are then replaced by the guards' values at the first point) or
+    ``resume = (t, y, h, n_steps, out_i)`` (a state the general driver reached). Every block of samples is
     given to ``sink`` as soon as it is taken (so an interruption keeps them). ``contact =
     (restitution per constraint, impact velocity threshold)`` configures the engine's event
     layer (engine/src/sim_events.cpp), which locates and applies contact events itself when no
@@ -360,6 +361,8 @@ def run(
     if start is not None:
         t0, q, qd = start
         code = loop.start(t0, np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float))
+        if code == eng.SIM_DONE and guards and not loop.arm_guards():  # the guards at the first point
+            code = eng.SIM_HANDOVER
         if code != eng.SIM_DONE:
             y0 = np.concatenate((q, qd))
             return EngineResult(False, t0, y0, 0.0, 0, 0, 0, 0, True, False, str(loop.message), [], **fric_end(), work=float(loop.work))

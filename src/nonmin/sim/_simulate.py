@@ -925,16 +925,18 @@ def simulate(
                 drift_factor=DRIFT_RANK_FACTOR, project_initial=project_initial,
                 max_steps=int(max_steps),
             )  # fmt: skip
-        er = None
-        if use_engine and not (events or unilateral):  # the whole run, start included
+        er = pending = None  # pending: the engine's first run with contact guards, handled below
+        if use_engine and not (events or fcs):  # the engine starts the run (start included)
             creg = _engine.compiled_controller(controller, model, eng_prog, act)
             ccb = _engine.ControllerCallback(controller, system.cstate, k, None, model) \
                 if controller is not None and creg is None else None  # fmt: skip
+            watches = _watches(events, act, unilateral)  # (values at the first point: the engine's)
+            g_idx, guards = _engine_guards(system, watches, [0.0] * len(watches))
             try:
                 er = _engine.run(eng_prog, opts=opts, active_mask=model_mask(model, act), t_out=t_out,
                                  sink=rec.extend, progress=bar, start=(t0, q, qd), controller=ccb,
-                                 passage_seed=seed,
-                                 compiled=creg)  # fmt: skip
+                                 passage_seed=seed, compiled=creg, guards=guards,
+                                 contact=contact_opts if unilateral else None)  # fmt: skip
             finally:
                 if ccb is not None:
                     system.cstate = ccb.state
@@ -943,7 +945,15 @@ def simulate(
             if not er.started:  # the first evaluation failed: the general driver raises
                 er = None
                 meta["engine"] = "python"
-        if er is not None:
+            elif unilateral:  # the loop below takes the engine's result (events, resumes)
+                er, pending = None, er
+                gvals = [0.0] * len(watches)
+                # (the state at t0 when the engine took no step: its projected start, pending.y)
+                state = StepperState(t0, pending.y.copy(), None, h_init)
+                out_i, engine_on = 0, True
+        if pending is not None:
+            pass
+        elif er is not None:
             n_steps += er.steps
             n_rejected += er.n_rejected
             system.n_rhs += er.n_rhs
@@ -999,7 +1009,9 @@ def simulate(
             return _friction.first_point(model, pp, system.active, sl, rank_rtol=rank_rtol, bias=stab.bias,
                                          B_u=None if controller is None else model.input_matrix(qq) @ pp.u)  # fmt: skip
         while t < t1:
-            if engine_on:  # the engine's steps up to t1, a failure, or a guard crossing
+            if engine_on and pending is not None:  # the engine's first run (it started the run)
+                er, pending = pending, None
+            elif engine_on:  # the engine's steps up to t1, a failure, or a guard crossing
                 creg = _engine.compiled_controller(controller, model, eng_prog, system.active)
                 ccb = _engine.ControllerCallback(controller, system.cstate, k, None, model) \
                     if controller is not None and creg is None else None  # fmt: skip
@@ -1018,6 +1030,7 @@ def simulate(
                         system.cstate = ccb.state
                     if creg is not None:
                         system.cstate = _engine.merge_state(controller, system.cstate, creg)
+            if engine_on:
                 fstep = None
                 if fcs and er.event and not er.handover:  # a guard crossed with user guards watched
                     fstep = _friction_step(

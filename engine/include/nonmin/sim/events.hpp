@@ -58,6 +58,10 @@ void set_contact_options(Loop& L, const std::vector<double>& restitution, double
 // values into L.guard_new; `fired` when one crossed downward or an impact gap stays below zero.
 Status contact_guards(Loop& L, double t, const double* q, const double* qd, const double* f_c, bool& fired);
 
+// The guards' values at the run's first point (after start(), which evaluated it into L.p1), in
+// place of the values given to set_guards: a run with unilateral constraints starts in the engine.
+Status arm_guards(Loop& L);
+
 // What the step that fired looked like (the state of run() at that moment).
 struct FiredStep {
     double t_start = 0.0, h = 0.0, t_new = 0.0;
