@@ -685,29 +685,43 @@ Status TreeProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) c
     }
     if (rq.nlam > 2) return Status::bad_shape;
     bool have_fixed = false;
-    const bool analytic = !quat_;
+    // analytic: the dynamics' tangents from rnea_derivatives (every tree) and, when every active
+    // row has them, the rows' from row_tangents; a tree with quaternion joints whose rows are not
+    // all analytic keeps the all-dual pass
+    const bool analytic = !quat_ || rq.nlam == 0 || rows_analytic(rq.active);
     if (analytic) {
-        // M a − g's tangents from the analytic derivatives of RNEA (v = q̇, a_v = a, T = 1)
+        const TreeModel& model = d_.model;
+        const int nv = model.nv;
         const Status st = normalize<double>(rq.q, ws);
         if (st != Status::ok) return st;
         for (int i = 0; i < nq; ++i)
             if (!std::isfinite(rq.qd[i])) return Status::not_finite;
-        forward_kinematics(d_.model, ws.data, ws.qn.data(), true);
-        have_fixed = true;
-        if (ws.dtq.rows() != nq) {
-            ws.dtq.resize(nq, nq);
-            ws.dtv.resize(nq, nq);
+        const double* v = rq.qd;  // v = q̇, a_v = a without quaternions
+        const double* av = rq.a;
+        if (quat_) {  // v = T q̇, a_v = T a + Ṫ q̇
+            velocity_map(rq.q, rq.qd, ws);
+            apply_T(ws, rq.a, ws.fv.data());
+            ws.fv += ws.a0;
+            v = ws.v.data();
+            av = ws.fv.data();
         }
-        rnea_derivatives(d_.model, ws.data, rq.qd, rq.a, ws.dtq.data(), ws.dtv.data());
-        for (int k = 0; k < nq; ++k) ws.dtv(k, k) += d_.damping[k];
+        forward_kinematics(model, ws.data, ws.qn.data(), true);
+        have_fixed = true;
+        if (ws.dtq.rows() != nv) {
+            ws.dtq.resize(nv, nv);
+            ws.dtv.resize(nv, nv);
+        }
+        rnea_derivatives(model, ws.data, v, av, ws.dtq.data(), ws.dtv.data());
+        for (int k = 0; k < nv; ++k) ws.dtv(k, k) += d_.damping[k];
+        if (quat_) quat_dynamics(rq, ws);
+        // row k of Dq, Dv: ∂r_dyn/∂q_k, ∂r_dyn/∂q̇_k (rnea_derivatives' layout: column k of ∂τ/∂q at k nv)
+        const double* Dq = quat_ ? ws.Eq.data() : ws.dtq.data();
+        const double* Dv = quat_ ? ws.Ev.data() : ws.dtv.data();
         for (int j = 0; j < rq.nd; ++j) {
             double* o = rq.r_dyn + static_cast<std::ptrdiff_t>(j) * nq;
             const double* dq = rq.dq + static_cast<std::ptrdiff_t>(j) * nq;
             const double* dqd = rq.dqd + static_cast<std::ptrdiff_t>(j) * nq;
             for (int i = 0; i < nq; ++i) o[i] = 0.0;
-            // dtq, dtv hold column k (∂τ/∂q_k) contiguously at k nq (rnea_derivatives' layout)
-            const double* Dq = ws.dtq.data();
-            const double* Dv = ws.dtv.data();
             for (int k = 0; k < nq; ++k) {
                 if (dq[k] != 0.0)
                     for (int i = 0; i < nq; ++i) o[i] += Dq[k * nq + i] * dq[k];
@@ -720,7 +734,7 @@ Status TreeProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) c
                 for (int r = 0; r < m_all_; ++r) rq.r_con[static_cast<std::ptrdiff_t>(j) * m_all_ + r] = 0.0;
             return Status::ok;
         }
-        if (rows_analytic(rq.active)) {  // the rows' tangents from the frames' kinematics
+        if (quat_ || rows_analytic(rq.active)) {  // the rows' tangents from the frames' kinematics
             row_tangents(rq, ws);
             return Status::ok;
         }
@@ -749,8 +763,219 @@ Status TreeProgram::residual_tangents(const ResidualQuery& rq, Workspace& wsb) c
     return Status::ok;
 }
 
+// ---------------------------------------------------------------- quaternion joints: the chain rule
+// (docs/theory.md, "Analytic derivatives with quaternion joints"). The velocity-space derivatives
+// (rnea_derivatives, row_tangents' frame tangents) are along Pinocchio's tangent: q_k moved by
+// δ = T(q) dq (the joint's local twist), v and a_v held. The residuals in q are
+//   r_dyn = Tᵀ τ_v(q, v, a_v),  r_con = A_v a_v + γ_v,  r_lam = Tᵀ A_vᵀ λ   (+ the joint-space rows)
+// with v = T q̇, a_v = T a + Ṫ q̇ (a held), so along q_k and q̇_k
+//   ∂r_dyn/∂q_k = ∂Tᵀ/∂q_k τ_v + Tᵀ (∂τ/∂δ T_k + ∂τ/∂v ∂v/∂q_k + M_v ∂a_v/∂q_k),
+//   ∂r_dyn/∂q̇_k = Tᵀ (∂τ/∂v T_k + M_v ∂a_v/∂q̇_k),
+// and the same for the rows (A_v in place of M_v, no outer Tᵀ for r_con). T, ∂v/∂q, ∂a_v/∂q,
+// ∂a_v/∂q̇ differ from the identity / zero only inside a quaternion block (quat_maps).
+
+void TreeProgram::quat_maps(const QuatBlock& b, const double* q, const double* qd, const double* a,
+                            const TreeWorkspace& ws, QuatMaps& m) const {
+    m.T.setZero();
+    m.Vq.setZero();
+    m.Aq.setZero();
+    m.Aqd.setZero();
+    const int i = b.joint;
+    const int eo = b.free ? 3 : 0;  // the block-local row of ω and column of ε
+    const Eigen::Map<const Vec4> e(q + b.qs), ed(qd + b.qs), ae(a + b.qs);
+    const double s2 = e.squaredNorm();
+    const Mat34& Tq = ws.Tq[static_cast<std::size_t>(i)];
+    const Vec3 w = Tq * ed;                    // ω = T_q ε̇
+    const double ratio = -2.0 * e.dot(ed) / s2;  // Ṫ_q ε̇ = ratio ω (G(ε̇) ε̇ = 0)
+    Vec3 vl = Vec3::Zero(), al = Vec3::Zero();
+    if (b.free) {
+        const Mat3& R = ws.R[static_cast<std::size_t>(i)];
+        vl = R.transpose() * Eigen::Map<const Vec3>(qd + b.iq);  // v_lin = Rᵀ ṗ
+        al = R.transpose() * Eigen::Map<const Vec3>(a + b.iq);
+        for (int c = 0; c < 3; ++c) {
+            const Vec3 rc = R.row(c).transpose();  // Rᵀ e_c
+            m.T.block<3, 1>(0, c) = rc;
+            m.Aqd.block<3, 1>(0, c) = -w.cross(rc);  // a0_lin = −ω × v_lin
+        }
+    }
+    for (int k = 0; k < 4; ++k) {
+        double u[4] = {0.0, 0.0, 0.0, 0.0};
+        u[k] = 1.0;
+        // T_q = 2 G(ε)/|ε|²: ∂T_q/∂ε_k = 2 G(e_k)/|ε|² − (2 ε_k/|ε|²) T_q
+        m.dTq[k] = (2.0 / s2) * quaternion_G(u) - (2.0 * e[k] / s2) * Tq;
+        const Vec3 th = Tq.col(k);          // δθ of a unit ε_k step
+        const Vec3 dw = m.dTq[k] * ed;      // ∂ω/∂ε_k
+        const double dr = (-2.0 * ed[k] - 2.0 * ratio * e[k]) / s2;  // ∂ratio/∂ε_k
+        const int c = eo + k;
+        m.T.block<3, 1>(eo, c) = th;
+        m.Vq.block<3, 1>(eo, c) = dw;
+        m.Aq.block<3, 1>(eo, c) = m.dTq[k] * ae + dr * w + ratio * dw;
+        m.Aqd.block<3, 1>(eo, c) = (-2.0 * e[k] / s2) * w + ratio * th;
+        if (b.free) {
+            // ∂Rᵀ/∂ε_k = −[δθ]× Rᵀ: ∂v_lin = −δθ × v_lin; a0_lin = −ω × v_lin
+            m.Vq.block<3, 1>(0, c) = -th.cross(vl);
+            m.Aq.block<3, 1>(0, c) = -th.cross(al) - dw.cross(vl) + w.cross(th.cross(vl));
+            m.Aqd.block<3, 1>(0, c) = -th.cross(vl);
+        }
+    }
+}
+
+void TreeProgram::add_dTt(const QuatBlock& b, const QuatMaps& m, const TreeWorkspace& ws, int kl, const double* yv,
+                          double* yq) const {
+    const int eo = b.free ? 3 : 0;
+    if (kl < eo) return;  // T does not depend on the position
+    const int k = kl - eo;
+    const Eigen::Map<const Vec3> ya(yv + eo);
+    Eigen::Map<Vec4>(yq + eo) += m.dTq[k].transpose() * ya;
+    if (b.free) {  // (−[δθ]× Rᵀ)ᵀ y = R (δθ × y)
+        const Vec3 th = ws.Tq[static_cast<std::size_t>(b.joint)].col(k);
+        Eigen::Map<Vec3>(yq) += ws.R[static_cast<std::size_t>(b.joint)] * th.cross(Eigen::Map<const Vec3>(yv));
+    }
+}
+
+void TreeProgram::quat_dynamics(const ResidualQuery& rq, TreeWorkspace& ws) const {
+    const TreeModel& model = d_.model;
+    const TreeData& D = ws.data;
+    const int nq = model.nq, nv = model.nv;
+    if (ws.Eq.rows() != nq) {
+        ws.Eq.resize(nq, nq);
+        ws.Ev.resize(nq, nq);
+        ws.Mb = Mat::Zero(nv, nv);
+        ws.tauv = Vec::Zero(nv);
+        ws.gv = Vec::Zero(nv);
+    }
+    // runs: T_k = e_iv, nothing else moves: row k = Tᵀ (∂τ/∂δ_iv) (rows of dtq are ∂τ/∂δ_c)
+    for (const Run& r : runs_)
+        for (int k = 0; k < r.len; ++k) {
+            apply_Tt(ws, ws.dtq.row(r.iv + k).data(), ws.Eq.row(r.iq + k).data());
+            apply_Tt(ws, ws.dtv.row(r.iv + k).data(), ws.Ev.row(r.iq + k).data());
+        }
+    auto in_subtree = [&](int j, int k) {  // j ⪰ k
+        while (j > k) j = model.joints[static_cast<std::size_t>(j)].parent;
+        return j == k;
+    };
+    auto joint_of = [&](int col) {
+        for (std::size_t j = 0; j < model.joints.size(); ++j) {
+            const Joint& jt = model.joints[j];
+            if (col >= jt.iv && col < jt.iv + joint_nv(jt.type)) return static_cast<int>(j);
+        }
+        return -1;
+    };
+    QuatMaps mp;
+    for (const QuatBlock& b : qblocks_) {
+        const int v0 = b.v0(), q0 = b.q0(), nvb = b.nv(), nqb = b.nq(), jb = b.joint;
+        // M_v's columns of the block from the composite inertias (cw[c] = Ic_j J_c):
+        // M(r, c) = J_r·cw[c] for r on j's support, J_c·cw[r] for r below j
+        for (int cc = 0; cc < nvb; ++cc) {
+            const int c = v0 + cc;
+            for (int r = 0; r < nv; ++r) {
+                const int jr = joint_of(r);
+                double val = 0.0;
+                if (in_subtree(jb, jr)) {
+                    val = D.J.col(r).head<3>().dot(D.cw[static_cast<std::size_t>(c)].lin) +
+                          D.J.col(r).tail<3>().dot(D.cw[static_cast<std::size_t>(c)].ang);
+                } else if (in_subtree(jr, jb)) {
+                    val = D.J.col(c).head<3>().dot(D.cw[static_cast<std::size_t>(r)].lin) +
+                          D.J.col(c).tail<3>().dot(D.cw[static_cast<std::size_t>(r)].ang);
+                }
+                ws.Mb(c, r) = val;
+            }
+            ws.Mb(c, c) += model.armature[c];
+            // τ_v(c) = J_c·F_j + armature a_v + d v − (S u)_c
+            double t = D.J.col(c).head<3>().dot(D.of[static_cast<std::size_t>(jb)].lin) +
+                       D.J.col(c).tail<3>().dot(D.of[static_cast<std::size_t>(jb)].ang);
+            t += model.armature[c] * ws.fv[c] + d_.damping[c] * ws.v[c];
+            if (rq.u != nullptr)
+                for (int a = 0; a < k_; ++a)
+                    if (d_.actuated[static_cast<std::size_t>(a)] == c) t -= rq.u[a];
+            ws.tauv[c] = t;
+        }
+        quat_maps(b, rq.q, rq.qd, rq.a, ws, mp);
+        for (int kl = 0; kl < nqb; ++kl) {
+            // along q_k: g = ∂τ/∂δ T_k + ∂τ/∂v ∂v/∂q_k + M_v ∂a_v/∂q_k
+            Vec& g = ws.gv;
+            g.setZero();
+            for (int cc = 0; cc < nvb; ++cc) {
+                const int c = v0 + cc;
+                if (mp.T(cc, kl) != 0.0) g += mp.T(cc, kl) * ws.dtq.row(c).transpose();
+                if (mp.Vq(cc, kl) != 0.0) g += mp.Vq(cc, kl) * ws.dtv.row(c).transpose();
+                if (mp.Aq(cc, kl) != 0.0) g += mp.Aq(cc, kl) * ws.Mb.row(c).transpose();
+            }
+            double* eq = ws.Eq.row(q0 + kl).data();
+            apply_Tt(ws, g.data(), eq);
+            add_dTt(b, mp, ws, kl, ws.tauv.data() + v0, eq + q0);
+            // along q̇_k: g = ∂τ/∂v T_k + M_v ∂a_v/∂q̇_k
+            g.setZero();
+            for (int cc = 0; cc < nvb; ++cc) {
+                const int c = v0 + cc;
+                if (mp.T(cc, kl) != 0.0) g += mp.T(cc, kl) * ws.dtv.row(c).transpose();
+                if (mp.Aqd(cc, kl) != 0.0) g += mp.Aqd(cc, kl) * ws.Mb.row(c).transpose();
+            }
+            apply_Tt(ws, g.data(), ws.Ev.row(q0 + kl).data());
+        }
+    }
+}
+
+void TreeProgram::quat_rows(const ResidualQuery& rq, TreeWorkspace& ws) const {
+    const int nq = d_.model.nq, nv = d_.model.nv, nlam = rq.nlam;
+    if (ws.Cq.rows() != nq || ws.Cq.cols() != m_all_) {
+        ws.Cq.resize(nq, m_all_);
+        ws.Cv.resize(nq, m_all_);
+        ws.Lq.resize(nq, 2 * nq);
+        ws.AtL.resize(2, nv);
+        ws.gv = Vec::Zero(nv);
+    }
+    // A_vᵀ λ_l = Σ_r λ_l,r A_v(r, ·) (frame rows: dca's columns)
+    for (int l = 0; l < nlam; ++l)
+        for (int c = 0; c < nv; ++c) {
+            double acc = 0.0;
+            for (int r = 0; r < m_all_; ++r) acc += ws.dca(c, r) * rq.lam[l * m_all_ + r];
+            ws.AtL(l, c) = acc;
+        }
+    for (const Run& r : runs_)
+        for (int k = 0; k < r.len; ++k) {
+            const int kq = r.iq + k, kv = r.iv + k;
+            ws.Cq.row(kq) = ws.dcq.row(kv);
+            ws.Cv.row(kq) = ws.dcv.row(kv);
+            for (int l = 0; l < nlam; ++l)
+                apply_Tt(ws, ws.dlq.row(kv).data() + l * nv, ws.Lq.row(kq).data() + l * nq);
+        }
+    QuatMaps mp;
+    for (const QuatBlock& b : qblocks_) {
+        const int v0 = b.v0(), q0 = b.q0(), nvb = b.nv(), nqb = b.nq();
+        quat_maps(b, rq.q, rq.qd, rq.a, ws, mp);
+        for (int kl = 0; kl < nqb; ++kl) {
+            const int kq = q0 + kl;
+            auto cq = ws.Cq.row(kq);
+            auto cv = ws.Cv.row(kq);
+            cq.setZero();
+            cv.setZero();
+            for (int cc = 0; cc < nvb; ++cc) {
+                const int c = v0 + cc;
+                const double t = mp.T(cc, kl), vq = mp.Vq(cc, kl), aq = mp.Aq(cc, kl), aqd = mp.Aqd(cc, kl);
+                if (t != 0.0) {
+                    cq += t * ws.dcq.row(c);
+                    cv += t * ws.dcv.row(c);
+                }
+                if (vq != 0.0) cq += vq * ws.dcv.row(c);
+                if (aq != 0.0) cq += aq * ws.dca.row(c);
+                if (aqd != 0.0) cv += aqd * ws.dca.row(c);
+            }
+            for (int l = 0; l < nlam; ++l) {
+                Vec& g = ws.gv;
+                g.setZero();
+                for (int cc = 0; cc < nvb; ++cc)
+                    if (mp.T(cc, kl) != 0.0) g += mp.T(cc, kl) * ws.dlq.row(v0 + cc).segment(l * nv, nv).transpose();
+                double* lq = ws.Lq.row(kq).data() + l * nq;
+                apply_Tt(ws, g.data(), lq);
+                add_dTt(b, mp, ws, kl, ws.AtL.row(l).data() + v0, lq + q0);
+            }
+        }
+    }
+}
+
 // ---------------------------------------------------------------- analytic row tangents
-// (trees without quaternion joints; docs/theory.md, "Analytic derivatives of the constraint rows")
+// (velocity space; quaternion trees then quat_rows; docs/theory.md, "Analytic derivatives of the constraint rows")
 
 bool TreeProgram::rows_analytic(const std::uint8_t* active) const {
     for (std::size_t ci = 0; ci < d_.constraints.size(); ++ci) {
@@ -764,7 +989,8 @@ bool TreeProgram::rows_analytic(const std::uint8_t* active) const {
             case RowType::path_driver:
             case RowType::joint_coupling:
             case RowType::joint_limit:
-            case RowType::joint_driver: break;
+            case RowType::joint_driver:
+            case RowType::unit_quaternion: break;
             default: return false;
         }
     }
@@ -799,10 +1025,12 @@ void TreeProgram::frame_tangents(const Frame& f, const TreeWorkspace& ws, FrameT
             const Motion xi = joint_twist(D, col);
             const Vec3 dpt = xi.lin + xi.ang.cross(p);  // velocity of the point p in the twist ξ
             const Motion eta = cross(xi, nup);
-            // along q̇_k: δν_i = ξ, δα_i = ξ × ν_i − 2 ξ × ν_p
+            // along v_k: δν_i = ξ, δα_i = ξ × ν_i − ξ × ν_p − ξ × ν_k (= ξ × ν_i − 2 ξ × ν_p for a
+            // 1-dof joint; a free flyer's or spherical joint's columns do not commute)
             Motion dav = cross(xi, nu);
-            dav.lin -= 2.0 * eta.lin;
-            dav.ang -= 2.0 * eta.ang;
+            const Motion ek = cross(xi, D.ov[jk]);
+            dav.lin -= eta.lin + ek.lin;
+            dav.ang -= eta.ang + ek.ang;
             FrameTangent& v = tv[col];
             v.dw = xi.ang;
             v.dv = dpt;
@@ -873,10 +1101,12 @@ NONMIN_FLATTEN void TreeProgram::row_tangents(const ResidualQuery& rq, TreeWorks
         ws.dlq.resize(n, 2 * n);
         for (auto* v : {&ws.tqa, &ws.tva, &ws.tqb, &ws.tvb}) v->assign(static_cast<std::size_t>(n), FrameTangent());
         ws.dF.assign(static_cast<std::size_t>(n), Force());
+        if (quat_) ws.dca.resize(n, m_all_);
     }
     ws.dcq.setZero();
     ws.dcv.setZero();
     ws.dlq.setZero();
+    if (quat_) ws.dca.setZero();
     FrameTangent *tqa = ws.tqa.data(), *tva = ws.tva.data(), *tqb = ws.tqb.data(), *tvb = ws.tvb.data();
     Force* dF = ws.dF.data();
     const double* a = rq.a;
@@ -886,19 +1116,10 @@ NONMIN_FLATTEN void TreeProgram::row_tangents(const ResidualQuery& rq, TreeWorks
         const TreeConstraint& c = d_.constraints[ci];
         const int r0 = constraints_[ci].row;
         const double* lam = rq.lam + r0;  // λ_l of row r0 + r: lam[l m_all + r]
-        if (c.type == RowType::joint_limit || c.type == RowType::joint_driver) continue;  // constant rows
-        if (c.type == RowType::joint_coupling) {
-            if (c.iq2 < 0) continue;
-            const auto& co = c.coef;
-            const double x = rq.q[c.iq2] - c.ref2, qd2 = rq.qd[c.iq2];
-            const double d2 = 2 * co[2] + 6 * co[3] * x + 12 * co[4] * x * x;
-            const double d3 = 6 * co[3] + 24 * co[4] * x;
-            // A a + γ = a₁ − d₁(x) a₂ − d₂(x) q̇₂²;  Aᵀλ = λ (e₁ − d₁(x) e₂)
-            ws.dcq(c.iq2, r0) = -d2 * a[c.iq2] - d3 * qd2 * qd2;
-            ws.dcv(c.iq2, r0) = -2.0 * d2 * qd2;
-            for (int l = 0; l < nlam; ++l) ws.dlq(c.iq2, l * n + c.iq2) -= lam[l * m_all_] * d2;
+        // joint-space rows: in q after the frame rows (below); joint limits and drivers are constant
+        if (c.type == RowType::joint_limit || c.type == RowType::joint_driver ||
+            c.type == RowType::joint_coupling || c.type == RowType::unit_quaternion)
             continue;
-        }
         // frame rows: coefficients (lin, ang) on frame a and frame b of each row with constant
         // world coefficients; hinge rows 3, 4 below
         const Frame& fa = d_.frames[c.frame_a];
@@ -933,6 +1154,10 @@ NONMIN_FLATTEN void TreeProgram::row_tangents(const ResidualQuery& rq, TreeWorks
                 ws.dcv(k, r0 + r) = la[r].dot(tva[k].da - tvb[k].da) + aa[r].dot(tva[k].dal - tvb[k].dal);
             }
         }
+        if (quat_)  // A_v's columns: ∂a/∂a_v,k = ∂v/∂v_k (dv), ∂α/∂a_v,k = ∂ω/∂v_k (dw)
+            for (int k = 0; k < n; ++k)
+                for (int r = 0; r < nc; ++r)
+                    ws.dca(k, r0 + r) = la[r].dot(tva[k].dv - tvb[k].dv) + aa[r].dot(tva[k].dw - tvb[k].dw);
         const SE3 Xa = frame_placement(model, D, fa), Xb = frame_placement(model, D, fb);
         // hinge: rows 3 + i = r_i·(α_a − α_b) + ṙ_i·(ω_a − ω_b), r_i = U_i × K, U_i = R_a u_i, K = R_b k,
         // ṙ_i = (ω_a × U_i) × K + U_i × (ω_b × K)
@@ -960,6 +1185,7 @@ NONMIN_FLATTEN void TreeProgram::row_tangents(const ResidualQuery& rq, TreeWorks
                         const double val = dr.dot(dal) + r[i].dot(A.dal - B.dal) + drd.dot(dw) + rd[i].dot(A.dw - B.dw);
                         (pass == 0 ? ws.dcq : ws.dcv)(k, r0 + 3 + i) = val;
                     }
+                    if (quat_) ws.dca(k, r0 + 3 + i) = r[i].dot(tva[k].dw - tvb[k].dw);
                 }
         }
         // Aᵀλ_l: the wrenches λ_l puts on the two frames (force at the world origin) and their
@@ -999,25 +1225,55 @@ NONMIN_FLATTEN void TreeProgram::row_tangents(const ResidualQuery& rq, TreeWorks
             }
         }
     }
+    // in q: the chain rule through T for quaternion trees (T = 1 otherwise)
+    const int nq = model.nq;
+    if (quat_) quat_rows(rq, ws);
+    Mat& Cq = quat_ ? ws.Cq : ws.dcq;
+    Mat& Cv = quat_ ? ws.Cv : ws.dcv;
+    Mat& Lq = quat_ ? ws.Lq : ws.dlq;
+    for (std::size_t ci = 0; ci < d_.constraints.size(); ++ci) {
+        if (!rq.active[ci]) continue;
+        const TreeConstraint& c = d_.constraints[ci];
+        const int r0 = constraints_[ci].row;
+        const double* lam = rq.lam + r0;
+        if (c.type == RowType::unit_quaternion) {
+            // A a + γ = εᵀ a + ε̇ᵀ ε̇;  Aᵀλ = λ ε
+            for (int k = 0; k < 4; ++k) {
+                const int iq = c.iq + k;
+                Cq(iq, r0) = a[iq];
+                Cv(iq, r0) = 2.0 * rq.qd[iq];
+                for (int l = 0; l < nlam; ++l) Lq(iq, l * nq + iq) += lam[l * m_all_];
+            }
+        } else if (c.type == RowType::joint_coupling && c.iq2 >= 0) {
+            const auto& co = c.coef;
+            const double x = rq.q[c.iq2] - c.ref2, qd2 = rq.qd[c.iq2];
+            const double d2 = 2 * co[2] + 6 * co[3] * x + 12 * co[4] * x * x;
+            const double d3 = 6 * co[3] + 24 * co[4] * x;
+            // A a + γ = a₁ − d₁(x) a₂ − d₂(x) q̇₂²;  Aᵀλ = λ (e₁ − d₁(x) e₂)
+            Cq(c.iq2, r0) = -d2 * a[c.iq2] - d3 * qd2 * qd2;
+            Cv(c.iq2, r0) = -2.0 * d2 * qd2;
+            for (int l = 0; l < nlam; ++l) Lq(c.iq2, l * nq + c.iq2) -= lam[l * m_all_] * d2;
+        }
+    }
     // the tangents along rq's directions (the pipeline's seeds are unit vectors: one row each)
     for (int j = 0; j < rq.nd; ++j) {
-        const double* dq = rq.dq + static_cast<std::ptrdiff_t>(j) * n;
-        const double* dqd = rq.dqd + static_cast<std::ptrdiff_t>(j) * n;
+        const double* dq = rq.dq + static_cast<std::ptrdiff_t>(j) * nq;
+        const double* dqd = rq.dqd + static_cast<std::ptrdiff_t>(j) * nq;
         double* rc = rq.r_con + static_cast<std::ptrdiff_t>(j) * m_all_;
-        double* rl = rq.r_lam + static_cast<std::ptrdiff_t>(j) * nlam * n;
+        double* rl = rq.r_lam + static_cast<std::ptrdiff_t>(j) * nlam * nq;
         for (int r = 0; r < m_all_; ++r) rc[r] = 0.0;
-        for (int r = 0; r < nlam * n; ++r) rl[r] = 0.0;
-        for (int k = 0; k < n; ++k) {
+        for (int r = 0; r < nlam * nq; ++r) rl[r] = 0.0;
+        for (int k = 0; k < nq; ++k) {
             if (dq[k] != 0.0) {
                 const double x = dq[k];
-                const double* cq = ws.dcq.row(k).data();
-                const double* lq = ws.dlq.row(k).data();
+                const double* cq = Cq.row(k).data();
+                const double* lq = Lq.row(k).data();
                 for (int r = 0; r < m_all_; ++r) rc[r] += x * cq[r];
-                for (int r = 0; r < nlam * n; ++r) rl[r] += x * lq[r];
+                for (int r = 0; r < nlam * nq; ++r) rl[r] += x * lq[r];
             }
             if (dqd[k] != 0.0) {
                 const double x = dqd[k];
-                const double* cv = ws.dcv.row(k).data();
+                const double* cv = Cv.row(k).data();
                 for (int r = 0; r < m_all_; ++r) rc[r] += x * cv[r];
             }
         }

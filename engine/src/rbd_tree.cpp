@@ -383,9 +383,12 @@ void rnea_derivatives(const TreeModel& model, TreeData& data, const double* v, c
             const Motion en = cross(eta, nup);
             bq.lin -= en.lin;
             bq.ang -= en.ang;
-            Motion bv;  // −2 ξ × ν_p
-            bv.lin = -2.0 * eta.lin;
-            bv.ang = -2.0 * eta.ang;
+            // −ξ × (ν_p + ν_k): along v_k, δα_i = ξ × ν_i − ξ × ν_p − ξ × ν_k (i ⪰ k); for a
+            // 1-dof joint ξ × ν_k = ξ × ν_p (−2 ξ × ν_p), not for a free flyer's or a spherical
+            // joint's columns (ξ × J_k v_k ≠ 0)
+            Motion bv = cross(xi, data.ov[k]);
+            bv.lin = -(bv.lin + eta.lin);
+            bv.ang = -(bv.ang + eta.ang);
             // the brackets at j = k in full (the ancestors' rows need them)
             Force Sqk = data.Ic[k] * bq;
             Sqk += cross_force(eta, data.oh[k]);

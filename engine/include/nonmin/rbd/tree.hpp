@@ -152,9 +152,10 @@ void rnea(const TreeModel& model, TreeDataT<S>& data, const S* a, S* tau);
 template <class S>
 S potential_energy(const TreeModel& model, const TreeDataT<S>& data);
 
-// Analytic first derivatives of rnea for a tree without quaternion joints (v = q̇; revolute,
-// prismatic, translation): dtau_dq(:, k) = ∂τ/∂q_k and dtau_dv(:, k) = ∂τ/∂v_k (nv × nv each,
-// column-major), at the velocity v and acceleration a; the armature term M_a a has no q and no v
+// Analytic first derivatives of rnea in Pinocchio's tangent (every joint type: q_k moves joint
+// k along its local twist, v and a held; a quaternion tree's chain rule to nonmin's coordinates
+// is TreeProgram::quat_dynamics): dtau_dq(:, k) = ∂τ/∂q_k and dtau_dv(:, k) = ∂τ/∂v_k (nv × nv
+// each, column-major), at the velocity v and acceleration a; the armature term M_a a has no q and no v
 // dependence. Needs forward_kinematics (with inertias); overwrites ov, oa, of, Ic, Bc, oh, cw, cy.
 // Derivation (docs/theory.md, "Analytic derivatives of RNEA"): moving q_k moves the subtree of
 // joint k rigidly with the twist ξ = J_k, so δJ_j = ξ × J_j, δI_i = ξ×* I_i − I_i ξ×,
@@ -163,7 +164,8 @@ S potential_energy(const TreeModel& model, const TreeDataT<S>& data);
 // K_j = Σ (ν_i×* I_i − I_i ν_i×) and subtree force F_j over i ⪰ j, and η = ξ × ν_p:
 //   ∂τ_j/∂q_k = −J_jᵀ [Ic_j (ξ × α_p − η × ν_p) + η ×* Hc_j + K_j η]        (j ⪰ k)
 //   ∂τ_j/∂q_k = J_jᵀ (ξ ×* F_k) + (the j = k bracket with J_j)                 (j ≺ k)
-//   ∂τ_j/∂v_k = J_jᵀ [K_m ξ + ξ ×* Hc_m − 2 Ic_m (ξ × ν_p)],  m = j if j ⪰ k, else k.
+//   ∂τ_j/∂v_k = J_jᵀ [K_m ξ + ξ ×* Hc_m − Ic_m (ξ × (ν_p + ν_k))],  m = j if j ⪰ k, else k
+// (δα_i = ξ × ν_i − ξ × ν_p − ξ × ν_k along v_k; for a 1-dof joint ξ × ν_k = ξ × ν_p).
 void rnea_derivatives(const TreeModel& model, TreeData& data, const double* v, const double* a,
                       double* dtau_dq, double* dtau_dv);
 

@@ -130,7 +130,7 @@ struct TreeWorkspace : Workspace, TreeScratch<double> {
     std::vector<DualW> wq, wqd, wrd, wrl, wrc;
     std::vector<Vec3> xl, xa;  // per joint and lane: world twists of the seeded directions
     Vec dv;                    // nv: one lane's velocity-space direction
-    Mat dtq, dtv;              // nv × nv: ∂τ/∂q, ∂τ/∂v of rnea_derivatives (trees without quaternions)
+    Mat dtq, dtv;              // nv × nv: ∂τ/∂q, ∂τ/∂v of rnea_derivatives (velocity space)
     // row_tangents' scratch (made at first use): ∂(A a + γ)/∂q_k, ∂(A a + γ)/∂q̇_k (row k of
     // dcq, dcv: nv × m_all) and ∂(Aᵀλ_l)/∂q_k (row k of dlq: nv × 2 nv); per frame side and
     // column k the tangents of its kinematics along q_k (tq) and q̇_k (tv); the side's wrench
@@ -138,6 +138,13 @@ struct TreeWorkspace : Workspace, TreeScratch<double> {
     Mat dcq, dcv, dlq;
     std::vector<FrameTangent> tqa, tva, tqb, tvb;
     std::vector<Force> dF;
+    // trees with quaternion joints (the chain rule through v = T(q) q̇, a_v = T a + Ṫ q̇;
+    // docs/theory.md, "Quaternion joints"): dca (nv × m_all) row c = ∂(A_v a_v + γ_v)/∂a_v,c
+    // (column c of A_v); the q-space tangents Eq, Ev (nq × nq: row k = ∂r_dyn/∂q_k, ∂/∂q̇_k),
+    // Cq, Cv (nq × m_all), Lq (nq × 2 nq); Mb rows c = M_v(:, c) for the quaternion blocks'
+    // velocity indices; τ_v (tauv) and A_vᵀλ_l (AtL, 2 × nv) at the state; gv: nv scratch.
+    Mat dca, Eq, Ev, Cq, Cv, Lq, Mb, AtL;
+    Vec tauv, gv;
 };
 
 class TreeProgram : public Program {
@@ -153,10 +160,11 @@ class TreeProgram : public Program {
     bool gravity_in_pass() const override { return true; }
     // The residuals of ResidualQuery: M a − h − f_p − B u = Tᵀ (rnea(q, v, T a + Ṫ q̇) + d ⊙ v − S u)
     // (one RNEA, no CRBA), A a + γ = the frame accelerations at the joint acceleration T a + Ṫ q̇,
-    // Aᵀ λ from the rows. Trees without quaternions: the first residual's tangents from the
-    // analytic rnea_derivatives (tree.hpp), the rows' from row_tangents (analytic, when every
-    // active row has them: rows_analytic) or else on DualW without the RNEA; with quaternions:
-    // everything in one pass per DUAL_WIDTH directions on DualW.
+    // Aᵀ λ from the rows. The first residual's tangents from the analytic rnea_derivatives
+    // (tree.hpp), the rows' from row_tangents (analytic, when every active row has them:
+    // rows_analytic) or else on DualW without the RNEA; trees with quaternions through the
+    // chain rule of quat_dynamics / quat_rows, or, when a row is not analytic (contact, point on
+    // plane, distance driver), everything in one pass per DUAL_WIDTH directions on DualW.
     Status residual_tangents(const ResidualQuery& rq, Workspace& ws) const override;
     std::unique_ptr<Workspace> make_workspace() const override;
 
@@ -212,10 +220,16 @@ class TreeProgram : public Program {
     // hinge, planar_point, planar_weld, path_driver and the joint-space rows.
     bool rows_analytic(const std::uint8_t* active) const;
     // The tangents of A a + γ and Aᵀλ_l (rq.r_con, rq.r_lam) along rq's directions from the
-    // analytic derivatives of the frames' kinematics (programs without quaternions; needs
+    // analytic derivatives of the frames' kinematics (velocity space, then in q: quat_rows; needs
     // rnea_derivatives' forward_motion at (q̇, a) in ws.data, accelerations with the gravity
     // offset). Derivation in docs/theory.md ("Analytic derivatives of the constraint rows").
     void row_tangents(const ResidualQuery& rq, TreeWorkspace& ws) const;
+    // The q-space tangents of the dynamics residual, ws.Eq and ws.Ev, from the velocity-space
+    // ws.dtq, ws.dtv of rnea_derivatives (trees with quaternion joints; needs rnea_derivatives'
+    // data and ws.v, ws.fv = a_v).
+    void quat_dynamics(const ResidualQuery& rq, TreeWorkspace& ws) const;
+    // ws.Cq, ws.Cv, ws.Lq from the velocity-space dcq, dcv, dca, dlq (quaternion trees).
+    void quat_rows(const ResidualQuery& rq, TreeWorkspace& ws) const;
     // One frame's tangents along every coordinate (tq: q_k, tv: q̇_k; zero outside its support).
     void frame_tangents(const Frame& f, const TreeWorkspace& ws, FrameTangent* tq, FrameTangent* tv) const;
     // dlq(k, l nv + ·) += ∂(J_fᵀ F)/∂q_k for the wrench F (world origin) carried by frame f's
@@ -239,6 +253,18 @@ class TreeProgram : public Program {
     // T_b (nv × nq of a quaternion block) entry (r, c).
     template <class S>
     static S tb(const TreeScratch<S>& ws, const QuatBlock& b, int r, int c);
+    // The chain rule's maps of one quaternion block at (q, q̇, a) (block-local rows: the block's
+    // velocities v0.., columns: its coordinates q0..): T_b, ∂v/∂q = ∂(T q̇)/∂q, ∂a_v/∂q =
+    // ∂(T a + Ṫ q̇)/∂q, ∂a_v/∂q̇ = ∂(Ṫ q̇)/∂q̇, and dTq[m] = ∂T_q/∂ε_m (3 × 4 each).
+    struct QuatMaps {
+        Eigen::Matrix<double, 6, 7> T, Vq, Aq, Aqd;
+        Mat34 dTq[4];
+    };
+    void quat_maps(const QuatBlock& b, const double* q, const double* qd, const double* a,
+                   const TreeWorkspace& ws, QuatMaps& m) const;
+    // y_q (the block's nq coordinates) = ∂T_bᵀ/∂q_k · y_v (the block's nv velocities), k = q0 + kl.
+    void add_dTt(const QuatBlock& b, const QuatMaps& m, const TreeWorkspace& ws, int kl, const double* yv,
+                 double* yq) const;
     std::vector<Run> runs_;
     std::vector<QuatBlock> qblocks_;
     std::vector<int> act_q_;  // per actuator: its coordinate when T is the identity there, else −1
