@@ -62,6 +62,17 @@ FloatArray = NDArray[np.float64]
 #: Target wall time (s) of one engine chunk (progress, interrupts, step budget in between).
 CHUNK_SECONDS = 0.25
 
+#: A step's cost in units of the run's start (the initial projection and one evaluation):
+#: RK4 takes four evaluations and a projection, DOPRI5 six or seven; rejected steps, projection
+#: iterations and samples add more. The first chunk is CHUNK_SECONDS over this many starts.
+START_STEP_RATIO = 16.0
+
+
+def _first_chunk(start_seconds: float) -> int:
+    """Steps of the first chunk, from the time the start took (at least 16, at most 2**20)."""
+    return int(min(max(16.0, CHUNK_SECONDS / max(START_STEP_RATIO * start_seconds, 1e-9)), 1 << 20))
+
+
 _KINDS = {"holonomic": 0, "rheonomic": 1, "nonholonomic": 2, "unilateral": 3}
 
 
@@ -358,40 +369,52 @@ def run(
             blk["active_mask"] = blk["active_mask"].astype(bool)
             sink(blk)
 
+    chunk = 16
     if start is not None:
         t0, q, qd = start
+        w0 = time.perf_counter()
         code = loop.start(t0, np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(qd, dtype=float))
         if code == eng.SIM_DONE and guards and not loop.arm_guards():  # the guards at the first point
             code = eng.SIM_HANDOVER
         if code != eng.SIM_DONE:
             y0 = np.concatenate((q, qd))
             return EngineResult(False, t0, y0, 0.0, 0, 0, 0, 0, True, False, str(loop.message), [], **fric_end(), work=float(loop.work))
+        # the first chunk from the start's time (a projection and an evaluation: a step costs
+        # a few of them, START_STEP_RATIO), so a short run is one chunk; the first sample is
+        # taken with the chunk's
+        chunk = _first_chunk(time.perf_counter() - w0)
         if passage_seed is not None and passage_seed[0].size:
             loop.seed_passages(np.ascontiguousarray(passage_seed[0], dtype=float),
                                np.ascontiguousarray(passage_seed[1], dtype=float).ravel())  # fmt: skip
-        take()
     else:
         assert resume is not None
         t, y, h, steps, out_i = resume
         loop.resume(t, np.ascontiguousarray(y, dtype=float), float(h), int(steps), int(out_i))
     if friction and not loop.arm_friction():  # the friction guards at the state reached
+        take()
         return EngineResult(True, float(loop.t), np.asarray(loop.y), float(loop.h), int(loop.n_steps), 0, 0,
                             int(loop.out_i), True, False, str(loop.message), list(loop.guard_values),
                             **fric_end(), work=float(loop.work))  # fmt: skip
     code = eng.SIM_DONE
-    chunk = 16
     t1 = float(opts.t1)
-    while loop.t < t1:
-        w0 = time.perf_counter()
-        steps0 = loop.n_steps
-        code = loop.run(chunk)
-        elapsed = time.perf_counter() - w0
-        take()
-        progress.update(loop.t)
-        if code != eng.SIM_DONE:
-            break
-        if loop.n_steps > steps0:
-            chunk = int(min(max(16, chunk * CHUNK_SECONDS / max(elapsed, 1e-6)), 1 << 20))
+    pending = start is not None  # samples recorded and not taken yet (the start's)
+    try:
+        while loop.t < t1:
+            w0 = time.perf_counter()
+            steps0 = loop.n_steps
+            pending = True
+            code = loop.run(chunk)
+            elapsed = time.perf_counter() - w0
+            take()
+            pending = False
+            progress.update(loop.t)
+            if code != eng.SIM_DONE:
+                break
+            if loop.n_steps > steps0:
+                chunk = int(min(max(16, chunk * CHUNK_SECONDS / max(elapsed, 1e-6)), 1 << 20))
+    finally:  # the samples not taken yet: the start's when no step was run, or an exception's
+        if pending:
+            take()
     return EngineResult(True, float(loop.t), np.asarray(loop.y), float(loop.h), int(loop.n_steps),
                         int(loop.n_rhs), int(loop.n_rejected), int(loop.out_i),
                         code == eng.SIM_HANDOVER, code == eng.SIM_EVENT, str(loop.message),

@@ -294,6 +294,10 @@ SHORTHANDS: dict[str, type] = {
 }
 
 
+#: ``EventSet()``: no user events, the default contact settings.
+_NO_EVENTS = EventSet()
+
+
 def _same(a: Any, b: Any) -> bool:
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
         try:
@@ -361,6 +365,8 @@ def resolve_options(
     s = _fold(Solver, flat, solver)
     if isinstance(events, EventSet):
         ev = _fold(EventSet, flat, events)
+    elif isinstance(events, tuple | list) and not events and not any(SHORTHANDS.get(k) is EventSet for k in flat):
+        ev = _NO_EVENTS  # the default (a frozen value): most calls
     else:
         ev = _fold(EventSet, flat, None)
         ev = replace(ev, events=events)  # validated by __post_init__

@@ -255,6 +255,24 @@ def drift_rank_rtol(ct: ConstraintTerms, rtol: float | None) -> float:
     return min(max(base, DRIFT_RANK_FACTOR * drift), 1e-2)
 
 
+#: Largest |q|, |q̇| the general driver evaluates: beyond it the squares in a model's terms
+#: (θ̇², q̇ᵀMq̇) overflow. A stage state past it comes from a step far too large for the motion
+#: (crossed four-bar, RK4 dt 0.14: |q̇| 5.7e181 at t = 4.78 s, after the engine's handover).
+STATE_RANGE = 1e150
+
+
+def _check_range(t: float, y: FloatArray) -> None:
+    """SimulationError for a finite state past :data:`STATE_RANGE` (NaN and inf are left to the
+    model's own typed checks), before its evaluation overflows with RuntimeWarnings."""
+    big = float(np.max(np.abs(y), initial=0.0))
+    if big > STATE_RANGE and math.isfinite(big):
+        raise SimulationError(
+            f"the state left the range of finite arithmetic at t = {t:.12g}: |(q, qd)|∞ = {big:.3g} "
+            f"(> {STATE_RANGE:g}); the step is too large for this motion: take a smaller dt or an "
+            "adaptive method"
+        )
+
+
 @dataclass
 class _System:
     """Model + controller + stabilization bias, with the active set and controller state."""
@@ -297,6 +315,7 @@ class _System:
     def rhs(self, t: float, y: FloatArray) -> FloatArray:
         """``F(t, y) = (qd, qdd)``."""
         self.n_rhs += 1
+        _check_range(t, y)
         n = self.n
         q, qd = y[:n], y[n:]
         terms, g, _ = self._forces(t, q, qd)
@@ -1413,9 +1432,14 @@ def _kick_check(result: Trajectory) -> Trajectory:
     # measured in the case of KICK_RATIO, must not set the scale; a jump of the input does not
     # move the median below half the larger level)
     a = np.max(np.abs(qdd), axis=1)
+    floor = 1e-9 * (1.0 + np.max(np.abs(qd), axis=1)[1:])
+    # every window's median is at least min(a) (rounding is monotone): when no step exceeds
+    # the ratio against that lower scale, none exceeds it against the medians
+    if bool(np.all(~(dt > 0.0) | (dv <= KICK_RATIO * (dt * a.min() + floor)))):
+        return result
     pad = np.concatenate((np.full(2, a[0]), a, np.full(2, a[-1])))
     acc = np.median(np.lib.stride_tricks.sliding_window_view(pad, 6), axis=1)[: dt.shape[0]]
-    scale = dt * acc + 1e-9 * (1.0 + np.max(np.abs(qd), axis=1)[1:])
+    scale = dt * acc + floor
     ok = ~(dt > 0.0) | (dv <= KICK_RATIO * scale)
     if result.events:  # an impact changes q̇ at its instant: the intervals touching it are exempt
         te = np.array([e.t for e in result.events])
