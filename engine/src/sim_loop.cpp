@@ -440,6 +440,44 @@ void record(Loop& L, const Point& p, double t) {
 
 // ------------------------------------------------------------------------------ projection
 
+namespace {
+
+// The velocity correction Δq̇ = Sᵀ(−A⁺ A q̇) on the factorization the position correction just
+// made (Solver::again: O(mn + n²) instead of a factorization), when that is the fresh result
+// to round-off: a program whose M varies (a constant M keeps the factorization of A(q) for the
+// next dynamics solve instead: dynamics_solve), every active row holonomic (the factorization's
+// rows are L.Ac's, at the linearization point q_lin instead of q), a certified LQ of full rank
+// at a tolerance ≥ vr (then its rank at vr is the same, and the solve bitwise the fresh one's
+// for those rows), and the rows moved by ‖A(q) − A(q_lin)‖_max ≤ eps ‖A‖_max ‖q̇‖_∞ / ‖Δq̇‖_∞:
+// the projection along the old rows differs from the new one by O(‖ΔA‖/‖A‖ · ‖Δq̇‖), below the
+// round-off of q̇ itself (the fresh solve's own error is eps·κ·‖q̇‖). Applies Δq̇ to qd and
+// returns true; false (nothing changed) when a condition fails.
+bool velocity_again(Loop& L, double vr, unsigned long long gen, bool lq_full, double pos_rtol, double* qd) {
+    if (L.prog->constant_mass() || L.m_hol != L.m || !lq_full || pos_rtol < vr || !L.solver.held() ||
+        L.solver.generation() != gen)
+        return false;
+    const int n = L.n, m = L.m;
+    double da = 0.0, a = 0.0;
+    for (int i = 0; i < m; ++i)
+        for (int j = 0; j < n; ++j) {
+            da = std::max(da, std::abs(L.Ac(i, j) - L.Alin(i, j)));
+            a = std::max(a, std::abs(L.Alin(i, j)));
+        }
+    if (!(da * 0.0 == 0.0) || !(a > 0.0)) return false;
+    if (L.solver.again(L.Mq.data(), L.zero_n.data(), L.vel.data(), L.dq.data(), nullptr).status != Status::ok)
+        return false;
+    double dqn = 0.0, qdn = 0.0;
+    for (int j = 0; j < n; ++j) {
+        dqn = std::max(dqn, std::abs(L.dq[j]));
+        qdn = std::max(qdn, std::abs(qd[j]));
+    }
+    if (!(da * dqn <= std::numeric_limits<double>::epsilon() * a * qdn)) return false;
+    for (int j = 0; j < n; ++j) qd[j] = qd[j] + L.dq[j];
+    return true;
+}
+
+}  // namespace
+
 // Projection.project (mass or Euclidean metric), in place on y = (q, qd).
 Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
     if (!L.any_active) return Status::ok;
@@ -456,6 +494,17 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
         L.mq = L.m_held ? 2 : 0;
     }
     const int mh = L.m_hol;
+    // the last fresh position correction's factorization (Alin, Mq; its rank tolerance, and
+    // whether it was a certified LQ of every row), for the velocity correction below
+    bool pos_held = false, pos_lq = false;
+    unsigned long long pos_gen = 0;
+    double pos_rtol = 0.0;
+    auto fresh_done = [&](double rtol) {
+        pos_held = true;
+        pos_lq = L.lq_full;
+        pos_gen = L.solver.generation();
+        pos_rtol = rtol;
+    };
     if (mh > 0) {
         double prev = inf;
         for (int j = 0; j < n; ++j) L.aq[j] = std::abs(q[j]);
@@ -513,12 +562,15 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
                 if (s != Status::ok) return s;
                 if (rank == mh) {  // no singular value below c2: the full-rank step
                     cut = c2;
+                    fresh_done(c2);
                 } else {  // next to a singular configuration: without the directions below the cut
                     cut = std::max(POSITION_CUT_RTOL, full);
                     s = correction(L, L.Alin, mh, L.phih.data(), cut, L.dq.data(), nullptr);
+                    fresh_done(cut);
                 }
             } else if (fresh) {
                 s = correction(L, L.Alin, mh, L.phih.data(), cut, L.dq.data(), nullptr);
+                fresh_done(cut);
             } else {  // a chord step: the last linearization's factorization, new residual
                 s = L.solver.again(L.Mq.data(), L.zero_n.data(), L.phih.data(), L.dq.data(), nullptr).status;
             }
@@ -530,15 +582,19 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
     }
     if (po.velocity && L.m > 0) {
         const double vr = velocity_rtol(L.opt, po);
-        s = correction(L, L.Ac, L.m, L.vel.data(), vr, L.dq.data(), nullptr);
-        if (s != Status::ok) return s;
-        for (int j = 0; j < n; ++j) qd[j] = qd[j] + L.dq[j];
-        L.vheld = !po.euclidean;  // (the Euclidean metric is not M)
-        L.vlq = L.lq_full;
-        L.vgen = L.solver.generation();
-        L.vt = t;
-        L.vrtol = vr;
-        for (int j = 0; j < n; ++j) L.vq[j] = q[j];
+        if (pos_held && velocity_again(L, vr, pos_gen, pos_lq, pos_rtol, qd)) {
+            L.vheld = false;  // (the factorization held is the position correction's A, not A(q))
+        } else {
+            s = correction(L, L.Ac, L.m, L.vel.data(), vr, L.dq.data(), nullptr);
+            if (s != Status::ok) return s;
+            for (int j = 0; j < n; ++j) qd[j] = qd[j] + L.dq[j];
+            L.vheld = !po.euclidean;  // (the Euclidean metric is not M)
+            L.vlq = L.lq_full;
+            L.vgen = L.solver.generation();
+            L.vt = t;
+            L.vrtol = vr;
+            for (int j = 0; j < n; ++j) L.vq[j] = q[j];
+        }
     }
     if (std::isfinite(po.energy_level)) {  // _stabilization.energy_scale
         if ((s = L.prog->evaluate(t, q, qd, L.active.data(), NEED_ENERGY, L.T, *L.ws)) != Status::ok) return s;
