@@ -105,6 +105,50 @@ def test_robot_joint_limit_and_floor_on_the_engine(monkeypatch: pytest.MonkeyPat
     _same_samples(a, b, 1e-8)
 
 
+
+def test_a_run_with_contact_guards_starts_in_the_engine(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A run with unilateral constraints alone starts in the engine (no Python projection, point
+    or guard values): SimLoop.arm_guards gives the contact guards the values the Python start
+    computes at its first point (_guard_values: the closed contact's normal force, the open
+    joint stops' gaps), and the run equals the general driver's."""
+    from types import SimpleNamespace
+
+    from nonmin.model.robots import serial_arm
+    from nonmin.sim import _engine
+    from nonmin.sim._integrators import RK4
+    from nonmin.sim._stabilization import Projection
+
+    model, state = serial_arm()
+    act = frozenset({"ee_contact"})
+    q0, qd0 = np.array(state.q, dtype=float), np.full(model.n, 0.1)
+    uni = tuple(c.name for c in model.constraints if c.kind == "unilateral")
+    system = _simulate._System(model, None, Projection(), None, model.n, model.k, act, None, unilateral=uni)
+    watches = _simulate._watches((), act, uni)
+    idx, guards = _simulate._engine_guards(system, watches, [0.0] * len(watches))
+    opts = _engine.options(RK4(), Projection(), dt=1e-3, t1=0.0, h0=1e-3, rank_rtol=None,
+                           drift_factor=_simulate.DRIFT_RANK_FACTOR, project_initial=True, max_steps=10)  # fmt: skip
+    er = _engine.run(_engine.program_for(model), opts=opts, active_mask=_simulate.model_mask(model, act),
+                     t_out=None, sink=lambda blk: None, progress=SimpleNamespace(update=lambda t: None),
+                     start=(0.0, q0, qd0), guards=guards, contact=([0.0] * len(model.constraints), 1e-6))  # fmt: skip
+    assert er.started and er.steps == 0
+    q, qd = Projection().project(model, 0.0, q0, qd0, act, None)
+    ref = _simulate._guard_values(system, watches, system.point(0.0, q, qd))
+    assert [watches[i].kind for i in idx].count("release") == 1 and len(idx) == len(uni)
+    np.testing.assert_allclose(er.guards, [ref[i] for i in idx], rtol=1e-9, atol=1e-12)
+    assert abs(er.guards[[watches[i].kind for i in idx].index("release")]) > 1e-3  # a real force
+
+    def no(*a: Any, **k: Any) -> Any:
+        raise AssertionError("the Python driver started a run the engine can start")
+
+    with monkeypatch.context() as mp:
+        mp.setattr(_simulate, "_guard_values", no)
+        a = simulate(model, (0.0, 0.2), q0, qd0, active=act, dt=1e-3, engine="engine", progress=False)
+    with use_backend("numpy"):
+        b = simulate(model, (0.0, 0.2), q0, qd0, active=act, dt=1e-3, engine="python", progress=False)
+    assert a.metadata["engine"] == "engine"
+    _same_events(a, b, 1e-11, 1e-8)
+    _same_samples(a, b, 1e-8)
+
 def test_engine_kernel_equals_the_numpy_specification() -> None:
     rng = np.random.default_rng(7)
     for _ in range(20):

@@ -944,7 +944,8 @@ def simulate(
                 drift_factor=DRIFT_RANK_FACTOR, project_initial=project_initial,
                 max_steps=int(max_steps),
             )  # fmt: skip
-        er = pending = None  # pending: the engine's first run with contact guards, handled below
+        er: _engine.EngineResult | None = None
+        pending: _engine.EngineResult | None = None  # the engine's first run with contact guards (below)
         if use_engine and not (events or fcs):  # the engine starts the run (start included)
             creg = _engine.compiled_controller(controller, model, eng_prog, act)
             ccb = _engine.ControllerCallback(controller, system.cstate, k, None, model) \
@@ -965,7 +966,7 @@ def simulate(
                 er = None
                 meta["engine"] = "python"
             elif unilateral:  # the loop below takes the engine's result (events, resumes)
-                er, pending = None, er
+                pending, er = er, None
                 gvals = [0.0] * len(watches)
                 # (the state at t0 when the engine took no step: its projected start, pending.y)
                 state = StepperState(t0, pending.y.copy(), None, h_init)
@@ -1050,6 +1051,7 @@ def simulate(
                     if creg is not None:
                         system.cstate = _engine.merge_state(controller, system.cstate, creg)
             if engine_on:
+                assert er is not None
                 fstep = None
                 if fcs and er.event and not er.handover:  # a guard crossed with user guards watched
                     fstep = _friction_step(
