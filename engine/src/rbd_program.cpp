@@ -854,13 +854,6 @@ void TreeProgram::quat_dynamics(const ResidualQuery& rq, TreeWorkspace& ws) cons
         while (j > k) j = model.joints[static_cast<std::size_t>(j)].parent;
         return j == k;
     };
-    auto joint_of = [&](int col) {
-        for (std::size_t j = 0; j < model.joints.size(); ++j) {
-            const Joint& jt = model.joints[j];
-            if (col >= jt.iv && col < jt.iv + joint_nv(jt.type)) return static_cast<int>(j);
-        }
-        return -1;
-    };
     QuatMaps mp;
     for (const QuatBlock& b : qblocks_) {
         const int v0 = b.v0(), q0 = b.q0(), nvb = b.nv(), nqb = b.nq(), jb = b.joint;
@@ -868,17 +861,20 @@ void TreeProgram::quat_dynamics(const ResidualQuery& rq, TreeWorkspace& ws) cons
         // M(r, c) = J_r·cw[c] for r on j's support, J_c·cw[r] for r below j
         for (int cc = 0; cc < nvb; ++cc) {
             const int c = v0 + cc;
-            for (int r = 0; r < nv; ++r) {
-                const int jr = joint_of(r);
-                double val = 0.0;
-                if (in_subtree(jb, jr)) {
-                    val = D.J.col(r).head<3>().dot(D.cw[static_cast<std::size_t>(c)].lin) +
-                          D.J.col(r).tail<3>().dot(D.cw[static_cast<std::size_t>(c)].ang);
-                } else if (in_subtree(jr, jb)) {
-                    val = D.J.col(c).head<3>().dot(D.cw[static_cast<std::size_t>(r)].lin) +
-                          D.J.col(c).tail<3>().dot(D.cw[static_cast<std::size_t>(r)].ang);
+            for (std::size_t j = 0; j < model.joints.size(); ++j) {
+                const Joint& jt = model.joints[j];
+                const int jr = static_cast<int>(j);
+                const bool above = in_subtree(jb, jr), below = !above && in_subtree(jr, jb);
+                for (int r = jt.iv; r < jt.iv + joint_nv(jt.type); ++r) {
+                    double val = 0.0;
+                    if (above)
+                        val = D.J.col(r).head<3>().dot(D.cw[static_cast<std::size_t>(c)].lin) +
+                              D.J.col(r).tail<3>().dot(D.cw[static_cast<std::size_t>(c)].ang);
+                    else if (below)
+                        val = D.J.col(c).head<3>().dot(D.cw[static_cast<std::size_t>(r)].lin) +
+                              D.J.col(c).tail<3>().dot(D.cw[static_cast<std::size_t>(r)].ang);
+                    ws.Mb(c, r) = val;
                 }
-                ws.Mb(c, r) = val;
             }
             ws.Mb(c, c) += model.armature[c];
             // τ_v(c) = J_c·F_j + armature a_v + d v − (S u)_c
