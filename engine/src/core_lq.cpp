@@ -523,6 +523,28 @@ void lq_rows(const LQWork& w, int m, int n, int first, int count, double* E) {
         for (int i = 0; i < count; ++i) reflect_row(E + static_cast<long>(i) * n, w, j, w.beta[j]);
 }
 
+void lq_rows_min_norm(const LQWork& w, int m, int n, int first, int count, double* E,
+                      const double* cv, double* x) {
+    for (int i = 0; i < count; ++i) {
+        double* Ei = E + static_cast<long>(i) * n;
+        for (int k = 0; k < n; ++k) Ei[k] = 0.0;
+        Ei[w.Pc[first + i]] = 1.0;
+    }
+    for (int i = 0; i < n; ++i) x[i] = 0.0;
+    for (int i = 0; i < m; ++i) x[w.Pc[i]] = cv[i];
+    for (int j = m - 1; j >= 0; --j) {  // independent chains side by side (lq_rows, lq_min_norm)
+        const double bj = w.beta[j];
+        for (int i = 0; i < count; ++i) reflect_row(E + static_cast<long>(i) * n, w, j, bj);
+        const int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
+        const double* v = w.Hv.data() + static_cast<long>(j) * n;
+        double d = 0.0;
+        for (int t = 1; t <= H[0]; ++t) d += v[H[t]] * x[H[t]];
+        d *= bj;
+        for (int t = 1; t <= H[0]; ++t) x[H[t]] -= d * v[H[t]];
+    }
+    for (int i = 0; i < n; ++i) x[i] = -x[i];
+}
+
 void lq_min_norm(const LQWork& w, int m, int n, const double* cv, double* x) {
     for (int i = 0; i < n; ++i) x[i] = 0.0;
     for (int i = 0; i < m; ++i) x[w.Pc[i]] = cv[i];

@@ -27,6 +27,7 @@ struct Solver::Impl {
     linalg::LQWork lq;       // certified LQ scratch
     int lqmode = linalg::LQ_NONE;  // what the last rank decision used
     bool zmode = false;            // null-space form: Z (rows of Kt, k = n − r ≤ r) spans N(A)
+    bool w_done = false;           // wv holds w of the last rank decision (lq_rows_min_norm)
     int m_live = 0;                // rows of B the rank decision used (the live rows of A)
     // The factorization of the last successful forward/solve call, for again(): its A had m
     // rows (scales d, live rows compacted), rank r, M diagonal or not, μ; the SVD paths keep
@@ -89,9 +90,13 @@ struct Solver::Impl {
     // left out like vanished rows: r = lq.rank kept rows, lq.Ro[a] the live row of factor row a.
     // SVD: the kept right singular vectors V (r × n), cv_k = (u_kᵀ D b)/σ_k, and with many rows
     // and few degrees of freedom (zmode) the other right singular vectors in the rows of Kt.
-    int rank_decision(int m, int live, double rtol, const int* pst = nullptr, const int* pco = nullptr) {
+    // with_w: in the null-space form of the certified LQ, also w = −(DA)⁺ D b into wv (the same
+    // sweep over the reflectors as Z; w_done tells min_norm_w).
+    int rank_decision(int m, int live, double rtol, const int* pst = nullptr, const int* pco = nullptr,
+                      bool with_w = false) {
         lqmode = linalg::LQ_NONE;
         zmode = false;
+        w_done = false;
         held = false;
         ++gen;
         if (pst) {  // the live rows, for the known pattern
@@ -125,7 +130,10 @@ struct Solver::Impl {
             if (lqmode != linalg::LQ_NONE) {
                 const int r = lq.rank;
                 zmode = n - r <= r;  // few degrees of freedom: the null-space basis Z
-                if (zmode)
+                if (zmode && with_w) {
+                    linalg::lq_rows_min_norm(lq, r, n, r, n - r, Kt.data(), cv.data(), wv.data());
+                    w_done = true;
+                } else if (zmode)
                     linalg::lq_rows(lq, r, n, r, n - r, Kt.data());
                 else
                     linalg::lq_rows(lq, r, n, 0, r, V.data());
@@ -223,17 +231,32 @@ struct Solver::Impl {
             if (!(mu > 0.0)) mu = 1.0;
         }
         *mu_out = mu;
-        double dmax = -std::numeric_limits<double>::infinity();
-        for (int i = 0; i < n; ++i) {  // M̄_ii = μ (1 − ‖Z e_i‖²) + (Zᵀ S Z)_ii
-            double p = 0.0, t = 0.0;
-            for (int a = 0; a < k; ++a) {
-                const double za = Z[a * n + i];
-                p += za * za;
-                double s = 0.0;
-                for (int c = 0; c < k; ++c) s += S[a * k + c] * Z[c * n + i];
-                t += za * s;
+        // M̄_ii = μ (1 − ‖Z e_i‖²) + (Zᵀ S Z)_ii: the rows of S Z (Tt) and the sums over a
+        // (pp, tt) element by element over i, each sum in the order of a one-i-at-a-time loop
+        double* SZ = Tt.data();
+        double* pp = cw.data();  // (cw, u: scratch until null_finish)
+        double* tt = u.data();
+        for (int a = 0; a < k; ++a) {
+            double* Ya = SZ + static_cast<long>(a) * n;
+            for (int i = 0; i < n; ++i) Ya[i] = 0.0;
+            for (int c = 0; c < k; ++c) {
+                const double sac = S[a * k + c];
+                const double* Zc = Z + static_cast<long>(c) * n;
+                for (int i = 0; i < n; ++i) Ya[i] += sac * Zc[i];
             }
-            const double dd = mu * (1.0 - p) + t;
+        }
+        for (int i = 0; i < n; ++i) pp[i] = tt[i] = 0.0;
+        for (int a = 0; a < k; ++a) {
+            const double* Za = Z + static_cast<long>(a) * n;
+            const double* Ya = SZ + static_cast<long>(a) * n;
+            for (int i = 0; i < n; ++i) {
+                pp[i] += Za[i] * Za[i];
+                tt[i] += Za[i] * Ya[i];
+            }
+        }
+        double dmax = -std::numeric_limits<double>::infinity();
+        for (int i = 0; i < n; ++i) {
+            const double dd = mu * (1.0 - pp[i]) + tt[i];
             if (dd > dmax) dmax = dd;
         }
         int st = linalg::CHOL_OK;
@@ -335,6 +358,10 @@ struct Solver::Impl {
     // w = −(DA)⁺ D γ from cv (r entries): −Qᵀ cv through the reflectors (null-space form of the
     // certified LQ), or −Σ_k v_k cv_k.
     void min_norm_w(int r) {
+        if (w_done) {  // rank_decision's sweep made it (for this cv; again() computes anew)
+            w_done = false;
+            return;
+        }
         if (zmode && lqmode != linalg::LQ_NONE) {
             linalg::lq_min_norm(lq, r, n, cv.data(), wv.data());
             return;
@@ -499,7 +526,7 @@ SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* 
     const int live = pst ? linalg::equilibrate_pattern(A, m, n, pst, pco, gamma, opt.rtol, B.data(), d.data(),
                                                        sig.data(), b_zero)
                          : linalg::equilibrate(A, m, n, gamma, opt.rtol, B.data(), d.data(), sig.data());
-    const int r = rank_decision(m, live, opt.rtol, pst, pco);
+    const int r = rank_decision(m, live, opt.rtol, pst, pco, true);
     // B back to zero over the pattern when the rank decision left its rows in place (no vanished
     // row compacted, no Jacobi rotation: the certified LQ and the SVD only read B); else the next
     // pattern call clears B in full

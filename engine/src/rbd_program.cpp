@@ -253,16 +253,28 @@ void TreeProgram::congruence(TreeScratch<S>& ws, S* M) const {
     for (const Run& r1 : runs_)
         for (const Run& r2 : runs_)
             out.block(r1.iq, r2.iq, r1.len, r2.len) = ws.Mv.block(r1.iv, r2.iv, r1.len, r2.len);
+    // Column c of T_b is zero outside rows k_lo … k_hi − 1 (a free block: Rᵀ on the position,
+    // the quaternion map on the rotation); the sums below skip those exact zeros (an acc that
+    // starts at +0 and gains only ±0 products stays +0: the same values as the full sums).
+    auto krange = [](const QuatBlock& b, int c, int& lo, int& hi) {
+        lo = b.free && c >= 3 ? 3 : 0;
+        hi = b.free && c < 3 ? 3 : b.nv();
+    };
     MatS& Y = ws.Y;
     for (std::size_t bi = 0; bi < qblocks_.size(); ++bi) {
         const QuatBlock& b = qblocks_[bi];
-        const int v0 = b.v0(), q0 = b.q0(), nvb = b.nv(), nqb = b.nq();
-        for (int r = 0; r < nqb; ++r)
+        const int v0 = b.v0(), q0 = b.q0(), nqb = b.nq();
+        S t[6];  // column r (or c) of T_b over its nonzero rows
+        for (int r = 0; r < nqb; ++r) {
+            int lo, hi;
+            krange(b, r, lo, hi);
+            for (int k = lo; k < hi; ++k) t[k - lo] = tb(ws, b, k, r);
             for (int c = 0; c < nv; ++c) {
                 S acc = S(0.0);
-                for (int k = 0; k < nvb; ++k) acc += tb(ws, b, k, r) * ws.Mv(v0 + k, c);
+                for (int k = lo; k < hi; ++k) acc += t[k - lo] * ws.Mv(v0 + k, c);
                 Y(r, c) = acc;
             }
+        }
         for (const Run& r : runs_)
             for (int i = 0; i < nqb; ++i)
                 for (int c = 0; c < r.len; ++c) {
@@ -271,13 +283,17 @@ void TreeProgram::congruence(TreeScratch<S>& ws, S* M) const {
                 }
         for (std::size_t bj = bi; bj < qblocks_.size(); ++bj) {
             const QuatBlock& b2 = qblocks_[bj];
-            for (int i = 0; i < nqb; ++i)
-                for (int c = 0; c < b2.nq(); ++c) {
+            for (int c = 0; c < b2.nq(); ++c) {
+                int lo, hi;
+                krange(b2, c, lo, hi);
+                for (int k = lo; k < hi; ++k) t[k - lo] = tb(ws, b2, k, c);
+                for (int i = 0; i < nqb; ++i) {
                     S acc = S(0.0);
-                    for (int k = 0; k < b2.nv(); ++k) acc += Y(i, b2.v0() + k) * tb(ws, b2, k, c);
+                    for (int k = lo; k < hi; ++k) acc += Y(i, b2.v0() + k) * t[k - lo];
                     out(q0 + i, b2.q0() + c) = acc;
                     if (bj != bi) out(b2.q0() + c, q0 + i) = acc;
                 }
+            }
         }
         for (int i = 0; i < nqb; ++i)  // the diagonal block T_bᵀ M_bb T_b, symmetrized
             for (int c = i + 1; c < nqb; ++c) {

@@ -175,4 +175,9 @@ void lq_profile_solve(const LQWork& w, int m, double* cv);
 // x = −Qᵀ cv (= −(DA)⁺ D b for cv = L⁻¹ D b), through the reflectors.
 void lq_min_norm(const LQWork& w, int m, int n, const double* cv, double* x);
 
+// lq_rows(w, m, n, first, count, E) and lq_min_norm(w, m, n, cv, x) in one sweep over the
+// reflectors (the same operations on each vector: results bitwise those of the two calls).
+void lq_rows_min_norm(const LQWork& w, int m, int n, int first, int count, double* E,
+                      const double* cv, double* x);
+
 }  // namespace nonmin::linalg
