@@ -57,18 +57,31 @@ DT = 1e-3
 
 
 
-def _interleaved(paths: dict[str, Any], args: Any) -> tuple[dict[str, float], dict[str, Any], dict[str, list[float]]]:
+_CPU = [math.nan]  # CPU time of the last nonmin timing window (process_time, all threads)
+
+
+def _interleaved(
+    paths: dict[str, Any], args: Any
+) -> tuple[dict[str, float], dict[str, Any], dict[str, list[float]], dict[str, float]]:
     """Every path once per round, ``args.repeat`` rounds: the median wall time per run of each
-    (one by one: over ``args.single`` runs, else ``args.runs``), each path's last output and the
-    wall times per run of every round."""
+    (one by one: over ``args.single`` runs, else ``args.runs``), each path's last output, the
+    wall times per run of every round, and the median CPU time per run (``time.process_time``
+    of the whole process, every thread, over the same window as the wall time: the nonmin paths
+    set ``_CPU``; the model's setup is outside both)."""
     walls: dict[str, list[float]] = {k: [] for k in paths}
+    cpus: dict[str, list[float]] = {k: [] for k in paths}
     outs: dict[str, Any] = {}
     for _ in range(args.repeat):
         for k, fn in paths.items():
+            _CPU[0] = math.nan
             w, out = fn()
-            walls[k].append(w / (args.single if "one by one" in k else args.runs))
+            per = args.single if "one by one" in k else args.runs
+            walls[k].append(w / per)
+            cpus[k].append(_CPU[0] / per)  # (NaN for paths that do not set it)
             outs[k] = out
-    return {k: statistics.median(v) for k, v in walls.items()}, outs, walls
+    med = {k: statistics.median(v) for k, v in walls.items()}
+    return med, outs, walls, {k: statistics.median(v) for k, v in cpus.items()}
+
 
 def states(k: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
@@ -105,9 +118,11 @@ def nonmin_batch(th0: np.ndarray, om0: np.ndarray, threads: int | None, dt: floa
     model = library.get("crossed_four_bar").model
     Q, V = _cfb_coordinates(th0, om0)
     t = np.linspace(0.0, T_FINAL, round(T_FINAL / 0.01) + 1)
-    w0 = time.perf_counter()
+    c0, w0 = time.process_time(), time.perf_counter()
     bt = simulate_batch(model, T_FINAL, Q, V, dt=dt, t_eval=t, threads=threads)
-    return time.perf_counter() - w0, bt
+    w = time.perf_counter() - w0
+    _CPU[0] = time.process_time() - c0
+    return w, bt
 
 
 def nonmin_single(th0: np.ndarray, om0: np.ndarray) -> tuple[float, np.ndarray]:
@@ -119,10 +134,12 @@ def nonmin_single(th0: np.ndarray, om0: np.ndarray) -> tuple[float, np.ndarray]:
     Q, V = _cfb_coordinates(th0, om0)
     t = np.linspace(0.0, T_FINAL, round(T_FINAL / 0.01) + 1)
     qs = []
-    w0 = time.perf_counter()
+    c0, w0 = time.process_time(), time.perf_counter()
     for i in range(len(th0)):
         qs.append(simulate(model, T_FINAL, Q[i], V[i], dt=DT, t_eval=t, progress=False).q)
-    return time.perf_counter() - w0, np.array(qs)
+    w = time.perf_counter() - w0
+    _CPU[0] = time.process_time() - c0
+    return w, np.array(qs)
 
 
 # --------------------------------------------------------------------------- MuJoCo
@@ -189,7 +206,11 @@ def main() -> int:
                     help="only the work-precision comparison with mujoco.rollout over a range of dt for both")
     ap.add_argument("--batch-vs-single", action="store_true",
                     help="only the batch (1 thread and the default thread count) against simulate one by one")
+    ap.add_argument("--efficiency", action="store_true",
+                    help="only the sweep's parallel efficiency from 1 to 2 workers (local and Dask)")
     args = ap.parse_args()
+    if args.efficiency:
+        return efficiency_only(args)
     if args.work_precision:
         return work_precision(args)
     if args.batch_vs_single:
@@ -210,7 +231,7 @@ def main() -> int:
     }
     for h in coarse_dt:
         paths[f"nonmin batch, 1 thread, dt = {h:g}"] = lambda h=h: nonmin_batch(th0, om0, 1, h)
-    per, outs, _ = _interleaved(paths, args)
+    per, outs, _, _ = _interleaved(paths, args)
     q_single, bt = outs["nonmin simulate one by one"], outs["nonmin batch, 1 thread"]
     ang_def, ang_stiff = outs["mujoco.rollout default, 1 thread"], outs["mujoco.rollout stiff, 1 thread"]
     coarse = {h: (None, outs[f"nonmin batch, 1 thread, dt = {h:g}"]) for h in coarse_dt}
@@ -236,7 +257,7 @@ def main() -> int:
                 branch_distance_max=branch, batch_equals_single=same,
                 failed=int(np.count_nonzero(~bt.success)))  # fmt: skip
     # ---- parallel efficiency
-    eff = efficiency(args.sweep_runs, not args.skip_dask)
+    eff = efficiency(args.sweep_runs, not args.skip_dask, args.repeat)
     rows["efficiency"] = eff
     rows["load_after"] = os.getloadavg()
     print(f"load average before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, after "
@@ -336,7 +357,7 @@ def batch_vs_single(args: Any) -> int:
         "nonmin batch, 1 thread": lambda: nonmin_batch(th0, om0, 1),
         f"nonmin batch, default threads ({os.cpu_count()} cores)": lambda: nonmin_batch(th0, om0, None),
     }
-    per, outs, walls = _interleaved(paths, args)
+    per, outs, walls, cpu = _interleaved(paths, args)
     b1, bd = outs["nonmin batch, 1 thread"], outs[list(paths)[2]]
     same = bool(np.array_equal(b1.q[: args.single], outs["nonmin simulate one by one"]))
     same_t = bool(np.array_equal(b1.q, bd.q))
@@ -344,23 +365,27 @@ def batch_vs_single(args: Any) -> int:
     print(f"load average before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, after {load1[0]:.2f} {load1[1]:.2f} "
           f"{load1[2]:.2f}\n\n{args.runs} runs (batch) / {args.single} runs (one by one) of the crossed four-bar "
           f"over {T_FINAL} s, RK4 dt = {DT}, medians of {args.repeat} interleaved rounds\n")  # fmt: skip
-    print("| path | per run (ms) | ratio to one by one |")
-    print("|---|---|---|")
-    base = per["nonmin simulate one by one"]
+    print("| path | wall per run (ms) | ratio to one by one | CPU per run (ms) | CPU ratio |")
+    print("|---|---|---|---|---|")
+    base, cbase = per["nonmin simulate one by one"], cpu["nonmin simulate one by one"]
     for k, v in per.items():
-        print(f"| {k} | {v * 1e3:.3f} | {v / base:.3f} |")
+        print(f"| {k} | {v * 1e3:.3f} | {v / base:.3f} | {cpu[k] * 1e3:.3f} | {cpu[k] / cbase:.3f} |")
     print(f"\nbatch (1 thread) equals simulate bitwise on the {args.single} runs: {same}; "
           f"batch 1 thread equals batch default threads bitwise: {same_t}; failed runs: "
           f"{int(np.count_nonzero(~b1.success))}")  # fmt: skip
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).with_name("sweep_bench_batch_vs_single.json").write_text(
-        json.dumps({"load": [load0, load1], "per_run_s": per, "walls": walls, "equal": [same, same_t]}, indent=1),
+        json.dumps({"load": [load0, load1], "per_run_s": per, "walls": walls, "cpu_per_run_s": cpu,
+                    "equal": [same, same_t]}, indent=1),
         encoding="utf-8")  # fmt: skip
     return 0
 
 
-def efficiency(runs: int, dask: bool) -> dict[str, tuple[float, float]]:
-    """Wall time of one sweep with 1 and 2 workers, locally and on a LocalCluster."""
+def efficiency(runs: int, dask: bool, repeat: int = 1) -> dict[str, tuple[float, float]]:
+    """Wall time of one sweep with 1 and 2 workers, locally and on LocalClusters of 1 and 2 worker
+    processes (both started here and kept): each configuration warmed up once (imports, the
+    model built on the workers), then ``repeat`` interleaved rounds (1 worker, 2 workers, ...);
+    medians."""
     from nonmin import library, sweep
     from nonmin.library._planar import _cfb_coordinates
 
@@ -369,8 +394,7 @@ def efficiency(runs: int, dask: bool) -> dict[str, tuple[float, float]]:
     Q, V = _cfb_coordinates(th0, om0)
     states0 = list(zip(Q, V))  # one zipped axis: (q0, qd0) of each draw
     t = np.linspace(0.0, T_FINAL, 201)
-    kw = {"t_span": T_FINAL, "dt": DT, "t_eval": t, "progress": False, "chunk": 50}
-    out: dict[str, tuple[float, float]] = {}
+    kw: dict[str, Any] = {"t_span": T_FINAL, "dt": DT, "t_eval": t, "progress": False, "chunk": 50}
     failed: list[int] = []
 
     def timed(**extra: Any) -> float:
@@ -379,19 +403,50 @@ def efficiency(runs: int, dask: bool) -> dict[str, tuple[float, float]]:
         failed.append(res.failed)  # (seed 99: one run of the first 20 fails in simulate too)
         return time.perf_counter() - w0
 
-    out["local threads"] = (timed(workers=1), timed(workers=2))
+    configs: dict[str, dict[str, Any]] = {"local threads 1": {"workers": 1}, "local threads 2": {"workers": 2}}
+    clusters: list[Any] = []
     if dask:
         from dask.distributed import Client, LocalCluster
 
-        times = []
         for nw in (1, 2):
-            with LocalCluster(n_workers=nw, threads_per_worker=1, processes=True, dashboard_address=None) as lc, \
-                    Client(lc) as client:  # fmt: skip
-                timed(scheduler=client)  # warm-up (imports, model build on the workers)
-                times.append(timed(scheduler=client))
-        out["dask LocalCluster processes"] = (times[0], times[1])
-    print(f"failed runs in the sweeps: {sorted(set(failed))}")
+            lc = LocalCluster(n_workers=nw, threads_per_worker=1, processes=True, dashboard_address=None)
+            client = Client(lc)
+            clusters += [client, lc]
+            configs[f"dask LocalCluster processes {nw}"] = {"scheduler": client}
+    try:
+        times: dict[str, list[float]] = {k: [] for k in configs}
+        for extra in configs.values():
+            timed(**extra)  # warm-up
+        for _ in range(max(repeat, 1)):
+            for k, extra in configs.items():
+                times[k].append(timed(**extra))
+    finally:
+        for c in clusters:
+            c.close()
+    med = {k: statistics.median(v) for k, v in times.items()}
+    out = {"local threads": (med["local threads 1"], med["local threads 2"])}
+    if dask:
+        out["dask LocalCluster processes"] = (med["dask LocalCluster processes 1"], med["dask LocalCluster processes 2"])
+    print(f"failed runs in the sweeps: {sorted(set(failed))}; rounds: "
+          + "; ".join(f"{k} " + " ".join(f"{x:.2f}" for x in v) for k, v in times.items()))
     return out
+
+
+def efficiency_only(args: Any) -> int:
+    """Target 2 alone: ``efficiency`` over ``--sweep-runs`` runs, ``--repeat`` interleaved rounds."""
+    load0 = os.getloadavg()
+    eff = efficiency(args.sweep_runs, not args.skip_dask, args.repeat)
+    load1 = os.getloadavg()
+    print(f"load average before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, after {load1[0]:.2f} {load1[1]:.2f} "
+          f"{load1[2]:.2f}; medians of {args.repeat} interleaved rounds after a warm-up\n")  # fmt: skip
+    print("| sweep, " + f"{args.sweep_runs} runs | 1 worker (s) | 2 workers (s) | efficiency |")
+    print("|---|---|---|---|")
+    for k, (a, b) in eff.items():
+        print(f"| {k} | {a:.2f} | {b:.2f} | {a / (2 * b):.2f} |")
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).with_name("sweep_bench_efficiency.json").write_text(
+        json.dumps({"load": [load0, load1], "efficiency": eff}, indent=1), encoding="utf-8")
+    return 0
 
 
 if __name__ == "__main__":
