@@ -382,10 +382,9 @@ def batch_vs_single(args: Any) -> int:
 
 
 def efficiency(runs: int, dask: bool, repeat: int = 1) -> dict[str, tuple[float, float]]:
-    """Wall time of one sweep with 1 and 2 workers, locally and on LocalClusters of 1 and 2 worker
-    processes (both started here and kept): each configuration warmed up once (imports, the
-    model built on the workers), then ``repeat`` interleaved rounds (1 worker, 2 workers, ...);
-    medians."""
+    """Wall time of one sweep with 1 and 2 workers, locally (warmed up, then ``repeat``
+    interleaved rounds) and on a LocalCluster of 1, then of 2 worker processes started here
+    (each warmed up: imports, the model built on the workers; then ``repeat`` sweeps); medians."""
     from nonmin import library, sweep
     from nonmin.library._planar import _cfb_coordinates
 
@@ -403,26 +402,21 @@ def efficiency(runs: int, dask: bool, repeat: int = 1) -> dict[str, tuple[float,
         failed.append(res.failed)  # (seed 99: one run of the first 20 fails in simulate too)
         return time.perf_counter() - w0
 
-    configs: dict[str, dict[str, Any]] = {"local threads 1": {"workers": 1}, "local threads 2": {"workers": 2}}
-    clusters: list[Any] = []
+    # local: both warmed up, then interleaved rounds; Dask: one LocalCluster at a time (two
+    # clusters alive in one process hung the sweep, 02:20 and 02:50 UTC), warmed up, then rounds
+    times: dict[str, list[float]] = {"local threads 1": [], "local threads 2": []}
+    timed(workers=1), timed(workers=2)
+    for _ in range(max(repeat, 1)):
+        times["local threads 1"].append(timed(workers=1))
+        times["local threads 2"].append(timed(workers=2))
     if dask:
         from dask.distributed import Client, LocalCluster
 
         for nw in (1, 2):
-            lc = LocalCluster(n_workers=nw, threads_per_worker=1, processes=True, dashboard_address=None)
-            client = Client(lc)
-            clusters += [client, lc]
-            configs[f"dask LocalCluster processes {nw}"] = {"scheduler": client}
-    try:
-        times: dict[str, list[float]] = {k: [] for k in configs}
-        for extra in configs.values():
-            timed(**extra)  # warm-up
-        for _ in range(max(repeat, 1)):
-            for k, extra in configs.items():
-                times[k].append(timed(**extra))
-    finally:
-        for c in clusters:
-            c.close()
+            with LocalCluster(n_workers=nw, threads_per_worker=1, processes=True, dashboard_address=None) as lc, \
+                    Client(lc) as client:  # fmt: skip
+                timed(scheduler=client)  # warm-up (imports, model build on the workers)
+                times[f"dask LocalCluster processes {nw}"] = [timed(scheduler=client) for _ in range(max(repeat, 1))]
     med = {k: statistics.median(v) for k, v in times.items()}
     out = {"local threads": (med["local threads 1"], med["local threads 2"])}
     if dask:
