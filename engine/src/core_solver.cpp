@@ -42,6 +42,14 @@ struct Solver::Impl {
     std::vector<double> Ui, Tj, db;
     std::vector<int> lrows;  // the live rows (a known pattern's rows after compaction)
     bool b_zero = true;      // B is all zero (a known pattern's entries are zeroed after use)
+    double h_rtol = 0.0;     // the held call's rank tolerance
+    // near(): the refined basis Z of the last near call's A (rows of Zn), S = Z M Zᵀ (Gn), its
+    // factor (Lsn) and μ; near_ok: they are that A's, refined from the factorization still held;
+    // near_last: the last solve was near() (cond_mbar reads Gn)
+    std::vector<double> Zn, Gn, Lsn, nres, nx;
+    bool near_ok = false, near_last = false;
+    int near_k = 0;
+    double near_mu = 0.0;
 
     Impl(int m_max_, int n_)
         : m_max(m_max_), n(n_) {
@@ -73,6 +81,11 @@ struct Solver::Impl {
         Tj.assign(mj * mj, 0.0);
         db.assign(m_max + 1, 0.0);
         lrows.assign(m_max, 0);
+        Zn.assign(mn, 0.0);
+        Gn.assign(static_cast<long>(m_max) * m_max, 0.0);
+        Lsn.assign(static_cast<long>(m_max) * m_max, 0.0);
+        nres.assign(m_max + 1, 0.0);
+        nx.assign(n, 0.0);
     }
 
     double smax_of(int m) const {  // max_i sig[i] (keep_rows' σ_max)
@@ -187,9 +200,13 @@ struct Solver::Impl {
     // The null-space form's factorization: S = Z M Zᵀ (k × k, in G), μ, the Cholesky factor of S
     // (Ls) with the SPD test of the n × n M̄ = diag(μI, S) in the basis [Q; Z] (pivots of S
     // against max_i M̄_ii). Returns a linalg::CholStatus.
+    // (Z, S, Lf: the basis read and the outputs, Kt, G and Ls when null)
     int null_factor(const double* M, bool diag, int k, double mu_in, double* mu_out,
-                    double spd_rtol, double* ratio) {
-        const double* Z = Kt.data();
+                    double spd_rtol, double* ratio, const double* Z = nullptr, double* S = nullptr,
+                    double* Lf = nullptr) {
+        if (!Z) Z = Kt.data();
+        if (!S) S = G.data();
+        if (!Lf) Lf = Ls.data();
         double* ZM = Et.data();
         for (int a = 0; a < k; ++a) {  // ZM = Z M
             const double* Za = Z + static_cast<long>(a) * n;
@@ -205,7 +222,6 @@ struct Solver::Impl {
                 for (int j = 0; j < n; ++j) Ya[j] += c * Mi[j];
             }
         }
-        double* S = G.data();
         double trs = 0.0;
         for (int a = 0; a < k; ++a) {
             for (int c = 0; c < k; ++c) {
@@ -261,7 +277,7 @@ struct Solver::Impl {
         }
         int st = linalg::CHOL_OK;
         double rt = std::numeric_limits<double>::infinity();
-        double* L = Ls.data();
+        double* L = Lf;
         for (int j = 0; j < k; ++j) {  // Cholesky of S
             double s = S[j * k + j];
             for (int c = 0; c < j; ++c) s -= L[j * k + c] * L[j * k + c];
@@ -285,10 +301,11 @@ struct Solver::Impl {
         return st;
     }
 
-    // out = w + Zᵀ S⁻¹ Z u (S = Ls Lsᵀ): the null-space form's q̈.
-    void null_space_qdd(int k, const double* uu, const double* w, double* out) {
-        const double* Z = Kt.data();
-        const double* L = Ls.data();
+    // out = w + Zᵀ S⁻¹ Z u (S = Ls Lsᵀ): the null-space form's q̈ (Z, L: Kt and Ls when null).
+    void null_space_qdd(int k, const double* uu, const double* w, double* out, const double* Z = nullptr,
+                        const double* L = nullptr) {
+        if (!Z) Z = Kt.data();
+        if (!L) L = Ls.data();
         double* y = cv.data();
         for (int a = 0; a < k; ++a) {
             double s = 0.0;
@@ -311,13 +328,14 @@ struct Solver::Impl {
     }
 
     // q̈ = w + Zᵀ S⁻¹ Z (g − M w) and f_c = M q̈ − g with the factor of S held (Ls).
-    void null_finish(const double* M, const double* gin, bool diag, int k, double* qdd, double* fc) {
+    void null_finish(const double* M, const double* gin, bool diag, int k, double* qdd, double* fc,
+                     const double* Z = nullptr, const double* L = nullptr) {
         for (int i = 0; i < n; ++i) {
             g[i] = gin[i];
             u[i] = gin[i];
         }
         add_m_times(M, diag, wv.data(), -1.0, u.data());  // u = g − M w
-        null_space_qdd(k, u.data(), wv.data(), qdd);
+        null_space_qdd(k, u.data(), wv.data(), qdd, Z, L);
         if (fc) {
             for (int i = 0; i < n; ++i) cw[i] = 0.0;
             add_m_times(M, diag, qdd, 1.0, cw.data());
@@ -375,6 +393,29 @@ struct Solver::Impl {
     }
 
     SolveInfo again(const double* M, const double* gin, const double* gamma, double* qdd, double* fc);
+    SolveInfo near(const double* M, const double* gin, const double* A, int m, const double* gamma,
+                   const SolveOptions& opt, bool same, double* qdd, double* fc);
+
+    // x = A_h⁺ b = (D A_h)⁺ D b through the held certified LQ of every row (near()).
+    void near_pinv(const double* b, double* x) {
+        const int r = h_r;
+        double* db_ = db.data();
+        for (int i = 0; i < r; ++i) db_[i] = d[i] * b[i];
+        if (lqmode == linalg::LQ_INVERSE) {
+            const int ld = lq.m_max;
+            for (int i = 0; i < r; ++i) {
+                const double* Ri = lq.Li.data() + static_cast<long>(i) * ld;
+                double s = 0.0;
+                for (int k = 0; k <= i; ++k) s += Ri[k] * db_[lq.Ro[k]];
+                cv[i] = s;
+            }
+        } else {
+            for (int i = 0; i < r; ++i) cv[i] = db_[lq.Ro[i]];
+            linalg::lq_profile_solve(lq, r, cv.data());
+        }
+        linalg::lq_min_norm(lq, r, n, cv.data(), x);
+        for (int j = 0; j < n; ++j) x[j] = -x[j];
+    }
 
     // Keep the factorization just made for again() (when the solve succeeded).
     void hold(const SolveInfo& info, int m, int r, bool diag) {
@@ -466,6 +507,8 @@ SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* 
                               double* fc, double* P, double* L, double* xmin) {
     SolveInfo info;
     held = false;
+    near_ok = near_last = false;
+    h_rtol = opt.rtol;
     ++gen;
     if (m < 0 || m > m_max) {
         info.status = Status::bad_shape;
@@ -649,6 +692,7 @@ SolveInfo Solver::Impl::solve(const double* M, const double* gin, const double* 
 SolveInfo Solver::Impl::again(const double* M, const double* gin, const double* gamma, double* qdd,
                               double* fc) {
     SolveInfo info;
+    near_last = false;
     if (!held) {
         info.status = Status::bad_shape;
         return info;
@@ -698,6 +742,120 @@ SolveInfo Solver::Impl::again(const double* M, const double* gin, const double* 
     return info;
 }
 
+// Passes of near() at most (each multiplies the residual by about ‖A − A_h‖ ‖A_h⁺‖; two
+// suffice for a projection's corrections of ~1e-6): nonmin ≤ 0.1's core solve_near.
+constexpr int NEAR_PASSES = 3;
+
+SolveInfo Solver::Impl::near(const double* M, const double* gin, const double* A, int m, const double* gamma,
+                             const SolveOptions& opt, bool same, double* qdd, double* fc) {
+    SolveInfo info;
+    info.status = Status::bad_shape;  // declined
+    const bool reuse = same && near_ok;
+    near_last = false;
+    if (!held || !zmode || lqmode == linalg::LQ_NONE || m != h_m || m_live != m || h_r != m ||
+        !(opt.rtol <= h_rtol) || !(opt.known & KNOWN_M_VALID) || !M || m == 0) {
+        near_ok = false;
+        return info;
+    }
+    const int k = n - m;
+    const bool diag = (opt.known & KNOWN_M_DIAGONAL) != 0;
+    const int* pst = opt.a_start;
+    const int* pco = opt.a_cols;
+    const bool pat = pst && pco;
+    auto row_dot = [&](int i, const double* x, double s) {  // s + (A x)_i
+        const double* Ai = A + static_cast<long>(i) * n;
+        if (pat)
+            for (int t = pst[i]; t < pst[i + 1]; ++t) s += Ai[pco[t]] * x[pco[t]];
+        else
+            for (int j = 0; j < n; ++j) s += Ai[j] * x[j];
+        return s;
+    };
+    const double tol = 64.0 * std::numeric_limits<double>::epsilon();
+    double* Z = Zn.data();
+    double* res = nres.data();
+    double* x = nx.data();
+    if (!reuse) {  // the refined basis Z' from Z_h
+        near_ok = false;
+        for (long t = 0; t < static_cast<long>(k) * n; ++t) Z[t] = Kt[t];
+        bool ok = false;
+        for (int pass = 0; pass < NEAR_PASSES && !ok; ++pass) {
+            for (int a = 0; a < k; ++a) {
+                double* za = Z + static_cast<long>(a) * n;
+                for (int i = 0; i < m; ++i) res[i] = row_dot(i, za, 0.0);
+                near_pinv(res, x);
+                for (int j = 0; j < n; ++j) za[j] -= x[j];
+            }
+            for (int a = 0; a < k; ++a) {  // Gram–Schmidt
+                double* za = Z + static_cast<long>(a) * n;
+                for (int c = 0; c < a; ++c) {
+                    const double* zc = Z + static_cast<long>(c) * n;
+                    double dd = 0.0;
+                    for (int j = 0; j < n; ++j) dd += zc[j] * za[j];
+                    for (int j = 0; j < n; ++j) za[j] -= dd * zc[j];
+                }
+                double nn = 0.0;
+                for (int j = 0; j < n; ++j) nn += za[j] * za[j];
+                const double inv = 1.0 / std::sqrt(nn);
+                for (int j = 0; j < n; ++j) za[j] *= inv;
+            }
+            double big = 0.0;
+            for (int a = 0; a < k; ++a)
+                for (int i = 0; i < m; ++i)
+                    big = std::max(big, std::fabs(row_dot(i, Z + static_cast<long>(a) * n, 0.0)) * d[i]);
+            ok = big <= tol;  // (NaN: not)
+        }
+        if (!ok) return info;
+    }
+    // w: the minimum-norm solution of A w = −γ
+    bool bad = false;
+    for (int i = 0; i < n; ++i) bad |= gin[i] * 0.0 != 0.0;
+    for (int i = 0; i < m; ++i) bad |= (gamma[i] - gamma[i]) != 0.0;
+    if (bad) return info;  // (the fresh call reports it)
+    double* w = wv.data();
+    near_pinv(gamma, w);
+    double gs = 0.0;
+    for (int j = 0; j < n; ++j) w[j] = -w[j];
+    for (int i = 0; i < m; ++i) gs = std::max(gs, std::fabs(gamma[i]) * d[i]);
+    bool ok = false;
+    for (int pass = 0; pass < NEAR_PASSES; ++pass) {
+        double e = 0.0, wmax = 0.0;
+        for (int i = 0; i < m; ++i) {
+            res[i] = row_dot(i, w, gamma[i]);
+            e = std::max(e, std::fabs(res[i]) * d[i]);
+        }
+        for (int j = 0; j < n; ++j) wmax = std::max(wmax, std::fabs(w[j]));
+        if (e <= tol * (gs + wmax)) {
+            ok = true;
+            break;
+        }
+        near_pinv(res, x);
+        for (int j = 0; j < n; ++j) w[j] -= x[j];
+    }
+    if (!ok) return info;
+    for (int a = 0; a < k; ++a) {  // w ⟂ N(A)
+        const double* za = Z + static_cast<long>(a) * n;
+        double dd = 0.0;
+        for (int j = 0; j < n; ++j) dd += za[j] * w[j];
+        for (int j = 0; j < n; ++j) w[j] -= dd * za[j];
+    }
+    if (!reuse) {
+        double mu = 0.0, ratio = 0.0;
+        const int st = null_factor(M, diag, k, opt.mu, &mu, opt.spd_rtol, &ratio, Z, Gn.data(), Lsn.data());
+        if (st != linalg::CHOL_OK) return info;  // (the fresh call reports it)
+        near_mu = mu;
+        near_k = k;
+        near_ok = true;
+    }
+    null_finish(M, gin, diag, k, qdd, fc, Z, Lsn.data());
+    near_last = true;
+    info.status = Status::ok;
+    info.rank = m;
+    info.mu = near_mu;
+    info.method = lqmode;
+    info.null_space_form = true;
+    return info;
+}
+
 Solver::Solver(int m_max, int n) {
     if (m_max < 0 || n < 1) throw EngineError("Solver: need m_max >= 0 and n >= 1");
     impl_ = std::make_unique<Impl>(m_max, n);
@@ -742,21 +900,27 @@ SolveInfo Solver::again(const double* M, const double* g, const double* gamma, d
 
 bool Solver::held() const { return impl_->held; }
 
+SolveInfo Solver::near(const double* M, const double* g, const double* A, int m, const double* gamma,
+                       const SolveOptions& opt, bool same, double* qdd, double* f_c) {
+    return impl_->near(M, g, A, m, gamma, opt, same, qdd, f_c);
+}
+
 unsigned long long Solver::generation() const { return impl_->gen; }
 
 double Solver::cond_mbar() {
     Impl& s = *impl_;
     if (!s.held || !s.zmode) return std::numeric_limits<double>::quiet_NaN();
-    const int k = s.n - s.h_r;
-    const double mu = s.h_mu;
+    const int k = s.near_last ? s.near_k : s.n - s.h_r;
+    const double mu = s.near_last ? s.near_mu : s.h_mu;
+    const double* G = s.near_last ? s.Gn.data() : s.G.data();  // S of the last solve
     if (k <= 0) return 1.0;
     double lo, hi;
     if (k == 1) {
-        lo = hi = s.G[0];
-    } else {  // eigenvalues of the symmetric part of S (k × k, in G) on a copy
+        lo = hi = G[0];
+    } else {  // eigenvalues of the symmetric part of S (k × k) on a copy
         double* X = s.Tt.data();
         for (int a = 0; a < k; ++a)
-            for (int c = 0; c < k; ++c) X[a * k + c] = 0.5 * (s.G[a * k + c] + s.G[c * k + a]);
+            for (int c = 0; c < k; ++c) X[a * k + c] = 0.5 * (G[a * k + c] + G[c * k + a]);
         linalg::sym_eigenvalues(X, k, s.cw.data());
         lo = hi = s.cw[0];
         for (int a = 1; a < k; ++a) {

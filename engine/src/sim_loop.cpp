@@ -83,6 +83,7 @@ SolveOptions solve_options(const Loop& L, double rtol, const std::vector<int>* p
 // A: L.Ac (its m rows) or L.Alin (the m_hol position-level rows), with their known pattern.
 Status correction(Loop& L, const Mat& A, int m, const double* r, double rtol, double* out, int* rank) {
     L.vheld = false;
+    L.nheld = false;
     const bool hol = &A == &L.Alin;
     // the metric's Known bits: the identity, or the constant M validated once (m_known)
     const unsigned known = L.mq == 1 ? KNOWN_M_VALID | KNOWN_M_DIAGONAL : L.mq == 2 ? L.m_known : 0u;
@@ -90,6 +91,11 @@ Status correction(Loop& L, const Mat& A, int m, const double* r, double rtol, do
                                 : solve_options(L, rtol, &L.pc_start, &L.pc_cols, known);
     const SolveInfo info = L.solver.forward(L.Mq.data(), L.zero_n.data(), A.data(), m, r, so, out, nullptr);
     L.lq_full = info.status == Status::ok && info.method != 0 && info.rank == m;
+    if (hol) {  // (a position correction: its factorization may serve the velocity step, Solver::near)
+        L.pfull = L.lq_full && info.null_space_form && m == L.m;
+        L.pgen = L.solver.generation();
+        L.prtol = rtol;
+    }
     if (rank) *rank = info.rank;
     if (info.status != Status::ok) return info.status;
     return Status::ok;
@@ -101,6 +107,18 @@ Status correction(Loop& L, const Mat& A, int m, const double* r, double rtol, do
 // row: Loop::vlq): A is a function of (t, q), so the factorization is this A's (certified LQ:
 // bitwise the fresh result).
 SolveInfo dynamics_solve(Loop& L, double t, const double* q, double rtol, double* qdd, double* fc) {
+    if (L.nheld && L.solver.generation() == L.pgen && t == L.vt && rtol <= L.prtol &&
+        (L.prog->constant_mass() || L.Mq == L.T.M)) {  // the velocity step's near() at this (t, q)
+        bool same = true;
+        for (int i = 0; i < L.n && same; ++i) same = q[i] == L.vq[i];
+        if (same) {
+            const SolveInfo info = L.solver.near(
+                L.T.M.data(), L.g.data(), L.Ac.data(), L.m, L.bias.data(),
+                solve_options(L, rtol, &L.pc_start, &L.pc_cols, L.m_held ? L.m_known : 0u), true, qdd, fc);
+            if (info.status == Status::ok) return info;
+        }
+    }
+    L.nheld = false;
     if (L.vheld && L.solver.generation() == L.vgen && t == L.vt && L.solver.held() &&
         (rtol == L.vrtol || (L.vlq && rtol <= L.vrtol))) {
         bool same = true;
@@ -582,8 +600,27 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
     }
     if (po.velocity && L.m > 0) {
         const double vr = velocity_rtol(L.opt, po);
-        if (pos_held && velocity_again(L, vr, pos_gen, pos_lq, pos_rtol, qd)) {
+        // the position correction's last factorization (a certified LQ of every active row, at a
+        // tolerance ≥ vr), refined to A at the corrected q (Solver::near: exact to round-off;
+        // the dynamics at this (t, q) then reuse it too)
+        bool near = false;
+        if (pos_held && mh == L.m && L.pfull && L.solver.generation() == L.pgen && vr <= L.prtol) {
+            const unsigned known = L.mq == 1 ? KNOWN_M_VALID | KNOWN_M_DIAGONAL : L.mq == 2 ? L.m_known : 0u;
+            const SolveInfo info = L.solver.near(L.Mq.data(), L.zero_n.data(), L.Ac.data(), L.m, L.vel.data(),
+                                                 solve_options(L, vr, &L.pc_start, &L.pc_cols, known), false,
+                                                 L.dq.data(), nullptr);
+            near = info.status == Status::ok;
+        }
+        if (near) {
+            for (int j = 0; j < n; ++j) qd[j] = qd[j] + L.dq[j];
+            L.nheld = !po.euclidean;  // (the Euclidean metric is not M)
+            L.vheld = false;
+            L.vt = t;
+            L.vrtol = vr;
+            for (int j = 0; j < n; ++j) L.vq[j] = q[j];
+        } else if (pos_held && velocity_again(L, vr, pos_gen, pos_lq, pos_rtol, qd)) {
             L.vheld = false;  // (the factorization held is the position correction's A, not A(q))
+            L.nheld = false;
         } else {
             s = correction(L, L.Ac, L.m, L.vel.data(), vr, L.dq.data(), nullptr);
             if (s != Status::ok) return s;

@@ -69,6 +69,24 @@ class Solver {
     // of the kept rows applied to D γ instead of rotating it with B). Status bad_shape when
     // nothing is held. qdd, f_c as forward.
     SolveInfo again(const double* M, const double* g, const double* gamma, double* qdd, double* f_c);
+    // Solve at a constraint matrix A (m × n, m the held call's m) close to the A_h of the held
+    // factorization, without factorizing A: the held factorization must be a certified LQ of
+    // every row (rank m) in the null-space form, taken at a rank tolerance ≥ opt.rtol, and
+    // opt.known must state M (KNOWN_M_VALID). Its factors give A_h⁺ and an orthonormal basis
+    // Z_h of N(A_h); with A = A_h + E, each pass z ← z − A_h⁺(A z) turns the basis' residual
+    // from O(‖E‖) into O(‖E‖²/σ_min) (then Gram–Schmidt), and likewise w ← w − A_h⁺(A w + γ)
+    // the minimum-norm solution of A w = −γ; passes continue until the equilibrated residuals
+    // are at round-off (64 eps), at most NEAR_PASSES. With Z and w exact for A, the null-space
+    // form q̈ = w + Zᵀ S⁻¹ Z (g − M w), S = Z M Zᵀ, μ = tr S / k gives the fresh call's result
+    // to round-off (not bitwise) at the cost of a few products with A and the held factors. The
+    // rank is the held one: A must be the held A moved by a projection's correction (the
+    // caller's concern). `same`: A is bitwise the A of the last near() call, which succeeded
+    // on the factorization still held (its Z, S and factor are reused; only w is new).
+    // The held factorization stays held for again(); cond_mbar() then reports the near A's.
+    // Status ok, or bad_shape when declined (nothing suitable held, passes not at round-off:
+    // factorize A instead), or the SPD status of S. qdd, f_c as forward.
+    SolveInfo near(const double* M, const double* g, const double* A, int m, const double* gamma,
+                   const SolveOptions& opt, bool same, double* qdd, double* f_c);
     // Whether a factorization is held (the last forward/solve succeeded; any other call drops it).
     bool held() const;
     // Counts the calls that factorize (forward, solve, range_basis, min_norm; not again): a

@@ -288,6 +288,14 @@ struct Loop {
     unsigned long long vgen = 0;
     double vt = 0.0, vrtol = 0.0;
     Vec vq;
+    // The position correction's last linearization (Solver generation pgen, rank tolerance
+    // prtol; pfull: a certified LQ of all m rows, which are every active row) serves the
+    // velocity correction at the corrected q through Solver::near (refined to that q's A,
+    // exact to round-off, no factorization), and then the dynamics solves at that (t, q)
+    // (nheld: A at (nt, vq) is the last near() call's, rank tolerance ≤ prtol).
+    bool pfull = false, nheld = false;
+    unsigned long long pgen = 0;
+    double prtol = 0.0;
 
     // integration state
     double t = 0.0;
