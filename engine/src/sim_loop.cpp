@@ -101,6 +101,12 @@ Status correction(Loop& L, const Mat& A, int m, const double* r, double rtol, do
     return Status::ok;
 }
 
+// Solver::near pays only with many rows: below this count (the dense certified LQ) a fresh
+// factorization is cheaper than near()'s refinement passes (callgrind, crossed four-bar 2 s
+// RK4 dt 1e-2: 39.08M Ir fresh, 42.25M with near(); A02 N = 40, 242 rows, 0.5 s dt 2e-2:
+// 139.16M fresh, 118.67M with near()).
+constexpr int NEAR_MIN_ROWS = 33;
+
 // Solver::forward at the evaluation just made at (t, q) (M = T.M, A = Ac, g, bias), or
 // Solver::again on the velocity correction's factorization when it was taken at this (t, q)
 // with the same M and rank tolerance (or a larger one, when it was a certified LQ of every
@@ -604,7 +610,8 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
         // tolerance ≥ vr), refined to A at the corrected q (Solver::near: exact to round-off;
         // the dynamics at this (t, q) then reuse it too)
         bool near = false;
-        if (pos_held && mh == L.m && L.pfull && L.solver.generation() == L.pgen && vr <= L.prtol) {
+        if (L.m >= NEAR_MIN_ROWS && pos_held && mh == L.m && L.pfull && L.solver.generation() == L.pgen &&
+            vr <= L.prtol) {
             const unsigned known = L.mq == 1 ? KNOWN_M_VALID | KNOWN_M_DIAGONAL : L.mq == 2 ? L.m_known : 0u;
             const SolveInfo info = L.solver.near(L.Mq.data(), L.zero_n.data(), L.Ac.data(), L.m, L.vel.data(),
                                                  solve_options(L, vr, &L.pc_start, &L.pc_cols, known), false,
