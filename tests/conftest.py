@@ -65,6 +65,33 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
 
 
 @pytest.fixture(scope="session")
+def pin_frame_constraints() -> Callable[..., tuple]:
+    """``pin_frame_constraints(robot, [(rows, name), ...])``: Pinocchio's ``RigidConstraintModel``
+    for each of a ``RobotModel``'s frame constraints (``CONTACT_3D`` for 3 rows, else
+    ``CONTACT_6D``, between the frames ``name:a`` and ``name:b``, LOCAL reference frame) and
+    their data, as the vectors ``constraintDynamics`` takes (the tests that compare with it)."""
+
+    def build(robot: object, specs: list[tuple[int, str]]) -> tuple:
+        import pinocchio as pin
+
+        pm = robot.pinocchio_model  # type: ignore[attr-defined]
+        models = pin.StdVec_RigidConstraintModel()
+        datas = pin.StdVec_RigidConstraintData()
+        for rows, name in specs:
+            fa = pm.frames[robot.frame_id(f"{name}:a")]  # type: ignore[attr-defined]
+            fb = pm.frames[robot.frame_id(f"{name}:b")]  # type: ignore[attr-defined]
+            ctype = pin.ContactType.CONTACT_3D if rows == 3 else pin.ContactType.CONTACT_6D
+            cm = pin.RigidConstraintModel(
+                ctype, pm, fa.parentJoint, fa.placement, fb.parentJoint, fb.placement, pin.ReferenceFrame.LOCAL
+            )
+            models.append(cm)
+            datas.append(cm.createData())
+        return models, datas
+
+    return build
+
+
+@pytest.fixture(scope="session")
 def load_benchmark() -> Callable[[str], ModuleType]:
     """``load_benchmark("sim_bench")``: a script of ``benchmarks/`` imported as a module (the
     tests that check the peer models the benchmarks run)."""

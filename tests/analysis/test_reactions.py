@@ -285,7 +285,7 @@ def test_spatial_fourbar_of_revolutes_has_undetermined_axial_forces() -> None:
 
 
 # --------------------------------------------------------------------------- robots vs Pinocchio
-def test_robot_loop_closures_match_pinocchio_lambda() -> None:
+def test_robot_loop_closures_match_pinocchio_lambda(pin_frame_constraints) -> None:
     pin = pytest.importorskip("pinocchio")
     from nonmin.model.robots._examples import two_arm_grasp
 
@@ -305,25 +305,7 @@ def test_robot_loop_closures_match_pinocchio_lambda() -> None:
     # Pinocchio: the same closures as RigidConstraintModels in frame a's LOCAL axes
     pm = robot.pinocchio_model
     data = pm.createData()
-    models = pin.StdVec_RigidConstraintModel()
-    datas = pin.StdVec_RigidConstraintData()
-    for name, ctype in (
-        ("grasp_left", pin.ContactType.CONTACT_6D),
-        ("grasp_right", pin.ContactType.CONTACT_3D),
-    ):
-        fa = pm.frames[robot.frame_id(f"{name}:a")]
-        fb = pm.frames[robot.frame_id(f"{name}:b")]
-        cm = pin.RigidConstraintModel(
-            ctype,
-            pm,
-            fa.parentJoint,
-            fa.placement,
-            fb.parentJoint,
-            fb.placement,
-            pin.ReferenceFrame.LOCAL,
-        )
-        models.append(cm)
-        datas.append(cm.createData())
+    models, datas = pin_frame_constraints(robot, [(6, "grasp_left"), (3, "grasp_right")])
     pin.initConstraintDynamics(pm, data, models, datas)
     prox = pin.ProximalSettings(1e-12, 0.0, 1)
     pin.constraintDynamics(

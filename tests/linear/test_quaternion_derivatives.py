@@ -114,28 +114,6 @@ def test_quaternion_derivatives_match_dual_numbers_and_differences(name):
         assert _rel(ours.dqdd_dqd, fd_v) <= 1e-7
 
 
-def _pin_constraints(robot, specs):
-    pm = robot.pinocchio_model
-    models = pin.StdVec_RigidConstraintModel()
-    datas = pin.StdVec_RigidConstraintData()
-    for rows, cname in specs:
-        fa = pm.frames[robot.frame_id(f"{cname}:a")]
-        fb = pm.frames[robot.frame_id(f"{cname}:b")]
-        ctype = pin.ContactType.CONTACT_3D if rows == 3 else pin.ContactType.CONTACT_6D
-        cm = pin.RigidConstraintModel(
-            ctype,
-            pm,
-            fa.parentJoint,
-            fa.placement,
-            fb.parentJoint,
-            fb.placement,
-            pin.ReferenceFrame.LOCAL,
-        )
-        models.append(cm)
-        datas.append(cm.createData())
-    return models, datas
-
-
 def _central(fun, x, h=1e-6):
     cols = []
     for k in range(x.size):
@@ -146,11 +124,11 @@ def _central(fun, x, h=1e-6):
 
 
 @pytest.mark.parametrize("name", sorted(MODELS))
-def test_quaternion_derivatives_match_pinocchio(name):
+def test_quaternion_derivatives_match_pinocchio(name, pin_frame_constraints):
     robot, q0, specs = MODELS[name]()
     pm = robot.pinocchio_model
     pd = pm.createData()
-    cms, cds = _pin_constraints(robot, specs)
+    cms, cds = pin_frame_constraints(robot, specs)
     pin.initConstraintDynamics(pm, pd, cms, cds)
     prox = pin.ProximalSettings(1e-14, 1e-14, 1)
     nv = pm.nv

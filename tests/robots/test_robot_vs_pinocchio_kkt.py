@@ -30,34 +30,29 @@ def _admissible_velocity(robot, q, active, rng):
     return N @ rng.normal(size=N.shape[1])
 
 
-def _pin_constraint_dynamics(robot, q, qd, tau_v, specs, *, mu=0.0, max_iter=1):
-    """Pinocchio's constraintDynamics on the same tree and constraint frames."""
-    pm = robot.pinocchio_model
-    data = pm.createData()
-    models = pin.StdVec_RigidConstraintModel()
-    datas = pin.StdVec_RigidConstraintData()
-    for rows, name in specs:
-        fa = pm.frames[robot.frame_id(f"{name}:a")]
-        fb = pm.frames[robot.frame_id(f"{name}:b")]
-        ctype = pin.ContactType.CONTACT_3D if rows == 3 else pin.ContactType.CONTACT_6D
-        cm = pin.RigidConstraintModel(
-            ctype, pm, fa.parentJoint, fa.placement, fb.parentJoint, fb.placement,
-            pin.ReferenceFrame.LOCAL,
-        )
-        models.append(cm)
-        datas.append(cm.createData())
-    pin.initConstraintDynamics(pm, data, models, datas)
-    prox = pin.ProximalSettings(1e-12, mu, max_iter)
-    qn = robot.pinocchio_configuration(q)
-    v = robot.to_pinocchio_velocity(q, qd)
-    a = np.array(pin.constraintDynamics(pm, data, qn, v, tau_v, models, datas, prox))
-    M = pin.crba(pm, pm.createData(), qn)
-    M = np.triu(M) + np.triu(M, 1).T
-    nle = np.array(pin.nonLinearEffects(pm, pm.createData(), qn, v))
-    f_c = M @ a + nle - tau_v  # generalized constraint force in velocity space
-    J = np.array(pin.getConstraintsJacobian(pm, data, models, datas))
-    lam = np.array(data.lambda_c)
-    return a, f_c, J, lam, prox
+@pytest.fixture
+def pin_dynamics(pin_frame_constraints):
+    """``pin_dynamics(robot, q, qd, tau_v, specs, mu=0.0, max_iter=1)``: Pinocchio's
+    constraintDynamics on the same tree and constraint frames (q̈, f_c, J, λ, the settings)."""
+
+    def run(robot, q, qd, tau_v, specs, *, mu=0.0, max_iter=1):
+        pm = robot.pinocchio_model
+        data = pm.createData()
+        models, datas = pin_frame_constraints(robot, specs)
+        pin.initConstraintDynamics(pm, data, models, datas)
+        prox = pin.ProximalSettings(1e-12, mu, max_iter)
+        qn = robot.pinocchio_configuration(q)
+        v = robot.to_pinocchio_velocity(q, qd)
+        a = np.array(pin.constraintDynamics(pm, data, qn, v, tau_v, models, datas, prox))
+        M = pin.crba(pm, pm.createData(), qn)
+        M = np.triu(M) + np.triu(M, 1).T
+        nle = np.array(pin.nonLinearEffects(pm, pm.createData(), qn, v))
+        f_c = M @ a + nle - tau_v  # generalized constraint force in velocity space
+        J = np.array(pin.getConstraintsJacobian(pm, data, models, datas))
+        lam = np.array(data.lambda_c)
+        return a, f_c, J, lam, prox
+
+    return run
 
 
 def _nonmin(robot, q, qd, tau_v, active):
@@ -68,7 +63,7 @@ def _nonmin(robot, q, qd, tau_v, active):
     return sol, mt, T
 
 
-def test_arm_point_contact_matches_pinocchio_kkt() -> None:
+def test_arm_point_contact_matches_pinocchio_kkt(pin_dynamics) -> None:
     """Fixed-base 4-dof arm, end effector pinned to the ground (3D point, rank 3, 1 dof)."""
     base = RobotModel.from_urdf(data_path("arm4.urdf"))
     robot = base.replace(robot_constraints=(FrameConstraint.point("pin", "ee"),))
@@ -83,14 +78,14 @@ def test_arm_point_contact_matches_pinocchio_kkt() -> None:
         qd = _admissible_velocity(robot, q0, None, rng)
         tau = rng.normal(size=robot.nv)
         sol, _, T = _nonmin(robot, q0, qd, tau, None)
-        a, f_c, J, lam, _ = _pin_constraint_dynamics(robot, q0, qd, tau, [(3, "pin")])
+        a, f_c, J, lam, _ = pin_dynamics(robot, q0, qd, tau, [(3, "pin")])
         assert int(sol.rank) == 3
         np.testing.assert_allclose(sol.qdd, a, atol=TOL, rtol=0)
         np.testing.assert_allclose(sol.f_c, T.T @ f_c, atol=TOL * max(1.0, np.abs(f_c).max()))
         np.testing.assert_allclose(J.T @ lam, f_c, atol=1e-8 * max(1.0, np.abs(f_c).max()))
 
 
-def test_two_arm_grasp_with_free_box_matches_pinocchio_kkt() -> None:
+def test_two_arm_grasp_with_free_box_matches_pinocchio_kkt(pin_dynamics) -> None:
     """Free-flyer box (quaternion coordinates) held by a weld (6D) and a point (3D)."""
     robot, state = two_arm_grasp()
     q = state.q
@@ -99,7 +94,7 @@ def test_two_arm_grasp_with_free_box_matches_pinocchio_kkt() -> None:
         qd = _admissible_velocity(robot, q, None, rng)
         tau = np.concatenate([np.zeros(6), rng.normal(size=robot.nv - 6)])
         sol, mt, T = _nonmin(robot, q, qd, tau, None)
-        a, f_c, _, _, _ = _pin_constraint_dynamics(
+        a, f_c, _, _, _ = pin_dynamics(
             robot, q, qd, tau, [(6, "grasp_left"), (3, "grasp_right")]
         )
         assert int(sol.rank) == 1 + 9
@@ -118,7 +113,7 @@ def _exactness(sol, mt, f):
     return res_acc, res_dyn
 
 
-def test_redundant_planar_loop_nonmin_exact_where_pinocchio_needs_regularization() -> None:
+def test_redundant_planar_loop_nonmin_exact_where_pinocchio_needs_regularization(pin_dynamics) -> None:
     """Four-bar closed by a 3D point: the out-of-plane row is identically zero (rank 2 < 3)."""
     red, state = fourbar("point")
     mini, _ = fourbar("planar_point")
@@ -135,19 +130,19 @@ def test_redundant_planar_loop_nonmin_exact_where_pinocchio_needs_regularization
     np.testing.assert_allclose(sol.qdd, sol_min.qdd, atol=1e-10)
     np.testing.assert_allclose(sol.f_c, sol_min.f_c, atol=1e-10)
     # Pinocchio: the exact KKT (mu = 0) breaks down on the singular system ...
-    a0, *_ = _pin_constraint_dynamics(red, q, qd, tau, [(3, "closure")], mu=0.0, max_iter=1)
+    a0, *_ = pin_dynamics(red, q, qd, tau, [(3, "closure")], mu=0.0, max_iter=1)
     assert not np.isfinite(a0).all()
     # ... a single regularized step is off by ~mu, and converging needs several iterations
-    a1, *_ = _pin_constraint_dynamics(red, q, qd, tau, [(3, "closure")], mu=1e-6, max_iter=1)
+    a1, *_ = pin_dynamics(red, q, qd, tau, [(3, "closure")], mu=1e-6, max_iter=1)
     assert np.abs(a1 - sol.qdd).max() > 1e-7
-    a_it, _, _, _, prox = _pin_constraint_dynamics(
+    a_it, _, _, _, prox = pin_dynamics(
         red, q, qd, tau, [(3, "closure")], mu=1e-6, max_iter=100
     )
     assert prox.iter > 1
     np.testing.assert_allclose(a_it, sol.qdd, atol=1e-8)
 
 
-def test_redundant_weld_plus_point_on_same_frames() -> None:
+def test_redundant_weld_plus_point_on_same_frames(pin_dynamics) -> None:
     """A weld and a point on the same frame pair (3 duplicated rows) change nothing in nonmin."""
     robot, state = two_arm_grasp()
     weld = robot.robot_constraints[0]
@@ -169,10 +164,10 @@ def test_redundant_weld_plus_point_on_same_frames() -> None:
     np.testing.assert_allclose(sol.qdd, ref.qdd, atol=1e-9)
     np.testing.assert_allclose(sol.f_c, ref.f_c, atol=1e-9)
     specs = [(6, "grasp_left"), (3, "grasp_right"), (3, "grasp_left_point")]
-    a0, *_ = _pin_constraint_dynamics(red, q, qd, tau, specs, mu=0.0, max_iter=1)
+    a0, *_ = pin_dynamics(red, q, qd, tau, specs, mu=0.0, max_iter=1)
     a_ref = red.to_pinocchio_acceleration(q, qd, sol.qdd)
     assert not (np.isfinite(a0).all() and np.abs(a0 - a_ref).max() < 1e-6)
-    a_it, _, _, _, prox = _pin_constraint_dynamics(red, q, qd, tau, specs, mu=1e-6, max_iter=200)
+    a_it, _, _, _, prox = pin_dynamics(red, q, qd, tau, specs, mu=1e-6, max_iter=200)
     assert prox.iter > 1
     np.testing.assert_allclose(a_it, a_ref, atol=1e-6 * max(1.0, np.abs(a_ref).max()))
 
@@ -187,7 +182,7 @@ def _solo12_urdf():
     return path
 
 
-def test_real_quadruped_four_feet_pinned_and_redundant_contacts() -> None:
+def test_real_quadruped_four_feet_pinned_and_redundant_contacts(pin_dynamics) -> None:
     """Solo-12 (example-robot-data, free-flyer base): 4 feet pinned (12 rows) vs Pinocchio;
     adding the 4 unilateral ground contacts of the same feet (4 duplicated rows) changes
     nothing in nonmin while Pinocchio's exact KKT fails."""
@@ -204,7 +199,7 @@ def test_real_quadruped_four_feet_pinned_and_redundant_contacts() -> None:
     qd = _admissible_velocity(robot, q, None, rng)
     tau = np.concatenate([np.zeros(6), rng.normal(size=robot.nv - 6)])
     sol, _, T = _nonmin(robot, q, qd, tau, None)
-    a, f_c, _, _, _ = _pin_constraint_dynamics(robot, q, qd, tau, [(3, c.name) for c in pins])
+    a, f_c, _, _, _ = pin_dynamics(robot, q, qd, tau, [(3, c.name) for c in pins])
     assert int(sol.rank) == 1 + 12
     scale = max(1.0, np.abs(a).max())
     np.testing.assert_allclose(robot.to_pinocchio_acceleration(q, qd, sol.qdd), a,
