@@ -349,8 +349,8 @@ def run_exudyn(dt: float, rho: float, repeat: int) -> dict[str, Any]:
             c = point(fr, name, b["com"])
             nd = mbs.AddNode(NodeRigidBody2D(referenceCoordinates=[float(c[0]), float(c[1]), a],
                                              initialVelocities=[0.0, 0.0, 0.0]))
-            obj[name] = mbs.AddObject(ObjectRigidBody2D(nodeNumber=nd, physicsMass=float(b["m"]),
-                                                        physicsInertia=float(b["I"])))
+            obj[name] = mbs.AddObject(ObjectRigidBody2D(nodeNumber=nd, mass=float(b["m"]),
+                                                        inertia=float(b["I"])))
             sens[name] = tuple(mbs.AddSensor(SensorNode(nodeNumber=nd, storeInternal=True, outputVariableType=kind))
                                for kind in (exu.OutputVariableType.Coordinates, exu.OutputVariableType.Coordinates_t))  # fmt: skip
 

@@ -458,8 +458,8 @@ def run_exudyn(mech: BarMechanism, dt: float, *, spectral_radius: float = 0.9,
             x, y, a, vx, vy, w = com0[i]
             nd = mbs.AddNode(NodeRigidBody2D(referenceCoordinates=[x, y, a],
                                              initialVelocities=[vx, vy, w]))
-            ob = mbs.AddObject(ObjectRigidBody2D(nodeNumber=nd, physicsMass=float(mech.masses[i]),
-                                                 physicsInertia=float(mech.inertias[i])))
+            ob = mbs.AddObject(ObjectRigidBody2D(nodeNumber=nd, mass=float(mech.masses[i]),
+                                                 inertia=float(mech.inertias[i])))
             mm = mbs.AddMarker(MarkerBodyMass(bodyNumber=ob))
             mbs.AddLoad(LoadMassProportional(markerNumber=mm, loadVector=[0.0, -G, 0.0]))
             half = 0.5 * mech.lengths[i]

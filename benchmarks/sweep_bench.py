@@ -274,10 +274,8 @@ def main() -> int:
         print(f"| {k} | {max(acc[k]):.2e} / {np.median(acc[k]):.2e} | {branch[k]:.2e} |")
     print(f"\nbatched runs equal simulate() bitwise on the {args.single} runs timed one by one: {same}; "
           f"failed runs: {rows['failed']}")  # fmt: skip
-    print("\n| sweep, " + f"{args.sweep_runs} runs | 1 worker (s) | 2 workers (s) | efficiency |")
-    print("|---|---|---|---|")
-    for k, (a, b) in eff.items():
-        print(f"| {k} | {a:.2f} | {b:.2f} | {a / (2 * b):.2f} |")
+    print()
+    _print_efficiency(eff, args.sweep_runs)
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(rows, indent=1), encoding="utf-8")
     return 0
@@ -381,6 +379,14 @@ def batch_vs_single(args: Any) -> int:
     return 0
 
 
+def _print_efficiency(eff: dict, runs: int) -> None:
+    """The Markdown table of target 2: seconds on 1 and 2 workers and the efficiency t1 / (2 t2)."""
+    print(f"| sweep, {runs} runs | 1 worker (s) | 2 workers (s) | efficiency |")
+    print("|---|---|---|---|")
+    for k, (a, b) in eff.items():
+        print(f"| {k} | {a:.2f} | {b:.2f} | {a / (2 * b):.2f} |")
+
+
 def efficiency(runs: int, dask: bool, repeat: int = 1) -> dict[str, tuple[float, float]]:
     """Wall time of one sweep with 1 and 2 workers, locally (warmed up, then ``repeat``
     interleaved rounds) and on a LocalCluster of 1, then of 2 worker processes started here
@@ -433,10 +439,7 @@ def efficiency_only(args: Any) -> int:
     load1 = os.getloadavg()
     print(f"load average before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, after {load1[0]:.2f} {load1[1]:.2f} "
           f"{load1[2]:.2f}; medians of {args.repeat} interleaved rounds after a warm-up\n")  # fmt: skip
-    print("| sweep, " + f"{args.sweep_runs} runs | 1 worker (s) | 2 workers (s) | efficiency |")
-    print("|---|---|---|---|")
-    for k, (a, b) in eff.items():
-        print(f"| {k} | {a:.2f} | {b:.2f} | {a / (2 * b):.2f} |")
+    _print_efficiency(eff, args.sweep_runs)
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).with_name("sweep_bench_efficiency.json").write_text(
         json.dumps({"load": [load0, load1], "efficiency": eff}, indent=1), encoding="utf-8")
