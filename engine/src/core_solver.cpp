@@ -396,23 +396,29 @@ struct Solver::Impl {
     SolveInfo near(const double* M, const double* gin, const double* A, int m, const double* gamma,
                    const SolveOptions& opt, bool same, double* qdd, double* fc);
 
-    // x = A_h⁺ b = (D A_h)⁺ D b through the held certified LQ of every row (near()).
-    void near_pinv(const double* b, double* x) {
-        const int r = h_r;
-        double* db_ = db.data();
-        for (int i = 0; i < r; ++i) db_[i] = d[i] * b[i];
+    // cv = L⁻¹ b[Ro] over the r rows of the held certified LQ: lq_certified's product with the
+    // inverse (LQ_INVERSE) or the solve over L's profile (LQ_PROFILE).
+    void lq_lower_solve(const double* b, int r) {
         if (lqmode == linalg::LQ_INVERSE) {
             const int ld = lq.m_max;
             for (int i = 0; i < r; ++i) {
                 const double* Ri = lq.Li.data() + static_cast<long>(i) * ld;
                 double s = 0.0;
-                for (int k = 0; k <= i; ++k) s += Ri[k] * db_[lq.Ro[k]];
+                for (int k = 0; k <= i; ++k) s += Ri[k] * b[lq.Ro[k]];
                 cv[i] = s;
             }
         } else {
-            for (int i = 0; i < r; ++i) cv[i] = db_[lq.Ro[i]];
+            for (int i = 0; i < r; ++i) cv[i] = b[lq.Ro[i]];
             linalg::lq_profile_solve(lq, r, cv.data());
         }
+    }
+
+    // x = A_h⁺ b = (D A_h)⁺ D b through the held certified LQ of every row (near()).
+    void near_pinv(const double* b, double* x) {
+        const int r = h_r;
+        double* db_ = db.data();
+        for (int i = 0; i < r; ++i) db_[i] = d[i] * b[i];
+        lq_lower_solve(db_, r);
         linalg::lq_min_norm(lq, r, n, cv.data(), x);
         for (int j = 0; j < n; ++j) x[j] = -x[j];
     }
@@ -715,17 +721,8 @@ SolveInfo Solver::Impl::again(const double* M, const double* gin, const double* 
     for (int i = 0; i < h_m; ++i)
         if (d[i] != 0.0) b[c++] = d[i] * gamma[i];
     const int ml = m_live;
-    if (lqmode == linalg::LQ_INVERSE) {  // cv = L⁻¹ (D γ)[Ro] (lq_certified's product)
-        const int ld = lq.m_max;
-        for (int i = 0; i < r; ++i) {
-            const double* Ri = lq.Li.data() + static_cast<long>(i) * ld;
-            double s = 0.0;
-            for (int k = 0; k <= i; ++k) s += Ri[k] * b[lq.Ro[k]];
-            cv[i] = s;
-        }
-    } else if (lqmode == linalg::LQ_PROFILE) {  // cv = L⁻¹ (D γ)[Ro] over L's profile
-        for (int i = 0; i < r; ++i) cv[i] = b[lq.Ro[i]];
-        linalg::lq_profile_solve(lq, r, cv.data());
+    if (lqmode == linalg::LQ_INVERSE || lqmode == linalg::LQ_PROFILE) {  // cv = L⁻¹ (D γ)[Ro]
+        lq_lower_solve(b, r);
     } else {  // cv = Σ⁻¹Uᵀ D γ over the kept rows
         for (int a = 0; a < r; ++a) {
             const double* Ua = Ui.data() + static_cast<long>(a) * ml;

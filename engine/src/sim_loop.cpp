@@ -93,6 +93,7 @@ Status correction(Loop& L, const Mat& A, int m, const double* r, double rtol, do
     L.lq_full = info.status == Status::ok && info.method != 0 && info.rank == m;
     if (hol) {  // (a position correction: its factorization may serve the velocity step, Solver::near)
         L.pfull = L.lq_full && info.null_space_form && m == L.m;
+        L.plq = L.lq_full;
         L.pgen = L.solver.generation();
         L.prtol = rtol;
     }
@@ -518,17 +519,9 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
         L.mq = L.m_held ? 2 : 0;
     }
     const int mh = L.m_hol;
-    // the last fresh position correction's factorization (Alin, Mq; its rank tolerance, and
-    // whether it was a certified LQ of every row), for the velocity correction below
-    bool pos_held = false, pos_lq = false;
-    unsigned long long pos_gen = 0;
-    double pos_rtol = 0.0;
-    auto fresh_done = [&](double rtol) {
-        pos_held = true;
-        pos_lq = L.lq_full;
-        pos_gen = L.solver.generation();
-        pos_rtol = rtol;
-    };
+    // a fresh position correction was made in this call: its factorization (Alin, Mq; L.pgen,
+    // L.prtol, L.plq, L.pfull, set by correction()) may serve the velocity correction below
+    bool pos_held = false;
     if (mh > 0) {
         double prev = inf;
         for (int j = 0; j < n; ++j) L.aq[j] = std::abs(q[j]);
@@ -586,15 +579,15 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
                 if (s != Status::ok) return s;
                 if (rank == mh) {  // no singular value below c2: the full-rank step
                     cut = c2;
-                    fresh_done(c2);
+                    pos_held = true;
                 } else {  // next to a singular configuration: without the directions below the cut
                     cut = std::max(POSITION_CUT_RTOL, full);
                     s = correction(L, L.Alin, mh, L.phih.data(), cut, L.dq.data(), nullptr);
-                    fresh_done(cut);
+                    pos_held = true;
                 }
             } else if (fresh) {
                 s = correction(L, L.Alin, mh, L.phih.data(), cut, L.dq.data(), nullptr);
-                fresh_done(cut);
+                pos_held = true;
             } else {  // a chord step: the last linearization's factorization, new residual
                 s = L.solver.again(L.Mq.data(), L.zero_n.data(), L.phih.data(), L.dq.data(), nullptr).status;
             }
@@ -625,7 +618,7 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
             L.vt = t;
             L.vrtol = vr;
             for (int j = 0; j < n; ++j) L.vq[j] = q[j];
-        } else if (pos_held && velocity_again(L, vr, pos_gen, pos_lq, pos_rtol, qd)) {
+        } else if (pos_held && velocity_again(L, vr, L.pgen, L.plq, L.prtol, qd)) {
             L.vheld = false;  // (the factorization held is the position correction's A, not A(q))
             L.nheld = false;
         } else {

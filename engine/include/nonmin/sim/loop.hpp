@@ -293,7 +293,8 @@ struct Loop {
     // velocity correction at the corrected q through Solver::near (refined to that q's A,
     // exact to round-off, no factorization), and then the dynamics solves at that (t, q)
     // (nheld: A at (nt, vq) is the last near() call's, rank tolerance ≤ prtol).
-    bool pfull = false, nheld = false;
+    // plq: that factorization was a certified LQ of full rank (velocity_again's condition).
+    bool pfull = false, plq = false, nheld = false;
     unsigned long long pgen = 0;
     double prtol = 0.0;
 
