@@ -971,9 +971,7 @@ def simulate(
                 # (the state at t0 when the engine took no step: its projected start, pending.y)
                 state = StepperState(t0, pending.y.copy(), None, h_init)
                 out_i, engine_on = 0, True
-        if pending is not None:
-            pass
-        elif er is not None:
+        if er is not None:  # the engine ran the whole run, or to a handover
             n_steps += er.steps
             n_rejected += er.n_rejected
             system.n_rhs += er.n_rhs
@@ -985,7 +983,7 @@ def simulate(
             state = StepperState(t, er.y.copy(), None, er.h if integ.adaptive else h_init)
             if er.handover:
                 meta["engine"] = f"engine, then python from t = {t:.12g}"
-        else:
+        elif pending is None:  # the Python start (pending: the engine's first run enters the loop below)
             if project_initial and act:
                 q, qd = stab.project(model, t0, q, qd, act, rank_rtol) if isinstance(stab, Projection) \
                     else Projection().project(model, t0, q, qd, act, rank_rtol)
