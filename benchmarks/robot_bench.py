@@ -201,8 +201,8 @@ def run_nonmin(case: Case, dt: float | None, T: float, model: Any = None, **kw: 
 
     kw = {"method": "rk4", "dt": dt, **kw} if dt is not None else kw
     model = case.model if model is None else model
-    traj = nonmin.simulate(model, (0.0, T), case.q0, np.zeros(model.n), t_eval=_samples(T),
-                           progress=False, **kw)
+    kw.setdefault("t_eval", _samples(T))
+    traj = nonmin.simulate(model, (0.0, T), case.q0, np.zeros(model.n), progress=False, **kw)
     return {"t": traj.t, "q": traj.q, "closure": float(np.max(traj.phi_norm)),
             "dE": float(np.max(np.abs(traj.energy - traj.energy[0]))), "status": traj.status.value,
             "engine": str(getattr(traj, "diagnostics", {}).get("engine", "?"))
@@ -442,8 +442,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--json", default=str(HERE / "results" / "robot_bench.json"))
     ap.add_argument("--wp", default=None, metavar="JSON",
                     help="work-precision mode: every engine over its full range (nonmin RK4 and "
-                         "DOPRI5/DOP853 rtol 1e-2..1e-10, Pinocchio Kp 0 and 100, MuJoCo), dt up to "
-                         "1.6e-2; rows also written in work_precision.py's format to JSON")
+                         "DOPRI5/DOP853 rtol 1e-2..1e-10, with and without joint limits, the coarse end "
+                         "also at its step ends; Pinocchio Kp 0 and 100, MuJoCo), dt up to 1.6e-2; rows "
+                         "also written in work_precision.py's format to JSON")
     ap.add_argument("--cpu", action="store_true", help="time with the process's CPU time instead of wall time")
     a = ap.parse_args(argv)
     if a.cpu:
@@ -483,6 +484,17 @@ def main(argv: list[str] | None = None) -> None:
                 for dt in (4e-3, 8e-3, 1e-2, 1.6e-2, 3.2e-2):
                     runs.append(("nonmin", "rk4 no joint limits", dt,
                                  lambda dt=dt, case=case, free=free: run_nonmin(case, dt, T, model=free)))
+                # recorded at the step ends (t_eval=None), as the peers record theirs; the error
+                # at every step end (the reference sampled there)
+                for dt in (1.2e-2, 1.5e-2, 1.6e-2, 2e-2):
+                    runs.append(("nonmin", "rk4 no joint limits step ends", dt,
+                                 lambda dt=dt, case=case, free=free: run_nonmin(case, dt, T, model=free, t_eval=None)))
+                for meth in ("dopri5", "dop853"):
+                    for rtol in (1e-2, 3e-3, 1e-3):
+                        runs.append(("nonmin", f"{meth} no joint limits step ends rtol={rtol:g}", None,
+                                     lambda meth=meth, rtol=rtol, case=case, free=free: run_nonmin(
+                                         case, None, T, model=free, method=meth, rtol=rtol, atol=rtol * 1e-2,
+                                         t_eval=None)))
                 for meth in ("dopri5", "dop853"):
                     for rtol in (1e-2, 3e-3, 1e-3, 1e-4):
                         runs.append(("nonmin", f"{meth} no joint limits rtol={rtol:g}", None,
@@ -493,14 +505,20 @@ def main(argv: list[str] | None = None) -> None:
                 wall, out = _timed(fn, a.repeat)
             except Exception as exc:  # a failing peer setting is a result
                 rows.append({"case": cname, "engine": eng, "setting": setting, "dt": dt, "error": repr(exc)})
-                print(f"{cname:15s} {eng:10s} {setting:22s} dt={dt or 0:.0e}  FAILED: {exc!r}", flush=True)
+                print(f"{cname:15s} {eng:10s} {setting:22s} dt={dt or 0:.2g}  FAILED: {exc!r}", flush=True)
                 continue
-            err = _errors(case, out["t"], out["q"], refpair) if out["status"] == "success" else np.inf
+            if out["status"] != "success":
+                err = np.inf
+            elif "step ends" in setting:  # every step end, against the reference sampled there
+                own = run_nonmin(case, a.dt_ref, T, t_eval=np.asarray(out["t"]))
+                err = _errors(case, out["t"], out["q"], (own["t"], own["q"]))
+            else:
+                err = _errors(case, out["t"], out["q"], refpair)
             row = {"case": cname, "engine": eng, "setting": setting, "dt": dt, "T": T,
                    "wall_per_sim_s": wall / T, "err_rad": err, "closure_m": out["closure"],
                    "dE_J": out["dE"], "status": out["status"], "nonmin_engine": out.get("engine")}
             rows.append(row)
-            print(f"{cname:15s} {eng:10s} {setting:22s} dt={dt or 0:.0e}  {wall / T * 1e3:9.2f} ms/s  "
+            print(f"{cname:15s} {eng:10s} {setting:22s} dt={dt or 0:.2g}  {wall / T * 1e3:9.2f} ms/s  "
                   f"err {err:.1e} rad  closure {out['closure']:.1e}  dE {out['dE']:.1e}  {out['status']}",
                   flush=True)
     res = {"machine": machine(), "horizon": T, "dt_ref": a.dt_ref, "rows": rows,
