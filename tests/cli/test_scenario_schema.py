@@ -107,3 +107,40 @@ def test_bad_frame_constraint(tmp_path):
     (tmp_path / "x.urdf").write_text("<robot name='x'><link name='a'/></robot>")
     with pytest.raises(ScenarioError, match=r"model.constraints\[0\].type: expected one of"):
         load_scenario(p).build_model()
+
+
+_OPTIONS_BASE = '[model]\nlibrary = "crossed_four_bar"\n[simulate]\nt_final = 0.05\n{extra}[simulate.options]\n{opt}\n'
+
+
+@pytest.mark.parametrize(
+    ("opt", "extra", "fragments"),
+    [
+        # the runner sets these itself: they were "got multiple values" TypeErrors (exit 4)
+        ('throw = true', "", ["simulate.options.throw"]),
+        ('progress = true', "", ["simulate.options.progress", "--progress"]),
+        ('controller = "x"', "", ["simulate.options.controller", "[controller]"]),
+        ('events = []', "", ["simulate.options.events", "[[events]]"]),
+        ('active = ["A"]', "", ["simulate.options.active", "initial.active"]),
+        # file names from a data file outside the output folder (checkpoint wrote anywhere)
+        ('checkpoint = "{escape}"', "", ["simulate.options.checkpoint", "--checkpoint-every"]),
+        ('checkpoint_every = 0.01', "", ["simulate.options.checkpoint_every", "--checkpoint-every"]),
+        ('resume = "/tmp/x.npz"', "", ["simulate.options.resume", "--resume"]),
+        # output_dt silently won over t_eval
+        ('t_eval = [0.0, 0.05]', "output_dt = 0.01\n", ["simulate.options.t_eval", "simulate.output_dt"]),
+    ],
+)
+def test_simulate_options_the_runner_owns_are_refused(tmp_path, opt, extra, fragments):
+    """[simulate.options] cannot set what the runner sets itself, nor name files to write or read."""
+    from nonmin.io import run_scenario
+
+    escape = tmp_path / "elsewhere" / "escaped.npz"
+    p = _write(tmp_path, _OPTIONS_BASE.format(opt=opt.replace("{escape}", str(escape)), extra=extra))
+    sc = load_scenario(p)
+    with pytest.raises(ScenarioError) as info:
+        run_scenario(sc, tmp_path / "out", progress=False)
+    msg = str(info.value)
+    assert str(p) in msg
+    for frag in fragments:
+        assert frag in msg, msg
+    assert not escape.exists()
+    assert not (tmp_path / "out" / "trajectory.npz").exists()

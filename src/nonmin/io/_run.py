@@ -18,6 +18,21 @@ from ._scenario import Scenario, resolve_entry_point
 __all__ = ["ScenarioResult", "build_controller", "build_events", "run_scenario", "simulate_kwargs"]
 
 
+#: ``simulate`` keywords that ``[simulate.options]`` may not set, with where they come from
+#: instead: the runner passes them itself (a second value was a TypeError), or they name files
+#: to write or read, which a data file may do only inside its output folder (``[output]``).
+_RUNNER_OWNED = {
+    "active": "key 'initial.active'",
+    "controller": "the [controller] table",
+    "events": "[[events]] tables",
+    "throw": "nothing: nonmin run keeps a failed run's samples and status (throw=False)",
+    "progress": "nonmin run --progress / --no-progress",
+    "checkpoint": "nonmin run --checkpoint-every SECONDS (it writes the output folder's trajectory file)",
+    "checkpoint_every": "nonmin run --checkpoint-every SECONDS",
+    "resume": "nonmin run --resume (it continues the output folder's trajectory file)",
+}
+
+
 def simulate_kwargs(sc: Scenario) -> dict[str, Any]:
     """Keywords for :func:`nonmin.sim.simulate` from the [simulate] table (validated)."""
     sim = sc.section("simulate")
@@ -30,6 +45,17 @@ def simulate_kwargs(sc: Scenario) -> dict[str, Any]:
     if overlap:
         raise ScenarioError(
             f"{sc.path}: keys {sorted(overlap)} given both in [simulate] and [simulate.options]"
+        )
+    for key in extra:
+        if key in _RUNNER_OWNED:
+            raise ScenarioError(
+                f"{sc.path}: key 'simulate.options.{key}': not settable from a scenario file; "
+                f"use {_RUNNER_OWNED[key]}"
+            )
+    if "t_eval" in extra and "output_dt" in sim:
+        raise ScenarioError(
+            f"{sc.path}: key 'simulate.options.t_eval': the output times are given twice, also "
+            "by 'simulate.output_dt'; keep one"
         )
     kw.update(extra)
     from ..sim import simulate
