@@ -145,7 +145,21 @@ def test_cli_sweep_then_plot(scenario: Path, tmp_path: Path):
     assert main(["plot", str(store), "-o", str(png), "--metric", "energy_drift"]) == 0
     assert png.stat().st_size > 1000
     assert main(["plot", str(store), "-o", str(png), "--metric", "nope"]) == 2
+    # per-run variables that are not numbers: a usage error (exit 2), was a ValueError (exit 4)
+    assert main(["plot", str(store), "-o", str(png), "--metric", "status"]) == 2
+    assert main(["plot", str(store), "-o", str(png), "--metric", "message"]) == 2
     assert main(["sweep", str(scenario), "--vary", "omega0", "--out", str(store)]) == 2
+
+
+def test_plot_sweep_refuses_non_numeric_metric_and_keys(scenario: Path):
+    pytest.importorskip("matplotlib")
+    from nonmin.sweeps import plot_sweep
+
+    ds = sweep(scenario, {"simulate.method": ["rk4", "midpoint"]}, progress=False).dataset
+    with pytest.raises(InputError, match=r"'status'.*not a number"):
+        plot_sweep(ds, "status", ["simulate.method"])
+    with pytest.raises(InputError, match=r"'simulate\.method'.*known: \[\]"):
+        plot_sweep(ds, "energy_drift", ["simulate.method"])
 
 
 def test_random_samples_cli_seed(scenario: Path, tmp_path: Path):

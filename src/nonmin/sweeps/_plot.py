@@ -54,6 +54,10 @@ def plot_sweep(ds: Any, metric: str | Any = "energy_drift", keys: list[str] | No
         if metric == "failed":
             vals = np.array([str(x) == "failed" for x in ds["status"].values], dtype=float)
         elif metric in ds.variables and ds[metric].dims == ("run",):
+            if ds[metric].dtype.kind not in "fiub":
+                raise InputError(f"metric {metric!r}: its values are {ds[metric].dtype} per run, not a "
+                                 f"number; plot one of {[m for m in PER_RUN_METRICS if m in ds.variables or m == 'failed']} "
+                                 "('failed' marks the runs whose status is failed)")  # fmt: skip
             vals = np.asarray(ds[metric].values, dtype=float)
         else:
             raise InputError(f"metric {metric!r}: not a per-run variable of the sweep; known: "
@@ -67,7 +71,7 @@ def plot_sweep(ds: Any, metric: str | Any = "energy_drift", keys: list[str] | No
     avail = swept_keys(ds)
     keys = avail[:2] if keys is None else list(keys)
     for k in keys:
-        if k not in ds.variables or ds[k].dims != ("run",):
+        if k not in ds.variables or ds[k].dims != ("run",) or ds[k].dtype.kind not in "fiub":
             raise InputError(f"key {k!r}: not a swept key with one number per run; known: {avail}")
     if not keys or len(keys) > 2:
         raise InputError(f"plot_sweep needs one or two swept keys, got {keys} (available: {avail})")
