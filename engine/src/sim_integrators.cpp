@@ -752,9 +752,10 @@ double sym_min_eigenvalue(double* X, int k, double* d, double* e) {
 void passage_setup(Loop& L) {
     Passages& P = L.pas;
     const int mr = std::max(L.m_all, 1), n = L.n;
-    P.B = Mat::Zero(mr, n);
-    P.G = Mat::Zero(mr, mr);
-    P.C = Mat::Zero(mr, mr);
+    // (B, G and C are written before they are read: a spare loop's are kept as they are)
+    if (P.B.rows() != mr || P.B.cols() != n) P.B = Mat::Zero(mr, n);
+    if (P.G.rows() != mr || P.G.cols() != mr) P.G = Mat::Zero(mr, mr);
+    if (P.C.rows() != mr || P.C.cols() != mr) P.C = Mat::Zero(mr, mr);
     for (Vec* v : {&P.x, &P.y, &P.v, &P.w}) *v = Vec::Zero(mr);
     P.live.assign(static_cast<std::size_t>(mr), 0);
     P.order.assign(static_cast<std::size_t>(mr), 0);

@@ -22,6 +22,7 @@
 #include <limits>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -248,6 +249,7 @@ struct Loop {
     Solver solver;
     Terms T;
     int n = 0, k = 0, c = 0, m_all = 0;
+    int spare_m = -1;  // the solver's row count when make_loop finished (~Loop: the spare)
 
     // active set and its rows
     std::vector<std::uint8_t> active;  // one entry per constraint
@@ -384,6 +386,12 @@ struct Loop {
     std::shared_ptr<struct EventScratch> evs;
 
     explicit Loop(int m_max, int n_) : solver(m_max, n_) {}
+    explicit Loop(Solver&& s) : solver(std::move(s)) {}
+    // hands the solver and the large matrices to the next make_loop of the same sizes
+    // (sim_loop.cpp: the spare workspace)
+    ~Loop();
+    Loop(const Loop&) = delete;
+    Loop& operator=(const Loop&) = delete;
 };
 
 // Build a loop for `prog` (which must outlive it) with the active mask (one entry per
