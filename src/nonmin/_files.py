@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -52,6 +53,29 @@ def as_path(path: Any, what: str = "path") -> Path:
     return p
 
 
+def _umask() -> int:
+    """The process's umask (read from /proc where it can be, without changing it)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    old = os.umask(0o022)
+    os.umask(old)
+    return old
+
+
+def _file_mode(target: Path) -> int:
+    """The permission bits a target gets: those of the file it replaces, else 0666 & ~umask
+    (what ``open(target, "w")`` would give; ``mkstemp`` makes its temporaries 0600)."""
+    try:
+        return stat.S_IMODE(target.stat().st_mode)
+    except OSError:
+        return 0o666 & ~_umask()
+
+
 def _temp_in(target: Path, suffix: str) -> tuple[int, Path]:
     folder = target.parent
     try:
@@ -59,6 +83,11 @@ def _temp_in(target: Path, suffix: str) -> tuple[int, Path]:
         fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix, dir=folder)
     except OSError as exc:
         raise OutputError(f"cannot write {str(target)!r}: {exc.strerror or exc}") from exc
+    try:
+        if hasattr(os, "fchmod"):
+            os.fchmod(fd, _file_mode(target))
+    except OSError:
+        pass  # a file system without permission bits: keep mkstemp's
     return fd, Path(name)
 
 
