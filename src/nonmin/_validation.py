@@ -24,9 +24,31 @@ def _shape_str(shape: Sequence[int | str]) -> str:
 
 
 def as_float_array(x: ArrayLike, name: str) -> FloatArray:
-    """Coerce ``x`` to a float64 array, raising :class:`ShapeError` if it is not numeric."""
+    """Coerce ``x`` to a float64 array, raising :class:`ShapeError` if it is not numeric.
+
+    Real numbers only: text (``"1.5"``, which NumPy would parse) is a :class:`ShapeError`,
+    booleans and complex values with a non-zero imaginary part (which NumPy would drop with a
+    warning) an :class:`InputError`, each naming ``name``.
+    """
+    if isinstance(x, np.ndarray) and x.dtype == np.float64:
+        return x
     try:
-        arr = np.asarray(x, dtype=np.float64)
+        raw = np.asarray(x)
+    except (TypeError, ValueError) as exc:
+        raise ShapeError(
+            f"{name} must be a numeric array, got {type(x).__name__}: {exc}"
+        ) from None
+    kind = raw.dtype.kind
+    if kind in "US" or (kind == "O" and any(isinstance(v, (str, bytes)) for v in raw.flat)):
+        raise ShapeError(f"{name} must be a numeric array, got text: {x!r:.80}")
+    if kind == "b" or (kind == "O" and any(isinstance(v, (bool, np.bool_)) for v in raw.flat)):
+        raise InputError(f"{name} must be numbers, got booleans: {x!r:.80}")
+    if kind == "c":
+        if np.any(raw.imag != 0):
+            raise InputError(f"{name} must be real numbers, got complex values (dtype {raw.dtype})")
+        raw = raw.real
+    try:
+        arr = np.asarray(raw, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise ShapeError(
             f"{name} must be a numeric array, got {type(x).__name__}: {exc}"

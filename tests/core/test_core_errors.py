@@ -223,3 +223,37 @@ def test_fully_constrained_and_m_greater_than_n():
     assert rel(qdd, -np.array([0.3, -0.1, 0.2])) <= REF_RTOL
     P, r = nullspace_projector(A)
     assert int(r) == 3 and np.abs(P).max() <= 1e-15
+
+
+# ---- real numbers only: NumPy would parse text, count booleans and drop imaginary parts ----
+_FD = {"M": np.eye(2), "h": [0.0, -9.81], "A": [[1.0, 0.0]], "adot_qd": [1.0]}
+
+
+@pytest.mark.parametrize(
+    ("arg", "value", "words"),
+    [
+        ("M", np.eye(2) * (1 + 1j), ["M", "complex"]),
+        ("M", [["1", "0"], ["0", "1"]], ["M", "numeric array, got text"]),
+        ("h", np.array([True, False]), ["h", "booleans"]),
+        ("A", np.array([[1.0, "0"]], dtype=object), ["A", "text"]),
+    ],
+)
+def test_kernels_refuse_text_booleans_and_complex(arg, value, words):
+    from nonmin.core import forward_dynamics
+    from nonmin.errors import InputError
+
+    with pytest.raises(InputError) as info:
+        forward_dynamics(**{**_FD, arg: value})
+    for w in words:
+        assert w in str(info.value)
+
+
+def test_kernels_take_complex_with_zero_imaginary_part_without_warning():
+    import warnings
+
+    from nonmin.core import forward_dynamics
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        qdd = forward_dynamics(**{**_FD, "M": np.eye(2).astype(complex)})
+    np.testing.assert_allclose(qdd, [-1.0, -9.81])

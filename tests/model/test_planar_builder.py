@@ -314,3 +314,12 @@ def test_duplicate_names_and_point_mass_rotation():
         b.body("ground", mass=1.0, inertia=1.0)
     with pytest.raises(InputError):
         PlanarBuilder("g", gravity=(0.0, float("nan")))
+
+
+def test_replace_gravity_with_text_is_named() -> None:
+    """model.replace(gravity="down") was a raw ValueError (could not convert string to float)."""
+    from nonmin import library
+    from nonmin.errors import InputError
+
+    with pytest.raises(InputError, match="gravity must be a finite 2-vector, got 'down'"):
+        library.get("crossed_four_bar").model.replace(gravity="down")

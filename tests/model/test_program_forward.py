@@ -75,3 +75,19 @@ def test_forward_shapes() -> None:
     fwd = _engine.Forward(prog, model.active_mask(None))
     with pytest.raises(ShapeError):
         fwd(0.0, np.zeros(model.n), np.zeros(model.n), np.zeros(model.n + 1))
+
+
+def test_forward_dynamics_bad_numbers_are_named() -> None:
+    """A NaN time was "the engine failed at state 0 (status 1)"; text q a raw ValueError."""
+    from nonmin.errors import InputError, NonFiniteError
+
+    bar = library.get("crossed_four_bar")
+    q, qd = bar.state.q, bar.state.qd
+    with pytest.raises(NonFiniteError, match="t must be finite"):
+        bar.model.forward_dynamics(q, qd, t=np.nan)
+    with pytest.raises(InputError, match="q must be a numeric array, got text"):
+        bar.model.forward_dynamics([str(v) for v in q], qd)
+    with pytest.raises(InputError, match="qd must be real numbers, got complex"):
+        bar.model.forward_dynamics(q, qd + 1j)
+    with pytest.raises(ShapeError, match="q must be a numeric array"):
+        bar.model.forward_dynamics("abc", qd)

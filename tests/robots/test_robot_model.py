@@ -339,3 +339,14 @@ def test_hinge_and_point_on_plane_admissible_motions() -> None:
         rel = vel("grasp_right:b").linear - vel("grasp_right:a").linear
         # the two points coincide, so the plane's rotation does not move the point
         assert abs(rel @ normal) < 1e-12
+
+
+def test_frame_constraint_vectors_must_be_finite_numbers() -> None:
+    """normal="y" was a raw ValueError from NumPy; a NaN placement was accepted."""
+    from nonmin.errors import InputError, NonFiniteError
+    from nonmin.model.robots import FrameConstraint
+
+    with pytest.raises(InputError, match="normal must be a numeric array, got text"):
+        FrameConstraint.planar_point("loop", "a", "b", normal="y")
+    with pytest.raises(NonFiniteError, match="placement_a must be finite"):
+        FrameConstraint.point("loop", "a", "b", placement_a=(np.nan, 0.0, 0.0))

@@ -254,3 +254,51 @@ def test_progress_output_only_when_asked(capsys) -> None:  # type: ignore[no-unt
     assert capsys.readouterr().err == ""
     simulate(make_pendulum(), (0.0, 0.05), [1.0, 0.0], dt=0.01, progress=True)
     assert capsys.readouterr().err != ""
+
+
+@pytest.mark.parametrize(
+    ("kw", "err", "words"),
+    [
+        ({"q0": "complex"}, "InputError", ["q0", "complex"]),
+        ({"q0": "bool"}, "InputError", ["q0", "booleans"]),
+        ({"qd0": "text"}, "ShapeError", ["qd0", "9 numbers"]),
+        ({"q0": "batch"}, "ShapeError", ["q0", "(2, 9)", "simulate_batch"]),
+    ],
+)
+def test_simulate_refuses_non_real_initial_states(kw, err, words):  # type: ignore[no-untyped-def]
+    """q0/qd0 given as complex, booleans or text ran silently (NumPy's casts); (k, n) hints the batch."""
+    import warnings
+
+    import nonmin
+    from nonmin import errors
+
+    mech = nonmin.library.get("crossed_four_bar")
+    q, qd = mech.state.q, mech.state.qd
+    make = {"complex": q + 1e-3j, "bool": q.astype(bool), "text": [str(v) for v in qd], "batch": np.stack([q, q])}
+    args = {"q0": q, "qd0": qd}
+    for k, v in kw.items():
+        args[k] = make[v]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(getattr(errors, err)) as info:
+            nonmin.simulate(mech.model, 0.01, args["q0"], args["qd0"], dt=1e-3)
+    for w in words:
+        assert w in str(info.value), str(info.value)
+
+
+def test_a_controller_with_the_wrong_signature_is_told_the_call() -> None:
+    """``controller=lambda t, q, qd: tau`` (Pinocchio/MuJoCo habit) said only "unexpected keyword
+    argument 'active'"; the error now states how simulate calls a controller."""
+    import nonmin
+
+    mech = nonmin.library.get("five_bar")
+    k = len(mech.model.actuator_names)
+    with pytest.raises(SimulationError) as info:
+        nonmin.simulate(mech, 0.01, dt=1e-3, controller=lambda t, q, qd: np.zeros(k))
+    msg = str(info.value)
+    assert "controller(t, q, qd, state, *, active)" in msg and "active" in msg
+    # a controller that takes the call but fails inside keeps the plain message
+    with pytest.raises(SimulationError, match=r"controller raised TypeError: inside \(at t = 0\)"):
+        nonmin.simulate(mech, 0.01, dt=1e-3, controller=lambda t, q, qd, s, active: (_ for _ in ()).throw(TypeError("inside")))
+    traj = nonmin.simulate(mech, 0.01, dt=1e-3, controller=lambda t, q, qd, state=None, **kw: np.zeros(k))
+    assert traj.success

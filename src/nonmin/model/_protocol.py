@@ -33,7 +33,7 @@ from typing import Any, ClassVar, Literal, NamedTuple, get_args
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..errors import InputError, ShapeError, UnknownNameError
+from ..errors import InputError, NonFiniteError, ShapeError, UnknownNameError
 
 FloatArray = NDArray[np.float64]
 
@@ -499,12 +499,13 @@ class Model(ABC):
         NonFiniteError, NotPositiveDefiniteError
             For the first state where the dynamics are not defined (its index is named).
         """
+        from .._validation import as_float_array
         from ..core.linalg import DEFAULT_RTOL, SPD_RTOL, resolve_rtol
         from ..errors import NonminError
 
         n = self.n
-        qa = np.asarray(q, dtype=np.float64)
-        va = np.asarray(qd, dtype=np.float64)
+        qa = as_float_array(q, "q")
+        va = as_float_array(qd, "qd")
         if qa.ndim == 0 or qa.shape[-1] != n:
             raise ShapeError(f"q must have shape (..., {n}), got shape {qa.shape}")
         if va.shape != qa.shape:
@@ -512,12 +513,16 @@ class Model(ABC):
         batch = qa.shape[:-1]
         N = int(np.prod(batch, dtype=np.int64))
         try:
-            ta = np.broadcast_to(np.asarray(t, dtype=np.float64), batch).reshape(N)
-        except ValueError:
+            ta = np.broadcast_to(as_float_array(t, "t"), batch).reshape(N)
+        except ValueError as exc:
+            if isinstance(exc, NonminError):
+                raise
             raise ShapeError(f"t must be a scalar or have shape {batch}, got shape {np.shape(t)}") from None
+        if not np.all(np.isfinite(ta)):
+            raise NonFiniteError(f"t must be finite, got {t!r:.80}")
         fa = None
         if f is not None:
-            fa = np.asarray(f, dtype=np.float64)
+            fa = as_float_array(f, "f")
             if fa.shape not in ((n,), qa.shape):
                 raise ShapeError(f"f must have shape ({n},) or {qa.shape}, got shape {fa.shape}")
             fa = np.ascontiguousarray(fa.reshape(-1, n))

@@ -39,13 +39,54 @@ def sample_bytes(n: int, k: int, c: int) -> int:
     return 8 * (1 + 4 * n + k + 6) + c
 
 
+#: How simulate calls each kind of user callback (named in the error when the callback's
+#: signature does not take that call).
+CALL_FORMS = {
+    "controller": "controller(t, q, qd, state, *, active) -> u, shape (k,) (state: the "
+                  "controller's initial_state(), None for a plain function)",
+    "controller.update": "controller.update(t, q, qd, state, *, active) -> new state",
+    "controller.initial_state": "controller.initial_state() -> state",
+    "guard": "guard(t, q, qd, f_c) -> float",
+    "Reset fn": "fn(t, q, qd, active) -> (q, qd)",
+}
+
+
+def _call_form(what: str) -> str | None:
+    for key in sorted(CALL_FORMS, key=len, reverse=True):
+        if what == key or what.endswith(": " + key):
+            return CALL_FORMS[key]
+    return None
+
+
+def _takes(fn: Callable[..., Any], args: tuple[Any, ...], kwargs: dict[str, Any]) -> bool:
+    """Whether ``fn``'s signature accepts this call (True when it cannot be inspected)."""
+    import inspect
+
+    try:
+        inspect.signature(fn).bind(*args, **kwargs)
+    except TypeError:
+        return False
+    except ValueError:  # no signature (some builtins)
+        return True
+    return True
+
+
 def user_call(what: str, t: float, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
-    """Call a user callback; a non-nonmin exception becomes a SimulationError naming it."""
+    """Call a user callback; a non-nonmin exception becomes a SimulationError naming it.
+
+    A ``TypeError`` because the callback's signature does not take simulate's call (a
+    controller written as ``lambda t, q, qd: ...``) says how it is called.
+    """
     try:
         return fn(*args, **kwargs)
     except NonminError:
         raise
     except Exception as exc:
+        form = _call_form(what)
+        if isinstance(exc, TypeError) and form is not None and not _takes(fn, args, kwargs):
+            raise SimulationError(
+                f"{what} cannot be called the way simulate calls it: {exc}; expected {form}"
+            ) from exc
         raise SimulationError(f"{what} raised {type(exc).__name__}: {exc} (at t = {t:.12g})") from exc
 
 

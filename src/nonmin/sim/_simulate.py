@@ -49,6 +49,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._validation import as_float_array
 from ..core import forward_dynamics, solve_dynamics
 from ..core.linalg import DEFAULT_RTOL, range_basis, row_norms
 from ..errors import (
@@ -641,11 +642,12 @@ def _t_span(t_span: Any) -> tuple[float, float]:
 
 def _vector(x: ArrayLike, name: str, n: int) -> FloatArray:
     try:
-        arr = np.array(x, dtype=float)
-    except (TypeError, ValueError):
+        arr = np.array(as_float_array(x, name))  # text, booleans, complex: InputError
+    except ShapeError:
         raise ShapeError(f"{name} must be {n} numbers, got {x!r}") from None
     if arr.shape != (n,):
-        raise ShapeError(f"{name} must have shape ({n},), got shape {arr.shape}")
+        batch = "; k initial states are k runs: nonmin.simulate_batch" if arr.shape[-1:] == (n,) else ""
+        raise ShapeError(f"{name} must have shape ({n},), got shape {arr.shape}{batch}")
     if not np.all(np.isfinite(arr)):
         raise NonFiniteError(f"{name} must be finite")
     return arr

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..._validation import as_float_array
 from ...errors import InputError, ModelError, NonFiniteError, ShapeError, UnknownNameError
 from .._protocol import (
     ConstraintSpec,
@@ -152,7 +153,10 @@ class PlanarModel(Model):
             off += b.ncoords
         s(self, "_index", index)
         s(self, "_mdiag", np.array(mdiag))
-        g = np.asarray(self.gravity, dtype=float)
+        try:
+            g = as_float_array(self.gravity, "gravity")
+        except InputError:
+            g = np.full(1, np.nan)
         if g.shape != (2,) or not np.isfinite(g).all():
             raise InputError(f"gravity must be a finite 2-vector, got {self.gravity!r}")
         s(self, "gravity", (float(g[0]), float(g[1])))

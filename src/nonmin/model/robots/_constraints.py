@@ -49,7 +49,8 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ...errors import InputError, ShapeError
+from ..._validation import as_float_array
+from ...errors import InputError, NonFiniteError, ShapeError
 from .._protocol import ConstraintKind, FloatArray
 
 __all__ = [
@@ -77,7 +78,9 @@ WORLD = "universe"
 def _placement(x: ArrayLike | None, name: str) -> FloatArray:
     if x is None:
         return np.eye(4)
-    arr = np.asarray(x, dtype=float)
+    arr = as_float_array(x, name)
+    if not np.isfinite(arr).all():
+        raise NonFiniteError(f"{name} must be finite, got {arr.tolist()}")
     if arr.shape == (3,):
         out = np.eye(4)
         out[:3, 3] = arr
@@ -91,7 +94,7 @@ def _placement(x: ArrayLike | None, name: str) -> FloatArray:
 
 
 def _unit(x: ArrayLike, name: str) -> FloatArray:
-    v = np.asarray(x, dtype=float)
+    v = as_float_array(x, name)
     if v.shape != (3,):
         raise ShapeError(f"{name} must have shape (3,), got shape {v.shape}")
     nrm = float(np.linalg.norm(v))
