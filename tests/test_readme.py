@@ -65,3 +65,20 @@ def test_readme_shows_what_its_code_prints(tmp_path):
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
+
+
+def test_gallery_caption_numbers_are_the_demo_s():
+    """The A02 caption's energy error and closure are what `nonmin demo` prints for n_four_bar
+    (it said ≤ 1e-9 J and ≤ 1e-15 while the demo printed 2.7e-9 J and 1.3e-14)."""
+    from importlib.resources import files
+
+    from nonmin.io import load_scenario, run_scenario
+
+    readme = (ROOT / "README.md").read_text()
+    m = re.search(r"\*\*A02 N four-bar\*\*.*?energy error ([0-9.e+-]+) J, closure ([0-9.e+-]+) m", readme)
+    assert m, "the A02 caption states no energy error and closure"
+    path = files("nonmin") / "data" / "scenarios" / "n_four_bar.toml"
+    traj = run_scenario(load_scenario(str(path)), write=False, progress=False).trajectory
+    drift = traj.energy_drift  # the summary's drift[J]
+    assert drift == pytest.approx(float(m.group(1)), rel=0.1), (drift, m.group(1))
+    assert float(traj.phi_norm.max()) < 10 * float(m.group(2))
