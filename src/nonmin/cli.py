@@ -128,7 +128,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
             rows.append(_summary_row(name, res.trajectory, tm, res.model))
         failed |= _status_name(res.trajectory) == "failed"
         for kind, f in res.files.items():
-            print(f"    {kind:11s} {f}  ({tm.get(kind, 0.0):.2f} s)", flush=True)
+            print(f"    {kind:11s} {Path(f).resolve()}  ({tm.get(kind, 0.0):.2f} s)", flush=True)
         if _status_name(res.trajectory) == "interrupted":
             if rows:
                 write_text(out / "summary.txt", _format_rows(rows) + "\n")
@@ -154,7 +154,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     if len(traj):
         print(_format_rows([_summary_row(sc.name, traj, res.timings, res.model)]))
     for kind, f in res.files.items():
-        print(f"{kind:11s} {f}")
+        print(f"{kind:11s} {Path(f).resolve()}")
     if _status_name(traj) == "interrupted":
         print(f"nonmin: interrupted: {traj.message}; {len(traj)} samples saved", file=sys.stderr)
         return EXIT_INTERRUPTED
@@ -415,12 +415,12 @@ def build_parser() -> argparse.ArgumentParser:
             "guards): scenario files with entry points are programs, use only trusted ones",
         )
 
-    def model_flag(sp: argparse.ArgumentParser, required: bool) -> None:
+    def model_flag(sp: argparse.ArgumentParser, required: bool, use: str = "") -> None:
         sp.add_argument(
             "--model",
             default=None,
             help="library model name or SCENARIO.toml the trajectory came from"
-            + ("" if required else " (draws the model-based panels)")
+            + (f" ({use})" if use else "")
             + "; the file's metadata is never used to rebuild one",
         )
         allow_code_flag(sp)
@@ -457,7 +457,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument(
         "--duration", type=_TIME, default=1.0, help="length of the diagnostic trajectory [s]"
     )
-    sp.add_argument("--samples", type=_SAMPLES, default=200)
+    sp.add_argument("--samples", type=_SAMPLES, default=200,
+                    help="samples of the diagnostic trajectory where rank A, cond(M̄) and μ are reported")
     allow_code_flag(sp)
     sp.set_defaults(func=cmd_check)
 
@@ -475,7 +476,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-o", "--output", default=None, help="image file (default RESULT.png)")
     sp.add_argument("--metric", default=None, help="sweep: per-run metric (default energy_drift)")
     sp.add_argument("--keys", default=None, help="sweep: one or two swept keys, comma-separated")
-    model_flag(sp, required=False)
+    model_flag(sp, required=False, use="draws the model-based panels")
     sp.set_defaults(func=cmd_plot)
 
     sp = sub.add_parser("animate", help="animate a saved trajectory (GIF or MP4)")
@@ -498,7 +499,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="csv (plain header + RESULT.csv.json metadata), parquet or netcdf "
                     "(extra export); default csv")
     sp.add_argument("-o", "--output", default=None, help="output file (default RESULT.csv/.parquet/.nc)")
-    model_flag(sp, required=False)
+    model_flag(sp, required=False, use="gives the columns their units")
     sp.set_defaults(func=cmd_export)
 
     sp = sub.add_parser("view", help="open a saved trajectory in the interactive 3-D viewer (browser)")

@@ -148,3 +148,18 @@ def test_bad_entry_point(tmp_path, capsys):
     assert main(["run", str(sc), "--allow-code"]) == EXIT_USAGE
     err = capsys.readouterr().err
     assert "model.entry_point" in err and "no_such_module_xyz" in err
+
+
+def test_run_prints_every_file_the_same_way(tmp_path, monkeypatch, capsys):
+    """With a relative --out, the trajectory and animation were printed as absolute paths and
+    the CSV and plot as relative ones; every file line is now absolute."""
+    scen = tmp_path / "s.toml"
+    scen.write_text('[model]\nlibrary = "crossed_four_bar"\n[simulate]\nt_final = 0.05\noutput_dt = 0.01\n'
+                    '[output]\nanimation = false\n')  # fmt: skip
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", str(scen), "--out", "rel", "--no-progress"]) == EXIT_OK
+    lines = [ln.split(None, 1) for ln in capsys.readouterr().out.splitlines()]
+    files = {ln[0]: ln[1] for ln in lines if len(ln) == 2 and ln[0] in ("trajectory", "csv", "plot")}
+    assert set(files) == {"trajectory", "csv", "plot"}
+    for kind, path in files.items():
+        assert Path(path).is_absolute() and Path(path).parent == (tmp_path / "rel").resolve(), (kind, path)
