@@ -64,6 +64,17 @@ void lq_profile_solve(const LQWork& w, int m, double* cv) {
     }
 }
 
+void lq_lower_subst(const LQWork& w, int m, double* cv) {
+    const int n = w.n;
+    const double* Wq = w.Wq.data();
+    for (int i = 0; i < m; ++i) {
+        const double* Wi = Wq + static_cast<long>(i) * n;
+        double s = cv[i];
+        for (int k = 0; k < i; ++k) s -= Wi[k] * cv[k];
+        cv[i] = s / Wi[i];
+    }
+}
+
 namespace {
 
 // Row i of X (leading dimension n) times reflector j (I − β_j v vᵀ over its columns Hx[j]);
@@ -234,7 +245,7 @@ int certify_profile(const double* B, int m, int n, double rtol, LQWork& w, doubl
 }  // namespace
 
 int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* cv,
-                 bool skip_redundant) {
+                 bool skip_redundant, bool inverse) {
     const int ld = w.m_max;
     double* Wq = w.Wq.data();
     for (int k = 0; k < n; ++k) {
@@ -313,44 +324,70 @@ int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* 
         }
         row2max = std::max(row2max, ri);
     }
-    for (int i = 0; i < m; ++i) cv[i] = 1.0 / Wq[i * n + i];  // reciprocal pivots (scratch)
-    // L⁻¹ row by row: row i = (e_i − Σ_{k<i} L_ik · row k) / L_ii (zero L_ik skipped)
-    double* Li = w.Li.data();
-    double f0 = 0.0, f1 = 0.0;
-    for (int i = 0; i < m; ++i) {
-        double* Ri = Li + static_cast<long>(i) * ld;
-        for (int c = 0; c < i; ++c) Ri[c] = 0.0;
-        Ri[i] = 1.0;
-        for (int k = 0; k < i; ++k) {
-            const double a = Wq[i * n + k];
-            if (a != 0.0) {
-                const double* Rk = Li + static_cast<long>(k) * ld;
-                for (int c = 0; c <= k; ++c) Ri[c] -= a * Rk[c];
-            }
-        }
-        const double r = cv[i];
-        for (int c = 0; c <= i; ++c) Ri[c] *= r;
-        const int i2 = (i + 1) - (i + 1) % 2;  // ‖L⁻¹‖_F²: two interleaved partial sums
-        for (int c = 0; c < i2; c += 2) {
-            f0 += Ri[c] * Ri[c];
-            f1 += Ri[c + 1] * Ri[c + 1];
-        }
-        if (i2 <= i) f0 += Ri[i] * Ri[i];
-    }
-    const double fi = f0 + f1;
     const double margin = rtol <= QR_MARGIN_RTOL ? QR_MARGIN : 1.0;
-    if (w.skipped == 0) {
-        if (!(std::sqrt(fl) * std::sqrt(fi) * margin * rtol < 1.0)) return LQ_NONE;
-    } else {  // σ_min(L₁₁) ≥ 1/‖L⁻¹‖_F > margin · rtol · √(‖L‖_F² + Σ‖x_s‖²) + eF
-        if (!skipped_rows_small(w, rtol, margin, row2max)) return LQ_NONE;
+    if (w.skipped > 0 && !skipped_rows_small(w, rtol, margin, row2max)) return LQ_NONE;
+    // The certificate with f2 ≥ ‖L⁻¹‖_F²: without skipped rows ‖L‖_F ‖L⁻¹‖_F · margin · rtol < 1;
+    // with them σ_min(L₁₁) ≥ 1/‖L⁻¹‖_F > margin · rtol · √(‖L‖_F² + Σ‖x_s‖²) + eF
+    auto certifies = [&](double f2) {
+        if (w.skipped == 0) return std::sqrt(fl) * std::sqrt(f2) * margin * rtol < 1.0;
         const double bound = margin * rtol * std::sqrt(fl + w.skip_n2) + std::sqrt(w.skip_f2);
-        if (!(bound * std::sqrt(fi) < 1.0)) return LQ_NONE;
+        return bound * std::sqrt(f2) < 1.0;
+    };
+    bool proved = false;
+    if (!inverse) {
+        // ‖L⁻¹‖_F² ≤ ‖C⁻¹ 1‖₂², C = L's comparison matrix (|L_ii| on the diagonal, −|L_ik|
+        // below): |L⁻¹| ≤ C⁻¹ entrywise (Higham, Thm 8.12) and C⁻¹ ≥ 0, so each row's sum of
+        // squares is at most its sum squared. One substitution (m²/2) instead of L⁻¹ (m³/6); the
+        // exact norm below only when the bound does not prove the rank (near a singular
+        // configuration): the decision is the exact test's. (1 + 1e-12: the bound's round-off.)
+        double* x = w.Cs.data();
+        double fb = 0.0;
+        for (int i = 0; i < m; ++i) {
+            const double* Wi = Wq + static_cast<long>(i) * n;
+            double s = 1.0;
+            for (int k = 0; k < i; ++k) s += std::fabs(Wi[k]) * x[k];
+            x[i] = s / std::fabs(Wi[i]);
+            fb += x[i] * x[i];
+        }
+        proved = certifies(fb * (1.0 + 1e-12));
     }
-    for (int i = 0; i < m; ++i) {  // cv = L⁻¹ (D b)[Ro]
-        const double* Ri = Li + static_cast<long>(i) * ld;
-        double s = 0.0;
-        for (int k = 0; k <= i; ++k) s += Ri[k] * B[static_cast<long>(w.Ro[k]) * (n + 1) + n];
-        cv[i] = s;
+    double* Li = w.Li.data();
+    if (!proved) {
+        for (int i = 0; i < m; ++i) cv[i] = 1.0 / Wq[i * n + i];  // reciprocal pivots (scratch)
+        // L⁻¹ row by row: row i = (e_i − Σ_{k<i} L_ik · row k) / L_ii (zero L_ik skipped)
+        double f0 = 0.0, f1 = 0.0;
+        for (int i = 0; i < m; ++i) {
+            double* Ri = Li + static_cast<long>(i) * ld;
+            for (int c = 0; c < i; ++c) Ri[c] = 0.0;
+            Ri[i] = 1.0;
+            for (int k = 0; k < i; ++k) {
+                const double a = Wq[i * n + k];
+                if (a != 0.0) {
+                    const double* Rk = Li + static_cast<long>(k) * ld;
+                    for (int c = 0; c <= k; ++c) Ri[c] -= a * Rk[c];
+                }
+            }
+            const double r = cv[i];
+            for (int c = 0; c <= i; ++c) Ri[c] *= r;
+            const int i2 = (i + 1) - (i + 1) % 2;  // ‖L⁻¹‖_F²: two interleaved partial sums
+            for (int c = 0; c < i2; c += 2) {
+                f0 += Ri[c] * Ri[c];
+                f1 += Ri[c + 1] * Ri[c + 1];
+            }
+            if (i2 <= i) f0 += Ri[i] * Ri[i];
+        }
+        if (!certifies(f0 + f1)) return LQ_NONE;
+    }
+    if (inverse) {
+        for (int i = 0; i < m; ++i) {  // cv = L⁻¹ (D b)[Ro]
+            const double* Ri = Li + static_cast<long>(i) * ld;
+            double s = 0.0;
+            for (int k = 0; k <= i; ++k) s += Ri[k] * B[static_cast<long>(w.Ro[k]) * (n + 1) + n];
+            cv[i] = s;
+        }
+    } else {  // cv = L⁻¹ (D b)[Ro] by substitution
+        for (int i = 0; i < m; ++i) cv[i] = B[static_cast<long>(w.Ro[i]) * (n + 1) + n];
+        lq_lower_subst(w, m, cv);
     }
     w.rank = m;
     return LQ_INVERSE;

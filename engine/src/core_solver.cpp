@@ -31,7 +31,7 @@ struct Solver::Impl {
     int m_live = 0;                // rows of B the rank decision used (the live rows of A)
     // The factorization of the last successful forward/solve call, for again(): its A had m
     // rows (scales d, live rows compacted), rank r, M diagonal or not, μ; the SVD paths keep
-    // Σ⁻¹Uᵀ of the kept rows in Ui (r × m_live), the certified LQ its L⁻¹ (lq.Li); the range
+    // Σ⁻¹Uᵀ of the kept rows in Ui (r × m_live), the certified LQ its L (lq.Wq or lq.Li); the range
     // form keeps M̄'s Cholesky factor (W, dinv), the null-space form Z (Kt), S (G) and its
     // factor (Ls).
     bool held = false;
@@ -138,7 +138,7 @@ struct Solver::Impl {
                     linalg::row_pattern(B.data(), m, n, n + 1, lq.Ap.data());
                 lqmode = linalg::lq_sparse(B.data(), m, n, rtol, lq, cv.data());
             } else {
-                lqmode = linalg::lq_certified(B.data(), m, n, rtol, lq, cv.data(), true);
+                lqmode = linalg::lq_certified(B.data(), m, n, rtol, lq, cv.data(), true, false);
             }
             if (lqmode != linalg::LQ_NONE) {
                 const int r = lq.rank;
@@ -396,21 +396,14 @@ struct Solver::Impl {
     SolveInfo near(const double* M, const double* gin, const double* A, int m, const double* gamma,
                    const SolveOptions& opt, bool same, double* qdd, double* fc);
 
-    // cv = L⁻¹ b[Ro] over the r rows of the held certified LQ: lq_certified's product with the
-    // inverse (LQ_INVERSE) or the solve over L's profile (LQ_PROFILE).
+    // cv = L⁻¹ b[Ro] over the r rows of the held certified LQ: lq_certified's substitution with
+    // its L (LQ_INVERSE) or the solve over L's profile (LQ_PROFILE).
     void lq_lower_solve(const double* b, int r) {
-        if (lqmode == linalg::LQ_INVERSE) {
-            const int ld = lq.m_max;
-            for (int i = 0; i < r; ++i) {
-                const double* Ri = lq.Li.data() + static_cast<long>(i) * ld;
-                double s = 0.0;
-                for (int k = 0; k <= i; ++k) s += Ri[k] * b[lq.Ro[k]];
-                cv[i] = s;
-            }
-        } else {
-            for (int i = 0; i < r; ++i) cv[i] = b[lq.Ro[i]];
+        for (int i = 0; i < r; ++i) cv[i] = b[lq.Ro[i]];
+        if (lqmode == linalg::LQ_INVERSE)
+            linalg::lq_lower_subst(lq, r, cv.data());
+        else
             linalg::lq_profile_solve(lq, r, cv.data());
-        }
     }
 
     // x = A_h⁺ b = (D A_h)⁺ D b through the held certified LQ of every row (near()).

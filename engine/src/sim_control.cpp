@@ -37,13 +37,8 @@ double norm2(const double* x, int len) {
 // bits, without factorizing A again. cv: m entries of scratch; V: m × n (used when n − m > m).
 void held_min_norm(const linalg::LQWork& lq, const double* d, int m, int n, const double* b, double* cv, double* V,
                    double* x) {
-    const int ld = lq.m_max;
-    for (int i = 0; i < m; ++i) {  // cv = L⁻¹ D b (lq_certified's)
-        const double* Ri = lq.Li.data() + static_cast<long>(i) * ld;
-        double s = 0.0;
-        for (int k = 0; k <= i; ++k) s += Ri[k] * (d[k] * b[k]);
-        cv[i] = s;
-    }
+    for (int i = 0; i < m; ++i) cv[i] = d[i] * b[i];  // cv = L⁻¹ D b (the Solver's substitution)
+    linalg::lq_lower_subst(lq, m, cv);
     if (n - m <= m) {
         linalg::lq_min_norm(lq, m, n, cv, x);  // (−x)
         for (int j = 0; j < n; ++j) x[j] = -x[j];
@@ -531,7 +526,7 @@ Status Projected::desired(double t, const double* q) {
         // Solver::min_norm, which min_norm_true takes at full rank), else min_norm_true each
         const int live = linalg::equilibrate(Ar_.data(), m, n, nullptr, rtol_, Br_.data(), dqr_.data(), sqr_.data());
         const bool held = live == m && m >= linalg::QR_MIN_ROWS && m <= n && m <= linalg::DENSE_INVERSE_MAX_ROWS &&
-                          linalg::lq_certified(Br_.data(), m, n, rtol_, lqr_, cqr_.data()) != linalg::LQ_NONE;
+                          linalg::lq_certified(Br_.data(), m, n, rtol_, lqr_, cqr_.data(), false, false) != linalg::LQ_NONE;
         auto solve = [&](const double* b) -> Status {
             if (!held) return min_norm_true(Ar_, m, b, xr_.data());
             if (!finite(b, m)) return Status::not_finite;

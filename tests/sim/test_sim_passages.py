@@ -170,7 +170,10 @@ def test_engine_and_general_driver_place_the_same_steps() -> None:
 def test_samples_at_change_points_are_as_accurate_as_the_others() -> None:
     """t_eval containing the crossed four-bar's change points (θ ≡ 0 mod π): the samples there
     come from the Hermite interpolant and the projection, as accurate as a regular sample
-    (measured before: 5.6e-3 m/s off at a change point)."""
+    (measured before: 5.6e-3 m/s off at a change point). At a change point the sample's error is
+    round-off amplified by 1/σ_min: with dt = 2.5e-4 · (1 + ε), ε = ±1e-13, 3e-13, 1e-12, it
+    ranged over 1e-11 … 1.8e-8 on main at 02e103f (and 2.8e-11 … 1.2e-8 after the certified LQ's
+    substitution), hence 5e-8."""
     tt = np.linspace(0.0, 1.4, 701)
     s = np.sin(crossed_four_bar_reference(tt)["theta"])
     idx = np.nonzero(np.sign(s[1:]) != np.sign(s[:-1]))[0]
@@ -186,7 +189,7 @@ def test_samples_at_change_points_are_as_accurate_as_the_others() -> None:
     ref = crossed_four_bar_reference(tr.t)
     err = np.abs(tr.qd - ref["qd"]).max(axis=1)
     at = np.isin(tr.t, stars)
-    assert err[at].max() < 1e-8
+    assert err[at].max() < 5e-8
     assert np.abs(tr.energy - tr.energy[0]).max() < 1e-8
 
 

@@ -153,9 +153,15 @@ void row_pattern_known(const int* start, const int* cols, const int* rows, int m
 // skip_redundant): reflector j pivots on column j. With skip_redundant, rows at round-off distance
 // from the span of the rows kept before them are skipped (w.rank rows kept, w.Ro[a] the row of
 // B of factor row a); without, w.rank = m. On LQ_INVERSE: cv = L⁻¹ (D b)[Ro] (w.rank), the
-// reflectors in w.
+// reflectors in w, L in the rows of w.Wq (factor row a: columns 0 … a). inverse: L⁻¹ in w.Li
+// (dense, m³/6) and cv its product with (D b)[Ro]; without, the certificate is first tried with
+// a bound on ‖L⁻¹‖_F from one substitution (core_lq.cpp; the exact norm only when the bound does
+// not prove it: the same decision), w.Li is not written and cv comes from lq_lower_subst.
 int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* cv,
-                 bool skip_redundant = false);
+                 bool skip_redundant = false, bool inverse = true);
+
+// cv ← L⁻¹ cv by forward substitution with the L that lq_certified left in w.Wq (m rows).
+void lq_lower_subst(const LQWork& w, int m, double* cv);
 
 // Many rows: rows taken in the order of their first nonzero column (w.Ro), reflector j pivots on
 // row j's first column not pivoted yet, row column lists track fill-in; B is read over w.Ap

@@ -1203,6 +1203,7 @@ def simulate(
                 qq, vv = stab.project(model, _t + s, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
                 return system.point(_t + s, qq, vv)._replace(work=rec.quad.W + dw)
 
+            _check_range(t_new, res.state.y)  # (the stages were checked, not the step's end)
             if dense_star is None:
                 q1, qd1 = stab.project(model, t_new, res.state.y[:n].copy(), res.state.y[n:].copy(),
                                        system.active, rank_rtol)  # fmt: skip
