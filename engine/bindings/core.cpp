@@ -423,6 +423,45 @@ void bind_core(nb::module_& m) {
         "Test helper: how the Solver decided one state (status, rank, μ, method: 0 SVD, 1 "
         "certified LQ with L⁻¹, 2 certified LQ over L's profile; null_space_form).");
     m.def(
+        "core_solve_near",
+        [](In M, In g, In Ah, In gh, In A, In gamma, double rtol) {
+            const int n = static_cast<int>(g.shape(0)), m = static_cast<int>(A.shape(0));
+            if (M.size() != static_cast<size_t>(n) * n || A.ndim() != 2 || Ah.ndim() != 2 ||
+                A.shape(1) != static_cast<size_t>(n) || Ah.shape(0) != A.shape(0) ||
+                Ah.shape(1) != A.shape(1) || gamma.size() != static_cast<size_t>(m) ||
+                gh.size() != static_cast<size_t>(m))
+                throw nb::value_error("core_solve_near: shapes");
+            Solver s(std::max(m, 1), n);
+            SolveOptions opt;
+            opt.rtol = rtol;
+            opt.known = KNOWN_M_VALID;
+            const size_t un = static_cast<size_t>(n);
+            nb::capsule o0, o1, o2;
+            double* held = fresh(2 * un, o0);  // q̈, f_c of the held factorization (Ah, gh)
+            double* first = fresh(2 * un, o1);
+            double* again = fresh(2 * un, o2);
+            const SolveInfo i0 = s.forward(M.data(), g.data(), Ah.data(), m, gh.data(), opt, held, held + n);
+            const SolveInfo i1 = s.near(M.data(), g.data(), A.data(), m, gamma.data(), opt, false, first, first + n);
+            const SolveInfo i2 = s.near(M.data(), g.data(), A.data(), m, gamma.data(), opt, true, again, again + n);
+            nb::dict d;
+            d["held_status"] = static_cast<int>(i0.status);
+            d["held_method"] = i0.method;
+            d["held_null_space_form"] = i0.null_space_form;
+            d["status"] = static_cast<int>(i1.status);
+            d["status_same"] = static_cast<int>(i2.status);
+            d["rank"] = i1.rank;
+            d["held"] = nb::cast(NpOut<nb::ndim<2>>(held, {2, un}, o0));
+            d["near"] = nb::cast(NpOut<nb::ndim<2>>(first, {2, un}, o1));
+            d["near_same"] = nb::cast(NpOut<nb::ndim<2>>(again, {2, un}, o2));
+            return d;
+        },
+        nb::arg("M"), nb::arg("g"), nb::arg("A_held"), nb::arg("gamma_held"), nb::arg("A"),
+        nb::arg("gamma"), nb::arg("rtol"),
+        "Test helper of Solver::near: factorize (M, g, A_held, gamma_held) (M stated valid), "
+        "then near() at (A, gamma) twice, the second with same = true. A dict of the statuses "
+        "(status 0 ok, 4 declined), the held call's method and form, and the rows [q̈, f_c] of "
+        "the three calls.");
+    m.def(
         "core_time_solve",
         [](In M, In g, In A, In gamma, long reps, int what) -> double {
             const int n = static_cast<int>(g.shape(0)), m = static_cast<int>(A.shape(0));
