@@ -1,0 +1,68 @@
+"""Batched model + kernel against MuJoCo's C batch, interleaved (issue 17, target 5).
+
+The batched part of ``model_bench.py --engine`` (``Forward.batch`` on 10⁴ states of the
+mechanism's own RK4 trajectory against ``mujoco.rollout.rollout(..., nstep=1)`` on 10⁴ states of
+MuJoCo's trajectory, 1 and 2 threads each), with the four timings interleaved in each of 9
+rounds and medians per state: on a shared machine a load change then hits both peers alike.
+Prints one line per mechanism (µs per state and the ratios engine / MuJoCo).
+
+    OPENBLAS_NUM_THREADS=1 python benchmarks/batch_interleaved.py
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import model_bench
+import mujoco
+import numpy as np
+from mujoco import rollout
+
+from nonmin import _engine, library
+
+N = 10_000
+ROUNDS = 9
+CASES = (("crossed_four_bar", "crossed_four_bar", {}, "crossed_four_bar"),
+         ("A02 N=2", "A02_n_four_bar", {"N": 2}, "A02_N2"))  # fmt: skip
+
+
+def main() -> None:
+    for label, name, kw, bar in CASES:
+        mech = library.get(name, **kw)
+        m, s = mech.model, mech.state
+        fwd = _engine.Forward(m.engine_program(), m.active_mask(s.active))
+        tt, Q, QD = model_bench._trajectory_states(mech, N)
+        mj, dat = model_bench._mujoco(bar)
+        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        x0 = np.zeros((N, mujoco.mj_stateSize(mj, spec)))
+        mujoco.mj_resetData(mj, dat)
+        for i in range(N):
+            mujoco.mj_step(mj, dat)
+            mujoco.mj_getState(mj, dat, x0[i], spec)
+        datas = {t: [mujoco.MjData(mj) for _ in range(t)] for t in (1, 2)}
+        for t in (1, 2):
+            rollout.rollout(mj, datas[t], x0[:10], nstep=1)  # warm-up (pool, allocation)
+        res: dict[str, list[float]] = {k: [] for k in ("e1", "e2", "m1", "m2")}
+        for _ in range(ROUNDS):
+            for t in (1, 2):
+                t0 = time.perf_counter()
+                fwd.batch(tt, Q, QD, t)
+                res[f"e{t}"].append(time.perf_counter() - t0)
+                t0 = time.perf_counter()
+                rollout.rollout(mj, datas[t], x0, nstep=1)
+                res[f"m{t}"].append(time.perf_counter() - t0)
+        med = {k: 1e6 * statistics.median(v) / N for k, v in res.items()}
+        print(f"{label}: engine 1 thread {med['e1']:.3f}, 2 threads {med['e2']:.3f} µs/state | "
+              f"rollout 1 thread {med['m1']:.3f}, 2 threads {med['m2']:.3f} | engine / rollout "
+              f"1 thread {med['e1'] / med['m1']:.2f}, 2 threads {med['e2'] / med['m2']:.2f} "
+              f"(load {os.getloadavg()[0]:.1f})", flush=True)  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
