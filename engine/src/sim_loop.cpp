@@ -156,14 +156,16 @@ namespace {
 // its 25 RK4 steps at dt 1e-2). Results do not depend on it: a Solver's results depend only
 // on its inputs (its scratch invariants, e.g. B zero between calls, hold after every call; a
 // resumed run is bitwise the uninterrupted one), the loop's matrices are zeroed as when
-// allocated, and the indicator's scratch is written before it is read (passage_setup). One
-// spare at most; a loop of other sizes frees it before allocating its own.
+// allocated or are written before they are read (A's gathered rows, the linearization, the
+// projection's M; the indicator's scratch, passage_setup). One spare at most; a loop of other
+// sizes frees it before allocating its own.
 struct Spare {
     int m_max = -1, n = -1;
     std::unique_ptr<Solver> solver;
     Terms T;
     Mat Ac, Ah, Alin, Mq, L;
-    Mat pas[3];  // the indicator's B, G, C
+    Mat pB, pG, pC;               // the indicator's B, G, C
+    std::vector<int> pcol_rows;  // and its column lists
 };
 std::mutex spare_mutex;
 Spare spare;
@@ -176,14 +178,19 @@ Spare take_spare(int m_max, int n) {
     return s;
 }
 
+// dst = an r × c matrix: from's storage as it is when it has that shape (a matrix written
+// before it is read), else a zero one
+void reused(Mat& dst, Mat& from, int r, int c) {
+    if (from.rows() == r && from.cols() == c)
+        dst.swap(from);
+    else
+        dst = Mat::Zero(r, c);
+}
+
 // dst = the zero r × c matrix, in from's storage when it has that shape
 void zeroed(Mat& dst, Mat& from, int r, int c) {
-    if (from.rows() == r && from.cols() == c) {
-        dst.swap(from);
-        dst.setZero();
-    } else {
-        dst = Mat::Zero(r, c);
-    }
+    reused(dst, from, r, c);
+    dst.setZero();
 }
 
 }  // namespace
@@ -224,13 +231,15 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
     }
     L.m = static_cast<int>(L.rows.size());
     L.m_hol = static_cast<int>(std::count(L.hol.begin(), L.hol.end(), 1));
-    zeroed(L.Ac, got.Ac, mr, n);
-    zeroed(L.Ah, got.Ah, mr, n);
-    zeroed(L.Alin, got.Alin, mr, n);
+    // (A's active rows are gathered in full at the first evaluation of A, and the
+    // linearization copied in full from them: rows are written before they are read)
+    reused(L.Ac, got.Ac, mr, n);
+    reused(L.Ah, got.Ah, mr, n);
+    reused(L.Alin, got.Alin, mr, n);
     for (Vec* v : {&L.gam, &L.phi, &L.vel, &L.phih, &L.bias, &L.floor_, &L.rnorm}) *v = Vec::Zero(mr);
     for (Vec* v : {&L.g, &L.qdd, &L.fc, &L.zero_n, &L.aq, &L.dq, &L.vq}) *v = Vec::Zero(n);
     L.u = Vec::Zero(L.k);
-    zeroed(L.Mq, got.Mq, n, n);
+    reused(L.Mq, got.Mq, n, n);  // (assigned in full by the projection: M or I)
     zeroed(L.L, got.L, n, n);
     for (Vec* v : {&L.y, &L.f, &L.y0, &L.f0, &L.y1, &L.yq1, &L.ys, &L.yp, &L.fp1, &L.tmp2n, &L.k1, &L.k2,
                    &L.k3, &L.k4, &L.kn, &L.ev, &L.d_ydiff, &L.d_bspl, &L.d_r3, &L.d_r4})
@@ -252,7 +261,10 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
     L.rec.n = n;
     L.rec.k = L.k;
     L.rec.c = L.c;
-    for (Mat* M : {&L.pas.B, &L.pas.G, &L.pas.C}) M->swap(got.pas[M - &L.pas.B]);
+    L.pas.B.swap(got.pB);
+    L.pas.G.swap(got.pG);
+    L.pas.C.swap(got.pC);
+    L.pas.col_rows.swap(got.pcol_rows);
     passage_setup(L);
     L.spare_m = mr;
     if (ctrl) ctrl->attach(L.T, L.Ac, L.m, L.rows);
@@ -271,9 +283,10 @@ Loop::~Loop() {
     s.Alin.swap(Alin);
     s.Mq.swap(Mq);
     s.L.swap(L);
-    s.pas[0].swap(pas.B);
-    s.pas[1].swap(pas.G);
-    s.pas[2].swap(pas.C);
+    s.pB.swap(pas.B);
+    s.pG.swap(pas.G);
+    s.pC.swap(pas.C);
+    s.pcol_rows.swap(pas.col_rows);
     std::lock_guard<std::mutex> lock(spare_mutex);
     spare = std::move(s);  // (the spare held before, if any, is freed)
 }
