@@ -216,6 +216,43 @@ std::unique_ptr<Workspace> TapeProgram::make_workspace() const {
     return w;
 }
 
+const TapePlan& TapeProgram::plan(TapeWorkspace& w, unsigned need) const {
+    for (const TapePlan& p : w.plans)
+        if (p.need == need) return p;
+    TapePlan P;
+    P.need = need;
+    const int base = n_inputs();
+    const std::size_t N = d_.op.size();
+    for (std::size_t i = 0; i < N; ++i) {
+        const int op = d_.op[i];
+        if (!(need_[i] & need) || static_cast<TapeOp>(op) == TapeOp::constant) continue;
+        P.dst.push_back(base + static_cast<int>(i));
+        P.a.push_back(d_.a[i]);
+        P.b.push_back(binary(static_cast<TapeOp>(op)) ? d_.b[i] : 0);
+        P.c.push_back(d_.c[i]);
+        if (P.run_op.empty() || P.run_op.back() != op) {
+            P.run_op.push_back(op);
+            P.run_end.push_back(0);
+        }
+        P.run_end.back() = static_cast<int>(P.dst.size());
+    }
+    const int n_targets = static_cast<int>(TapeTarget::V) + 1;
+    const std::size_t E = d_.out_target.size();
+    for (int T = 0; T < n_targets; ++T) {
+        P.out_start.push_back(static_cast<int>(P.out_idx.size()));
+        if (!(target_need(static_cast<TapeTarget>(T)) & need)) continue;
+        for (std::size_t e = 0; e < E; ++e) {
+            if (d_.out_target[e] != T) continue;
+            P.out_idx.push_back(d_.out_index[e]);
+            P.out_reg.push_back(d_.out_reg[e]);
+            P.out_con.push_back(out_row_constraint_[e]);
+        }
+    }
+    P.out_start.push_back(static_cast<int>(P.out_idx.size()));
+    w.plans.push_back(std::move(P));
+    return w.plans.back();
+}
+
 Status TapeProgram::evaluate(double t, const double* q, const double* qd, const std::uint8_t* active,
                              unsigned need, Terms& out, Workspace& wsb) const {
     auto& w = static_cast<TapeWorkspace&>(wsb);
@@ -233,50 +270,54 @@ Status TapeProgram::evaluate(double t, const double* q, const double* qd, const 
                 if (!std::isfinite(q[i]) || !std::isfinite(qd[i])) return Status::not_finite;
         }
     }
-    const int base = n_inputs();
-    const std::size_t N = d_.op.size();
-    const int* op = d_.op.data();
-    const int* ia = d_.a.data();
-    const int* ib = d_.b.data();
-    const double* cc = d_.c.data();
-    const std::uint8_t* nd = need_.data();
-    double* o = r + base;
-    for (std::size_t i = 0; i < N; ++i) {
-        if (!(nd[i] & need)) continue;
-        const double x = r[ia[i]];
-        double y;
-        switch (static_cast<TapeOp>(op[i])) {
-            case TapeOp::constant: continue;  // written once by make_workspace
-            case TapeOp::add: y = x + r[ib[i]]; break;
-            case TapeOp::sub: y = x - r[ib[i]]; break;
-            case TapeOp::mul: y = x * r[ib[i]]; break;
-            case TapeOp::div: y = x / r[ib[i]]; break;
-            case TapeOp::neg: y = -x; break;
-            case TapeOp::powi: y = powi(x, static_cast<long>(cc[i])); break;
-            case TapeOp::pow: y = std::pow(x, r[ib[i]]); break;
-            case TapeOp::sqrt: y = std::sqrt(x); break;
-            case TapeOp::sin: y = std::sin(x); break;
-            case TapeOp::cos: y = std::cos(x); break;
-            case TapeOp::tan: y = std::tan(x); break;
-            case TapeOp::exp: y = std::exp(x); break;
-            case TapeOp::log: y = std::log(x); break;
-            case TapeOp::asin: y = std::asin(x); break;
-            case TapeOp::acos: y = std::acos(x); break;
-            case TapeOp::atan: y = std::atan(x); break;
-            case TapeOp::atan2: y = std::atan2(x, r[ib[i]]); break;
-            case TapeOp::sinh: y = std::sinh(x); break;
-            case TapeOp::cosh: y = std::cosh(x); break;
-            case TapeOp::tanh: y = std::tanh(x); break;
-            case TapeOp::abs: y = std::fabs(x); break;
-            case TapeOp::sign: y = x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0); break;
-            case TapeOp::min: y = std::fmin(x, r[ib[i]]); break;
-            case TapeOp::max: y = std::fmax(x, r[ib[i]]); break;
-            case TapeOp::square: y = x * x; break;
-            default: y = 0.0; break;
+    // the instructions these flags need, run by run (each run one op: one dispatch per run);
+    // the same ops on the same operands in the same order as the tape, so bitwise the same
+    const TapePlan& P = plan(w, need & NEED_ALL);
+    const int* dst = P.dst.data();
+    const int* ia = P.a.data();
+    const int* ib = P.b.data();
+    const double* cc = P.c.data();
+    const std::size_t n_runs = P.run_op.size();
+    int k = 0;
+    for (std::size_t run = 0; run < n_runs; ++run) {
+        const int e = P.run_end[run];
+#define NONMIN_TAPE_RUN(expr)                  \
+    for (; k < e; ++k) {                       \
+        const double x = r[ia[k]];             \
+        r[dst[k]] = (expr);                    \
+    }                                          \
+    break
+        switch (static_cast<TapeOp>(P.run_op[run])) {
+            case TapeOp::add: NONMIN_TAPE_RUN(x + r[ib[k]]);
+            case TapeOp::sub: NONMIN_TAPE_RUN(x - r[ib[k]]);
+            case TapeOp::mul: NONMIN_TAPE_RUN(x * r[ib[k]]);
+            case TapeOp::div: NONMIN_TAPE_RUN(x / r[ib[k]]);
+            case TapeOp::neg: NONMIN_TAPE_RUN(-x);
+            case TapeOp::powi: NONMIN_TAPE_RUN(powi(x, static_cast<long>(cc[k])));
+            case TapeOp::pow: NONMIN_TAPE_RUN(std::pow(x, r[ib[k]]));
+            case TapeOp::sqrt: NONMIN_TAPE_RUN(std::sqrt(x));
+            case TapeOp::sin: NONMIN_TAPE_RUN(std::sin(x));
+            case TapeOp::cos: NONMIN_TAPE_RUN(std::cos(x));
+            case TapeOp::tan: NONMIN_TAPE_RUN(std::tan(x));
+            case TapeOp::exp: NONMIN_TAPE_RUN(std::exp(x));
+            case TapeOp::log: NONMIN_TAPE_RUN(std::log(x));
+            case TapeOp::asin: NONMIN_TAPE_RUN(std::asin(x));
+            case TapeOp::acos: NONMIN_TAPE_RUN(std::acos(x));
+            case TapeOp::atan: NONMIN_TAPE_RUN(std::atan(x));
+            case TapeOp::atan2: NONMIN_TAPE_RUN(std::atan2(x, r[ib[k]]));
+            case TapeOp::sinh: NONMIN_TAPE_RUN(std::sinh(x));
+            case TapeOp::cosh: NONMIN_TAPE_RUN(std::cosh(x));
+            case TapeOp::tanh: NONMIN_TAPE_RUN(std::tanh(x));
+            case TapeOp::abs: NONMIN_TAPE_RUN(std::fabs(x));
+            case TapeOp::sign: NONMIN_TAPE_RUN(x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0));
+            case TapeOp::min: NONMIN_TAPE_RUN(std::fmin(x, r[ib[k]]));
+            case TapeOp::max: NONMIN_TAPE_RUN(std::fmax(x, r[ib[k]]));
+            case TapeOp::square: NONMIN_TAPE_RUN(x * x);
+            default: NONMIN_TAPE_RUN(0.0);  // (constant: not in a plan)
         }
-        o[i] = y;
+#undef NONMIN_TAPE_RUN
     }
-    // outputs: zero what is asked, then scatter the table
+    // outputs: zero what is asked, then scatter the table (target by target, each in table order)
     if (need & NEED_M) out.M.setZero();
     if (need & NEED_H) {
         out.h.setZero();
@@ -294,29 +335,41 @@ Status TapeProgram::evaluate(double t, const double* q, const double* qd, const 
     }
     double T = 0.0, V = 0.0;
     bool finite = true;
-    const std::size_t E = d_.out_target.size();
-    for (std::size_t e = 0; e < E; ++e) {
-        const auto tg = static_cast<TapeTarget>(d_.out_target[e]);
-        if (!(target_need(tg) & need)) continue;
-        const int ci = out_row_constraint_[e];
-        if (ci >= 0 && !active[ci]) continue;
-        const double v = r[d_.out_reg[e]];
-        if (!std::isfinite(v)) finite = false;
-        const int idx = d_.out_index[e];
-        switch (tg) {
-            case TapeTarget::M:
-                if (need & NEED_M) out.M.data()[idx] = v;
-                if (need & NEED_ENERGY) T += v * qd[idx / n] * qd[idx % n];
-                break;
-            case TapeTarget::h: out.h[idx] = v; break;
-            case TapeTarget::f_passive: out.f_passive[idx] = v; break;
-            case TapeTarget::B: out.B.data()[idx] = v; break;
-            case TapeTarget::A: out.A.data()[idx] = v; break;
-            case TapeTarget::gamma: out.gamma[idx] = v; break;
-            case TapeTarget::phi: out.phi[idx] = v; break;
-            case TapeTarget::velocity: out.velocity[idx] = v; break;
-            case TapeTarget::V: V = v; break;
+    const int* oi = P.out_idx.data();
+    const int* orr = P.out_reg.data();
+    const int* oc = P.out_con.data();
+    const int* os = P.out_start.data();
+    auto scatter = [&](TapeTarget tg, double* dest) {
+        for (int e = os[static_cast<int>(tg)]; e < os[static_cast<int>(tg) + 1]; ++e) {
+            const int ci = oc[e];
+            if (ci >= 0 && !active[ci]) continue;
+            const double v = r[orr[e]];
+            if (!std::isfinite(v)) finite = false;
+            dest[oi[e]] = v;
         }
+    };
+    {  // M (and the kinetic energy from it, in table order)
+        const bool wm = (need & NEED_M) != 0, we = (need & NEED_ENERGY) != 0;
+        double* Md = out.M.data();
+        for (int e = os[0]; e < os[1]; ++e) {
+            const double v = r[orr[e]];
+            if (!std::isfinite(v)) finite = false;
+            const int idx = oi[e];
+            if (wm) Md[idx] = v;
+            if (we) T += v * qd[idx / n] * qd[idx % n];
+        }
+    }
+    scatter(TapeTarget::h, out.h.data());
+    scatter(TapeTarget::f_passive, out.f_passive.data());
+    scatter(TapeTarget::B, out.B.data());
+    scatter(TapeTarget::A, out.A.data());
+    scatter(TapeTarget::gamma, out.gamma.data());
+    scatter(TapeTarget::phi, out.phi.data());
+    scatter(TapeTarget::velocity, out.velocity.data());
+    for (int e = os[static_cast<int>(TapeTarget::V)]; e < os[static_cast<int>(TapeTarget::V) + 1]; ++e) {
+        const double v = r[orr[e]];
+        if (!std::isfinite(v)) finite = false;
+        V = v;
     }
     if (need & NEED_ENERGY) {
         out.kinetic = 0.5 * T;

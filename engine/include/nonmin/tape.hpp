@@ -61,9 +61,23 @@ struct TapeDescription {
     std::vector<int> out_target, out_index, out_reg;  // output table: flat index in its array
 };
 
+// The tape pre-decoded for one set of NEED_* flags (built once per workspace and flag set, on
+// first use): the instructions those flags need, in the tape's order, as runs of one op (no
+// per-instruction flag test or dispatch), and the output table split by target.
+struct TapePlan {
+    unsigned need = 0;                          // the flags (need & 0xff)
+    std::vector<int> run_op, run_end;           // runs [run_end[k−1], run_end[k]) of op run_op[k]
+    std::vector<int> dst, a, b;                 // registers written and read
+    std::vector<double> c;                      // powi's exponent
+    // output entries of each target in table order: (flat index, register, constraint or −1)
+    std::vector<int> out_start;                 // out_start[T] … out_start[T + 1] (TapeTarget T)
+    std::vector<int> out_idx, out_reg, out_con;
+};
+
 struct TapeWorkspace : Workspace {
     std::vector<double> reg;
     std::vector<double> dreg;  // evaluate_tangent: the registers' directional derivatives
+    std::vector<TapePlan> plans;
 };
 
 class TapeProgram final : public Program {
@@ -86,6 +100,7 @@ class TapeProgram final : public Program {
 
   private:
     void schedule();  // reorder into runs of one op (dependencies kept)
+    const TapePlan& plan(TapeWorkspace& w, unsigned need) const;
 
     TapeDescription d_;
     std::vector<double> params_;

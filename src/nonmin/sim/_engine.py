@@ -76,10 +76,15 @@ def _first_chunk(start_seconds: float) -> int:
 _KINDS = {"holonomic": 0, "rheonomic": 1, "nonholonomic": 2, "unilateral": 3}
 
 
-def _engine() -> Any:
-    from .. import _engine as eng  # type: ignore[attr-defined]  # the compiled extension (no stubs)
+_ENG: list[Any] = []  # the compiled extension, imported at the first run (import nonmin stays light)
 
-    return eng
+
+def _engine() -> Any:
+    if not _ENG:
+        from .. import _engine as eng  # type: ignore[attr-defined]  # the compiled extension (no stubs)
+
+        _ENG.append(eng)
+    return _ENG[0]
 
 
 # --------------------------------------------------------------------------- eligibility

@@ -1428,17 +1428,19 @@ def _kick_check(result: Trajectory) -> Trajectory:
     t, qd, qdd = result.t, result.qd, result.qdd
     if t.shape[0] < 2 or qd.shape[1] == 0:
         return result
-    dt = np.diff(t)
-    dv = np.max(np.abs(np.diff(qd, axis=0) - 0.5 * dt[:, None] * (qdd[1:] + qdd[:-1])), axis=1)
+    # (ndarray methods and slices: np.diff and np.max's wrappers cost more than the arithmetic
+    # on a short run; the same values)
+    dt = t[1:] - t[:-1]
+    dv = np.abs((qd[1:] - qd[:-1]) - 0.5 * dt[:, None] * (qdd[1:] + qdd[:-1])).max(axis=1)
     # the acceleration level around each step: the median of |q̈|∞ over the 6 step ends
     # i−2 … i+3 (one wrong q̈ at a step end next to a singular instant, 19051 against 80
     # measured in the case of KICK_RATIO, must not set the scale; a jump of the input does not
     # move the median below half the larger level)
-    a = np.max(np.abs(qdd), axis=1)
-    floor = 1e-9 * (1.0 + np.max(np.abs(qd), axis=1)[1:])
+    a = np.abs(qdd).max(axis=1)
+    floor = 1e-9 * (1.0 + np.abs(qd).max(axis=1)[1:])
     # every window's median is at least min(a) (rounding is monotone): when no step exceeds
     # the ratio against that lower scale, none exceeds it against the medians
-    if bool(np.all(~(dt > 0.0) | (dv <= KICK_RATIO * (dt * a.min() + floor)))):
+    if bool((~(dt > 0.0) | (dv <= KICK_RATIO * (dt * a.min() + floor))).all()):
         return result
     pad = np.concatenate((np.full(2, a[0]), a, np.full(2, a[-1])))
     acc = np.median(np.lib.stride_tricks.sliding_window_view(pad, 6), axis=1)[: dt.shape[0]]
