@@ -38,6 +38,9 @@ bool binary(TapeOp op) {
     }
 }
 
+// A plan's fused op (not a tape op): sin into dst and cos into b of one register
+constexpr int TAPE_SINCOS = 100;
+
 inline double powi(double x, long k) {
     if (k < 0) return 1.0 / powi(x, -k);
     double r = 1.0;
@@ -223,12 +226,45 @@ const TapePlan& TapeProgram::plan(TapeWorkspace& w, unsigned need) const {
     P.need = need;
     const int base = n_inputs();
     const std::size_t N = d_.op.size();
+    // sin and cos of one register, both needed: one sincos at the first of the two (glibc's
+    // sincos is bitwise its sin and cos: checked on 2e7 arguments; the second's register is
+    // read only after it in the tape's order, so writing it earlier changes nothing)
+    std::vector<int> partner(N, -1);
+#if defined(__GLIBC__)
+    {
+        std::vector<int> sin_of(static_cast<std::size_t>(base) + N, -1), cos_of(sin_of.size(), -1);
+        for (std::size_t i = 0; i < N; ++i) {
+            if (!(need_[i] & need)) continue;
+            const auto op = static_cast<TapeOp>(d_.op[i]);
+            if (op == TapeOp::sin && sin_of[static_cast<std::size_t>(d_.a[i])] < 0)
+                sin_of[static_cast<std::size_t>(d_.a[i])] = static_cast<int>(i);
+            if (op == TapeOp::cos && cos_of[static_cast<std::size_t>(d_.a[i])] < 0)
+                cos_of[static_cast<std::size_t>(d_.a[i])] = static_cast<int>(i);
+        }
+        for (std::size_t x = 0; x < sin_of.size(); ++x)
+            if (sin_of[x] >= 0 && cos_of[x] >= 0) {
+                partner[static_cast<std::size_t>(sin_of[x])] = cos_of[x];
+                partner[static_cast<std::size_t>(cos_of[x])] = sin_of[x];
+            }
+    }
+#endif
+    std::vector<char> done(N, 0);
     for (std::size_t i = 0; i < N; ++i) {
-        const int op = d_.op[i];
-        if (!(need_[i] & need) || static_cast<TapeOp>(op) == TapeOp::constant) continue;
-        P.dst.push_back(base + static_cast<int>(i));
+        int op = d_.op[i];
+        if (!(need_[i] & need) || static_cast<TapeOp>(op) == TapeOp::constant || done[i]) continue;
+        int b = binary(static_cast<TapeOp>(op)) ? d_.b[i] : 0;
+        int dst = base + static_cast<int>(i);
+        if (partner[i] >= 0) {  // sin → (dst, b) = (sin's, cos's register)
+            const int j = partner[i];
+            done[static_cast<std::size_t>(j)] = 1;
+            const bool is_sin = static_cast<TapeOp>(op) == TapeOp::sin;
+            dst = base + (is_sin ? static_cast<int>(i) : j);
+            b = base + (is_sin ? j : static_cast<int>(i));
+            op = TAPE_SINCOS;
+        }
+        P.dst.push_back(dst);
         P.a.push_back(d_.a[i]);
-        P.b.push_back(binary(static_cast<TapeOp>(op)) ? d_.b[i] : 0);
+        P.b.push_back(b);
         P.c.push_back(d_.c[i]);
         if (P.run_op.empty() || P.run_op.back() != op) {
             P.run_op.push_back(op);
@@ -313,6 +349,11 @@ Status TapeProgram::evaluate(double t, const double* q, const double* qd, const 
             case TapeOp::min: NONMIN_TAPE_RUN(std::fmin(x, r[ib[k]]));
             case TapeOp::max: NONMIN_TAPE_RUN(std::fmax(x, r[ib[k]]));
             case TapeOp::square: NONMIN_TAPE_RUN(x * x);
+            case static_cast<TapeOp>(TAPE_SINCOS):
+#if defined(__GLIBC__)
+                for (; k < e; ++k) ::sincos(r[ia[k]], &r[dst[k]], &r[ib[k]]);
+#endif
+                break;
             default: NONMIN_TAPE_RUN(0.0);  // (constant: not in a plan)
         }
 #undef NONMIN_TAPE_RUN

@@ -310,11 +310,28 @@ def _same(a: Any, b: Any) -> bool:
         return False
 
 
+#: The values built from flat shorthands alone, by (kind, ((name, type, value), ...)) when every
+#: value is a plain str/int/float/bool/None: the values are frozen and validated, so a call with
+#: the same shorthands shares the first call's value instead of validating it again.
+_BUILT: dict[tuple[Any, ...], Any] = {}
+_BUILT_MAX = 256
+_PLAIN = (str, int, float, bool, type(None))
+
+
 def _fold(kind: type, flat: dict[str, Any], given: Any) -> Any:
     """``given`` (a value of ``kind``, or None for the defaults) with the shorthands from ``flat``."""
     mine = {k: v for k, v in flat.items() if SHORTHANDS.get(k) is kind}
     if given is None:
-        return kind(**mine)
+        if not all(type(v) in _PLAIN for v in mine.values()):
+            return kind(**mine)
+        key = (kind, *sorted((k, type(v).__name__, v) for k, v in mine.items()))
+        hit = _BUILT.get(key)
+        if hit is None:
+            hit = kind(**mine)  # (invalid values raise here, and are not kept)
+            if len(_BUILT) >= _BUILT_MAX:
+                _BUILT.clear()
+            _BUILT[key] = hit
+        return hit
     for k, v in mine.items():
         ours = getattr(given, k)
         probe = getattr(kind(**{k: v}), k)  # validated and normalised the same way

@@ -648,7 +648,7 @@ def _vector(x: ArrayLike, name: str, n: int) -> FloatArray:
     if arr.shape != (n,):
         batch = "; k initial states are k runs: nonmin.simulate_batch" if arr.shape[-1:] == (n,) else ""
         raise ShapeError(f"{name} must have shape ({n},), got shape {arr.shape}{batch}")
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         raise NonFiniteError(f"{name} must be finite")
     return arr
 

@@ -380,6 +380,9 @@ STABILIZATIONS: dict[str, type[Stabilization]] = {
 }
 
 
+_BY_NAME: dict[str, Stabilization] = {}
+
+
 def resolve_stabilization(spec: Stabilization | str | None) -> Stabilization:
     """An instance from an object or a registered name."""
     from ..errors import UnknownNameError
@@ -393,7 +396,14 @@ def resolve_stabilization(spec: Stabilization | str | None) -> Stabilization:
             raise UnknownNameError(
                 f"stabilization: unknown name {spec!r}; known: {sorted(STABILIZATIONS)}"
             )
-        return STABILIZATIONS[spec]()
+        cls = STABILIZATIONS[spec]
+        params = getattr(cls, "__dataclass_params__", None)
+        if params is None or not params.frozen:  # (a class registered by a user: a new instance)
+            return cls()
+        hit = _BY_NAME.get(spec)
+        if hit is None or type(hit) is not cls:  # frozen values: one default instance per name
+            hit = _BY_NAME[spec] = cls()
+        return hit
     raise InputError(
         f"stabilization must be a Stabilization object or one of {sorted(STABILIZATIONS)}, "
         f"got {type(spec).__name__}"
