@@ -179,6 +179,11 @@ def test_bad_arguments_are_typed_errors(bar):
         simulate_batch(bar, 0.1, st.q, record=("q", "lambda"))
     with pytest.raises(InputError, match="threads"):
         simulate_batch(bar, 0.1, st.q, threads=0)
+    # complex and text initial states ran (NumPy's casts: a ComplexWarning, or parsed strings)
+    with pytest.raises(InputError, match="q0 must be real numbers, got complex"):
+        simulate_batch(bar, 0.1, np.stack([st.q] * 2) + 1j)
+    with pytest.raises(ShapeError, match="qd0 must be an array of shape"):
+        simulate_batch(bar, 0.1, st.q, st.qd.astype(str))
 
 
 def test_adaptive_runs_with_t_eval_match_simulate(bar):

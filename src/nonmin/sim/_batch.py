@@ -28,6 +28,7 @@ from typing import Any, overload
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._validation import as_float_array
 from ..errors import InputError, NonFiniteError, ShapeError
 from ..model import Model
 from . import _engine
@@ -208,8 +209,8 @@ def _stack(x: ArrayLike | None, name: str, n: int, k: int | None) -> FloatArray 
     if x is None:
         return None
     try:
-        a = np.array(x, dtype=float)
-    except (TypeError, ValueError):
+        a = np.array(as_float_array(x, name))  # text, booleans, complex: refused by name
+    except ShapeError:
         raise ShapeError(f"{name} must be an array of shape (k, {n}) or ({n},), got {type(x).__name__}") from None
     if a.ndim == 1:
         a = a[None]
