@@ -85,7 +85,8 @@ def user_call(what: str, t: float, fn: Callable[..., Any], *args: Any, **kwargs:
         form = _call_form(what)
         if isinstance(exc, TypeError) and form is not None and not _takes(fn, args, kwargs):
             raise SimulationError(
-                f"{what} cannot be called the way simulate calls it: {exc}; expected {form}"
+                f"{what} cannot be called the way simulate calls it ({type(exc).__name__}: {exc}); "
+                f"expected {form}"
             ) from exc
         raise SimulationError(f"{what} raised {type(exc).__name__}: {exc} (at t = {t:.12g})") from exc
 
