@@ -35,3 +35,20 @@ def test_planar_public_names():
     }
     for name in planar.__all__:
         assert hasattr(planar, name)
+
+
+def test_horizon_and_parameter_errors_are_named() -> None:
+    """t_final=-1 or NaN built a Mechanism with that horizon; omega0=NaN said only "q and qd
+    must be finite", naming neither the mechanism nor the parameter."""
+    import math
+
+    import pytest
+
+    from nonmin import library
+    from nonmin.errors import InputError, NonFiniteError
+
+    for bad in (-1.0, 0.0, math.nan, math.inf):
+        with pytest.raises(InputError, match="t_final must be a positive finite horizon"):
+            library.get("crossed_four_bar", t_final=bad)
+    with pytest.raises(NonFiniteError, match=r"mechanism 'crossed_four_bar' with parameters \{'omega0': nan\}"):
+        library.get("crossed_four_bar", omega0=math.nan)

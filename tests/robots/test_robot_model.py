@@ -350,3 +350,15 @@ def test_frame_constraint_vectors_must_be_finite_numbers() -> None:
         FrameConstraint.planar_point("loop", "a", "b", normal="y")
     with pytest.raises(NonFiniteError, match="placement_a must be finite"):
         FrameConstraint.point("loop", "a", "b", placement_a=(np.nan, 0.0, 0.0))
+
+
+def test_negative_joint_damping_is_a_model_error() -> None:
+    """damping=[-1, -1, -1] (energy injected) was accepted; the planar builder's dampers refuse it."""
+    from nonmin.errors import ModelError
+    from nonmin.model.robots import RobotModel, data_path
+
+    with pytest.raises(ModelError, match=r"damping must be finite and ≥ 0"):
+        RobotModel.from_urdf(data_path("fourbar.urdf"), damping=[0.1, -1.0, 0.0])
+    with pytest.raises(ModelError, match=r"damping must be finite and ≥ 0"):
+        RobotModel.from_urdf(data_path("fourbar.urdf"), damping=[np.nan, 0.0, 0.0])
+    RobotModel.from_urdf(data_path("fourbar.urdf"), damping=[0.1, 0.0, 0.2])

@@ -23,6 +23,7 @@ returns what the benchmark asks for.
 from __future__ import annotations
 
 import inspect
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
@@ -60,6 +61,14 @@ class Mechanism:
     reference: str
     name: str = ""
     params: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        try:
+            tf = float(self.t_final)
+        except (TypeError, ValueError):
+            tf = math.nan
+        if not (math.isfinite(tf) and tf > 0.0):
+            raise InputError(f"t_final must be a positive finite horizon [s], got {self.t_final!r}")
 
 
 F = TypeVar("F", bound=Callable[..., Mechanism])
@@ -110,8 +119,14 @@ def get(name: str, **params: Any) -> Mechanism:
         )
     try:
         mech = fn(**params)
-    except NonminError:
-        raise
+    except NonminError as exc:
+        if not params:
+            raise
+        try:  # the same error, naming the mechanism and the parameters that led to it
+            named = type(exc)(f"mechanism {name!r} with parameters {params!r}: {exc}")
+        except TypeError:  # an error type with more arguments
+            raise exc from None
+        raise named from None
     except (TypeError, ValueError, ArithmeticError) as exc:
         raise InputError(
             f"mechanism {name!r}: cannot build it with parameters {params!r}: "

@@ -61,6 +61,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ... import _engine  # type: ignore[attr-defined]  # compiled extension, no stub
+from ..._validation import as_float_array
 from ...errors import (
     FileFormatError,
     InputError,
@@ -418,9 +419,12 @@ class RobotModel(Model):
                 act_names += [b.joint] if b.nv == 1 else [f"{b.joint}.{i}" for i in range(b.nv)]
         damp = np.zeros(pm.nv)
         if self.damping is not None:
-            damp = np.asarray(self.damping, dtype=float)
+            damp = np.array(as_float_array(self.damping, "damping"))
             if damp.shape != (pm.nv,):
                 raise ShapeError(f"damping must have shape ({pm.nv},), got shape {damp.shape}")
+            if not (np.isfinite(damp).all() and (damp >= 0.0).all()):
+                raise ModelError(f"damping must be finite and ≥ 0 (viscous, one value per velocity "
+                                 f"component), got {damp.tolist()}")  # fmt: skip
         struct = frozenset(c.name for c in structural)
         if self.default_active_names is None:
             dflt = frozenset(c.name for c in specs if c.kind != "unilateral")
