@@ -129,3 +129,23 @@ def test_mass_matrix_singular_off_the_nullspace():
     s = assemble(m, [0.9, 0.3, 0.2], [1.0, 1.0, 1.0])
     assert consistent(m, s, tol=1e-12)
     assert s.q[2] == pytest.approx(0.0, abs=1e-14) and abs(np.hypot(s.q[0], s.q[1]) - 1) < 1e-12
+
+
+def test_function_model_names_and_callables_are_checked() -> None:
+    """coordinate_names ("x", "x") was accepted (q0.x, CSV columns and plots then clash), and a
+    mass given as an array failed only inside simulate ('user function mass raised TypeError')."""
+    import numpy as np
+    import pytest
+
+    from nonmin.errors import InputError
+    from nonmin.model import FunctionModel
+
+    fns = {"mass": lambda q: np.eye(2), "coriolis": lambda q, qd: np.zeros((2, 2)),
+           "conservative": lambda q: np.zeros(2), "potential": lambda q: 0.0}  # fmt: skip
+    with pytest.raises(InputError, match=r"coordinate_names must be unique.*\['x'\]"):
+        FunctionModel("p", ("x", "x"), **fns)
+    with pytest.raises(InputError, match="coordinate_names must be a sequence of strings"):
+        FunctionModel("p", "xy", **fns)
+    with pytest.raises(InputError, match="mass must be a callable, got ndarray"):
+        FunctionModel("p", ("x", "y"), **{**fns, "mass": np.eye(2)})
+    assert FunctionModel("p", ("x", "y"), **fns).n == 2

@@ -216,6 +216,17 @@ class FunctionModel(Model):
         coords = tuple(coordinate_names)
         if not coords:
             raise InputError("coordinate_names must name at least one coordinate")
+        if isinstance(coordinate_names, str) or not all(isinstance(c, str) for c in coords):
+            raise InputError(f"coordinate_names must be a sequence of strings, got {coordinate_names!r}")
+        if len(set(coords)) != len(coords):
+            dup = sorted({c for c in coords if coords.count(c) > 1})
+            raise InputError(f"coordinate_names must be unique (q0.<name>, plots and files use them), "
+                             f"got {dup} more than once")  # fmt: skip
+        for fname, fn in (("mass", mass), ("coriolis", coriolis), ("conservative", conservative),
+                          ("potential", potential), ("input_matrix_fn", input_matrix_fn),
+                          ("passive", passive), ("outputs_fn", outputs_fn), ("geometry_fn", geometry_fn)):
+            if fn is not None and not callable(fn):
+                raise InputError(f"{fname} must be a callable, got {type(fn).__name__}")
         s = object.__setattr__
         s(self, "name", str(name))
         s(self, "coordinate_names", coords)
