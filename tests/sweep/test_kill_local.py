@@ -97,3 +97,24 @@ def test_local_sweep_killed_midway_with_chunk_1_loses_and_repeats_no_run(tmp_pat
     full = open_sweep(store)
     assert list(full["status"].values) == ["success"] * RUNS
     np.testing.assert_array_equal(full["q"].values[done], ref["q"].values)
+
+
+def test_ctrl_c_on_the_cli_sweep_says_what_is_kept_and_exits_130(tmp_path: Path) -> None:
+    """nonmin sweep stopped by Ctrl-C (SIGINT) printed only 'nonmin: interrupted'; it now says
+    how many runs the store holds and that the same command resumes, and exits 130."""
+    scen = tmp_path / "cfb.toml"
+    scen.write_text(_scenario_text(), encoding="utf-8")
+    store = tmp_path / "c.zarr"
+    argv = [sys.executable, "-m", "nonmin.cli", "sweep", str(scen), "--vary", f"{KEY}=5:8:{RUNS}",
+            "--chunk", "1", "--workers", "1", "--out", str(store), "--no-progress"]  # fmt: skip
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})  # fmt: skip
+    t_end = time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < t_end and len(_commits(store)) < 2:
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    kept = int(_covered(store).sum())
+    assert 2 <= kept < RUNS
+    assert f"{kept} of {RUNS} runs committed" in err and "the same command resumes" in err, err

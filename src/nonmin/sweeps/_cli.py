@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -35,12 +36,28 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from ._run import sweep
 
     out = Path(args.out) if args.out else Path.cwd() / f"{Path(args.scenario).stem}-sweep.zarr"
-    res = sweep(args.scenario, args.vary, samples=args.samples, seed=args.seed, store=out,
-                scheduler=args.scheduler, workers=args.workers, chunk=args.chunk, progress=args.progress,
-                allow_code=args.allow_code)  # fmt: skip
+    try:
+        res = sweep(args.scenario, args.vary, samples=args.samples, seed=args.seed, store=out,
+                    scheduler=args.scheduler, workers=args.workers, chunk=args.chunk, progress=args.progress,
+                    allow_code=args.allow_code)  # fmt: skip
+    except KeyboardInterrupt:  # Ctrl-C: say what the store keeps and how to go on (exit 130)
+        print(f"nonmin sweep: {_committed(out)}; the same command resumes", file=sys.stderr)
+        raise
     print(f"{res.store}: {res.runs} runs ({res.computed} computed now, {res.skipped} from the store), "
           f"{res.failed} failed")  # fmt: skip
     return 0
+
+
+def _committed(store: Path) -> str:
+    """What an interrupted sweep's store holds, in words."""
+    from ._run import open_sweep
+
+    try:
+        status = open_sweep(store)["status"].values
+    except Exception:  # nothing committed yet (no store), or a store being written
+        return f"{store}: no run committed yet"
+    done = int(sum(str(x) != "pending" for x in status))
+    return f"{store}: {done} of {len(status)} runs committed"
 
 
 def cmd_plot_sweep(args: argparse.Namespace) -> int:
