@@ -144,3 +144,15 @@ def test_contact_page_output_is_current(tmp_path: Path) -> None:
     )
     for phrase in CONTACT_CLAIMS:
         assert phrase in proc.stdout, f"docs/contact.md: output lacks {phrase!r}"
+
+
+def test_architecture_page_example_runs(tmp_path: Path) -> None:
+    """docs/architecture.md's simulate call with option values is a script a reader can paste
+    (it used undefined names: mech, lock, np, and a 'floor' no model had)."""
+    block = python_blocks((ROOT / "docs" / "architecture.md").read_text(encoding="utf-8"))[0]
+    code = block + "\nprint(traj.status.value, traj.t[-1])\n"
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=TIME_LIMIT, env=dict(os.environ, MPLBACKEND="Agg"))  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stdout.split() == ["event_terminated", "1.5"]
+    assert (tmp_path / "run.npz").is_file()
