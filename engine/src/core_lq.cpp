@@ -92,6 +92,19 @@ inline bool reflect_row(double* X, const LQWork& w, int j, double bj) {
     return true;
 }
 
+// reflect_row without the test d = 0 (a row the reflector does not touch: X − 0·v, the same
+// values; for the dense path, where that branch is mispredicted)
+inline void reflect_row_always(double* X, const LQWork& w, int j, double bj) {
+    const int n = w.n;
+    const int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
+    const double* v = w.Hv.data() + static_cast<long>(j) * n;
+    const int cnt = H[0];
+    double d = 0.0;
+    for (int t = 1; t <= cnt; ++t) d += X[H[t]] * v[H[t]];
+    d *= bj;
+    for (int t = 1; t <= cnt; ++t) X[H[t]] -= d * v[H[t]];
+}
+
 // Add reflector j's columns to row i's column list (lq_sparse).
 inline void merge_columns(LQWork& w, int i, int j) {
     const int n = w.n;
@@ -126,8 +139,12 @@ bool reflect(double* X, LQWork& w, int j, int row, int p, double x0, double s, i
     double* Xj = X + static_cast<long>(row) * n;
     Xj[p] = alpha;
     for (int t = 2; t <= cnt; ++t) Xj[H[t]] = 0.0;
-    for (int i = row + 1; i <= imax; ++i)
-        if (reflect_row(X + static_cast<long>(i) * n, w, j, bj) && track) merge_columns(w, i, j);
+    if (track) {
+        for (int i = row + 1; i <= imax; ++i)
+            if (reflect_row(X + static_cast<long>(i) * n, w, j, bj)) merge_columns(w, i, j);
+    } else {
+        for (int i = row + 1; i <= imax; ++i) reflect_row_always(X + static_cast<long>(i) * n, w, j, bj);
+    }
     for (int t = 1; t <= cnt; ++t)  // those rows may now be nonzero in all its columns
         if (imax > w.Lr[H[t]]) w.Lr[H[t]] = imax;
     return true;
