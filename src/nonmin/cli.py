@@ -381,6 +381,7 @@ _TIME = _number(0.0, 1e9)
 _FPS = _number(0.0, 1000.0)
 _SPEED = _number(0.0, 1e6)
 _SAMPLES = _number(2, 1_000_000, low_open=False, kind=int)
+_PORT = _number(0, 65535, low_open=False, kind=int)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -504,7 +505,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser("view", help="open a saved trajectory in the interactive 3-D viewer (browser)")
     sp.add_argument("result", help="trajectory file (.npz) written by run/demo")
-    sp.add_argument("--port", type=int, default=8080, help="port of the viewer's web server (default 8080)")
+    sp.add_argument("--port", type=_PORT, default=8080,
+                    help="port of the viewer's web server (default 8080; 0: any free port)")
     sp.add_argument("--speed", type=_SPEED, default=1.0, help="initial playback speed")
     sp.add_argument("--no-browser", action="store_true", help="do not open a browser window")
     sp.add_argument("--seconds", type=_TIME, default=None, help="stop after this many seconds")

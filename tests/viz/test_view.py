@@ -232,3 +232,19 @@ def test_readme_five_lines_open_a_urdf_loop(monkeypatch, tmp_path):
         assert "/closures" in viewer.body_nodes  # the loop closure's two frames are marked
     finally:
         viewer.stop()
+
+
+def test_a_port_outside_0_65535_is_a_usage_error(capsys):
+    """--port 99999 let viser's server thread die with OverflowError: bind(): port must be
+    0-65535 (a raw traceback); the API and the CLI now refuse it by name."""
+    from nonmin import library
+    from nonmin.cli import EXIT_USAGE, main
+    from nonmin.errors import InputError
+    from nonmin.viz import view
+
+    with pytest.raises(InputError, match=r"port must be an integer in \[0, 65535\]"):
+        view(library.get("crossed_four_bar").model, port=99999)
+    with pytest.raises(SystemExit) as info:
+        main(["view", "x.npz", "--model", "crossed_four_bar", "--port", "99999", "--no-browser"])
+    assert info.value.code == EXIT_USAGE
+    assert "--port" in capsys.readouterr().err

@@ -277,6 +277,8 @@ def view(
         spd = float("nan")
     if not (np.isfinite(spd) and 0 < spd <= 1e3):
         raise InputError(f"view: speed must be a number in (0, 1000], got {speed!r}")
+    if isinstance(port, bool) or not isinstance(port, int | np.integer) or not 0 <= int(port) <= 65535:
+        raise InputError(f"view: port must be an integer in [0, 65535] (0: any free port), got {port!r}")
     viser = _viser()
     if traj is None:
         q0 = _default_q(model)
