@@ -100,3 +100,21 @@ def test_values_are_frozen_and_compare() -> None:
 
 def test_values_are_exported_at_the_top() -> None:
     assert nonmin.Solver is Solver and nonmin.EventSet is EventSet and nonmin.Output is Output
+
+
+def test_text_and_booleans_are_not_numbers_for_dt_and_t_span() -> None:
+    """simulate(m, "1", dt="1e-3") ran (float() parses text); dt=True was already refused."""
+    import pytest
+
+    from nonmin import library, simulate
+    from nonmin.errors import InputError
+
+    bar = library.get("crossed_four_bar")
+    with pytest.raises(InputError, match="dt must be a positive finite number, got '1e-3'"):
+        simulate(bar, 0.01, dt="1e-3")
+    with pytest.raises(InputError, match="t_span must be"):
+        simulate(bar, "1", dt=1e-3)
+    with pytest.raises(InputError, match="t_span must be"):
+        simulate(bar, (0.0, "1"), dt=1e-3)
+    with pytest.raises(InputError, match="rtol must be a positive finite number"):
+        simulate(bar, 0.01, method="dopri5", rtol="1e-6")

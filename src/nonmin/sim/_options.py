@@ -41,7 +41,7 @@ __all__ = ["EventSet", "Output", "Solver", "resolve_options"]
 def _pos(name: str, x: Any, *, allow_none: bool = False) -> float | None:
     if x is None and allow_none:
         return None
-    if isinstance(x, bool):
+    if isinstance(x, bool | str | bytes):  # float() would take True and "1e-3"
         raise InputError(f"{name} must be a positive finite number, got {x!r}")
     try:
         v = float(x)

@@ -621,6 +621,9 @@ def _positive(x: Any, name: str) -> float:
 
 
 def _t_span(t_span: Any) -> tuple[float, float]:
+    if isinstance(t_span, bool | str | bytes) or (
+            isinstance(t_span, tuple | list) and any(isinstance(v, bool | str | bytes) for v in t_span)):
+        raise InputError(f"t_span must be (t0, t1) or a final time in seconds, got {t_span!r}")
     try:
         if np.isscalar(t_span):
             pair = (0.0, float(t_span))  # type: ignore[arg-type]
