@@ -109,6 +109,18 @@ def test_bad_frame_constraint(tmp_path):
         load_scenario(p).build_model()
 
 
+def test_frame_constraint_vector_with_text_names_the_key(tmp_path):
+    """placement_a = [1, "x", 2] was 'table [model.params]: ValueError: could not convert string
+    to float' (the wrong table, a raw message)."""
+    pytest.importorskip("pinocchio")
+    from nonmin.model.robots import data_path
+
+    p = _write(tmp_path, f'[model]\nurdf = "{data_path("fourbar.urdf")}"\n[[model.constraints]]\ntype = "point"\n'
+                         'name = "c"\nframe_a = "coupler_tip"\nframe_b = "rocker_tip"\nplacement_a = [1, "x", 2]\n')  # fmt: skip
+    with pytest.raises(ScenarioError, match=r"key model.constraints\[0\].placement_a: expected a list of numbers"):
+        load_scenario(p).build_model()
+
+
 _OPTIONS_BASE = '[model]\nlibrary = "crossed_four_bar"\n[simulate]\nt_final = 0.05\n{extra}[simulate.options]\n{opt}\n'
 
 

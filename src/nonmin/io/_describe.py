@@ -117,7 +117,11 @@ def frame_constraints(items: Sequence[Mapping[str, Any]], file: Path) -> list[An
         kwargs = _bind(fn, args, file, key, f"FrameConstraint.{kind}")
         for k, v in list(kwargs.items()):
             if isinstance(v, tuple):
-                kwargs[k] = np.asarray(v, dtype=float)
+                try:
+                    kwargs[k] = np.asarray(v, dtype=float)
+                except (TypeError, ValueError):
+                    raise ScenarioError(f"{file}: key {key}.{k}: expected a list of numbers, got "
+                                        f"{list(v)!r}") from None  # fmt: skip
         try:
             out.append(fn(**kwargs))
         except NonminError as exc:
