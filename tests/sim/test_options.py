@@ -118,3 +118,21 @@ def test_text_and_booleans_are_not_numbers_for_dt_and_t_span() -> None:
         simulate(bar, (0.0, "1"), dt=1e-3)
     with pytest.raises(InputError, match="rtol must be a positive finite number"):
         simulate(bar, 0.01, method="dopri5", rtol="1e-6")
+
+
+def test_t_eval_must_be_a_non_empty_1d_array_of_numbers() -> None:
+    """t_eval=np.zeros((2, 2)) was flattened (one sample), t_eval=[] gave a 'success' run with no
+    sample at all, and t_eval=["0", "0.01"] was parsed."""
+    import pytest
+
+    from nonmin import library, simulate
+    from nonmin.errors import InputError, ShapeError
+
+    bar = library.get("crossed_four_bar")
+    with pytest.raises(ShapeError, match=r"t_eval must be a non-empty 1-D array of times, got shape \(2, 2\)"):
+        simulate(bar, 0.01, dt=1e-3, t_eval=np.zeros((2, 2)))
+    with pytest.raises(ShapeError, match=r"got shape \(0,\)"):
+        simulate(bar, 0.01, dt=1e-3, t_eval=[])
+    with pytest.raises(InputError, match="t_eval"):
+        simulate(bar, 0.01, dt=1e-3, t_eval=["0", "0.01"])
+    assert len(simulate(bar, 0.01, dt=1e-3, t_eval=0.01)) == 1  # one time is one sample

@@ -30,7 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
+from .._validation import as_float_array
+from ..errors import InputError, ShapeError
 from . import _durable
 from ._events import Event
 from ._integrators import Integrator
@@ -264,9 +265,12 @@ class Output:
                     f"{_durable.MAX_RECORD_BYTES / 2**30:g} GiB budget of a run; pass a coarser t_eval"
                 )
             try:
-                t = np.array(self.t_eval, dtype=float).ravel()
-            except (TypeError, ValueError):
+                t = np.array(as_float_array(self.t_eval, "t_eval"))
+            except ShapeError:
                 raise InputError(f"t_eval must be an array of times, got {type(self.t_eval).__name__}") from None
+            if t.ndim > 1 or t.size == 0:  # a (k, m) array was flattened, an empty one recorded nothing
+                raise ShapeError(f"t_eval must be a non-empty 1-D array of times, got shape {t.shape}")
+            t = t.ravel()
             t.flags.writeable = False
             object.__setattr__(self, "t_eval", t)
         if self.progress is not None:
