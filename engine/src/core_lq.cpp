@@ -13,6 +13,7 @@ LQWork::LQWork(int m_max_, int n_) : m_max(m_max_), n(n_) {
     Wq.assign(m * nn, 0.0);
     Hv.assign(m * nn, 0.0);
     beta.assign(m, 0.0);
+    rp.assign(m, 0.0);
     Li.assign(m * m, 0.0);
     key.assign(m, 0.0);
     Hx.assign(m * (nn + 1), 0);
@@ -71,7 +72,7 @@ void lq_lower_subst(const LQWork& w, int m, double* cv) {
         const double* Wi = Wq + static_cast<long>(i) * n;
         double s = cv[i];
         for (int k = 0; k < i; ++k) s -= Wi[k] * cv[k];
-        cv[i] = s / Wi[i];
+        cv[i] = s * w.rp[i];
     }
 }
 
@@ -341,6 +342,8 @@ int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* 
         }
         row2max = std::max(row2max, ri);
     }
+    // reciprocal pivots: independent divisions, off the substitutions' dependency chains
+    for (int i = 0; i < m; ++i) w.rp[i] = 1.0 / Wq[i * n + i];
     const double margin = rtol <= QR_MARGIN_RTOL ? QR_MARGIN : 1.0;
     if (w.skipped > 0 && !skipped_rows_small(w, rtol, margin, row2max)) return LQ_NONE;
     // The certificate with f2 ≥ ‖L⁻¹‖_F²: without skipped rows ‖L‖_F ‖L⁻¹‖_F · margin · rtol < 1;
@@ -363,14 +366,14 @@ int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* 
             const double* Wi = Wq + static_cast<long>(i) * n;
             double s = 1.0;
             for (int k = 0; k < i; ++k) s += std::fabs(Wi[k]) * x[k];
-            x[i] = s / std::fabs(Wi[i]);
+            x[i] = s * std::fabs(w.rp[i]);
             fb += x[i] * x[i];
         }
         proved = certifies(fb * (1.0 + 1e-12));
     }
     double* Li = w.Li.data();
     if (!proved) {
-        for (int i = 0; i < m; ++i) cv[i] = 1.0 / Wq[i * n + i];  // reciprocal pivots (scratch)
+        for (int i = 0; i < m; ++i) cv[i] = w.rp[i];  // reciprocal pivots (scratch)
         // L⁻¹ row by row: row i = (e_i − Σ_{k<i} L_ik · row k) / L_ii (zero L_ik skipped)
         double f0 = 0.0, f1 = 0.0;
         for (int i = 0; i < m; ++i) {

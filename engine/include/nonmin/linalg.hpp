@@ -117,6 +117,7 @@ struct LQWork {
     std::vector<double> Wq;     // m × n: the rows being reduced; L in its lower part
     std::vector<double> Hv;     // m × n: reflector j's vector at its columns
     std::vector<double> beta;   // m: reflector j's 2/‖v‖²
+    std::vector<double> rp;     // m: 1/L_aa, L's reciprocal pivots (lq_certified)
     std::vector<double> Li;     // m × m: L⁻¹ (LQ_INVERSE) or L over its profile (LQ_PROFILE)
     std::vector<double> G;      // m × m: the factor of L Lᵀ − τI (profile certificate)
     std::vector<double> key;    // m: row sort keys (lq_sparse)
@@ -160,7 +161,8 @@ void row_pattern_known(const int* start, const int* cols, const int* rows, int m
 int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* cv,
                  bool skip_redundant = false, bool inverse = true);
 
-// cv ← L⁻¹ cv by forward substitution with the L that lq_certified left in w.Wq (m rows).
+// cv ← L⁻¹ cv by forward substitution with the L that lq_certified left in w.Wq (m rows) and
+// its reciprocal pivots w.rp.
 void lq_lower_subst(const LQWork& w, int m, double* cv);
 
 // Many rows: rows taken in the order of their first nonzero column (w.Ro), reflector j pivots on

@@ -1019,6 +1019,7 @@ def simulate(
         if isinstance(stab, Projection) and (integ.adaptive or (passages is not None and type(integ) is RK4)):
 
             def project_y(tt: float, yy: FloatArray) -> FloatArray:
+                _check_range(tt, yy)  # (a stage point before its projection's evaluation)
                 qq, vv = stab.project(model, tt, yy[:n].copy(), yy[n:].copy(), system.active, rank_rtol)
                 return np.concatenate((qq, vv))
 
