@@ -417,6 +417,9 @@ def run(
                 break
             if loop.n_steps > steps0:
                 chunk = int(min(max(16, chunk * CHUNK_SECONDS / max(elapsed, 1e-6)), 1 << 20))
+    except BaseException as exc:  # Ctrl-C or a callback's error: the caller keeps the counts
+        exc.engine_counts = (int(loop.n_steps), int(loop.n_rhs), int(loop.n_rejected))  # type: ignore[attr-defined]
+        raise
     finally:  # the samples not taken yet: the start's when no step was run, or an exception's
         if pending:
             take()

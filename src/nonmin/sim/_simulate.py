@@ -1382,7 +1382,12 @@ def simulate(
                 system.cstate = _durable.user_call("controller.update", t, controller.update, t, q1, qd1,
                                                    system.cstate, active=system.active)
             bar.update(t)
-    except KeyboardInterrupt:  # Ctrl-C: keep what was computed
+    except KeyboardInterrupt as exc:  # Ctrl-C: keep what was computed
+        counts = getattr(exc, "engine_counts", None)
+        if counts is not None:  # inside an engine run: its steps (from the run's start or resume)
+            n_steps = max(n_steps, counts[0])
+            system.n_rhs += counts[1]
+            n_rejected += counts[2]
         status = Status.INTERRUPTED
         message = f"interrupted (KeyboardInterrupt) after t = {rec.last_t(t0):.12g}"
     except Exception as exc:  # throw=False: any failure ends the run with a partial result
