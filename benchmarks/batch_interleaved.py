@@ -21,7 +21,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import model_bench
 import mujoco
-import numpy as np
 from mujoco import rollout
 
 from nonmin import _engine, library
@@ -39,12 +38,7 @@ def main() -> None:
         fwd = _engine.Forward(m.engine_program(), m.active_mask(s.active))
         tt, Q, QD = model_bench._trajectory_states(mech, N)
         mj, dat = model_bench._mujoco(bar)
-        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        x0 = np.zeros((N, mujoco.mj_stateSize(mj, spec)))
-        mujoco.mj_resetData(mj, dat)
-        for i in range(N):
-            mujoco.mj_step(mj, dat)
-            mujoco.mj_getState(mj, dat, x0[i], spec)
+        x0 = model_bench.mujoco_trajectory_states(mj, dat, N)
         datas = {t: [mujoco.MjData(mj) for _ in range(t)] for t in (1, 2)}
         for t in (1, 2):
             rollout.rollout(mj, datas[t], x0[:10], nstep=1)  # warm-up (pool, allocation)

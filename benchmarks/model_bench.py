@@ -395,6 +395,21 @@ def _bar(name: str) -> Any:
     return sim_bench.a02_mechanism(int(name[5:]))
 
 
+def mujoco_trajectory_states(mj: Any, dat: Any, count: int) -> Any:
+    """``count`` distinct consistent states for ``rollout`` (full physics, one row each): the
+    steps of MuJoCo's own trajectory from rest at qpos0 (``dat`` is reset first)."""
+    import mujoco
+    import numpy as np
+
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    x0 = np.zeros((count, mujoco.mj_stateSize(mj, spec)))
+    mujoco.mj_resetData(mj, dat)
+    for i in range(count):
+        mujoco.mj_step(mj, dat)
+        mujoco.mj_getState(mj, dat, x0[i], spec)
+    return x0
+
+
 def _mujoco(name: str) -> tuple[Any, Any]:
     import mujoco
     import sim_bench  # noqa: F401  (path set by _bar)
@@ -496,13 +511,7 @@ def _mujoco_case(bar: str, repeat: int, N: int, reps: int) -> dict[str, Any]:
     dat.qvel[:] = rng.standard_normal(mj.nv)
     r: dict[str, Any] = {"mujoco_nv": int(mj.nv)}
     r["mujoco_forward_us"] = median_wall_us(lambda: mujoco.mj_forward(mj, dat), repeat)
-    # N distinct consistent states: the steps of MuJoCo's own trajectory from rest at qpos0
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    x0 = np.zeros((N, mujoco.mj_stateSize(mj, spec)))
-    mujoco.mj_resetData(mj, dat)
-    for i in range(N):
-        mujoco.mj_step(mj, dat)
-        mujoco.mj_getState(mj, dat, x0[i], spec)
+    x0 = mujoco_trajectory_states(mj, dat, N)
     for threads in (1, 2):
         datas = [mujoco.MjData(mj) for _ in range(threads)]
         rollout.rollout(mj, datas, x0[:10], nstep=1)  # warm-up (pool, allocation)

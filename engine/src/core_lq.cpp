@@ -79,31 +79,31 @@ void lq_lower_subst(const LQWork& w, int m, double* cv) {
 namespace {
 
 // Row i of X (leading dimension n) times reflector j (I − β_j v vᵀ over its columns Hx[j]);
-// returns whether the row changed.
-inline bool reflect_row(double* X, const LQWork& w, int j, double bj) {
+// returns whether the row changed. TestZero = false skips the test d = 0 (a row the reflector
+// does not touch: X − 0·v, the same values; for the dense path, where that branch is
+// mispredicted).
+template <bool TestZero>
+inline bool reflect_row_impl(double* X, const LQWork& w, int j, double bj) {
     const int n = w.n;
     const int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
     const double* v = w.Hv.data() + static_cast<long>(j) * n;
     const int cnt = H[0];
     double d = 0.0;
     for (int t = 1; t <= cnt; ++t) d += X[H[t]] * v[H[t]];
-    if (d == 0.0) return false;
+    if constexpr (TestZero) {
+        if (d == 0.0) return false;
+    }
     d *= bj;
     for (int t = 1; t <= cnt; ++t) X[H[t]] -= d * v[H[t]];
     return true;
 }
 
-// reflect_row without the test d = 0 (a row the reflector does not touch: X − 0·v, the same
-// values; for the dense path, where that branch is mispredicted)
+inline bool reflect_row(double* X, const LQWork& w, int j, double bj) {
+    return reflect_row_impl<true>(X, w, j, bj);
+}
+
 inline void reflect_row_always(double* X, const LQWork& w, int j, double bj) {
-    const int n = w.n;
-    const int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
-    const double* v = w.Hv.data() + static_cast<long>(j) * n;
-    const int cnt = H[0];
-    double d = 0.0;
-    for (int t = 1; t <= cnt; ++t) d += X[H[t]] * v[H[t]];
-    d *= bj;
-    for (int t = 1; t <= cnt; ++t) X[H[t]] -= d * v[H[t]];
+    reflect_row_impl<false>(X, w, j, bj);
 }
 
 // Add reflector j's columns to row i's column list (lq_sparse).
