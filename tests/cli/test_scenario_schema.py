@@ -156,3 +156,24 @@ def test_simulate_options_the_runner_owns_are_refused(tmp_path, opt, extra, frag
         assert frag in msg, msg
     assert not escape.exists()
     assert not (tmp_path / "out" / "trajectory.npz").exists()
+
+
+@pytest.mark.parametrize(
+    ("table", "fragments"),
+    [
+        ('type = "regulator"\nKp = 10.0\n', ["missing key 'controller.target'", "'regulator'"]),
+        ('type = "force_control"\n', ["'controller.target'", "'controller.forces'", "'force_control'"]),
+    ],
+)
+def test_controller_table_without_a_required_key_names_it(tmp_path, table, fragments):
+    """A [controller] table without its target said "_regulator() missing 1 required
+    keyword-only argument: 'target'" (an internal name)."""
+    from nonmin.io import run_scenario
+
+    p = _write(tmp_path, '[model]\nlibrary = "five_bar"\n[simulate]\nt_final = 0.01\n[controller]\n' + table)
+    with pytest.raises(ScenarioError) as info:
+        run_scenario(load_scenario(p), tmp_path / "out", progress=False)
+    msg = str(info.value)
+    assert "_regulator" not in msg and "_hybrid_force" not in msg, msg
+    for frag in fragments:
+        assert frag in msg, msg

@@ -96,6 +96,15 @@ def build_controller(sc: Scenario, model: Any) -> Any:
                     f"{sc.path}: unknown key 'controller.{key}' for controller {name!r}; expected "
                     f"one of {sorted(p for p in sig.parameters if p != 'model')}"
                 )
+    missing = [
+        p.name for p in sig.parameters.values()
+        if p.kind == p.KEYWORD_ONLY and p.default is p.empty and p.name not in kwargs
+    ]  # fmt: skip
+    if missing:
+        raise ScenarioError(
+            f"{sc.path}: missing key " + ", ".join(f"'controller.{k}'" for k in missing)
+            + f" for controller {name!r}"
+        )
     try:
         return factory(model, **kwargs)
     except NonminError as exc:
