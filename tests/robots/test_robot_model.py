@@ -276,6 +276,8 @@ def test_bad_input_raises_typed_errors() -> None:
         RobotModel.from_urdf(path, root_joint="planar")
     with pytest.raises(InputError, match="does not exist"):
         RobotModel.from_urdf(path.with_name("missing.urdf"))
+    with pytest.raises(InputError, match="expected a URDF file, got the folder"):  # (said "does not exist")
+        RobotModel.from_urdf(path.parent)
     with pytest.raises(ShapeError, match="placement_a"):
         FrameConstraint.point("c", "ee", placement_a=np.eye(3))
     with pytest.raises(InputError, match="axis"):
@@ -362,3 +364,14 @@ def test_negative_joint_damping_is_a_model_error() -> None:
     with pytest.raises(ModelError, match=r"damping must be finite and ≥ 0"):
         RobotModel.from_urdf(data_path("fourbar.urdf"), damping=[np.nan, 0.0, 0.0])
     RobotModel.from_urdf(data_path("fourbar.urdf"), damping=[0.1, 0.0, 0.2])
+
+
+def test_a_folder_is_not_an_mjcf_file(tmp_path):
+    """RobotModel.from_mjcf(folder) said the path "does not exist"."""
+    pytest.importorskip("mujoco")
+    from nonmin.errors import FileFormatError
+
+    with pytest.raises(FileFormatError, match="expected a MJCF file, got the folder"):
+        RobotModel.from_mjcf(tmp_path)
+    with pytest.raises(FileFormatError, match="which does not exist"):
+        RobotModel.from_mjcf(tmp_path / "missing.xml")

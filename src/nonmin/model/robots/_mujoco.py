@@ -239,7 +239,10 @@ def load_mjcf(
     """
     p = Path(path)
     if not p.is_file():
-        raise FileFormatError(f"path: MJCF file {str(p)!r} does not exist")
+        raise FileFormatError(
+            "path: expected a MJCF file, got "
+            + (f"the folder {str(p)!r}" if p.is_dir() else f"{str(p)!r}, which does not exist")
+        )
     enforce = _joint_limits_option(joint_limits)
     try:
         size = p.stat().st_size

@@ -556,7 +556,10 @@ class RobotModel(Model):
 
         p = Path(path)
         if not p.is_file():
-            raise FileFormatError(f"path: URDF file {str(p)!r} does not exist")
+            raise FileFormatError(
+                "path: expected a URDF file, got "
+                + (f"the folder {str(p)!r}" if p.is_dir() else f"{str(p)!r}, which does not exist")
+            )
         if root_joint not in (None, "freeflyer"):
             raise InputError(f"root_joint must be None or 'freeflyer', got {root_joint!r}")
         enforce = _joint_limits_option(joint_limits)
