@@ -373,7 +373,6 @@ int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* 
     }
     double* Li = w.Li.data();
     if (!proved) {
-        for (int i = 0; i < m; ++i) cv[i] = w.rp[i];  // reciprocal pivots (scratch)
         // L⁻¹ row by row: row i = (e_i − Σ_{k<i} L_ik · row k) / L_ii (zero L_ik skipped)
         double f0 = 0.0, f1 = 0.0;
         for (int i = 0; i < m; ++i) {
@@ -387,7 +386,7 @@ int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* 
                     for (int c = 0; c <= k; ++c) Ri[c] -= a * Rk[c];
                 }
             }
-            const double r = cv[i];
+            const double r = w.rp[i];
             for (int c = 0; c <= i; ++c) Ri[c] *= r;
             const int i2 = (i + 1) - (i + 1) % 2;  // ‖L⁻¹‖_F²: two interleaved partial sums
             for (int c = 0; c < i2; c += 2) {

@@ -752,17 +752,12 @@ double sym_min_eigenvalue(double* X, int k, double* d, double* e) {
 void passage_setup(Loop& L) {
     Passages& P = L.pas;
     const int mr = std::max(L.m_all, 1), n = L.n;
-    // (B, G, C and col_rows are written before they are read: a spare loop's are kept as they are)
-    if (P.B.rows() != mr || P.B.cols() != n) P.B = Mat::Zero(mr, n);
-    if (P.G.rows() != mr || P.G.cols() != mr) P.G = Mat::Zero(mr, mr);
-    if (P.C.rows() != mr || P.C.cols() != mr) P.C = Mat::Zero(mr, mr);
+    // (B, G, C and col_rows: sized by make_loop, a spare loop's kept as they are)
     for (Vec* v : {&P.x, &P.y, &P.v, &P.w}) *v = Vec::Zero(mr);
     P.live.assign(static_cast<std::size_t>(mr), 0);
     P.order.assign(static_cast<std::size_t>(mr), 0);
     P.first.assign(static_cast<std::size_t>(mr), 0);
     P.col_ptr.assign(static_cast<std::size_t>(n) + 1, 0);
-    if (P.col_rows.size() != static_cast<std::size_t>(mr) * static_cast<std::size_t>(n))  // (written before read)
-        P.col_rows.assign(static_cast<std::size_t>(mr) * static_cast<std::size_t>(n), 0);
     P.tri = Vec::Zero(4 * mr);
     if (L.opt.method == Method::dopri5) {  // DormandPrince5.passage_fractions: nodes 0.3 | 0.8
         P.frac[0] = 0.45, P.frac[1] = 0.55, P.frac[2] = 0.65;

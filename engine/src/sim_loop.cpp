@@ -261,10 +261,16 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
     L.rec.n = n;
     L.rec.k = L.k;
     L.rec.c = L.c;
-    L.pas.B.swap(got.pB);
-    L.pas.G.swap(got.pG);
-    L.pas.C.swap(got.pC);
-    L.pas.col_rows.swap(got.pcol_rows);
+    // the indicator's B, G, C and column lists are written before they are read (passage_setup
+    // sizes the rest of its scratch)
+    reused(L.pas.B, got.pB, mr, n);
+    reused(L.pas.G, got.pG, mr, mr);
+    reused(L.pas.C, got.pC, mr, mr);
+    const std::size_t ncr = static_cast<std::size_t>(mr) * static_cast<std::size_t>(n);
+    if (got.pcol_rows.size() == ncr)
+        L.pas.col_rows.swap(got.pcol_rows);
+    else
+        L.pas.col_rows.assign(ncr, 0);
     passage_setup(L);
     L.spare_m = mr;
     if (ctrl) ctrl->attach(L.T, L.Ac, L.m, L.rows);

@@ -41,6 +41,7 @@ as it is.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -76,15 +77,12 @@ def _first_chunk(start_seconds: float) -> int:
 _KINDS = {"holonomic": 0, "rheonomic": 1, "nonholonomic": 2, "unilateral": 3}
 
 
-_ENG: list[Any] = []  # the compiled extension, imported at the first run (import nonmin stays light)
-
-
+@functools.cache
 def _engine() -> Any:
-    if not _ENG:
-        from .. import _engine as eng  # type: ignore[attr-defined]  # the compiled extension (no stubs)
+    """The compiled extension, imported at the first run (import nonmin stays light)."""
+    from .. import _engine as eng  # type: ignore[attr-defined]  # the compiled extension (no stubs)
 
-        _ENG.append(eng)
-    return _ENG[0]
+    return eng
 
 
 # --------------------------------------------------------------------------- eligibility

@@ -22,6 +22,7 @@ written, with a message that names the field, what was expected and what came.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Iterable, Mapping
@@ -314,12 +315,15 @@ def _same(a: Any, b: Any) -> bool:
         return False
 
 
-#: The values built from flat shorthands alone, by (kind, ((name, type, value), ...)) when every
-#: value is a plain str/int/float/bool/None: the values are frozen and validated, so a call with
-#: the same shorthands shares the first call's value instead of validating it again.
-_BUILT: dict[tuple[Any, ...], Any] = {}
-_BUILT_MAX = 256
 _PLAIN = (str, int, float, bool, type(None))
+
+
+@functools.lru_cache(maxsize=256)
+def _built(kind: type, items: tuple[tuple[str, str, Any], ...]) -> Any:
+    """The value built from flat shorthands alone, ``items`` = ((name, type name, value), ...)
+    of plain str/int/float/bool/None values: the values are frozen and validated, so a call with
+    the same shorthands shares the first call's value (an invalid one raises and is not kept)."""
+    return kind(**{k: v for k, _, v in items})
 
 
 def _fold(kind: type, flat: dict[str, Any], given: Any) -> Any:
@@ -328,14 +332,7 @@ def _fold(kind: type, flat: dict[str, Any], given: Any) -> Any:
     if given is None:
         if not all(type(v) in _PLAIN for v in mine.values()):
             return kind(**mine)
-        key = (kind, *sorted((k, type(v).__name__, v) for k, v in mine.items()))
-        hit = _BUILT.get(key)
-        if hit is None:
-            hit = kind(**mine)  # (invalid values raise here, and are not kept)
-            if len(_BUILT) >= _BUILT_MAX:
-                _BUILT.clear()
-            _BUILT[key] = hit
-        return hit
+        return _built(kind, tuple(sorted((k, type(v).__name__, v) for k, v in mine.items())))
     for k, v in mine.items():
         ours = getattr(given, k)
         probe = getattr(kind(**{k: v}), k)  # validated and normalised the same way
