@@ -7,6 +7,10 @@ rounds and medians per state: on a shared machine a load change then hits both p
 Prints one line per mechanism (µs per state and the ratios engine / MuJoCo).
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/batch_interleaved.py
+    OPENBLAS_NUM_THREADS=1 python benchmarks/batch_interleaved.py --cases A02_N40 --rounds 5
+
+Each engine timing is preceded by a warm-up call on both thread counts (``Forward.batch``
+makes its per-thread scratch on the first call and keeps it, as MuJoCo keeps its ``MjData``).
 """
 
 from __future__ import annotations
@@ -27,12 +31,24 @@ from nonmin import _engine, library
 
 N = 10_000
 ROUNDS = 9
-CASES = (("crossed_four_bar", "crossed_four_bar", {}, "crossed_four_bar"),
-         ("A02 N=2", "A02_n_four_bar", {"N": 2}, "A02_N2"))  # fmt: skip
+ALL_CASES = {
+    "crossed_four_bar": ("crossed_four_bar", "crossed_four_bar", {}, "crossed_four_bar"),
+    "A02_N2": ("A02 N=2", "A02_n_four_bar", {"N": 2}, "A02_N2"),
+    "A02_N40": ("A02 N=40", "A02_n_four_bar", {"N": 40}, "A02_N40"),
+    "A02_N80": ("A02 N=80", "A02_n_four_bar", {"N": 80}, "A02_N80"),
+}
+CASES = tuple(ALL_CASES[k] for k in ("crossed_four_bar", "A02_N2"))
 
 
 def main() -> None:
-    for label, name, kw, bar in CASES:
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--cases", default=",".join(("crossed_four_bar", "A02_N2")),
+                    help=f"comma-separated, of {', '.join(ALL_CASES)}")  # fmt: skip
+    ap.add_argument("--rounds", type=int, default=ROUNDS)
+    args = ap.parse_args()
+    for label, name, kw, bar in (ALL_CASES[k] for k in args.cases.split(",")):
         mech = library.get(name, **kw)
         m, s = mech.model, mech.state
         fwd = _engine.Forward(m.engine_program(), m.active_mask(s.active))
@@ -42,8 +58,9 @@ def main() -> None:
         datas = {t: [mujoco.MjData(mj) for _ in range(t)] for t in (1, 2)}
         for t in (1, 2):
             rollout.rollout(mj, datas[t], x0[:10], nstep=1)  # warm-up (pool, allocation)
+            fwd.batch(tt[:128], Q[:128], QD[:128], t)  # warm-up (the kept per-thread scratch)
         res: dict[str, list[float]] = {k: [] for k in ("e1", "e2", "m1", "m2")}
-        for _ in range(ROUNDS):
+        for _ in range(args.rounds):
             for t in (1, 2):
                 t0 = time.perf_counter()
                 fwd.batch(tt, Q, QD, t)

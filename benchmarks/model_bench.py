@@ -480,13 +480,28 @@ def _engine_case(label: str, name: str, kw: dict[str, Any], bar: str | None, rep
     N = tt.shape[0]
     r["batch_states"] = N
     reps = 3
+    # the batch's per-thread scratch is made by its first call and kept (Forward.batch): made here
+    fwd.batch(tt[:128], Q[:128], QD[:128], 2)
     for threads in (1, 2):
-        walls = []
+        walls, cpus = [], []
         for _ in range(reps):
-            t0 = time.perf_counter()
+            c0, t0 = time.process_time(), time.perf_counter()
             fwd.batch(tt, Q, QD, threads)
             walls.append(time.perf_counter() - t0)
+            cpus.append(time.process_time() - c0)
         r[f"engine_batch{threads}_us_per_state"] = 1e6 * statistics.median(walls) / N
+        r[f"engine_batch{threads}_cpu_us_per_state"] = 1e6 * statistics.median(cpus) / N
+    # like for like with the batch: single calls (from Python) over the same states (the single
+    # timing above repeats the initial state, whose solve can be cheaper than a trajectory's)
+    walls, cpus = [], []
+    for _ in range(reps):
+        c0, t0 = time.process_time(), time.perf_counter()
+        for i in range(N):
+            fwd(float(tt[i]), Q[i], QD[i], qdd)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    r["engine_single_states_us"] = 1e6 * statistics.median(walls) / N
+    r["engine_single_states_cpu_us"] = 1e6 * statistics.median(cpus) / N
     if bar is not None:
         r.update(_mujoco_case(bar, repeat, N, reps))
     return r
@@ -581,17 +596,20 @@ def engine_markdown(res: dict[str, Any]) -> str:
         f"Batched model + kernel over up to {res['batch']} distinct states (fewer where one "
         f"call is slow: column 'states'; each peer's states are the steps of its own trajectory "
         "from the initial state), µs per state (engine: `Forward.batch`; MuJoCo: "
-        "`rollout(nstep=1)`, one mj_step per state), medians of 3.",
+        "`rollout(nstep=1)`, one mj_step per state), medians of 3; 'single calls': a Python "
+        "loop of single `Forward` calls over the batch's states (wall / CPU).",
         "",
-        "| mechanism | states | engine 1 thread | engine 2 threads | MuJoCo 1 thread "
-        "| MuJoCo 2 threads | engine / MuJoCo (2 threads) |",
-        "|---|---:|---:|---:|---:|---:|---:|",
+        "| mechanism | states | single calls | engine 1 thread (CPU) | engine 2 threads (CPU) "
+        "| MuJoCo 1 thread | MuJoCo 2 threads | engine / MuJoCo (2 threads) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in res["engine"]:
         mj2 = r.get("mujoco_batch2_us_per_state")
         lines.append(
-            f"| {r['case']} | {r['batch_states']} | {f(r['engine_batch1_us_per_state'])} "
-            f"| {f(r['engine_batch2_us_per_state'])} "
+            f"| {r['case']} | {r['batch_states']} | {f(r.get('engine_single_states_us'))} / "
+            f"{f(r.get('engine_single_states_cpu_us'))} "
+            f"| {f(r['engine_batch1_us_per_state'])} ({f(r.get('engine_batch1_cpu_us_per_state'))}) "
+            f"| {f(r['engine_batch2_us_per_state'])} ({f(r.get('engine_batch2_cpu_us_per_state'))}) "
             f"| {f(r.get('mujoco_batch1_us_per_state'))} | {f(mj2)} "
             f"| {f(None if mj2 is None else r['engine_batch2_us_per_state'] / mj2)} |"
         )

@@ -5,6 +5,7 @@
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/unique_ptr.h>
 
+#include <mutex>
 #include <string>
 #include <thread>
 
@@ -47,6 +48,8 @@ struct Forward {
     std::vector<std::uint8_t> active;
     SolveOptions opt;
     std::unique_ptr<ForwardScratch> scratch;  // single calls
+    ScratchPool pool;                         // batch calls: one scratch per worker, kept
+    std::mutex pool_mutex;                    // a concurrent batch call makes its own
 };
 
 using OArr1 = nb::ndarray<double, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
@@ -142,13 +145,15 @@ void bind_program(nb::module_& m) {
                 out.qdd = qdd.data();
                 out.status = status.data();
                 int bad;
+                std::unique_lock<std::mutex> own(f.pool_mutex, std::try_to_lock);
+                ScratchPool* pool = own.owns_lock() ? &f.pool : nullptr;
                 if (p.thread_safe()) {
                     nb::gil_scoped_release release;
                     bad = forward_batch(p, static_cast<int>(N), t.data(), q.data(), qd.data(), f.active.data(),
-                                        nullptr, 0, f.opt, std::max(nthreads, 1), out);
+                                        nullptr, 0, f.opt, std::max(nthreads, 1), out, pool);
                 } else {
                     bad = forward_batch(p, static_cast<int>(N), t.data(), q.data(), qd.data(), f.active.data(),
-                                        nullptr, 0, f.opt, 1, out);
+                                        nullptr, 0, f.opt, 1, out, pool);
                 }
                 if (bad)
                     for (std::size_t i = 0; i < N; ++i)

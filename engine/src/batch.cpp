@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <memory>
 #include <thread>
 #include <vector>
 
@@ -69,17 +70,25 @@ int run_range(const BatchJob& job, ForwardScratch& s, int lo, int hi, bool* stop
 
 int forward_batch(const Program& program, int N, const double* t, const double* q, const double* qd,
                   const std::uint8_t* active, const double* f, int f_stride, const SolveOptions& opt,
-                  int threads, BatchOutputs out) {
+                  int threads, BatchOutputs out, ScratchPool* pool) {
     if (N <= 0) return 0;
     const BatchJob job{program, t, q, qd, active, f, f_stride, opt, out};
     int nt = threads > 0 ? threads : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
     // below ~64 states per thread the start-up of a thread is not amortized
     nt = std::min(nt, std::max(1, N / 64));
     if (!program.thread_safe()) nt = 1;
+    ScratchPool local;
+    if (pool == nullptr) pool = &local;
+    if (pool->size() < static_cast<std::size_t>(nt)) pool->resize(static_cast<std::size_t>(nt));
+    // worker j's scratch, made by that worker on first use (its pages touched by it)
+    auto scratch = [&](int j) -> ForwardScratch& {
+        std::unique_ptr<ForwardScratch>& s = (*pool)[static_cast<std::size_t>(j)];
+        if (!s) s = std::make_unique<ForwardScratch>(program, active);
+        return *s;
+    };
     if (nt == 1) {
-        ForwardScratch s(program, active);
         bool stop = false;
-        return run_range(job, s, 0, N, &stop);
+        return run_range(job, scratch(0), 0, N, &stop);
     }
     // Threads take chunks of consecutive states from a shared counter (about 64 chunks per
     // thread): a thread slowed by other work on its core takes fewer chunks instead of holding
@@ -89,8 +98,8 @@ int forward_batch(const Program& program, int N, const double* t, const double* 
     std::atomic<int> next{0};
     std::atomic<int> failures{0};
     std::atomic<bool> stopped{false};
-    auto worker = [&]() {
-        ForwardScratch s(program, active);
+    auto worker = [&](int j) {
+        ForwardScratch& s = scratch(j);
         int bad = 0;
         for (;;) {
             if (stopped.load(std::memory_order_relaxed)) break;
@@ -102,11 +111,11 @@ int forward_batch(const Program& program, int N, const double* t, const double* 
         }
         failures.fetch_add(bad, std::memory_order_relaxed);
     };
-    std::vector<std::thread> pool;
-    pool.reserve(static_cast<std::size_t>(nt - 1));
-    for (int k = 1; k < nt; ++k) pool.emplace_back(worker);
-    worker();
-    for (std::thread& th : pool) th.join();
+    std::vector<std::thread> team;
+    team.reserve(static_cast<std::size_t>(nt - 1));
+    for (int k = 1; k < nt; ++k) team.emplace_back(worker, k);
+    worker(0);
+    for (std::thread& th : team) th.join();
     int bad = failures.load();
     if (stopped.load()) {  // after a callback error: the states no thread started failed by it
         const int first = std::min(next.load(), N);
