@@ -172,3 +172,24 @@ def test_forward_batch_keeps_its_scratch_bitwise(name, kw):
     for i in (0, 77, 149):
         fwd(float(t[i]), Q[i], V[i], qdd)
         assert np.array_equal(qdd, first[i])
+
+
+def test_forward_dynamics_keeps_scratch_across_models_bitwise():
+    """``Model.forward_dynamics`` keeps the per-thread scratch of its last programs (engine
+    ``forward_batch``): calls alternating between more models and active sets than it keeps
+    give bit for bit the first call's results (each computed with a fresh scratch)."""
+    cases = []
+    for name, kw in (("A02_n_four_bar", {"N": 40}), ("A02_n_four_bar", {"N": 2}), ("slider_crank", {}),
+                     ("crossed_four_bar", {})):  # fmt: skip
+        mech = library.get(name, **kw)
+        Q, V = _states(mech, 70, seed=4)
+        cases.append((mech.model, Q, V, mech.state.active))
+    first = [m.forward_dynamics(Q, V, active=act, threads=2) for m, Q, V, act in cases]
+    for _ in range(2):
+        for (m, Q, V, act), ref in zip(cases, first):
+            for threads in (1, 2):
+                res = m.forward_dynamics(Q, V, active=act, threads=threads)
+                assert np.array_equal(res.qdd, ref.qdd) and np.array_equal(res.f_c, ref.f_c)
+                assert np.array_equal(res.rank, ref.rank)
+            one = m.forward_dynamics(Q[11], V[11], active=act)
+            assert np.array_equal(one.qdd, ref.qdd[11])
