@@ -804,10 +804,14 @@ def _nonmin_body_names(bar: BarMechanism) -> list[str]:
 
 def run_nonmin(bar: BarMechanism, method: str, *, dt: float | None = None,
                rtol: float = 1e-8, atol: float = 1e-10, stabilization: str = "projection",
-               engine: str = "auto", samples: str = "grid", repeat: int = 3, warmup: bool = True) -> RunResult:
+               engine: str = "auto", samples: str = "grid", passages: bool = True,
+               h_max: float | None = None, repeat: int = 3, warmup: bool = True) -> RunResult:
     """``samples="grid"``: samples every ``SAMPLE_DT`` (dense output, projected); ``"steps"``: the
-    step ends only (``t_eval=None``, as the peers record theirs), errors at those instants."""
-    from nonmin.sim import simulate
+    step ends only (``t_eval=None``, as the peers record theirs), errors at those instants.
+    ``passages=False``: the integrator without the singularity-aware step placement;
+    ``h_max`` (adaptive methods): the largest step, also the first (with ``rtol = 1`` the error
+    control accepts every attempt: fixed steps of ``h_max``)."""
+    from nonmin.sim import METHODS, simulate
 
     mech = nonmin_mechanism(bar)
     # the same physical system: nonmin's initial state must equal the neutral description's
@@ -821,8 +825,20 @@ def run_nonmin(bar: BarMechanism, method: str, *, dt: float | None = None,
                           "engine": engine}
     if dt is not None:
         kw["dt"] = dt
-    if method not in ("rk4", "midpoint"):
+    adaptive = METHODS[method].adaptive
+    if adaptive:
         kw.update(rtol=rtol, atol=atol)
+    if not passages or h_max is not None:  # an Integrator value instead of the name
+        cls = METHODS[method]
+        opts: dict[str, Any] = {"passages": passages}
+        if adaptive:
+            opts.update(rtol=kw.pop("rtol"), atol=kw.pop("atol"))
+            if h_max is not None:
+                opts["h_max"] = h_max
+                kw["h0"] = h_max
+        else:
+            opts["dt"] = kw.pop("dt")
+        kw["method"] = cls(**opts)
     walls = []
     status = "ok"
     traj = None
@@ -850,7 +866,9 @@ def run_nonmin(bar: BarMechanism, method: str, *, dt: float | None = None,
     com = _nonmin_to_com(bar, mech.model, np.asarray(traj.q), np.asarray(traj.qd))
     used = str(traj.metadata.get("engine", "python"))
     setting = (f"{method} {stabilization}" + (" step ends" if samples == "steps" else "")
-               + (f" rtol={rtol:g}" if "dt" not in kw else "") + f" [{used}]")
+               + (f" rtol={rtol:g}" if adaptive else "")
+               + (f" h_max={h_max:g}" if h_max is not None else "")
+               + (" passages off" if not passages else "") + f" [{used}]")
     return RunResult("nonmin", setting, bar.name, dt, np.asarray(traj.t), com,
                      walls if status == "ok" else [], status,
                      extra={"n_steps": traj.n_steps, "n_rhs": traj.n_rhs, "nonmin_engine": used,
@@ -904,6 +922,27 @@ WP_STEP_ENDS: dict[str, list[PeerSpec]] = {
         # on N = 40: the stages of long steps lie far off the manifold)
         ("A02_N40", (2e-2, 3e-2, 4e-2, 5e-2, 1e-1), (1e-2, 1e-3, 1e-4, 1e-6, 1e-7, 1e-8)))
 }  # fmt: skip
+
+#: RK8 (DOP853's 8th-order stages at a fixed step, no error estimate; ``nonmin.sim.RK8``) at its
+#: step ends over its range (issue 18, target 4), with the singular-passage placement and, at
+#: A02 N = 2's coarse end, without it (``passages=False``: there the cheapest setting at
+#: Pinocchio's semi-implicit Euler dt 5e-2 accuracy); and the coarse end of RK4 and DOP853
+#: without the placement on A02 N = 2.
+WP_RK8: dict[str, list[PeerSpec]] = {
+    name: [*(("nonmin", {"method": "rk8", "dt": dt, "samples": "steps"}) for dt in dts),
+           *(("nonmin", {"method": "rk8", "dt": dt, "samples": "steps", "passages": False}) for dt in off)]
+    for name, dts, off in (
+        ("crossed_four_bar", (2e-3, 5e-3, 1e-2, 2e-2), ()),
+        ("A02_N2", (5e-2, 1e-1, 1.5e-1, 2e-1), (2e-1, 2.5e-1, 2.7e-1)),
+        ("A02_N40", (2e-2, 5e-2, 1e-1), ()))
+}  # fmt: skip
+WP_RK8["A02_N2"] += [
+    *(("nonmin", {"method": "rk4", "dt": dt, "samples": "steps", "passages": False}) for dt in (6e-2, 7e-2, 8e-2)),
+    *(("nonmin", {"method": "dop853", "rtol": r, "atol": r * 1e-2, "samples": "steps", "passages": False})
+      for r in (3e-4, 1e-4)),
+]  # fmt: skip
+for _name, _cfg in WP_RK8.items():
+    WP_STEP_ENDS[_name] = WP_STEP_ENDS[_name] + _cfg
 
 
 def default_configs(mech: BarMechanism, quick: bool) -> list[PeerSpec]:

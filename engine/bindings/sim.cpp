@@ -253,7 +253,8 @@ void bind_sim(nb::module_& m) {
         .value("rk4", sim::Method::rk4)
         .value("dopri5", sim::Method::dopri5)
         .value("midpoint", sim::Method::midpoint)
-        .value("dop853", sim::Method::dop853);
+        .value("dop853", sim::Method::dop853)
+        .value("rk8", sim::Method::rk8);
     nb::enum_<sim::Stabilization>(m, "SimStabilization")
         .value("none", sim::Stabilization::none)
         .value("baumgarte", sim::Stabilization::baumgarte)

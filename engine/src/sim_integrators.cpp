@@ -568,6 +568,7 @@ bool adaptive(const Loop& L) { return L.opt.method == Method::dopri5 || L.opt.me
 // A raw step of size h of the fixed-step method from (t, y) (f: F(t, y) when known)
 Status fixed_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec& out) {
     if (L.opt.method == Method::rk4) return rk4_advance(L, t, y, f, h, out);
+    if (L.opt.method == Method::rk8) return d8_advance(L, t, y, f, h, out);  // RK8.advance
     return midpoint_advance(L, t, y, f, h, L.opt.max_halvings, out);
 }
 
@@ -762,14 +763,14 @@ void passage_setup(Loop& L) {
     if (L.opt.method == Method::dopri5) {  // DormandPrince5.passage_fractions: nodes 0.3 | 0.8
         P.frac[0] = 0.45, P.frac[1] = 0.55, P.frac[2] = 0.65;
         P.n_frac = 3;
-    } else if (L.opt.method == Method::dop853) {  // DOP853.passage_fractions: nodes 1/3 | 0.6
+    } else if (L.opt.method == Method::dop853 || L.opt.method == Method::rk8) {  // DOP853/RK8.passage_fractions: nodes 1/3 | 0.6
         P.frac[0] = 0.41, P.frac[1] = 0.465, P.frac[2] = 0.52;
         P.n_frac = 3;
     } else {  // Integrator.passage_fractions (RK4, implicit midpoint)
         P.frac[0] = 0.25, P.frac[1] = 0.75;
         P.n_frac = 2;
     }
-    P.widen = !detail::adaptive(L);  // fixed-step methods only
+    P.widen = !detail::adaptive(L) && L.opt.method != Method::rk8;  // fixed-step methods but RK8 (RK8.widen_passages)
     passage_reset(L);
 }
 

@@ -245,7 +245,7 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
                    &L.k3, &L.k4, &L.kn, &L.ev, &L.d_ydiff, &L.d_bspl, &L.d_r3, &L.d_r4})
         *v = Vec::Zero(2 * n);
     L.K = Mat::Zero(7, 2 * n);
-    if (opt.method == Method::dop853) {
+    if (opt.method == Method::dop853 || opt.method == Method::rk8) {
         L.K8 = Mat::Zero(16, 2 * n);
         L.F8 = Mat::Zero(7, 2 * n);
         L.e3 = Vec::Zero(2 * n);

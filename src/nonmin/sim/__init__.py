@@ -2,7 +2,7 @@
 
 One entry point, :func:`simulate`, whose options are values (:class:`Solver`,
 :class:`EventSet`, :class:`Output` and a stabilization), with pluggable integrators (:data:`METHODS`: ``"rk4"``,
-``"dopri5"``, ``"dop853"``, ``"midpoint"``), stabilizations (:data:`STABILIZATIONS`: ``"none"``,
+``"rk8"``, ``"dopri5"``, ``"dop853"``, ``"midpoint"``), stabilizations (:data:`STABILIZATIONS`: ``"none"``,
 ``"baumgarte"``, ``"projection"``), events with transitions as values (:class:`Event`,
 :class:`Activate`, :class:`Deactivate`, :class:`Reset`), automatic unilateral contact, and an
 immutable :class:`Trajectory` result that saves to one self-describing file.
@@ -12,7 +12,9 @@ Which method (measured on the library mechanisms, see ``_simulate`` and ``_integ
 configurations and change points; ``"dopri5"`` is efficient (dense output, error control) and
 passes them with the simulator's adaptive rank tolerance :data:`ADAPTIVE_RANK_RTOL`;
 ``"midpoint"`` keeps the energy error bounded on regular motions but cannot cross an exact
-change point.
+change point; ``"rk8"`` (DOP853's stages at a fixed step, no error estimate) is the cheapest at
+coarse accuracy on smooth motion (A02 N = 2 at dt 0.25 s: 1.1e-2 m, faster than Pinocchio's
+semi-implicit Euler at dt 5e-2, 7.3e-2 m), but nothing checks a step that is too long.
 """
 
 from ._batch import BatchTrajectory as BatchTrajectory
@@ -30,6 +32,7 @@ from ._friction import friction_state as friction_state
 from ._integrators import DOP853 as DOP853
 from ._integrators import METHODS as METHODS
 from ._integrators import RK4 as RK4
+from ._integrators import RK8 as RK8
 from ._integrators import DormandPrince5 as DormandPrince5
 from ._integrators import ImplicitMidpoint as ImplicitMidpoint
 from ._integrators import Integrator as Integrator
@@ -56,6 +59,7 @@ __all__ = [
     "DOP853",
     "METHODS",
     "RK4",
+    "RK8",
     "STABILIZATIONS",
     "Activate",
     "BatchTrajectory",

@@ -15,7 +15,7 @@ through :meth:`~nonmin.model.Model.evaluate` / ``mass_matrix`` / ``constraint_te
 taken only inside the callback). A controller is called back the same way (compiled
 controllers replace the callback later).
 
-Covered: the methods ``"rk4"``, ``"dopri5"``, ``"dop853"``, ``"midpoint"`` (the four classes exactly), the
+Covered: the methods ``"rk4"``, ``"rk8"``, ``"dopri5"``, ``"dop853"``, ``"midpoint"`` (the five classes exactly), the
 stabilizations ``"none"``, ``"baumgarte"``, ``"projection"`` (exactly those classes), ``t_eval``,
 ``project_initial``, ``rank_rtol``, ``max_steps``, ``h0``, controllers (Python callback), user
 events and automatic unilateral contact. The contact guards are evaluated, located and their
@@ -55,7 +55,7 @@ from ..core.linalg import SPD_RTOL
 from ..errors import InputError
 from ..model import Model
 from . import _durable, _integrators
-from ._integrators import DOP853, RK4, DormandPrince5, ImplicitMidpoint
+from ._integrators import DOP853, RK4, RK8, DormandPrince5, ImplicitMidpoint
 from ._stabilization import Baumgarte, NoStabilization, Projection
 
 FloatArray = NDArray[np.float64]
@@ -92,7 +92,7 @@ def ineligible(
     integ: Any, stab: Any, events: tuple[Any, ...], unilateral: tuple[str, ...], engine: str
 ) -> str | None:
     """Why the engine loop cannot run this simulation, or None when it covers it."""
-    if type(integ) not in (RK4, DormandPrince5, DOP853, ImplicitMidpoint):
+    if type(integ) not in (RK4, RK8, DormandPrince5, DOP853, ImplicitMidpoint):
         return f"method {getattr(integ, 'name', '') or type(integ).__name__!r} is not one of the built-in integrators"
     if type(stab) not in (NoStabilization, Baumgarte, Projection):
         return f"stabilization {stab!r} is not one of the built-in stabilizations"
@@ -254,6 +254,9 @@ def options(
     o = eng.SimOptions()
     if type(integ) is RK4:
         o.method = eng.SimMethod.rk4
+        o.dt = float(dt)
+    elif type(integ) is RK8:
+        o.method = eng.SimMethod.rk8
         o.dt = float(dt)
     elif type(integ) is ImplicitMidpoint:
         o.method = eng.SimMethod.midpoint

@@ -10,6 +10,8 @@ in and returned; the objects themselves are frozen and can be shared between run
   Hairer, Nørsett & Wanner, *Solving ODEs I*, Table II.5.2.
 * :class:`DOP853` — adaptive Dormand–Prince 8(5,3) with its 7th-order continuous extension
   (``"dop853"``): fewer, longer steps at tight tolerances.
+* :class:`RK8` — DOP853's 8th-order stages with a fixed step and no error estimate (``"rk8"``):
+  the cheapest accurate steps at coarse dt on smooth motion.
 * :class:`ImplicitMidpoint` — the symmetric, symplectic implicit midpoint rule, order 2
   (``"midpoint"``): bounded energy error over long runs.
 
@@ -34,6 +36,7 @@ __all__ = [
     "DOP853",
     "METHODS",
     "RK4",
+    "RK8",
     "DormandPrince5",
     "ImplicitMidpoint",
     "Integrator",
@@ -532,6 +535,9 @@ class Integrator(ABC):
     #: Fractions of a step at which a singular instant is placed (:class:`SingularPassages`):
     #: the middles of the largest gaps between the stage nodes.
     passage_fractions: ClassVar[tuple[float, ...]] = (0.25, 0.75)
+    #: Fixed-step methods: the step that holds a singular instant is widened to
+    #: :data:`PASSAGE_SIGMA` (:class:`SingularPassages`, ``widen``); not for :class:`RK8`.
+    widen_passages: ClassVar[bool] = True
 
     @abstractmethod
     def step(
@@ -1006,10 +1012,55 @@ def _d8_dense(
     return interp
 
 
+@dataclass(frozen=True)
+class RK8(Integrator):
+    """Dormand–Prince's 8th-order stages and weights (:class:`DOP853`'s ``y₁``) with a fixed step
+    ``dt``: 12 right-hand sides per step (11 new ones: the first is F at the projected step end
+    before), no error estimate — so none of DOP853's projections of the error points
+    ``y₁ − e₅``, ``y₁ − e₃`` and no rejected attempts — the step end projected as with RK4.
+
+    For coarse steps on smooth motion, where DOP853's error control would take about the same
+    steps: on A02 N = 2 (10 s, step ends recorded) dt = 0.25 s gives B0 within 1.1e-2 m and
+    the energy within 4.9e-3 J in 40 steps, faster than Pinocchio's semi-implicit Euler at
+    dt = 5e-2 (7.3e-2 m, 4.6 J; ``benchmarks/README.md``). Without error control nothing
+    guards a step that is too long: the crossed four-bar's change points need dt ≲ 1e-2 and
+    the singular-passage placement; check the accuracy against a finer run.
+
+    ``passages`` as for :class:`RK4`, but the step that holds a singular instant is not widened
+    (:data:`PASSAGE_SIGMA`): at steps of 0.1–0.3 s a doubled step loses the 8th-order accuracy
+    (A02 N = 2 at dt 0.25 left the parallelogram mode with it). Samples between step ends come
+    from the quintic Hermite interpolant of the projected step ends (order 6 in q, 5 in q̇),
+    not from DOP853's 7th-order extension.
+    """
+
+    dt: float | None = None
+    passages: bool = True
+
+    name: ClassVar[str] = "rk8"
+    order: ClassVar[int] = 8
+    adaptive: ClassVar[bool] = False
+    passage_fractions: ClassVar[tuple[float, ...]] = DOP853.passage_fractions
+    widen_passages: ClassVar[bool] = False
+
+    def advance(self, fun: RHS, t: float, y: FloatArray, f: FloatArray | None, h: float) -> FloatArray:
+        K = np.empty((12, y.shape[0]))
+        K[0] = fun(t, y) if f is None else f
+        DOP853._stages(fun, t, y, K, h, 1, 12)
+        return y + h * (_D8.B @ K[:12])
+
+    def step(
+        self, fun: RHS, state: StepperState, t_bound: float, project: Projector | None = None,
+        place: Placer | None = None,
+    ) -> StepResult:  # fmt: skip
+        """One step (:func:`_fixed_step`, without RK4's projected stages)."""
+        return _fixed_step(self, fun, state, t_bound, None, place)
+
+
 #: Integrators by name (``method=`` of :func:`nonmin.sim.simulate`).
 METHODS: dict[str, type[Integrator]] = {
     "rk4": RK4,
     "dopri5": DormandPrince5,
     "midpoint": ImplicitMidpoint,
     "dop853": DOP853,
+    "rk8": RK8,
 }

@@ -88,7 +88,9 @@ class Solver:
     ----------
     method : str or Integrator, default "rk4"
         ``"rk4"`` (fixed step ``dt``), ``"dopri5"`` (adaptive, ``rtol``/``atol``),
-        ``"dop853"`` (adaptive, order 8: tight tolerances, long runs), ``"midpoint"``
+        ``"dop853"`` (adaptive, order 8: tight tolerances, long runs), ``"rk8"`` (DOP853's
+        8th-order stages with a fixed ``dt`` and no error estimate: coarse steps on smooth
+        motion, the cheapest at Pinocchio's coarse accuracy on A02), ``"midpoint"``
         (implicit midpoint, fixed ``dt``), any name of
         :data:`nonmin.sim.METHODS`, or an :class:`~nonmin.sim.Integrator` value.
     dt : float, optional

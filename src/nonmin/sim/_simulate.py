@@ -70,6 +70,7 @@ from ._integrators import (
     DOP853,
     METHODS,
     RK4,
+    RK8,
     DormandPrince5,
     ImplicitMidpoint,
     Integrator,
@@ -206,7 +207,7 @@ def _step_work(
     if isinstance(integ, DormandPrince5):
         P0 = f_pow if f_pow is not None else powers[0]
         return h * float(_DP_B @ np.array([P0, *powers[-6:]]))
-    if isinstance(integ, DOP853):
+    if isinstance(integ, DOP853 | RK8):
         P0 = f_pow if f_pow is not None else powers[0]
         stages = powers[-12:-1] if fsal else powers[-11:]
         return h * float(np.asarray(_dop853_tableau.B)[:12] @ np.array([P0, *stages]))
@@ -718,7 +719,7 @@ def simulate(
         A :class:`nonmin.control.Controller` (``initial_state`` and ``update`` are used when
         present); ``u`` has shape (k,) and enters as ``B(q) u``.
     method, dt : shorthands of ``solver``
-        The integrator (``"rk4"``, ``"dopri5"``, ``"dop853"``, ``"midpoint"`` or an :class:`Integrator`
+        The integrator (``"rk4"``, ``"rk8"``, ``"dopri5"``, ``"dop853"``, ``"midpoint"`` or an :class:`Integrator`
         value) and its step: ``simulate(m, 1, method="rk4", dt=1e-3)`` is
         ``simulate(m, 1, solver=Solver("rk4", dt=1e-3))``.
     solver : Solver, optional
@@ -906,7 +907,7 @@ def simulate(
         stab = _energy_level(stab, model, t0, q, qd, act, rank_rtol, project_initial,
                              bool(controller is not None or events or unilateral))  # fmt: skip
     rec = _Recorder(model)
-    passages = (SingularPassages(integ.passage_fractions, widen=not integ.adaptive)
+    passages = (SingularPassages(integ.passage_fractions, widen=not integ.adaptive and integ.widen_passages)
                  if getattr(integ, "passages", False) else None)  # fmt: skip
     seed = _passage_history(prev, act, t_out)
     records: list[EventRecord] = []

@@ -44,7 +44,9 @@ constexpr double CHORD_RATE = 0.1;
 constexpr double SAMPLE_VELOCITY_RTOL = SINGULAR_CUT_RTOL;
 constexpr double DRIFT_RTOL_CAP = 1e-2;                  // drift_rank_rtol's upper bound
 
-enum class Method : int { rk4 = 0, dopri5 = 1, midpoint = 2, dop853 = 3 };
+// rk8: DOP853's 8th-order stages and weights with a fixed step (no error estimate, no projected
+// error points; nonmin.sim.RK8)
+enum class Method : int { rk4 = 0, dopri5 = 1, midpoint = 2, dop853 = 3, rk8 = 4 };
 enum class Stabilization : int { none = 0, baumgarte = 1, projection = 2 };
 
 // nonmin.sim.Projection's parameters.
@@ -63,7 +65,7 @@ constexpr double ENERGY_MAX_CHANGE = 1e-2;
 
 struct Options {
     Method method = Method::rk4;
-    double dt = 1e-3;  // fixed step (rk4, midpoint)
+    double dt = 1e-3;  // fixed step (rk4, midpoint, rk8)
     // dopri5
     double rtol = 1e-8, atol = 1e-10;
     double h_max = std::numeric_limits<double>::infinity();
