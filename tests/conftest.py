@@ -26,7 +26,13 @@ def pytest_cmdline_main(config: pytest.Config) -> None:
     """The default suite (``python -m pytest`` with no paths: the README's test command and
     ``.ci/run``) runs on two worker processes (pytest-xdist) when xdist is installed and no
     ``-n`` was given: the suite is sized for two cores (issue 17, target 7). Runs of chosen
-    paths, ``-p no:xdist`` and ``-n 0`` stay in one process."""
+    paths, ``-p no:xdist`` and ``-n 0`` stay in one process.
+
+    The workers share the tests by work stealing (``--dist worksteal``, unless ``--dist`` was
+    given): each starts with half of the ordered collection and an idle worker takes half of
+    the other's remaining queue, so the two finish within about one short test of each other.
+    xdist's default ``load`` hands the last tests out in chunks, and a chunk that holds a long
+    test leaves the other worker idle at the end of the run."""
     if (
         config.pluginmanager.hasplugin("xdist")
         and config.getoption("numprocesses", None) is None
@@ -37,22 +43,34 @@ def pytest_cmdline_main(config: pytest.Config) -> None:
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
         if cores > 1:
             config.option.numprocesses = 2
+            if config.getoption("dist", "no") == "no":
+                config.option.dist = "worksteal"
 
 
-#: The longest tests of a fresh clone, longest first (``--durations`` of the default suite, 17:58
-#: UTC 2026-11-26, load ~15: mypy 140 s, the tutorial pages 17–30 s each, the demo 29 s, ...;
-#: not the browser tests, whose module fixture starts Chromium once per worker that runs them):
-#: they go first, so that the two workers take them in turn beside the rest instead of one
-#: worker finishing them alone at the end (longest-processing-time-first scheduling).
+#: The longest tests of a fresh clone, longest first (``--durations`` of the default suite on a
+#: fresh clone of a9b1940, 07:00 UTC 2026-11-27, quiet: mypy 27.3 s, the two browser tests 11.2
+#: and 10.4 s (+ 2.4 s for Chromium's start), the API docs' build 8.3 s, tutorial 03 7.1 s, the
+#: demo 6.2 s, ...). They go first, so that the two workers take them in turn beside the rest
+#: instead of one worker finishing them alone at the end (longest-processing-time-first
+#: scheduling). The browser tests were 2382nd and 2383rd of 2422 in collection order: ~24 s on
+#: one worker while the other had ~40 short tests left. A prefix keeps the tests it matches in
+#: their order, together (the browser tests share their module's Chromium, the API docs their
+#: built site).
 _FIRST = (
     "tests/test_lint.py::test_mypy_clean",
+    "tests/viz/test_view.py::test_browser_",
+    "tests/docs/test_api_docs.py::",
     "tests/docs/test_tutorials.py::test_tutorial_runs[03",
     "tests/cli/test_cli_e2e.py::test_demo_quick",
-    "tests/docs/test_tutorials.py::test_tutorial_runs[02",
-    "tests/docs/test_tutorials.py::test_tutorial_runs[01",
-    "tests/cli/test_cli_e2e.py::test_run_writes_all_outputs",
-    "tests/docs/test_tutorials.py::test_tutorial_runs[04",
     "tests/control/test_control_hybrid.py::test_passivity_set_point_lyapunov_non_increasing",
+    "tests/docs/test_tutorials.py::test_tutorial_runs[02",
+    "tests/sim/test_sim_passages.py::test_a_run_that_ends_at_a_change_point_ends_on_the_branch[0.00025-python]",
+    "tests/sim/test_energy_bookkeeping.py::test_work_of_a_sinusoidal_push_is_half_m_v_squared[dop853-1e-08-python]",
+    "tests/sim/test_sim_engine.py::test_events_located_by_the_general_driver_between_engine_steps[kw0]",
+    "tests/cli/test_cli_e2e.py::test_run_writes_all_outputs",
+    "tests/control/test_control_hybrid.py::test_tracker_follows_crank_trajectory[passivity]",
+    "tests/docs/test_tutorials.py::test_tutorial_runs[04",
+    "tests/docs/test_tutorials.py::test_tutorial_runs[01",
 )
 
 
