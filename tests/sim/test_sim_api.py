@@ -31,14 +31,14 @@ from nonmin.sim import (
 
 def test_public_api_is_pinned() -> None:
     assert set(sim.__all__) == {
-        "ADAPTIVE_RANK_RTOL", "DEFAULT_DT", "METHODS", "RK4", "STABILIZATIONS", "Activate", "Baumgarte", "Deactivate",
+        "ADAPTIVE_RANK_RTOL", "DEFAULT_DT", "METHODS", "RK4", "RK8", "STABILIZATIONS", "Activate", "Baumgarte", "Deactivate",
         "DOP853", "DormandPrince5", "Event", "EventRecord", "ImplicitMidpoint", "Integrator",
         "NoStabilization", "Projection", "Reset", "Stabilization", "Status", "StepResult",
         "StepperState", "Trajectory", "load_trajectory", "simulate",
         "Solver", "EventSet", "Output", "check_model", "ModelReport", "CheckItem",
         "BatchTrajectory", "simulate_batch", "ContactState", "friction_state",
     }
-    assert set(sim.METHODS) == {"rk4", "dopri5", "dop853", "midpoint"}
+    assert set(sim.METHODS) == {"rk4", "rk8", "dopri5", "dop853", "midpoint"}
     assert set(sim.STABILIZATIONS) == {"none", "baumgarte", "projection"}
 
 
