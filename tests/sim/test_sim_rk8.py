@@ -102,3 +102,17 @@ def test_bad_input_is_a_typed_error() -> None:
     for bad in (-0.1, 0.0, float("nan"), "0.1"):
         with pytest.raises(InputError, match="dt"):
             simulate(mech, (0.0, 0.1), solver=Solver("rk8", dt=bad), progress=False)  # type: ignore[arg-type]
+
+
+def test_crossed_four_bar_stays_on_branch_through_its_change_points() -> None:
+    """Crossed four-bar, 10 s (18 change points), RK8 at dt 1e-2 with the passage placement:
+    on the anti-parallelogram branch at every step end, the crank within 0.1 rad of the exact
+    reduction (measured 3.2e-2 m at B, energy 6.3e-2 J: less accurate than RK4 at equal dt)."""
+    mech = library.get("crossed_four_bar")
+    tr = simulate(mech, (0.0, 10.0), method=RK8(dt=1e-2), progress=False)
+    assert tr.success and tr.t[-1] == pytest.approx(10.0)
+    res = [mech.model.outputs(t, q, qd)["anti_branch_residual"] for t, q, qd in zip(tr.t, tr.q, tr.qd, strict=True)]
+    assert float(np.max(np.abs(res))) < 1e-8
+    ref = library.crossed_four_bar_reference(tr.t)
+    assert float(np.max(np.abs(tr.q[:, 2] - ref["theta"]))) < 0.1
+    assert tr.energy_drift < 0.1
