@@ -58,9 +58,9 @@ Status rk4_advance(Loop& L, double t, const Vec& y, const Vec* f, double h, Vec&
     const double P1 = f ? L.wk_f : L.wk_P;  // the stage powers (the work's quadrature)
     const double hh = 0.5 * h;
     // next to a singular passage the stage states are projected (RK4.step, stages=True): F's
-    // derivatives across the manifold grow like 1/σ_min, a stage off it by O(h²) would cost
-    // the step an O(h²) error instead of O(h⁵)
-    const bool sp = L.stage_proj && L.opt.stab == Stabilization::projection;
+    // derivatives across the manifold grow like 1/σ_min, and an unprojected stage costs the step
+    // an error that outgrows its own there (passage_stages decides from k1 = (q̇, q̈))
+    const bool sp = L.stage_proj && L.opt.stab == Stabilization::projection && passage_stages(L, t, h, L.k1.data());
     for (int i = 0; i < n2; ++i) L.ys[i] = y[i] + hh * L.k1[i];
     if (sp && (s = project(L, t + 0.5 * h, L.ys.data(), L.opt.projection)) != Status::ok) return s;
     if ((s = rhs(L, t + 0.5 * h, L.ys.data(), L.k2.data())) != Status::ok) return s;
@@ -588,7 +588,9 @@ constexpr double PASSAGE_ITER_RTOL = 1e-6;
 constexpr double PASSAGE_FLOOR = 1e-7;
 constexpr double PASSAGE_BAND = 0.05;
 constexpr double PASSAGE_NOISE = 100.0;
+constexpr double PASSAGE_STAGE_NEAR = 3.0;
 constexpr double PASSAGE_STAGE_K = 30.0;
+constexpr double PASSAGE_STAGE_WINDOW = 0.15;
 constexpr double PASSAGE_SIGMA = 2e-4;
 constexpr double PASSAGE_WIDEN_MAX = 2.0;
 constexpr double PASSAGE_TREND = 1e-9;
@@ -1039,12 +1041,23 @@ double passage_place(const Loop& L, double t, double h) {
     return best > 0.0 ? best : h;
 }
 
-// _integrators.SingularPassages.stages
-bool passage_stages(const Loop& L, double t, double h) {
+// _integrators.SingularPassages.stages: the step holds the predicted instant, or the instant is
+// nearer (τ = σ/|σ̇|) than PASSAGE_STAGE_NEAR steps, or than both PASSAGE_STAGE_K steps and
+// PASSAGE_STAGE_WINDOW times the motion's own time scale ‖q̇‖/‖q̈‖ (f = F(t, y) = (q̇, q̈));
+// docs/theory.md, "Projected RK4 stages near a singular passage"
+bool passage_stages(const Loop& L, double t, double h, const double* f) {
     const Passages& P = L.pas;
     if (!L.opt.passages || !std::isfinite(P.sigma) || !(P.sigma >= PASSAGE_FLOOR)) return false;
-    if (PASSAGE_STAGE_K * P.rate * h > P.sigma) return true;
-    return P.have_star && P.t_star > t && P.t_star - t <= (1.0 + PASSAGE_BAND) * h;
+    if (P.have_star && P.t_star > t && P.t_star - t <= (1.0 + PASSAGE_BAND) * h) return true;
+    if (PASSAGE_STAGE_NEAR * P.rate * h > P.sigma) return true;
+    if (!(PASSAGE_STAGE_K * P.rate * h > P.sigma)) return false;
+    const int n = L.n;
+    double v2 = 0.0, a2 = 0.0;
+    for (int i = 0; i < n; ++i) {
+        v2 += f[i] * f[i];
+        a2 += f[n + i] * f[n + i];
+    }
+    return P.sigma * std::sqrt(a2) < PASSAGE_STAGE_WINDOW * P.rate * std::sqrt(v2);
 }
 
 // _integrators.SingularPassages.holds

@@ -927,7 +927,7 @@ Outcome run(Loop& L, long long max_steps) {
                 L.have_f = true;
                 L.wk_f = L.wk_P;
             }
-            L.stage_proj = L.opt.method == Method::rk4 && L.any_active && passage_stages(L, L.t, hs);
+            L.stage_proj = L.opt.method == Method::rk4 && L.any_active;  // (rk4_advance: passage_stages)
             s = fixed_advance(L, L.t, L.y, (f_start || end_star) ? &L.f : nullptr, hs, L.y1);
             L.stage_proj = false;
             if (s != Status::ok) return fail(L, s);

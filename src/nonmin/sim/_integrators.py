@@ -199,14 +199,18 @@ PASSAGE_ZONE_STEP = 0.5
 PASSAGE_NOISE = 100.0
 
 #: RK4 projects its stage states (position and velocity, the stabilization's projection) in a
-#: step over which the indicator changes by more than ``1/PASSAGE_STAGE_K`` of itself
-#: (``PASSAGE_STAGE_K·|dσ/dt|·h > σ``) or that holds the predicted instant. Near a passage F's
-#: derivatives across the constraint manifold grow like 1/σ, so a stage off the manifold by
-#: the method's O(h²) costs the step an O(h²/σ) error (measured, crossed four-bar, dt = 1e-3:
-#: +2.9e-7 J at every change point, 4.0e-6 J over 10 s); with projected stages the step's
-#: error is O(h⁵) again (1.2 s, python driver: 4.8e-7 → 3.8e-9 J at dt 1e-3, 4.5e-8 →
-#: 2.4e-10 J at 5e-4; K = 10: 5.5e-9, K = ∞ (every step): 4.2e-9).
+#: step that holds the predicted instant or lies nearer to it (``τ = σ/|dσ/dt|``) than
+#: ``PASSAGE_STAGE_NEAR`` steps, or than both ``PASSAGE_STAGE_K`` steps and
+#: ``PASSAGE_STAGE_WINDOW`` times the motion's own time scale ``‖q̇‖/‖q̈‖`` (from ``F(t, y)``
+#: at the step start). Near a passage F's derivatives
+#: across the constraint manifold grow like 1/τ, and an unprojected stage costs the step an
+#: error ``e_x ≈ e_o·(τ₁/τ)^b`` (``e_o ∝ h⁵`` its own, b ≈ 2–3) while h ≪ τ: where projection
+#: pays does not depend on h (docs/theory.md, "Projected stages", the derivation and the
+#: measurements; the former ``30·|dσ/dt|·h > σ`` held on nearly every step at dt ≥ 1e-2 and on
+#: too few at dt < 1e-3).
+PASSAGE_STAGE_NEAR = 3.0
 PASSAGE_STAGE_K = 30.0
+PASSAGE_STAGE_WINDOW = 0.15
 
 #: The step that holds a singular instant (fixed-step methods) is at least so long that its ends
 #: and stages lie where the indicator is ≥ PASSAGE_SIGMA: ``H = max(h, PASSAGE_SIGMA /
@@ -381,14 +385,23 @@ class SingularPassages:
             H = min(max(h, PASSAGE_SIGMA / (self.fractions[0] * self.rate)), PASSAGE_WIDEN_MAX * h)
         return place_step(self.t_star, t, h, self.fractions, H)
 
-    def stages(self, t: float, h: float) -> bool:
-        """Whether the step of size ``h`` from ``t`` projects its stage states
-        (:data:`PASSAGE_STAGE_K`)."""
+    def stages(self, t: float, h: float, f: FloatArray) -> bool:
+        """Whether the step of size ``h`` from ``t`` projects its stage states, ``f = F(t, y)``
+        (:data:`PASSAGE_STAGE_NEAR`, :data:`PASSAGE_STAGE_K`, :data:`PASSAGE_STAGE_WINDOW`)."""
         if not (math.isfinite(self.sigma) and self.sigma >= PASSAGE_FLOOR):
             return False
-        if PASSAGE_STAGE_K * self.rate * h > self.sigma:
+        if self.t_star is not None and t < self.t_star and self.t_star - t <= (1.0 + PASSAGE_BAND) * h:
             return True
-        return self.t_star is not None and t < self.t_star and self.t_star - t <= (1.0 + PASSAGE_BAND) * h
+        if PASSAGE_STAGE_NEAR * self.rate * h > self.sigma:
+            return True
+        if not PASSAGE_STAGE_K * self.rate * h > self.sigma:
+            return False
+        n = f.shape[0] // 2
+        v2 = a2 = 0.0
+        for i in range(n):  # (the engine's order of summation: the same decision bit for bit)
+            v2 += float(f[i]) * float(f[i])
+            a2 += float(f[n + i]) * float(f[n + i])
+        return self.sigma * math.sqrt(a2) < PASSAGE_STAGE_WINDOW * self.rate * math.sqrt(v2)
 
     def holds(self, t: float, h: float) -> bool:
         """Whether the step of size ``h`` from ``t`` holds the predicted singular instant
@@ -559,17 +572,24 @@ def _fixed_step(
     method: Integrator, fun: RHS, state: StepperState, t_bound: float, project: Projector | None,
     place: Placer | None,
 ) -> StepResult:  # fmt: skip
-    """One fixed step of ``method``; next to a singular passage (``place`` a
+    """One fixed step of ``method``; next to a singular passage (``method`` RK4, ``place`` a
     :class:`SingularPassages` whose :meth:`~SingularPassages.stages` holds) the step is RK4's
     with its stage states projected by ``project`` (the engine loop: ``rk4_advance`` with
     ``Loop::stage_proj``)."""
     t = state.t
     h = _clip(t, state.h if place is None else place(t, state.h), t_bound)
-    if project is None or not (isinstance(place, SingularPassages) and place.stages(t, h)):
-        y1 = method.advance(fun, t, state.y, state.f, h)
+    f = state.f
+    stages = False
+    if project is not None and isinstance(place, SingularPassages) and isinstance(method, RK4):
+        if f is None:
+            f = fun(t, state.y)  # (the decision reads F(t, y); the step reuses it as its first stage)
+        stages = place.stages(t, h, f)
+    if not stages:
+        y1 = method.advance(fun, t, state.y, f, h)
     else:
+        assert f is not None and project is not None
         y = state.y
-        k1 = fun(t, y) if state.f is None else state.f
+        k1 = f
         k2 = fun(t + 0.5 * h, project(t + 0.5 * h, y + 0.5 * h * k1))
         k3 = fun(t + 0.5 * h, project(t + 0.5 * h, y + 0.5 * h * k2))
         k4 = fun(t + h, project(t + h, y + h * k3))
@@ -586,8 +606,8 @@ class RK4(Integrator):
     so that it falls at 1/4 or 3/4 of a step (:class:`SingularPassages`): at most one step per
     passage is shortened, the others keep ``dt``; the step that holds the instant is at least
     :data:`PASSAGE_SIGMA` wide (in σ_min), and the steps near the instant project their stage
-    states (:data:`PASSAGE_STAGE_K`). Measured (A02 N = 2, 10 s, samples every 0.01 s, engine
-    loop, reference at rtol 1e-13): B0 error 2.0e-11 / 4.9e-11 / 9.9e-11 m and energy drift
+    states (:data:`PASSAGE_STAGE_WINDOW`). Measured (A02 N = 2, 10 s, samples every 0.01 s,
+    engine loop, reference at rtol 1e-13): B0 error 2.0e-11 / 4.9e-11 / 9.9e-11 m and energy drift
     2.0e-11 / 7.3e-11 / 1.3e-10 J at dt = 2.5e-4 / 1e-4 / 5e-5; crossed four-bar, 10 s:
     energy 2.2e-8 / 2.0e-9 / 7.0e-10 / 2.7e-10 / 2.7e-11 J at dt 1e-3 / 7e-4 / 5e-4 / 2.5e-4 /
     1e-4 (without the placement: 6.5e-10, 8.7e-7, 1.6e-3, 1.6e-4 m on A02 at 2.5e-4 … 5e-5: a

@@ -343,7 +343,7 @@ struct Loop {
 
     Samples rec;
     Passages pas;
-    bool stage_proj = false;  // RK4: project the stage states of the step being taken (passage_stages)
+    bool stage_proj = false;  // RK4: the step being taken may project its stage states (passage_stages decides)
 
     // Coulomb friction (sim_friction.cpp): the contacts, the evaluation mask (the active set
     // plus the tangential rows of slipping contacts), the normal forces of the slipping ones,
@@ -448,9 +448,10 @@ void passage_setup(Loop& L);
 void passage_observe(Loop& L, double t, const Mat& A, int m);
 void passage_reset(Loop& L);
 double passage_place(const Loop& L, double t, double h);
-// Whether the RK4 step of size h from t projects its stage states: the indicator changes by
-// more than 1/PASSAGE_STAGE_K of itself within the step, or the predicted instant is inside it.
-bool passage_stages(const Loop& L, double t, double h);
+// Whether the RK4 step of size h from t (f = F(t, y), 2n) projects its stage states: the
+// predicted instant is inside it, or nearer than a few steps or than a fraction of the motion's
+// time scale ‖q̇‖/‖q̈‖ (sim_integrators.cpp; docs/theory.md, singular passages).
+bool passage_stages(const Loop& L, double t, double h, const double* f);
 // Whether the step of size h from t holds the predicted singular instant (adaptive methods
 // then sample it from the continuous extension)
 bool passage_holds(const Loop& L, double t, double h);
