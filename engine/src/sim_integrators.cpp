@@ -588,7 +588,7 @@ constexpr double PASSAGE_ITER_RTOL = 1e-6;
 constexpr double PASSAGE_FLOOR = 1e-7;
 constexpr double PASSAGE_BAND = 0.05;
 constexpr double PASSAGE_NOISE = 100.0;
-constexpr double PASSAGE_STAGE_NEAR = 3.0;
+constexpr double PASSAGE_STAGE_AHEAD = 2.0;
 constexpr double PASSAGE_STAGE_K = 30.0;
 constexpr double PASSAGE_STAGE_WINDOW = 0.15;
 constexpr double PASSAGE_SIGMA = 2e-4;
@@ -1041,15 +1041,14 @@ double passage_place(const Loop& L, double t, double h) {
     return best > 0.0 ? best : h;
 }
 
-// _integrators.SingularPassages.stages: the step holds the predicted instant, or the instant is
-// nearer (τ = σ/|σ̇|) than PASSAGE_STAGE_NEAR steps, or than both PASSAGE_STAGE_K steps and
-// PASSAGE_STAGE_WINDOW times the motion's own time scale ‖q̇‖/‖q̈‖ (f = F(t, y) = (q̇, q̈));
-// docs/theory.md, "Projected RK4 stages near a singular passage"
+// _integrators.SingularPassages.stages: the predicted instant lies within PASSAGE_STAGE_AHEAD
+// steps ahead (this step or the next holds it), or nearer (τ = σ/|σ̇|, either side) than both
+// PASSAGE_STAGE_K steps and PASSAGE_STAGE_WINDOW times the motion's own time scale ‖q̇‖/‖q̈‖
+// (f = F(t, y) = (q̇, q̈)); docs/theory.md, "Projected RK4 stages near a singular passage"
 bool passage_stages(const Loop& L, double t, double h, const double* f) {
     const Passages& P = L.pas;
     if (!L.opt.passages || !std::isfinite(P.sigma) || !(P.sigma >= PASSAGE_FLOOR)) return false;
-    if (P.have_star && P.t_star > t && P.t_star - t <= (1.0 + PASSAGE_BAND) * h) return true;
-    if (PASSAGE_STAGE_NEAR * P.rate * h > P.sigma) return true;
+    if (P.have_star && P.t_star > t && P.t_star - t <= PASSAGE_STAGE_AHEAD * h) return true;
     if (!(PASSAGE_STAGE_K * P.rate * h > P.sigma)) return false;
     const int n = L.n;
     double v2 = 0.0, a2 = 0.0;

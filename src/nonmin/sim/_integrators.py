@@ -199,16 +199,16 @@ PASSAGE_ZONE_STEP = 0.5
 PASSAGE_NOISE = 100.0
 
 #: RK4 projects its stage states (position and velocity, the stabilization's projection) in a
-#: step that holds the predicted instant or lies nearer to it (``τ = σ/|dσ/dt|``) than
-#: ``PASSAGE_STAGE_NEAR`` steps, or than both ``PASSAGE_STAGE_K`` steps and
-#: ``PASSAGE_STAGE_WINDOW`` times the motion's own time scale ``‖q̇‖/‖q̈‖`` (from ``F(t, y)``
-#: at the step start). Near a passage F's derivatives
-#: across the constraint manifold grow like 1/τ, and an unprojected stage costs the step an
-#: error ``e_x ≈ e_o·(τ₁/τ)^b`` (``e_o ∝ h⁵`` its own, b ≈ 2–3) while h ≪ τ: where projection
-#: pays does not depend on h (docs/theory.md, "Projected stages", the derivation and the
-#: measurements; the former ``30·|dσ/dt|·h > σ`` held on nearly every step at dt ≥ 1e-2 and on
-#: too few at dt < 1e-3).
-PASSAGE_STAGE_NEAR = 3.0
+#: step from which the predicted instant lies at most ``PASSAGE_STAGE_AHEAD`` steps ahead (this
+#: step or the next holds it), or that lies nearer to it (``τ = σ/|dσ/dt|``, either side) than
+#: both ``PASSAGE_STAGE_K`` steps and ``PASSAGE_STAGE_WINDOW`` times the motion's own time scale
+#: ``‖q̇‖/‖q̈‖`` (from ``F(t, y)`` at the step start). Near a passage F's derivatives across the
+#: constraint manifold grow like 1/τ, and an unprojected stage costs the step an error
+#: ``e_x ≈ e_o·(τ₁/τ)^b`` (``e_o ∝ h⁵`` its own, b ≈ 2–3) while h ≪ τ: where projection pays
+#: does not depend on h; where h/τ is not small it pays on the approach only (docs/theory.md,
+#: "Projected RK4 stages near a singular passage", the derivation and the measurements; the
+#: former ``30·|dσ/dt|·h > σ`` held on nearly every step at dt ≥ 1e-2).
+PASSAGE_STAGE_AHEAD = 2.0
 PASSAGE_STAGE_K = 30.0
 PASSAGE_STAGE_WINDOW = 0.15
 
@@ -387,12 +387,10 @@ class SingularPassages:
 
     def stages(self, t: float, h: float, f: FloatArray) -> bool:
         """Whether the step of size ``h`` from ``t`` projects its stage states, ``f = F(t, y)``
-        (:data:`PASSAGE_STAGE_NEAR`, :data:`PASSAGE_STAGE_K`, :data:`PASSAGE_STAGE_WINDOW`)."""
+        (:data:`PASSAGE_STAGE_AHEAD`, :data:`PASSAGE_STAGE_K`, :data:`PASSAGE_STAGE_WINDOW`)."""
         if not (math.isfinite(self.sigma) and self.sigma >= PASSAGE_FLOOR):
             return False
-        if self.t_star is not None and t < self.t_star and self.t_star - t <= (1.0 + PASSAGE_BAND) * h:
-            return True
-        if PASSAGE_STAGE_NEAR * self.rate * h > self.sigma:
+        if self.t_star is not None and t < self.t_star and self.t_star - t <= PASSAGE_STAGE_AHEAD * h:
             return True
         if not PASSAGE_STAGE_K * self.rate * h > self.sigma:
             return False
