@@ -633,10 +633,8 @@ bool passage_time(const Passages& P, double& out) {
 // at a fraction of its cost: no eigenvectors, no QR sweeps over the whole spectrum.
 double sym_min_eigenvalue(double* X, int k, double* d, double* e) {
     if (k == 1) return X[0];
-    // Only the lower triangle is kept: the rank-2 update X₂₂ −= v wᵀ + w vᵀ gives X(i, c) and
-    // X(c, i) the same value bit for bit (v_i w_c + w_i v_c and v_c w_i + w_c v_i are one sum
-    // of the same two products; no contraction into FMA: CMakeLists.txt), so X(i, c), c > i, is
-    // read as X(c, i) — the same numbers in the same order as the full square, half the update.
+    for (int i = 0; i < k; ++i)  // the upper triangle from the lower one
+        for (int j = i + 1; j < k; ++j) X[i * k + j] = X[j * k + i];
     double* v = e + k;  // (scratch after e: the caller gives 3k entries from e on)
     double* w = v + k;
     for (int j = 0; j + 2 < k; ++j) {
@@ -665,15 +663,14 @@ double sym_min_eigenvalue(double* X, int k, double* d, double* e) {
         double pv = 0.0;
         for (int i = j + 1; i < k; ++i) {
             double s = 0.0;
-            for (int c = j + 1; c < i; ++c) s += X[i * k + c] * v[c];
-            for (int c = i; c < k; ++c) s += X[c * k + i] * v[c];
+            for (int c = j + 1; c < k; ++c) s += X[i * k + c] * v[c];
             w[i] = beta * s;
             pv += w[i] * v[i];
         }
         const double half = 0.5 * beta * pv;
         for (int i = j + 1; i < k; ++i) w[i] -= half * v[i];
         for (int i = j + 1; i < k; ++i)
-            for (int c = j + 1; c <= i; ++c) X[i * k + c] -= v[i] * w[c] + w[i] * v[c];
+            for (int c = j + 1; c < k; ++c) X[i * k + c] -= v[i] * w[c] + w[i] * v[c];
     }
     d[k - 2] = X[(k - 2) * k + (k - 2)];
     e[k - 2] = X[(k - 1) * k + (k - 2)];
