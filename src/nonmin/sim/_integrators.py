@@ -936,10 +936,7 @@ class DOP853(Integrator):
             K[s] = fun(t + _D8.C[s] * h, y + h * (_D8.A[s, :s] @ K[:s]))
 
     def advance(self, fun: RHS, t: float, y: FloatArray, f: FloatArray | None, h: float) -> FloatArray:
-        K = np.empty((16, y.shape[0]))
-        K[0] = fun(t, y) if f is None else f
-        self._stages(fun, t, y, K, h, 1, 12)
-        return y + h * (_D8.B @ K[:12])
+        return _d8_advance(fun, t, y, f, h)
 
     def step(
         self, fun: RHS, state: StepperState, t_bound: float, project: Projector | None = None,
@@ -1030,6 +1027,15 @@ def _d8_dense(
     return interp
 
 
+def _d8_advance(fun: RHS, t: float, y: FloatArray, f: FloatArray | None, h: float) -> FloatArray:
+    """DOP853's 8th-order step ``y₁`` from ``(t, y)`` (``f = F(t, y)`` or None): its 12 stages
+    and weights, no error estimate (:class:`DOP853` and :class:`RK8`)."""
+    K = np.empty((12, y.shape[0]))
+    K[0] = fun(t, y) if f is None else f
+    DOP853._stages(fun, t, y, K, h, 1, 12)
+    return y + h * (_D8.B @ K[:12])
+
+
 @dataclass(frozen=True)
 class RK8(Integrator):
     """Dormand–Prince's 8th-order stages and weights (:class:`DOP853`'s ``y₁``) with a fixed step
@@ -1061,10 +1067,7 @@ class RK8(Integrator):
     widen_passages: ClassVar[bool] = False
 
     def advance(self, fun: RHS, t: float, y: FloatArray, f: FloatArray | None, h: float) -> FloatArray:
-        K = np.empty((12, y.shape[0]))
-        K[0] = fun(t, y) if f is None else f
-        DOP853._stages(fun, t, y, K, h, 1, 12)
-        return y + h * (_D8.B @ K[:12])
+        return _d8_advance(fun, t, y, f, h)
 
     def step(
         self, fun: RHS, state: StepperState, t_bound: float, project: Projector | None = None,
