@@ -29,6 +29,20 @@ def make_pendulum(length: float = 1.0) -> FunctionModel:
     )
 
 
+
+def forced_oscillator(t: float, y: np.ndarray) -> np.ndarray:
+    """x'' = −x + cos(2t) written first order (a time-dependent forcing exercises every node of a
+    Runge–Kutta tableau; the DOP853 and RK8 order tests)."""
+    return np.array([y[1], -y[0] + np.cos(2.0 * t)])
+
+
+def forced_oscillator_exact(t: float) -> np.ndarray:
+    """The solution of :func:`forced_oscillator` from (x, ẋ) = (2/3, 1) at t = 0."""
+    x = np.cos(t) + np.sin(t) - np.cos(2.0 * t) / 3.0
+    v = -np.sin(t) + np.cos(t) + 2.0 * np.sin(2.0 * t) / 3.0
+    return np.array([x, v])
+
+
 # Crossed four-bar: crank 1 m at O = (0, 0), coupler 2 m, rocker 1 m at D = (2, 0), ground 2 m.
 # Coordinates: absolute link angles (θ1, θ2, θ3); uniform rods of 1 kg per metre.
 L1, L2, L3, DX = 1.0, 2.0, 1.0, 2.0

@@ -9,22 +9,12 @@ from typing import Any
 import numpy as np
 import pytest
 
+from conftest import forced_oscillator, forced_oscillator_exact
 from nonmin import library
 from nonmin.core import use_backend
 from nonmin.library import n_four_bar_reference
 from nonmin.sim import DOP853, METHODS, Solver, StepperState, simulate
 from nonmin.sim import _dop853_tableau as tab
-
-
-def _osc(t: float, y: np.ndarray) -> np.ndarray:
-    """x'' = −x + cos(2t) written first order (a time-dependent forcing exercises every node)."""
-    return np.array([y[1], -y[0] + np.cos(2.0 * t)])
-
-
-def _osc_exact(t: float) -> np.ndarray:
-    x = np.cos(t) + np.sin(t) - np.cos(2.0 * t) / 3.0
-    v = -np.sin(t) + np.cos(t) + 2.0 * np.sin(2.0 * t) / 3.0
-    return np.array([x, v])
 
 
 def test_tableau_conditions() -> None:
@@ -40,15 +30,15 @@ def test_tableau_conditions() -> None:
 
 def test_step_is_order_8_and_dense_output_order_7() -> None:
     integ = DOP853()
-    y0 = _osc_exact(0.0)
+    y0 = forced_oscillator_exact(0.0)
     errs, dense_errs = [], []
     hs = [0.4, 0.2, 0.1]
     for h in hs:
-        y1 = integ.advance(_osc, 0.0, y0, None, h)
-        errs.append(float(np.max(np.abs(y1 - _osc_exact(h)))))
-        res = DOP853(rtol=1e3, atol=1e3).step(_osc, StepperState(0.0, y0, None, h), 10.0)
+        y1 = integ.advance(forced_oscillator, 0.0, y0, None, h)
+        errs.append(float(np.max(np.abs(y1 - forced_oscillator_exact(h)))))
+        res = DOP853(rtol=1e3, atol=1e3).step(forced_oscillator, StepperState(0.0, y0, None, h), 10.0)
         assert res.h == h and res.dense is not None
-        dense_errs.append(max(float(np.max(np.abs(res.dense(th) - _osc_exact(th)))) for th in (0.3 * h, 0.5 * h, 0.77 * h)))
+        dense_errs.append(max(float(np.max(np.abs(res.dense(th) - forced_oscillator_exact(th)))) for th in (0.3 * h, 0.5 * h, 0.77 * h)))
     p_step = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
     p_dense = np.log2(np.array(dense_errs[:-1]) / np.array(dense_errs[1:]))
     # local errors: O(h^9) for the step, O(h^8) for the interpolant
@@ -58,14 +48,14 @@ def test_step_is_order_8_and_dense_output_order_7() -> None:
 
 def test_adaptive_run_meets_its_tolerance_on_an_ode() -> None:
     integ = DOP853(rtol=1e-11, atol=1e-13)
-    st = StepperState(0.0, _osc_exact(0.0), None, 0.0)
+    st = StepperState(0.0, forced_oscillator_exact(0.0), None, 0.0)
     steps = 0
     while st.t < 10.0:
-        res = integ.step(_osc, st, 10.0)
+        res = integ.step(forced_oscillator, st, 10.0)
         st = res.state
         steps += 1
     assert st.t == 10.0 and steps < 200
-    assert float(np.max(np.abs(st.y - _osc_exact(10.0)))) < 1e-9
+    assert float(np.max(np.abs(st.y - forced_oscillator_exact(10.0)))) < 1e-9
 
 
 def test_registered_and_resolved() -> None:

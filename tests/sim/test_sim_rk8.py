@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from conftest import forced_oscillator, forced_oscillator_exact
 from nonmin import library
 from nonmin.core import use_backend
 from nonmin.errors import InputError
@@ -16,36 +17,25 @@ from nonmin.sim import DOP853, METHODS, RK8, Solver, StepperState, simulate
 from nonmin.sim import _dop853_tableau as tab
 
 
-def _osc(t: float, y: np.ndarray) -> np.ndarray:
-    """x'' = −x + cos(2t) first order (a time-dependent forcing exercises every node)."""
-    return np.array([y[1], -y[0] + np.cos(2.0 * t)])
-
-
-def _osc_exact(t: float) -> np.ndarray:
-    x = np.cos(t) + np.sin(t) - np.cos(2.0 * t) / 3.0
-    v = -np.sin(t) + np.cos(t) + 2.0 * np.sin(2.0 * t) / 3.0
-    return np.array([x, v])
-
-
 def test_one_step_is_dop853s_y1_and_order_8() -> None:
     """A step is DOP853's y₁ = y + hΣb_j k_j (the same stages, to round-off), whose local error
     is O(h⁹); over a fixed span the global error falls at order 8."""
-    y0 = _osc_exact(0.0)
+    y0 = forced_oscillator_exact(0.0)
     for h in (0.4, 0.2):
-        a = RK8(dt=h).advance(_osc, 0.0, y0, None, h)
+        a = RK8(dt=h).advance(forced_oscillator, 0.0, y0, None, h)
         K = np.empty((12, 2))
-        K[0] = _osc(0.0, y0)
+        K[0] = forced_oscillator(0.0, y0)
         for s in range(1, 12):
-            K[s] = _osc(tab.C[s] * h, y0 + h * (tab.A[s, :s] @ K[:s]))
+            K[s] = forced_oscillator(tab.C[s] * h, y0 + h * (tab.A[s, :s] @ K[:s]))
         assert float(np.max(np.abs(a - (y0 + h * (tab.B @ K))))) < 1e-15
-        assert float(np.max(np.abs(a - DOP853().advance(_osc, 0.0, y0, None, h)))) < 1e-15
+        assert float(np.max(np.abs(a - DOP853().advance(forced_oscillator, 0.0, y0, None, h)))) < 1e-15
     errs = []
     hs = [0.5, 0.25, 0.125]
     for h in hs:
         st = StepperState(0.0, y0, None, h)
         while st.t < 5.0 - 1e-12:
-            st = RK8(dt=h).step(_osc, st, 5.0).state
-        errs.append(float(np.max(np.abs(st.y - _osc_exact(5.0)))))
+            st = RK8(dt=h).step(forced_oscillator, st, 5.0).state
+        errs.append(float(np.max(np.abs(st.y - forced_oscillator_exact(5.0)))))
     p = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
     assert np.all(p > 7.5), (errs, p)
 

@@ -44,13 +44,14 @@ basis. The rotation rows of ``weld`` and ``planar_weld`` use the relative angula
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from ..._validation import as_float_array
-from ...errors import InputError, NonFiniteError, ShapeError
+from ...errors import FileFormatError, InputError, NonFiniteError, ShapeError
 from .._protocol import ConstraintKind, FloatArray
 
 __all__ = [
@@ -535,3 +536,15 @@ def _joint_limits_option(joint_limits: Any) -> bool | str:
         f"joint_limits must be True (enforce as unilateral constraints), False or 'warn' "
         f"(not enforced, a JointLimitWarning names them) or 'ignore', got {joint_limits!r}"
     )
+
+
+def _robot_file(path: Any, kind: str) -> Path:
+    """``path`` as a Path to an existing file, else a FileFormatError naming ``kind`` ("URDF",
+    "MJCF") and whether a folder or nothing is there (the loaders' one check)."""
+    p = Path(path)
+    if not p.is_file():
+        raise FileFormatError(
+            f"path: expected a {kind} file, got "
+            + (f"the folder {str(p)!r}" if p.is_dir() else f"{str(p)!r}, which does not exist")
+        )
+    return p

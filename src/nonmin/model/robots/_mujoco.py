@@ -47,7 +47,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ...errors import FileFormatError, JointLimitWarning, ModelError, missing_dependency
-from ._constraints import FrameConstraint, JointCoupling, RobotConstraint, _joint_limits_option
+from ._constraints import (
+    FrameConstraint,
+    JointCoupling,
+    RobotConstraint,
+    _joint_limits_option,
+    _robot_file,
+)
 
 try:
     import mujoco
@@ -237,12 +243,7 @@ def load_mjcf(
     MuJoCo's parse and compile errors become :class:`~nonmin.errors.FileFormatError`; moving
     bodies with non-positive mass or inertia become :class:`~nonmin.errors.ModelError`.
     """
-    p = Path(path)
-    if not p.is_file():
-        raise FileFormatError(
-            "path: expected a MJCF file, got "
-            + (f"the folder {str(p)!r}" if p.is_dir() else f"{str(p)!r}, which does not exist")
-        )
+    p = _robot_file(path, "MJCF")
     enforce = _joint_limits_option(joint_limits)
     try:
         size = p.stat().st_size

@@ -82,6 +82,7 @@ from ._constraints import (
     PathDriver,
     RobotConstraint,
     _joint_limits_option,
+    _robot_file,
     complete_basis,
 )
 from ._tree import compile_tree
@@ -554,12 +555,7 @@ class RobotModel(Model):
         """
         from ._urdf_check import check_urdf, joint_limit_text
 
-        p = Path(path)
-        if not p.is_file():
-            raise FileFormatError(
-                "path: expected a URDF file, got "
-                + (f"the folder {str(p)!r}" if p.is_dir() else f"{str(p)!r}, which does not exist")
-            )
+        p = _robot_file(path, "URDF")
         if root_joint not in (None, "freeflyer"):
             raise InputError(f"root_joint must be None or 'freeflyer', got {root_joint!r}")
         enforce = _joint_limits_option(joint_limits)
