@@ -317,6 +317,12 @@ Status TapeProgram::evaluate(double t, const double* q, const double* qd, const 
     int k = 0;
     for (std::size_t run = 0; run < n_runs; ++run) {
         const int e = P.run_end[run];
+#if defined(__GLIBC__)
+        if (P.run_op[run] == TAPE_SINCOS) {  // (a plan's op, not a TapeOp: no switch case)
+            for (; k < e; ++k) ::sincos(r[ia[k]], &r[dst[k]], &r[ib[k]]);
+            continue;
+        }
+#endif
 #define NONMIN_TAPE_RUN(expr)                  \
     for (; k < e; ++k) {                       \
         const double x = r[ia[k]];             \
@@ -349,12 +355,9 @@ Status TapeProgram::evaluate(double t, const double* q, const double* qd, const 
             case TapeOp::min: NONMIN_TAPE_RUN(std::fmin(x, r[ib[k]]));
             case TapeOp::max: NONMIN_TAPE_RUN(std::fmax(x, r[ib[k]]));
             case TapeOp::square: NONMIN_TAPE_RUN(x * x);
-            case static_cast<TapeOp>(TAPE_SINCOS):
-#if defined(__GLIBC__)
-                for (; k < e; ++k) ::sincos(r[ia[k]], &r[dst[k]], &r[ib[k]]);
-#endif
+            default:  // (constant: not in a plan)
+                for (; k < e; ++k) r[dst[k]] = 0.0;
                 break;
-            default: NONMIN_TAPE_RUN(0.0);  // (constant: not in a plan)
         }
 #undef NONMIN_TAPE_RUN
     }
