@@ -399,11 +399,13 @@ def load_trajectory(path: str | os.PathLike[str], *, max_bytes: int = MAX_LOAD_B
     p = str(as_path(path, "load_trajectory: path"))
     if not os.path.isfile(p):
         raise FileFormatError(f"load_trajectory: {p!r}: no such file")
+    # (zipfile raises NotImplementedError for a header that declares a zip version or a
+    # compression method it does not know: a damaged file, e.g. one flipped bit)
     try:
         with zipfile.ZipFile(p) as zf:
             declared = sum(i.file_size for i in zf.infolist())
             names = [i.filename for i in zf.infolist()]
-    except (zipfile.BadZipFile, OSError, EOFError, ValueError) as exc:
+    except (zipfile.BadZipFile, NotImplementedError, OSError, EOFError, ValueError) as exc:
         raise FileFormatError(f"load_trajectory: {p!r}: not a readable .npz (zip) file: {exc}") from None
     if declared > max_bytes:
         raise FileFormatError(
@@ -452,7 +454,8 @@ def load_trajectory(path: str | os.PathLike[str], *, max_bytes: int = MAX_LOAD_B
             reaction_arrays = {f: np.array(data[f]) for f in data.files if f.startswith("reaction")}
     except FileFormatError:
         raise
-    except (zipfile.BadZipFile, zlib.error, OSError, EOFError, ValueError, KeyError, MemoryError) as exc:
+    except (zipfile.BadZipFile, zlib.error, NotImplementedError, OSError, EOFError, ValueError, KeyError,
+            MemoryError) as exc:
         raise _bad(p, entry, f"cannot be read ({type(exc).__name__}: {exc})") from None
     coords = _names(meta, "coordinate_names", p)
     cons = _names(meta, "constraint_names", p)
