@@ -9,6 +9,9 @@ controller and with each built-in controller, all compiled into the engine's loo
 * ``tracker``: ``Tracker(..., method="computed_torque")`` following a clamped cubic spline
   (``Reference.spline``) through the uncontrolled run sampled every 0.05 s (the engine evaluates
   the spline and projects it onto the manifold at every new time);
+* ``passivity``: the same reference with the default ``Tracker`` law (``method="passivity"``,
+  Slotine–Li on the projected dynamics, λ = 10; compiled as ``Law::passivity``: C and Ȧ from the
+  program);
 * ``force``: ``ForceControl(regulator, {constraint: value})``, the force of one loop closure
   commanded (``on_infeasible="least_squares"`` where the actuators cannot reach it: the cost is
   the same);
@@ -23,6 +26,11 @@ CPU (process) time; the ratios are of medians. The load average is printed with 
 (the machine is shared: CPU-time ratios are the steadier ones).
 
     OPENBLAS_NUM_THREADS=1 python benchmarks/control_bench.py [--repeat 7] [--T 1.0] [--json out.json]
+
+``--tutorial03`` times instead tutorial 03's section 4 (five-bar tracking a circle, DOPRI5
+rtol 1e-7, atol 1e-9, 2 s, the passivity Tracker): compiled into the loop against the same law
+called back in Python (a subclass of Tracker is never compiled), CPU time, steps and the largest
+difference of the two trajectories.
 """
 
 from __future__ import annotations
@@ -79,7 +87,8 @@ def controllers(model: Any, q0: np.ndarray, qd0: np.ndarray, closure: str, pytho
                   on_infeasible="least_squares")  # fmt: skip
     dim = model.constraint(closure).dim
     force = ForceControl(reg, {closure: np.full(dim, 1.0)}, on_infeasible="least_squares")
-    out: dict[str, Any] = {"none": None, "regulator": reg, "tracker": trk, "force": force}
+    pas = Tracker(model, ref, Kp=400.0, Kd=40.0, lambda_=10.0, quaternion_blocks=qb, on_infeasible="least_squares")
+    out: dict[str, Any] = {"none": None, "regulator": reg, "tracker": trk, "passivity": pas, "force": force}
     if python:
         def user(t: float, q: Any, qd: Any, state: Any = None, *, active: Any = None) -> Any:
             return reg(t, q, qd, active=active)
@@ -128,7 +137,7 @@ def run(names: list[str], repeat: int, T: float, python: bool) -> list[dict[str,
 
 
 def markdown(rows: list[dict[str, Any]]) -> str:
-    keys = [k for k in ("regulator", "tracker", "force", "python_regulator") if rows and k in rows[0]]
+    keys = [k for k in ("regulator", "tracker", "passivity", "force", "python_regulator") if rows and k in rows[0]]
     head = "| case | uncontrolled (ms / simulated s, CPU) | " + " | ".join(
         f"{k} / uncontrolled (CPU; wall)" for k in keys) + " | load |"  # fmt: skip
     lines = [head, "|" + "---|" * (len(keys) + 3)]
@@ -139,6 +148,38 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+class _CalledBack(Tracker):
+    """The same law, never compiled (compile_controller takes the exact class only)."""
+
+
+def tutorial03(repeat: int) -> dict[str, Any]:
+    """Tutorial 03 section 4: compiled passivity law against the Python law called back."""
+    ts = np.linspace(0.0, 2.0, 41)
+    circle = [(0.4 + 0.15 * np.sin(np.pi * t), 1.5 - 0.15 + 0.15 * np.cos(np.pi * t)) for t in ts]
+    ref = Reference.spline(ts, [library.five_bar(end_effector=p).state.q for p in circle])
+    model = library.five_bar().model
+    off = library.five_bar(end_effector=(0.35, 1.45))
+    res: dict[str, Any] = {"case": "tutorial03_section4", "load": [round(os.getloadavg()[0], 2)]}
+    trajs = {}
+    for name, cls in (("compiled", Tracker), ("called_back", _CalledBack)):
+        cpu, wall = [], []
+        for _ in range(repeat):
+            track = cls(model, ref, Kp=100.0, Kd=20.0, lambda_=10.0)
+            w, p = time.perf_counter(), time.process_time()
+            tr = nonmin.simulate(off, (0.0, 2.0), method="dopri5", controller=track, rtol=1e-7, atol=1e-9,
+                                 t_eval=ts, progress=False)  # fmt: skip
+            wall.append(time.perf_counter() - w)
+            cpu.append(time.process_time() - p)
+        trajs[name] = tr
+        res[name] = {"cpu_s": statistics.median(cpu), "wall_s": statistics.median(wall), "n_steps": tr.n_steps,
+                     "n_rhs": tr.n_rhs, "engine": tr.metadata["engine"]}  # fmt: skip
+    res["load"].append(round(os.getloadavg()[0], 2))
+    a, b = trajs["compiled"], trajs["called_back"]
+    res["max_abs_dq"] = float(np.max(np.abs(a.q - b.q)))
+    res["cpu_ratio"] = res["compiled"]["cpu_s"] / res["called_back"]["cpu_s"]
+    return res
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--repeat", type=int, default=7)
@@ -146,7 +187,14 @@ def main() -> None:
     ap.add_argument("--cases", default="ur5_point,dual_arm_grasp,five_bar")
     ap.add_argument("--python", action="store_true", help="also time a Python controller called back")
     ap.add_argument("--json", default="")
+    ap.add_argument("--tutorial03", action="store_true", help="tutorial 03 section 4: compiled vs called back")
     a = ap.parse_args()
+    if a.tutorial03:
+        r = tutorial03(a.repeat)
+        print(json.dumps(r, indent=1))
+        if a.json:
+            Path(a.json).write_text(json.dumps(r, indent=1))
+        return
     rows = run([c for c in a.cases.split(",") if c], a.repeat, a.T, a.python)
     print(markdown(rows))
     if a.json:

@@ -170,9 +170,12 @@ void bind_control(nb::module_& m) {
                                       "A Python function t -> array (3, dim) (triple) or (dim,), called back.")
         .def(nb::init<nb::object, int, bool>(), nb::arg("fn"), nb::arg("dim"), nb::arg("triple"));
 
+    m.def("sim_passivity_supported", &sim::passivity_supported, nb::arg("program"),
+          "Whether the Tracker's passivity law compiles for this program (C and Ȧ in the engine: a "
+          "constant mass matrix or a rigid-body tree).");
     nb::class_<SimControl, sim::Controller>(
         m, "SimControl", nb::dynamic_attr(),
-        "nonmin.control's Regulator (σ = 0), Tracker (computed torque) and ForceControl over either, "
+        "nonmin.control's Regulator (σ = 0), Tracker (computed torque, passivity) and ForceControl over either, "
         "compiled for one active set of the loop.")
         .def(
             "__init__",
@@ -180,13 +183,14 @@ void bind_control(nb::module_& m) {
                const std::vector<std::array<int, 4>>& qblocks, CArr1 u_min, CArr1 u_max, double rtol,
                bool raise_infeasible, bool project_target, bool reject, bool mass_metric,
                const std::vector<int>& fixed, nb::object reference,
-               const std::vector<std::pair<int, nb::object>>& forces, nb::object other_active_set) {
+               const std::vector<std::pair<int, nb::object>>& forces, nb::object other_active_set, double lambda) {
                 auto vec = [](CArr1 a) { return Vec(CVecMap(a.data(), static_cast<Eigen::Index>(a.shape(0)))); };
                 auto mat = [](CArr2 a) {
                     return Mat(CMatMap(a.data(), static_cast<Eigen::Index>(a.shape(0)),
                                        static_cast<Eigen::Index>(a.shape(1))));
                 };
-                if (law != 0 && law != 1) raise_input("SimControl: law must be 0 (regulator) or 1 (computed torque)");
+                if (law < 0 || law > 2)
+                    raise_input("SimControl: law must be 0 (regulator), 1 (computed torque) or 2 (passivity)");
                 sim::ControlSpec s;
                 s.law = static_cast<sim::Law>(law);
                 s.q_star = vec(q_star);
@@ -201,6 +205,7 @@ void bind_control(nb::module_& m) {
                 s.reject = reject;
                 s.mass_metric = mass_metric;
                 s.fixed = fixed;
+                s.lambda = lambda;
                 std::vector<nb::object> keep;
                 if (!reference.is_none()) {
                     s.reference = nb::cast<sim::Signal*>(reference);
@@ -228,7 +233,29 @@ void bind_control(nb::module_& m) {
             nb::arg("quaternion_blocks"), nb::arg("u_min"), nb::arg("u_max"), nb::arg("rtol"),
             nb::arg("raise_infeasible"), nb::arg("project_target"), nb::arg("reject"), nb::arg("mass_metric"),
             nb::arg("fixed"), nb::arg("reference").none(), nb::arg("forces"),
-            nb::arg("other_active_set").none() = nb::none())
+            nb::arg("other_active_set").none() = nb::none(), nb::arg("lambda_") = 1.0)
+        .def(
+            "probe",
+            [](SimControl& c, const Program& prog, double t, CArr1 q, CArr1 qd, const std::vector<int>& active) {
+                const int n = prog.n();
+                if (q.shape(0) != static_cast<std::size_t>(n) || qd.shape(0) != static_cast<std::size_t>(n) ||
+                    active.size() != prog.constraints().size())
+                    raise_input("SimControl.probe: q, qd need n entries and active one per constraint");
+                std::vector<std::uint8_t> mask(active.begin(), active.end());
+                std::vector<double> u(static_cast<std::size_t>(prog.k()));
+                const Status st = c.probe(t, q.data(), qd.data(), mask.data(), u.data());
+                if (st != Status::ok) raise_input("SimControl.probe: the compiled law failed (status " +
+                                                  std::to_string(static_cast<int>(st)) + ")");
+                nb::dict d;
+                d["u"] = u;
+                d["lyapunov"] = c.lyapunov();
+                d["target"] = std::vector<double>(c.target().data(), c.target().data() + n);
+                return d;
+            },
+            nb::arg("program"), nb::arg("t"), nb::arg("q"), nb::arg("qd"), nb::arg("active"),
+            "One law evaluation at (t, q, qd) with the active mask (0/1 per constraint), outside the loop: "
+            "{'u', 'lyapunov', 'target'} (ControlInfo's u, lyapunov and target; for the tests).")
+        .def_prop_ro("lyapunov", &SimControl::lyapunov, "W of the last law evaluation (NaN: the law has none).")
         .def_prop_ro("stats", [](const SimControl& r) {
             nb::dict d;
             d["steps"] = r.steps;

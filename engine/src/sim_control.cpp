@@ -1,6 +1,7 @@
 // Built-in controllers compiled for the loop (see nonmin/sim/control.hpp).
 #include "nonmin/sim/control.hpp"
 #include "nonmin/linalg.hpp"
+#include "nonmin/rbd/tree_program.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -116,10 +117,15 @@ Status TimeSignal::eval(double t, double* x, double* v, double* a) {
 
 // ------------------------------------------------------------------------------ the controller
 
+bool passivity_supported(const Program& prog) {
+    if (prog.constant_mass() && prog.differentiable()) return true;
+    return dynamic_cast<const rbd::TreeProgram*>(&prog) != nullptr;
+}
+
 Projected::Projected(const Program& prog, ControlSpec spec)
     : prog_(&prog), s_(std::move(spec)), n_(prog.n()), k_(prog.k()),
       rtol_(s_.rtol > 0.0 ? s_.rtol : DEFAULT_RTOL),
-      gravity_in_pass_(s_.law == Law::regulator && prog.gravity_in_pass()),
+      gravity_in_pass_((s_.law == Law::regulator || s_.law == Law::passivity) && prog.gravity_in_pass()),
       solver_(prog.m_all() + prog.n() + static_cast<int>(s_.fixed.size()) + 1, prog.n()) {
     const int n = n_, k = k_;
     if (s_.Kp.rows() != n || s_.Kp.cols() != n || s_.Kd.rows() != n || s_.Kd.cols() != n ||
@@ -127,8 +133,19 @@ Projected::Projected(const Program& prog, ControlSpec spec)
         throw EngineError("controller: sizes do not match the program");
     if (s_.law == Law::regulator && s_.q_star.size() != n)
         throw EngineError("controller: the target must have the program's n entries");
-    if (s_.law == Law::computed_torque && (!s_.reference || s_.reference->dim() != n))
+    if (s_.law != Law::regulator && (!s_.reference || s_.reference->dim() != n))
         throw EngineError("controller: the tracker needs a reference of dimension n");
+    if (s_.law == Law::passivity) {
+        if (!passivity_supported(prog))
+            throw EngineError("controller: the passivity law needs C and Ȧ, which this program does not give");
+        if (!(std::isfinite(s_.lambda) && s_.lambda > 0.0)) throw EngineError("controller: λ must be > 0");
+        coriolis_ = prog.constant_mass() ? 0 : 1;
+        Tv_ = prog.make_terms();
+        Tt_ = prog.make_terms();
+        Cm_ = Mat::Zero(n, n);
+        Adall_ = Mat::Zero(std::max(prog.m_all(), 1), n);
+        for (Vec* v : {&pe_, &ped_, &px_, &pqrd_, &pqrdd_, &psv_, &pt1_, &pt2_, &pt3_}) *v = Vec::Zero(n);
+    }
     for (const auto& b : s_.qblocks)
         for (int i : b)
             if (i < 0 || i >= n) throw EngineError("controller: a quaternion block index is out of range");
@@ -234,6 +251,12 @@ void Projected::attach(const Terms& T, const Mat& A, int m, const std::vector<in
     if (m > 0) {
         Atrue_ = Mat::Zero(m, n);
         svd_a_ = Eigen::JacobiSVD<Mat>(m, n, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    }
+    if (s_.law == Law::passivity) {
+        Apinv_ = Mat::Zero(n, mr);
+        Adot_ = Mat::Zero(mr, n);
+        pm_ = Vec::Zero(mr);
+        pm2_ = Vec::Zero(mr);
     }
 }
 
@@ -471,7 +494,7 @@ Status Projected::project_configuration(double t, double* x) {
 // Tracker.desired (and a regulator's target under rheonomic constraints): qs_, vs_, as_ at t.
 Status Projected::desired(double t, const double* q) {
     const int n = n_;
-    const bool tracker = s_.law == Law::computed_torque;
+    const bool tracker = s_.law != Law::regulator;
     Status s;
     if (tracker && s_.qblocks.empty()) {  // (no sign to decide: the reference's values are not needed)
         for (const Memo& mm : memo_)
@@ -562,6 +585,7 @@ Status Projected::law(double t, const double* q, const double* qd, const Terms& 
     const int n = n_, k = k_, m = m_;
     last_t_ = std::numeric_limits<double>::quiet_NaN();  // (set again when the law succeeds)
     pb_valid_ = false;
+    lyapunov_ = std::numeric_limits<double>::quiet_NaN();
     Status s = nullspace(A);
     if (s != Status::ok) return s;
     if (s_.law == Law::regulator) {
@@ -591,6 +615,14 @@ Status Projected::law(double t, const double* q, const double* qd, const Terms& 
         }
         project(w_.data(), fpar_.data());
         for (int i = 0; i < n; ++i) fpar_[i] = -fpar_[i];
+    } else if (s_.law == Law::passivity) {
+        if ((s = desired(t, q)) != Status::ok) return s;
+        const Vec* fg = &T.f_g;  // f_g as the regulator's
+        if (!gravity_in_pass_) {
+            if ((s = prog_->evaluate(t, q, zero_.data(), mask_.data(), NEED_H, Tg_, *ws_)) != Status::ok) return s;
+            fg = &Tg_.h;
+        }
+        if ((s = passivity_force(t, q, qd, T, A, *fg)) != Status::ok) return s;
     } else {
         // computed torque: a = q̈* − Kd ė − Kp e, f_∥ = P(M(P a + w) − h − f_p), w = −(DA)⁺Dγ
         if ((s = desired(t, q)) != Status::ok) return s;
@@ -637,6 +669,207 @@ Status Projected::law(double t, const double* q, const double* qd, const Terms& 
         last_qd_[i] = qd[i];
     }
     return Status::ok;
+}
+
+// ------------------------------------------------------------------------------ passivity
+
+// A⁺ (n × m) into Apinv_ (nonmin.core.pseudo_inverse(A, rtol): the rank of step 1's policy).
+// With step 1's certified LQ of D A (full row rank), A⁺ = (DA)⁺D, column i = (DA)⁺ D e_i by the
+// held factor (held_min_norm: no new factorization); else A's own SVD truncated to the rank.
+Status Projected::pseudo_inverse(const Mat& A) {
+    const int n = n_, m = m_;
+    if (lq_valid_) {
+        for (int i = 0; i < m; ++i) {
+            for (int r = 0; r < m; ++r) pm_[r] = r == i ? 1.0 : 0.0;
+            held_min_norm(lq_, dq_.data(), m, n, pm_.data(), cq_.data(), Vh_.data(), pt1_.data());
+            for (int j = 0; j < n; ++j) Apinv_(j, i) = pt1_[j];
+        }
+        return Status::ok;
+    }
+    for (int i = 0; i < m; ++i) Atrue_.row(i) = A.row(i);
+    svd_a_.compute(Atrue_);
+    const auto& sv = svd_a_.singularValues();
+    const auto& U = svd_a_.matrixU();
+    const auto& V = svd_a_.matrixV();
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < m; ++i) Apinv_(j, i) = 0.0;
+    for (int kk = 0; kk < rank_ && kk < sv.size(); ++kk) {
+        const double inv = sv[kk] > 0.0 ? 1.0 / sv[kk] : 1.0;  // (as pseudo_inverse)
+        for (int j = 0; j < n; ++j) {
+            const double vj = V(j, kk) * inv;
+            for (int i = 0; i < m; ++i) Apinv_(j, i) += vj * U(i, kk);
+        }
+    }
+    return Status::ok;
+}
+
+void Projected::lam_p(const double* v, double* out) {  // out = −A⁺ (Ȧ (P v))
+    const int n = n_, m = m_;
+    project(v, pt3_.data());
+    for (int i = 0; i < m; ++i) {
+        double a = 0.0;
+        for (int j = 0; j < n; ++j) a += Adot_(i, j) * pt3_[j];
+        pm2_[i] = a;
+    }
+    for (int j = 0; j < n; ++j) {
+        double a = 0.0;
+        for (int i = 0; i < m; ++i) a += Apinv_(j, i) * pm2_[i];
+        out[j] = -a;
+    }
+}
+
+void Projected::lam_p_t(const double* v, double* out) {  // out = −P (Ȧᵀ (A⁺ᵀ v))
+    const int n = n_, m = m_;
+    for (int i = 0; i < m; ++i) {
+        double a = 0.0;
+        for (int j = 0; j < n; ++j) a += Apinv_(j, i) * v[j];
+        pm2_[i] = a;
+    }
+    for (int j = 0; j < n; ++j) {
+        double a = 0.0;
+        for (int i = 0; i < m; ++i) a += Adot_(i, j) * pm2_[i];
+        pt3_[j] = -a;
+    }
+    project(pt3_.data(), out);
+}
+
+void Projected::mbar_times(const Terms& T, double mu, const double* v, double* out) {  // (PMP + μ(I − P)) v
+    const int n = n_;
+    project(v, pt3_.data());
+    for (int i = 0; i < n; ++i) {
+        double a = 0.0;
+        for (int j = 0; j < n; ++j) a += T.M(i, j) * pt3_[j];
+        out[i] = a;
+    }
+    for (int i = 0; i < n; ++i) pt3_[i] = v[i] - pt3_[i];  // Q v
+    project(out, out);
+    for (int i = 0; i < n; ++i) out[i] += mu * pt3_[i];
+}
+
+// Tracker.law, method="passivity" (Slotine–Li on the projected dynamics; _tracking.py):
+//   q̇_r = P x, x = q̇* − λe;  q̈_r = Ṗ x + P(q̈* − λė);  s = q̇ − q̇_r;
+//   f_∥ = P(M̄ q̈_r + C̄ q̇_r − f_g − f_p − Kd s − Kp e),  W = ½ sᵀM̄s + ½ eᵀKp e,
+// with M̄ = PMP + μQ (μ = tr(PMP)/(n − r), _common.mbar), Λ = −A⁺Ȧ, Ṗ = ΛP + PΛᵀ and
+// C̄ = PCP + PMṖ − μΛP (eq. (Cbar2)), all as products with vectors (P = ZᵀZ from step 1; A⁺ from
+// step 1's certified LQ or A's truncated SVD; Ȧ from the program's tangent along q̇ (planar:
+// A has no explicit t) or TreeProgram::jacobian_dot; C = 0 for a constant M, else
+// TreeProgram::coriolis_matrix). Into fpar_ and lyapunov_.
+Status Projected::passivity_force(double t, const double* q, const double* qd, const Terms& T, const Mat& A,
+                                  const Vec& fg) {
+    const int n = n_, m = m_, d = n_ - rank_;
+    const double lam = s_.lambda;
+    Status s;
+    // μ = tr(PMP)/(n − r) = tr(Z M Zᵀ)/d; tr(M)/n when d = 0; 1 when not positive
+    double mu;
+    if (d > 0) {
+        double tr = 0.0;
+        for (int a = 0; a < d; ++a)
+            for (int i = 0; i < n; ++i) {
+                double r = 0.0;
+                for (int j = 0; j < n; ++j) r += T.M(i, j) * Z_(a, j);
+                tr += Z_(a, i) * r;
+            }
+        mu = tr / d;
+    } else {
+        mu = T.M.trace() / n;
+    }
+    if (!(mu > 0.0)) mu = 1.0;
+    const bool cons = m > 0;
+    if (cons) {  // Ȧ (active rows) and A⁺
+        if (coriolis_ == 0) {
+            if ((s = prog_->evaluate_tangent(t, q, qd, qd, zero_.data(), mask_.data(), NEED_A, Tv_, Tt_, *ws_)) !=
+                Status::ok)
+                return s;
+            for (int i = 0; i < m; ++i) Adot_.row(i) = Tt_.A.row(rows_[static_cast<std::size_t>(i)]);
+        } else {
+            const auto& tp = static_cast<const rbd::TreeProgram&>(*prog_);
+            if ((s = tp.jacobian_dot(q, qd, mask_.data(), static_cast<rbd::TreeWorkspace&>(*ws_), Adall_.data())) !=
+                Status::ok)
+                return s;
+            for (int i = 0; i < m; ++i) Adot_.row(i) = Adall_.row(rows_[static_cast<std::size_t>(i)]);
+        }
+        if (!finite(Adot_.data(), m * n)) return Status::not_finite;
+        if ((s = pseudo_inverse(A)) != Status::ok) return s;
+    }
+    for (int i = 0; i < n; ++i) {
+        pe_[i] = q[i] - qs_[i];
+        ped_[i] = qd[i] - vs_[i];
+        px_[i] = vs_[i] - lam * pe_[i];
+    }
+    project(px_.data(), pqrd_.data());  // q̇_r = P x
+    for (int i = 0; i < n; ++i) pt1_[i] = as_[i] - lam * ped_[i];
+    project(pt1_.data(), pqrdd_.data());  // q̈_r = P(q̈* − λė) + Ṗ x
+    if (cons) {
+        lam_p(px_.data(), pt1_.data());
+        lam_p_t(px_.data(), pt2_.data());
+        for (int i = 0; i < n; ++i) pqrdd_[i] += pt1_[i] + pt2_[i];
+    }
+    for (int i = 0; i < n; ++i) psv_[i] = qd[i] - pqrd_[i];  // s
+    // y = M̄ q̈_r + C̄ q̇_r − f_g − f_p − Kd s − Kp e  (into w_)
+    mbar_times(T, mu, pqrdd_.data(), w_.data());
+    if (coriolis_ == 1) {  // + P C P q̇_r
+        const auto& tp = static_cast<const rbd::TreeProgram&>(*prog_);
+        if ((s = tp.coriolis_matrix(q, qd, static_cast<rbd::TreeWorkspace&>(*ws_), Cm_.data())) != Status::ok)
+            return s;
+        if (!finite(Cm_.data(), n * n)) return Status::not_finite;
+        if (cons) project(pqrd_.data(), pt1_.data()); else pt1_ = pqrd_;
+        for (int i = 0; i < n; ++i) {
+            double a = 0.0;
+            for (int j = 0; j < n; ++j) a += Cm_(i, j) * pt1_[j];
+            pt2_[i] = a;
+        }
+        if (cons) project(pt2_.data(), pt2_.data());
+        for (int i = 0; i < n; ++i) w_[i] += pt2_[i];
+    }
+    if (cons) {  // + P M Ṗ q̇_r − μ Λ P q̇_r
+        lam_p(pqrd_.data(), pt1_.data());
+        lam_p_t(pqrd_.data(), pt2_.data());
+        for (int i = 0; i < n; ++i) pt2_[i] += pt1_[i];  // Ṗ q̇_r
+        for (int i = 0; i < n; ++i) {
+            double a = 0.0;
+            for (int j = 0; j < n; ++j) a += T.M(i, j) * pt2_[j];
+            a_[i] = a;
+        }
+        project(a_.data(), a_.data());
+        for (int i = 0; i < n; ++i) w_[i] += a_[i] - mu * pt1_[i];
+    }
+    for (int i = 0; i < n; ++i) {
+        double a = w_[i] - fg[i] - T.f_passive[i];
+        for (int j = 0; j < n; ++j) a -= s_.Kd(i, j) * psv_[j] + s_.Kp(i, j) * pe_[j];
+        w_[i] = a;
+    }
+    project(w_.data(), fpar_.data());
+    // W = ½ sᵀ M̄ s + ½ eᵀ Kp e
+    mbar_times(T, mu, psv_.data(), pt1_.data());
+    double ws = 0.0, we = 0.0;
+    for (int i = 0; i < n; ++i) {
+        ws += psv_[i] * pt1_[i];
+        double r = 0.0;
+        for (int j = 0; j < n; ++j) r += s_.Kp(i, j) * pe_[j];
+        we += pe_[i] * r;
+    }
+    lyapunov_ = 0.5 * ws + 0.5 * we;
+    return Status::ok;
+}
+
+Status Projected::probe(double t, const double* q, const double* qd, const std::uint8_t* active, double* u) {
+    const int n = n_;
+    if (Tp_.M.rows() != n) {
+        Tp_ = prog_->make_terms();
+        Ap_ = Mat::Zero(std::max(prog_->m_all(), 1), n);
+    }
+    std::vector<int> rows;
+    const auto& cons = prog_->constraints();
+    for (std::size_t ci = 0; ci < cons.size(); ++ci)
+        if (active[ci])
+            for (int r = 0; r < cons[ci].dim; ++r) rows.push_back(cons[ci].row + r);
+    const unsigned need = NEED_M | NEED_H | NEED_B | NEED_A | NEED_GAMMA | this->need();
+    Status s = prog_->evaluate(t, q, qd, active, need, Tp_, *ws_);
+    if (s != Status::ok) return s;
+    const int m = static_cast<int>(rows.size());
+    for (int i = 0; i < m; ++i) Ap_.row(i) = Tp_.A.row(rows[static_cast<std::size_t>(i)]);
+    attach(Tp_, Ap_, m, rows);
+    return control(t, q, qd, active, u);
 }
 
 // ------------------------------------------------------------------------------ step 3

@@ -158,8 +158,8 @@ class ProjectedController(Controller):
 
     def engine_controller(self, model: Any, program: Any, active: frozenset[str]) -> Any | None:
         """The engine's compiled form for the active set ``active`` (Regulator with σ = 0, the
-        computed-torque Tracker, ForceControl over either; :mod:`nonmin.control._engine`), else
-        None (called back). See :meth:`nonmin.control.Controller.engine_controller`."""
+        Tracker (computed torque; passivity on planar and robot programs), ForceControl over
+        either; :mod:`nonmin.control._engine`), else None (called back). See :meth:`nonmin.control.Controller.engine_controller`."""
         from ._engine import compile_controller
 
         return compile_controller(self, model, program, active)

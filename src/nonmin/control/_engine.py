@@ -2,11 +2,15 @@
 
 :func:`compile_controller` turns a controller value into the engine's ``SimControl`` for one
 active set, or returns None when it must be called back (a user controller, the Tracker's
-passivity law, a Regulator with σ > 0, a controller of another model). What compiles:
+passivity law on a program without C and Ȧ in the engine — spatial, SymPy, function models —,
+a Regulator with σ > 0, a controller of another model). What compiles:
 
 * :class:`~nonmin.control.Regulator` (σ = 0): its target per active set (projected here once;
   under an active rheonomic constraint the engine projects it at every time, as ``target_for``);
-* :class:`~nonmin.control.Tracker` with ``method="computed_torque"``: its reference as a value
+* :class:`~nonmin.control.Tracker` with ``method="computed_torque"``, and with
+  ``method="passivity"`` on planar models (constant M: C = 0, Ȧ from the program's tangent) and
+  robots (the tree program's Christoffel C and Ȧ), W recorded as ``SimControl.lyapunov``: its
+  reference as a value
   the engine evaluates — a piecewise polynomial (:meth:`Reference.constant`,
   :meth:`Reference.polynomial`, :meth:`Reference.spline`) — or a Python function called back
   for ``(q*, q̇*, q̈*)(t)`` alone (:meth:`Reference.from_functions`), the rest compiled;
@@ -139,6 +143,11 @@ def _compile(ctrl: Any, model: Model, program: Any, active: frozenset[str], othe
         project = True
         q_star = np.zeros(n)
         reference = signal(c._ref, n)
+    elif _is(ctrl, "Tracker") and ctrl.method == "passivity" and _eng().sim_passivity_supported(program):
+        law = 2  # (C and Ȧ in the engine: planar and rigid-body-tree programs)
+        project = True
+        q_star = np.zeros(n)
+        reference = signal(c._ref, n)
     else:
         return None
     o: Any = outer
@@ -146,7 +155,7 @@ def _compile(ctrl: Any, model: Model, program: Any, active: frozenset[str], othe
         program, law, _arr(q_star), _arr(c._Kp), _arr(c._Kd), [tuple(int(i) for i in b) for b in c._qblocks],
         _arr(o._lo), _arr(o._hi), -1.0 if o.rtol is None else float(o.rtol), o.on_infeasible == "raise",
         project, ctrl.target_policy == "reject", ctrl.metric == "mass", [int(i) for i in ctrl.fixed],
-        reference, forces, other,
+        reference, forces, other, float(getattr(ctrl, "lambda_", 1.0)),
     )  # fmt: skip
 
 

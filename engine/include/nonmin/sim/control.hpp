@@ -1,5 +1,5 @@
 // Built-in controllers compiled for the loop (nonmin.control): the Regulator, the Tracker's
-// computed-torque law, and ForceControl over either, with their references as values the engine
+// computed-torque and passivity laws, and ForceControl over either, with their references as values the engine
 // evaluates (TimeSignal: one TimeFunction of nonmin/timefn.hpp per component, the drivers' own
 // values) or, as an escape hatch, a Python function called back. The
 // Python classes stay the specification (nonmin/control/*.py); every formula below names the one
@@ -10,7 +10,10 @@
 //      the certified LQ or the SVD rule), and Z, an orthonormal basis of N(A) (rows), from a
 //      Householder QR of Vᵀ;
 //   2. the law's f_∥ ∈ N(A) (regulator: −P(f_g + Kp e + Kd qd); computed torque:
-//      P(M(P a + w) − h − f_p), a = q̈* − Kd ė − Kp e, w = −(DA)⁺Dγ);
+//      P(M(P a + w) − h − f_p), a = q̈* − Kd ė − Kp e, w = −(DA)⁺Dγ; passivity (Slotine–Li):
+//      P(M̄ q̈_r + C̄ q̇_r − f_g − f_p − Kd s − Kp e), q̇_r = P(q̇* − λe), s = q̇ − q̇_r, with
+//      M̄ = PMP + μQ, Λ = −A⁺Ȧ, Ṗ = ΛP + PΛᵀ, C̄ = PCP + PMṖ − μΛP, only as products with vectors
+//      (passivity_supported(): C and Ȧ from the program), and W = ½ sᵀM̄s + ½ eᵀKp e);
 //   3. u = (PB)⁺ f_∥ (_common.actuate): with PB = Zᵀ(ZB), u = (ZB)ᵀ((ZB)(ZB)ᵀ)⁻¹ Z f_∥ when the
 //      smallest singular value of ZB is certified far above the rank cutoff (then rank(PB) =
 //      n − r, feasible, and this is the SVD's truncated pseudo-inverse); otherwise the SVD of PB
@@ -70,7 +73,14 @@ class TimeSignal final : public Signal {
     std::size_t scratch_size_ = 0;  // the tapes' registers
 };
 
-enum class Law : int { regulator = 0, computed_torque = 1 };
+enum class Law : int { regulator = 0, computed_torque = 1, passivity = 2 };
+
+// Whether the passivity (Slotine–Li) law can be compiled for `prog`: it needs the Christoffel
+// Coriolis matrix C and Ȧ, which the engine has for programs with a constant mass matrix (C = 0,
+// Ȧ from evaluate_tangent along q̇: planar) and for rigid-body trees (TreeProgram::coriolis_matrix
+// and jacobian_dot). The other programs (spatial: a quaternion C of their own; tapes and
+// Python functions: C from the model's own expressions) are called back.
+bool passivity_supported(const Program& prog);
 
 // The constant part of a compiled controller (validated by the Python classes).
 struct ControlSpec {
@@ -87,6 +97,7 @@ struct ControlSpec {
     bool mass_metric = false;  // metric="mass"
     std::vector<int> fixed;
     Signal* reference = nullptr;  // tracker: (q*, q̇*, q̈*)(t); borrowed
+    double lambda = 1.0;          // passivity: the sliding variable's bandwidth λ
     // force control: (constraint index, desired force λ*(t) of its rows); borrowed signals
     std::vector<std::pair<int, Signal*>> forces;
     // evaluated instead of the compiled law when the loop's active set is no longer the one the
@@ -114,6 +125,15 @@ class Projected : public Controller {
     std::vector<double> max_abs_u;
     long long fast_actuations = 0, svd_actuations = 0;  // which path step 3 took (force control too)
 
+    // One law evaluation at (t, q, qd) with the active mask `active`, outside the loop: the
+    // program evaluated here, attached, u into `u` (k). For the per-call tests against the
+    // Python controllers (ControlInfo.u, .lyapunov, .target).
+    Status probe(double t, const double* q, const double* qd, const std::uint8_t* active, double* u);
+    // The Lyapunov value W of the last law evaluation (passivity: ½ sᵀM̄s + ½ eᵀKp e; else NaN)
+    double lyapunov() const { return lyapunov_; }
+    // The projected reference q* of the last law evaluation (LawOutput.target)
+    const Vec& target() const { return qs_; }
+
   private:
     Status law(double t, const double* q, const double* qd, const Terms& T, const Mat& A, double* u);
     Status nullspace(const Mat& A);
@@ -130,6 +150,12 @@ class Projected : public Controller {
     bool force_terms_null(const Terms& T, const double* g, const double* gamma);
     void record();
     double sigma_min_pb();
+    Status passivity_force(double t, const double* q, const double* qd, const Terms& T, const Mat& A,
+                           const Vec& fg);
+    Status pseudo_inverse(const Mat& A);
+    void lam_p(const double* v, double* out);    // out = Λ P v = −A⁺ Ȧ P v
+    void lam_p_t(const double* v, double* out);  // out = (Λ P)ᵀ v = −P Ȧᵀ A⁺ᵀ v
+    void mbar_times(const Terms& T, double mu, const double* v, double* out);  // (PMP + μ(I − P)) v
 
     const Program* prog_;
     ControlSpec s_;
@@ -185,6 +211,15 @@ class Projected : public Controller {
     Mat ZMs_, Ss_;  // Z M and S = Z M Zᵀ's Cholesky factor (force_terms_null)
     Vec xs_, ys_;
     Vec c0_, qtmp_, gtmp_, rhs_, lam_, sf_, pf_;
+    // passivity: A⁺ (n × m), Ȧ's active rows (m × n), C (n × n), the tangent evaluation
+    int coriolis_ = 0;  // 0: C = 0 (constant M), 1: TreeProgram
+    Mat Apinv_, Adot_, Cm_, Adall_;
+    Terms Tv_, Tt_;
+    Vec pe_, ped_, px_, pqrd_, pqrdd_, psv_, pt1_, pt2_, pt3_, pm_, pm2_;
+    double lyapunov_ = std::numeric_limits<double>::quiet_NaN();
+    // probe()
+    Terms Tp_;
+    Mat Ap_;
     // the state of the last law evaluation
     double last_t_ = std::numeric_limits<double>::quiet_NaN();
     Vec last_q_, last_qd_;

@@ -1,0 +1,289 @@
+"""The Tracker's passivity (Slotine–Li) law compiled into the engine (Law::passivity,
+engine/src/sim_control.cpp) against the Python law (nonmin/control/_tracking.py, the
+specification): per call (u, the Lyapunov value W, the projected target) to round-off, and over
+whole runs (the same steps, trajectories within tight tolerances). Planar programs (constant M:
+C = 0, Ȧ from the program's tangent along q̇), a rheonomic planar model (a driven distance), the
+switched wall contact, and a robot (the tree program's Christoffel C and Ȧ). Programs without
+C in the engine (spatial, SymPy, function models) are called back."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from nonmin import library
+from nonmin.control import ForceControl, Reference, Switched, Tracker
+from nonmin.core import use_backend
+from nonmin.model.planar import PlanarBuilder
+from nonmin.sim import _engine, simulate
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "examples"))
+from control_scenes import (
+    arm2r_configuration,
+    crank_four_bar,
+    crank_four_bar_configuration,
+    wall_tip_path,
+)
+
+FIELDS = ("q", "qd", "qdd", "f_c", "u")
+
+
+def _compiled(ctrl: Any, model: Any, active: frozenset[str] | None = None) -> Any:
+    prog = _engine.program_for(model)
+    return _engine.compiled_controller(ctrl, model, prog, model.resolve_active(active))
+
+
+def _mask(model: Any, active: frozenset[str]) -> list[int]:
+    return [int(c.name in active) for c in model.constraints]
+
+
+def _per_call(ctrl: Any, model: Any, states: list[tuple[float, np.ndarray, np.ndarray]],
+              active: frozenset[str] | None = None, tol: float = 1e-10) -> None:  # fmt: skip
+    """compiled.probe = the Python controller's info at each state: u, W, target."""
+    act = model.resolve_active(active)
+    c = _compiled(ctrl, model, act)
+    assert type(c).__name__ == "SimControl"
+    prog = _engine.program_for(model)
+    for t, q, qd in states:
+        got = c.probe(prog, t, q, qd, _mask(model, act))
+        with use_backend("numpy"):
+            want = ctrl.info(t, q, qd, active=act)
+        scale_u = max(1.0, float(np.max(np.abs(want.u))))
+        assert float(np.max(np.abs(np.asarray(got["u"]) - want.u))) <= tol * scale_u, (t, got["u"], want.u)
+        assert abs(got["lyapunov"] - want.lyapunov) <= tol * max(1.0, abs(want.lyapunov)), (got, want.lyapunov)
+        np.testing.assert_allclose(got["target"], want.target, rtol=0, atol=tol * max(1.0, np.abs(want.target).max()))
+        assert math.isfinite(got["lyapunov"]) and got["lyapunov"] > 0.0
+
+
+def _pair(model: Any, make: Any, **kw: Any) -> tuple[Any, Any]:
+    a = simulate(model, controller=make(), engine="engine", progress=False, **kw)
+    with use_backend("numpy"):
+        b = simulate(model, controller=make(), engine="python", progress=False, **kw)
+    return a, b
+
+
+def _close(a: Any, b: Any, tol: float = 1e-9, tol_acc: float = 1e-7, same_steps: bool = True) -> None:
+    assert a.metadata["engine"] == "engine" and b.metadata["engine"] == "python", a.metadata["engine"]
+    assert a.success and b.success, (a.message, b.message)
+    if same_steps:
+        assert len(a) == len(b) and a.n_steps == b.n_steps, (a.n_steps, b.n_steps)
+        np.testing.assert_allclose(a.t, b.t, rtol=0, atol=1e-12)
+    for f in FIELDS:
+        x, y = getattr(a, f), getattr(b, f)
+        err = float(np.max(np.abs(x - y))) / max(1.0, float(np.max(np.abs(y))))
+        assert err < (tol_acc if f in ("qdd", "f_c", "u") else tol), (f, err)
+
+
+def _states(model: Any, q0: np.ndarray, ts: np.ndarray, rng: np.random.Generator) -> list[Any]:
+    """Admissible states near q0 (on the manifold, q̇ in N(A)) at the times ts."""
+    from nonmin.model import assemble
+
+    out = []
+    for t in ts:
+        st = assemble(model, q0 + 0.02 * rng.normal(size=model.n), rng.normal(size=model.n), t=float(t))
+        out.append((float(t), np.asarray(st.q), np.asarray(st.qd)))
+    return out
+
+
+# ----------------------------------------------------------------------------- five-bar (tutorial 03)
+
+
+def _five_bar_tracker() -> tuple[Any, Tracker, np.ndarray]:
+    ts = np.linspace(0.0, 2.0, 41)
+    circle = [(0.4 + 0.15 * np.sin(np.pi * t), 1.5 - 0.15 + 0.15 * np.cos(np.pi * t)) for t in ts]
+    ref = Reference.spline(ts, [library.five_bar(end_effector=p).state.q for p in circle])
+    model = library.five_bar().model
+    q0 = library.five_bar(end_effector=(0.35, 1.45)).state.q
+    return model, Tracker(model, ref, Kp=100.0, Kd=20.0, lambda_=10.0), q0
+
+
+def test_five_bar_passivity_per_call() -> None:
+    model, trk, q0 = _five_bar_tracker()
+    rng = np.random.default_rng(3)
+    _per_call(trk, model, _states(model, q0, np.array([0.0, 0.013, 0.5, 1.25, 1.999, 2.5]), rng))
+
+
+def test_five_bar_passivity_run_equals_python() -> None:
+    """Tutorial 03 section 4 (DOPRI5 rtol 1e-7): the same accepted steps, the same trajectory."""
+
+    def make() -> Tracker:
+        return _five_bar_tracker()[1]
+
+    model, _, q0 = _five_bar_tracker()
+    ts = np.linspace(0.0, 0.6, 13)
+    a, b = _pair(model, make, t_span=(0.0, 0.6), q0=q0, method="dopri5", rtol=1e-7, atol=1e-9, t_eval=ts)
+    # DOPRI5's step sizes follow an error estimate at round-off distance of the two laws: the
+    # same number of steps, the samples to well within the method's tolerance
+    _close(a, b, tol=1e-6, tol_acc=1e-5)
+    assert float(np.max(np.abs(a.u))) > 1.0
+    # RK4 (fixed steps): the whole run to round-off
+    a, b = _pair(model, make, t_span=(0.0, 0.3), q0=q0, dt=2e-3)
+    _close(a, b)
+
+
+def test_crank_four_bar_passivity_run_and_state() -> None:
+    """RK4 on the crank four-bar with actuator limits: u, q, qd to round-off; the controller
+    state (saturation counts, σ_min(PB), max |u|) the Python record's."""
+    model = crank_four_bar()
+    ts = np.linspace(0.0, 0.6, 13)
+    qs = np.array([crank_four_bar_configuration(model, 1.0 + 0.8 * math.sin(2.0 * t)) for t in ts])
+    ref = Reference.spline(ts, qs)
+
+    def make() -> Tracker:
+        return Tracker(model, ref, Kp=400.0, Kd=40.0, lambda_=10.0, u_min=-30.0, u_max=30.0)
+
+    q0 = crank_four_bar_configuration(model, 0.6)
+    _per_call(make(), model, _states(model, q0, np.array([0.0, 0.1, 0.35]), np.random.default_rng(1)))
+    a, b = _pair(model, make, t_span=(0.0, 0.2), q0=q0, dt=2e-3)
+    _close(a, b)
+    # merge_state over the compiled steps = ControlState.record over the same steps
+    from nonmin.sim import RK4, Projection
+
+    ctl = make()
+    creg = _compiled(ctl, model)
+    eng = _engine._engine()
+    opts = _engine.options(RK4(), Projection(), dt=2e-3, t1=0.2, h0=0.0, rank_rtol=None, drift_factor=1.0,
+                           project_initial=True, max_steps=1000)  # fmt: skip
+    act = model.resolve_active(None)
+    loop = eng.SimLoop(_engine.program_for(model), model.active_mask(act), opts, np.zeros(0), True, None, None,
+                       None, [], creg)  # fmt: skip
+    assert loop.start(0.0, a.q[0], a.qd[0]) == eng.SIM_DONE
+    assert loop.run(1000) == eng.SIM_DONE
+    rec = loop.take()
+    got = _engine.merge_state(ctl, ctl.initial_state(), creg)
+    want = ctl.initial_state()
+    with use_backend("numpy"):
+        for t, q, qd in zip(rec["t"][1:], rec["q"][1:], rec["qd"][1:], strict=True):
+            want = ctl.update(t, q, qd, want, active=act)
+    assert got.steps == want.steps == 100
+    assert got.saturated_steps == want.saturated_steps and sum(got.saturated_steps) > 0
+    assert got.infeasible_steps == want.infeasible_steps == 0
+    assert abs(got.min_sigma_pb - want.min_sigma_pb) <= 1e-12 * want.min_sigma_pb
+    np.testing.assert_allclose(got.max_abs_u, want.max_abs_u, rtol=1e-9)
+    assert math.isfinite(creg.lyapunov)
+
+
+# ----------------------------------------------------------------------------- rheonomic, switching
+
+
+def _arm3_driven() -> Any:
+    """A 3R arm whose tip's distance to the ground point (2.2, 0) is driven (rheonomic, A depends
+    on q: Ȧ ≠ 0), three joint torques, 2 DOF left; gravity on."""
+    b = PlanarBuilder("arm3_driven", gravity=(0.0, -9.81))
+    for i in (1, 2, 3):
+        b.body(f"l{i}", mass=1.0, inertia=1.0 / 12.0)
+    b.revolute("j1", ("ground", (0.0, 0.0)), ("l1", (-0.5, 0.0)))
+    b.revolute("j2", ("l1", (0.5, 0.0)), ("l2", (-0.5, 0.0)))
+    b.revolute("j3", ("l2", (0.5, 0.0)), ("l3", (-0.5, 0.0)))
+    b.point("T", "l3", (0.5, 0.0))
+    b.ground_point("G", (2.2, 0.0))
+    b.drive_distance("drive", "G", "T", [0.6, 0.3])  # |T − G| = 0.6 + 0.3 t
+    for j in ("j1", "j2", "j3"):
+        b.actuator(j, j)
+    return b.build()
+
+
+def _arm3_q(a1: float, a2: float, a3: float) -> np.ndarray:
+    q, p, ang = [], np.zeros(2), 0.0
+    for a in (a1, a2, a3):
+        ang = a
+        c = p + 0.5 * np.array([math.cos(ang), math.sin(ang)])
+        q += [c[0], c[1], ang]
+        p = p + np.array([math.cos(ang), math.sin(ang)])
+    return np.array(q)
+
+
+def test_rheonomic_planar_passivity_per_call_and_run() -> None:
+    from nonmin.model import assemble
+
+    model = _arm3_driven()
+    q0 = assemble(model, _arm3_q(0.6, -0.5, -0.9), np.zeros(model.n), t=0.0).q
+    ref = Reference.polynomial([_arm3_q(0.5, -0.4, -0.8), 0.2 * np.ones(model.n)])
+
+    def make() -> Tracker:
+        return Tracker(model, ref, Kp=50.0, Kd=10.0, lambda_=5.0)
+
+    _per_call(make(), model, _states(model, q0, np.array([0.0, 0.05, 0.2]), np.random.default_rng(7)))
+    a, b = _pair(model, make, t_span=(0.0, 0.3), q0=q0, dt=2e-3)
+    _close(a, b)
+    assert float(np.max(np.abs(a.u))) > 1.0
+
+
+def test_switched_wall_passivity_engine_equals_python() -> None:
+    """arm2r_wall: a passivity tracker reaches the wall, then force control over it commands 5 N
+    (Switched; each active set compiled, the contact event by the general driver)."""
+    mech = library.get("arm2r_wall")
+    m = mech.model
+
+    def path(t: float) -> np.ndarray:
+        return wall_tip_path(t, t_reach=0.6, t_settle=0.3, t_slide=1.0)
+
+    ts = np.linspace(0.0, 1.2, 61)
+    ref = Reference.spline(ts, np.array([arm2r_configuration(path(t)) for t in ts]))
+
+    def make() -> Any:
+        trk = Tracker(m, ref, Kp=400.0, Kd=40.0, lambda_=10.0)
+        return Switched(m, {frozenset({"shoulder", "elbow"}): trk}, default=ForceControl(trk, {"wall": 5.0}))
+
+    free = _compiled(make(), m, frozenset({"shoulder", "elbow"}))
+    touch = _compiled(make(), m, frozenset({"shoulder", "elbow", "wall"}))
+    assert type(free).__name__ == type(touch).__name__ == "SimControl"
+    a = simulate(mech, (0.0, 0.7), method="rk4", dt=4e-3, controller=make(), engine="engine", progress=False)
+    with use_backend("numpy"):
+        b = simulate(mech, (0.0, 0.7), method="rk4", dt=4e-3, controller=make(), engine="python", progress=False)
+    assert a.success and b.success
+    assert [e.name for e in a.events] == [e.name for e in b.events] and len(a.events) == 1
+    assert abs(a.events[0].t - b.events[0].t) < 1e-9
+    assert len(a) == len(b)
+    np.testing.assert_allclose(a.q, b.q, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(a.u, b.u, rtol=0, atol=1e-5 * float(np.max(np.abs(b.u))))
+
+
+# ----------------------------------------------------------------------------- robots (TreeProgram)
+
+
+def test_robot_passivity_per_call_and_run() -> None:
+    pytest.importorskip("pinocchio")
+    import warnings
+
+    from nonmin.errors import JointLimitWarning
+    from nonmin.model.robots._examples import serial_arm
+
+    warnings.simplefilter("ignore", JointLimitWarning)
+    model, state = serial_arm()
+    q0 = np.asarray(state.q)
+    d = np.array([0.1, 0.05, -0.1, -0.05])  # (away from the joint stops)
+    ref = Reference.polynomial([q0 + d, d])
+
+    def make() -> Tracker:
+        return Tracker(model, ref, Kp=30.0, Kd=5.0, lambda_=5.0)
+
+    rng = np.random.default_rng(11)
+    states = [(float(t), q0 + 0.05 * rng.normal(size=model.n), rng.normal(size=model.n)) for t in (0.0, 0.1, 0.3)]
+    from nonmin.model import assemble
+
+    states = [(t, np.asarray(s.q), np.asarray(s.qd)) for t, q, qd in states
+              for s in [assemble(model, q, qd, t=t)]]  # fmt: skip
+    _per_call(make(), model, states)
+    a, b = _pair(model, make, t_span=(0.0, 0.2), q0=q0, dt=2e-3)
+    _close(a, b)
+    assert [e.name for e in a.events] == [e.name for e in b.events]
+
+
+def test_called_back_without_coriolis_in_the_engine() -> None:
+    """A function model (C from the user's function): the passivity law stays in Python."""
+    from nonmin.model import FunctionModel
+
+    fm = FunctionModel(name="xy", coordinate_names=("x", "y"), mass=lambda q: np.diag([2.0 + math.cos(q[1]), 1.0]),
+                       coriolis=lambda q, qd: np.array([[-0.5 * math.sin(q[1]) * qd[1], -0.5 * math.sin(q[1]) * qd[0]],
+                                                        [0.5 * math.sin(q[1]) * qd[0], 0.0]]),
+                       conservative=lambda q: np.zeros(2), potential=lambda q: 0.0, actuator_names=("fx", "fy"),
+                       input_matrix_fn=lambda q: np.eye(2))  # fmt: skip
+    trk = Tracker(fm, np.zeros(2))
+    prog = _engine.program_for(fm)
+    assert prog is None or _compiled(trk, fm) is None
