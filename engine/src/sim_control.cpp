@@ -263,6 +263,13 @@ void Projected::attach(const Terms& T, const Mat& A, int m, const std::vector<in
 Status Projected::control(double t, const double* q, const double* qd, const std::uint8_t* active, double* u) {
     if (stale_) return s_.other_active_set ? s_.other_active_set->control(t, q, qd, active, u) : Status::bad_shape;
     if (!T_) return Status::bad_shape;
+    if (s_.own_terms) {  // the controller's own model (same layout): its terms at this state
+        const unsigned need = NEED_M | NEED_H | NEED_B | NEED_A | NEED_GAMMA | own_need();
+        const Status s = prog_->evaluate(t, q, qd, mask_.data(), need, Tu_, *ws_);
+        if (s != Status::ok) return s;
+        for (int i = 0; i < m_; ++i) Au_.row(i) = Tu_.A.row(rows_[static_cast<std::size_t>(i)]);
+        return law(t, q, qd, Tu_, Au_, u);
+    }
     return law(t, q, qd, *T_, *A_, u);
 }
 
@@ -273,7 +280,7 @@ Status Projected::update(double t, const double* q, const double* qd, const std:
     bool same = t == last_t_;
     for (int i = 0; same && i < n_; ++i) same = q[i] == last_q_[i] && qd[i] == last_qd_[i];
     if (!same) {
-        const unsigned need = NEED_M | NEED_H | NEED_B | NEED_A | NEED_GAMMA | this->need();
+        const unsigned need = NEED_M | NEED_H | NEED_B | NEED_A | NEED_GAMMA | own_need();
         Status s = prog_->evaluate(t, q, qd, active, need, Tu_, *ws_);
         if (s != Status::ok) return s;
         for (int i = 0; i < m_; ++i) Au_.row(i) = Tu_.A.row(rows_[static_cast<std::size_t>(i)]);
@@ -863,7 +870,7 @@ Status Projected::probe(double t, const double* q, const double* qd, const std::
     for (std::size_t ci = 0; ci < cons.size(); ++ci)
         if (active[ci])
             for (int r = 0; r < cons[ci].dim; ++r) rows.push_back(cons[ci].row + r);
-    const unsigned need = NEED_M | NEED_H | NEED_B | NEED_A | NEED_GAMMA | this->need();
+    const unsigned need = NEED_M | NEED_H | NEED_B | NEED_A | NEED_GAMMA | own_need();
     Status s = prog_->evaluate(t, q, qd, active, need, Tp_, *ws_);
     if (s != Status::ok) return s;
     const int m = static_cast<int>(rows.size());

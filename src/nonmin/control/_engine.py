@@ -3,7 +3,10 @@
 :func:`compile_controller` turns a controller value into the engine's ``SimControl`` for one
 active set, or returns None when it must be called back (a user controller, the Tracker's
 passivity law on a program without C and Ȧ in the engine — spatial, SymPy, function models —,
-a Regulator with σ > 0, a controller of another model). What compiles:
+a Regulator with σ > 0, a controller of a model of another layout or without a compiled
+program). A controller built on another model instance with the simulated model's layout is
+compiled on its own model's program and evaluates it at every call (``own_terms``), as the
+Python controller evaluates its own model. What compiles:
 
 * :class:`~nonmin.control.Regulator` (σ = 0): its target per active set (projected here once;
   under an active rheonomic constraint the engine projects it at every time, as ``target_for``);
@@ -128,8 +131,15 @@ def _compile(ctrl: Any, model: Model, program: Any, active: frozenset[str], othe
                 return None
             forces.append((names.index(nm), sig))
         ctrl = motion
-    if getattr(ctrl, "model", None) is not model:
-        return None
+    own = getattr(ctrl, "model", None)
+    own_terms = own is not model
+    if own_terms:
+        # a controller of another model instance (e.g. built on an equal model, as tutorial 03
+        # does): compiled on its own model's program when that has the loop's layout; the law
+        # then evaluates its own program at every call, as the Python controller does
+        program = _own_program(own, model)
+        if program is None:
+            return None
     c: Any = ctrl  # (its validated private fields)
     n = model.n
     rheonomic = any(x.kind == "rheonomic" and x.name in active for x in model.constraints)
@@ -155,8 +165,21 @@ def _compile(ctrl: Any, model: Model, program: Any, active: frozenset[str], othe
         program, law, _arr(q_star), _arr(c._Kp), _arr(c._Kd), [tuple(int(i) for i in b) for b in c._qblocks],
         _arr(o._lo), _arr(o._hi), -1.0 if o.rtol is None else float(o.rtol), o.on_infeasible == "raise",
         project, ctrl.target_policy == "reject", ctrl.metric == "mass", [int(i) for i in ctrl.fixed],
-        reference, forces, other, float(getattr(ctrl, "lambda_", 1.0)),
+        reference, forces, other, float(getattr(ctrl, "lambda_", 1.0)), own_terms,
     )  # fmt: skip
+
+
+def _layout(m: Any) -> tuple[Any, ...]:
+    return (m.n, m.k, tuple((c.name, c.kind, int(c.dim)) for c in m.constraints))
+
+
+def _own_program(own: Any, model: Model) -> Any | None:
+    """The compiled program of the controller's own model when it has the simulated model's
+    layout (n, k, the constraints' names, kinds and dims in order), else None (called back)."""
+    if not isinstance(own, Model) or _layout(own) != _layout(model):
+        return None
+    make = getattr(own, "engine_program", None)
+    return make() if callable(make) else None
 
 
 def merge_state(state: Any, compiled: Any, k: int) -> Any:

@@ -98,6 +98,12 @@ struct ControlSpec {
     std::vector<int> fixed;
     Signal* reference = nullptr;  // tracker: (q*, q̇*, q̈*)(t); borrowed
     double lambda = 1.0;          // passivity: the sliding variable's bandwidth λ
+    // the controller's model is another model than the loop's with the same layout (n, k, the
+    // constraints' names, kinds and dims: a controller built on an equal model, or on a nominal
+    // model driving another plant): the law evaluates its own program (the one given to the
+    // constructor) at every call instead of reading the loop's terms, as the Python controller
+    // evaluates its own model
+    bool own_terms = false;
     // force control: (constraint index, desired force λ*(t) of its rows); borrowed signals
     std::vector<std::pair<int, Signal*>> forces;
     // evaluated instead of the compiled law when the loop's active set is no longer the one the
@@ -114,7 +120,7 @@ class Projected : public Controller {
     Status control(double t, const double* q, const double* qd, const std::uint8_t* active, double* u) override;
     Status update(double t, const double* q, const double* qd, const std::uint8_t* active) override;
     bool stateless() const override { return true; }  // update() only records
-    unsigned need() const override { return gravity_in_pass_ ? NEED_GRAVITY : 0u; }
+    unsigned need() const override { return s_.own_terms ? 0u : own_need(); }
     std::unique_ptr<Controller> clone() const override { return std::make_unique<Projected>(*prog_, s_); }
 
     // ControlState.record's counters over the accepted steps seen
@@ -135,6 +141,7 @@ class Projected : public Controller {
     const Vec& target() const { return qs_; }
 
   private:
+    unsigned own_need() const { return gravity_in_pass_ ? NEED_GRAVITY : 0u; }
     Status law(double t, const double* q, const double* qd, const Terms& T, const Mat& A, double* u);
     Status nullspace(const Mat& A);
     void project(const double* x, double* out);
