@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "nonmin/sim/batch.hpp"
+#include "../src/lanes.hpp"
 #include "program_common.hpp"
 #include "register.hpp"
 
@@ -204,6 +205,18 @@ void bind_sim_batch(nb::module_& m) {
         "Zeno limit); then also active_mask (k, N, c) and events (per run, dicts as SimLoop.events). "
         "controllers: (program index, active mask, compiled SimController) prototypes, copied per "
         "thread and run.");
+    // the lock-step lanes of the batch (engine/src/lanes.hpp): their width and counters
+    m.def("lanes_stats", []() {
+        nb::dict d;
+        const lanes::Stats& s = lanes::stats();
+        d["available"] = lanes::available();
+        d["width"] = lanes::width();
+        d["lane_calls"] = s.lane_calls.load();
+        d["lane_groups"] = s.lane_groups.load();
+        d["scalar_calls"] = s.scalar_calls.load();
+        d["diverged"] = s.diverged.load();
+        return d;
+    });
 }
 
 }  // namespace nonmin::bindings

@@ -4,6 +4,13 @@
 #include <cmath>
 
 #include "nonmin/linalg.hpp"
+#include "lanes.hpp"
+
+#pragma GCC diagnostic ignored "-Wpsabi"  // the lanes' vectors: inlined into their target functions
+
+#include <new>
+#include <type_traits>
+#include <vector>
 
 namespace nonmin::linalg {
 
@@ -262,67 +269,199 @@ int certify_profile(const double* B, int m, int n, double rtol, LQWork& w, doubl
 
 }  // namespace
 
-int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* cv,
-                 bool skip_redundant, bool inverse) {
+namespace {
+
+// The lanes' decisions (lanes.hpp): one bool for a scalar run; for W runs in lock step the
+// lanes' common value, or `div` set when they differ (the lane evaluation is abandoned).
+#define NONMIN_INLINE __attribute__((always_inline)) inline
+NONMIN_INLINE bool decide(bool b, bool&) { return b; }
+template <class M>
+NONMIN_INLINE bool decide(const M& mask, bool& div) {
+    bool all = true, any = false;
+    for (int l = 0; l < static_cast<int>(sizeof(M) / sizeof(mask[0])); ++l) {
+        all = all && mask[l] != 0;
+        any = any || mask[l] != 0;
+    }
+    div = div || all != any;
+    return all;
+}
+NONMIN_INLINE double vsqrt(double x) { return std::sqrt(x); }
+NONMIN_INLINE double vabs(double x) { return std::fabs(x); }
+NONMIN_INLINE double vmax(double a, double b) { return std::max(a, b); }
+template <class S>
+NONMIN_INLINE S vsqrt(const S& x) {  // std::sqrt per lane (correctly rounded: the same result)
+    S r = x;
+    for (int l = 0; l < static_cast<int>(sizeof(S) / sizeof(double)); ++l) r[l] = std::sqrt(x[l]);
+    return r;
+}
+template <class S>
+NONMIN_INLINE S vmax(const S& a, const S& b) {
+    return a < b ? b : a;  // std::max(a, b) per lane
+}
+template <class S>
+NONMIN_INLINE S vabs(const S& x) {  // std::fabs per lane: the sign bit cleared
+    using I = decltype(x < x);
+    return (S)((I)x & 0x7fffffffffffffffLL);
+}
+template <class S>
+NONMIN_INLINE S bc(double x) {  // x in every lane
+    return S{} + x;
+}
+template <class S>
+constexpr bool is_lane = !std::is_same_v<S, double>;
+
+// Storage for the lanes' vectors at their alignment (the default allocator aligns to 16 bytes
+// where AVX is not enabled, and the AVX code loads 32-byte vectors with aligned moves).
+template <class T>
+struct AlignedAlloc {
+    using value_type = T;
+    AlignedAlloc() = default;
+    template <class U>
+    AlignedAlloc(const AlignedAlloc<U>&) {}
+    T* allocate(std::size_t k) {
+        return static_cast<T*>(::operator new(k * sizeof(T), std::align_val_t(sizeof(T) < 32 ? 16 : 32)));
+    }
+    void deallocate(T* p, std::size_t) { ::operator delete(p, std::align_val_t(sizeof(T) < 32 ? 16 : 32)); }
+    bool operator==(const AlignedAlloc&) const { return true; }
+    bool operator!=(const AlignedAlloc&) const { return false; }
+};
+template <class T>
+using AVec = std::vector<T, AlignedAlloc<T>>;
+
+// The certified LQ's work arrays on the scalar S (LQWork for double; LaneLQ for W lanes).
+template <class S>
+struct LaneLQ {
+    int m_max = 0, n = 0;
+    AVec<S> Wq, Hv, beta, rp, Li, Cs;
+    std::vector<int> Hx, Ro, Pc, Lr, Kr;
+    int rank = 0, skipped = 0;
+    void size(int m_max_, int n_) {
+        if (m_max == m_max_ && n == n_) return;
+        m_max = m_max_;
+        n = n_;
+        const std::size_t m = static_cast<std::size_t>(std::max(m_max_, 1)), nn = static_cast<std::size_t>(n_);
+        Wq.assign(m * nn, S{});
+        Hv.assign(m * nn, S{});
+        beta.assign(m, S{});
+        rp.assign(m, S{});
+        Li.assign(m * m, S{});
+        Cs.assign(m, S{});
+        Hx.assign(m * (nn + 1), 0);
+        Ro.assign(m, 0);
+        Pc.assign(nn, 0);
+        Lr.assign(nn, 0);
+        Kr.assign(m, 0);
+    }
+};
+
+// lq_certified (linalg.hpp) on the scalar S: S = double is the engine's kernel; S = W doubles
+// evaluates W calls of one shape in lock step, every lane's operations those of its scalar call
+// (lanes.hpp), and returns LQ_DIVERGED where their decisions differ or where the scalar kernel
+// leaves the common path (a row skipped or a residual candidate for it, a certificate not proved
+// by the bound, L⁻¹ asked for): those calls are made by the scalar kernel.
+template <class S, class Wk>
+NONMIN_INLINE int lq_certified_t(const S* B, int m, int n, S rtol, Wk& w, S* cv, bool skip_redundant, bool inverse) {
+    constexpr bool lane = is_lane<S>;
+    bool div = false;
+    if constexpr (lane) {
+        if (inverse) return LQ_DIVERGED;
+    }
     const int ld = w.m_max;
-    double* Wq = w.Wq.data();
+    S* Wq = w.Wq.data();
     for (int k = 0; k < n; ++k) {
         w.Pc[k] = 0;  // 1 once pivoted
         w.Lr[k] = -1;
     }
     for (int i = 0; i < m; ++i) {
         w.Ro[i] = i;
-        const double* Bi = B + static_cast<long>(i) * (n + 1);
-        double* Wi = Wq + static_cast<long>(i) * n;
+        const S* Bi = B + static_cast<long>(i) * (n + 1);
+        S* Wi = Wq + static_cast<long>(i) * n;
         for (int k = 0; k < n; ++k) {
-            const double x = Bi[k];
+            const S x = Bi[k];
             Wi[k] = x;
             const int last = w.Lr[k];
-            w.Lr[k] = x != 0.0 ? i : last;  // (a select, not a branch: the pattern is irregular)
+            w.Lr[k] = decide(x != 0.0, div) ? i : last;  // (a select, not a branch: the pattern is irregular)
         }
+    }
+    if constexpr (lane) {
+        if (div) return LQ_DIVERGED;
     }
     // a row whose residual is at round-off level is skipped (skip_redundant; else never)
     const double tol = redundant_row_tol(m, n);
     w.skipped = 0;
-    w.skip_f2 = 0.0;
-    w.skip_n2 = 0.0;
+    if constexpr (!lane) {
+        w.skip_f2 = 0.0;
+        w.skip_n2 = 0.0;
+    }
     int r = 0;  // reflectors so far: reflector r pivots on column r
     for (int j = 0; j < m; ++j) {
         const int p = r;
-        double* Wj = Wq + static_cast<long>(j) * n;
-        double s = 0.0;
+        S* Wj = Wq + static_cast<long>(j) * n;
+        S s = S{};
         if (p < n) {
-            double* v = w.Hv.data() + static_cast<long>(r) * n;
+            S* v = w.Hv.data() + static_cast<long>(r) * n;
             int* H = w.Hx.data() + static_cast<long>(r) * (n + 1);
-            const double x0 = Wj[p];
+            const S x0 = Wj[p];
             s = x0 * x0;
             v[p] = x0;
             H[1] = p;
             int cnt = 1;
             int imax = w.Lr[p];
             for (int k = p + 1; k < n; ++k) {  // (columns after r are not pivoted yet)
-                const double x = Wj[k];
+                const S x = Wj[k];
                 v[k] = x;
-                if (x != 0.0) {
+                if (decide(x != 0.0, div)) {
                     s += x * x;
                     H[1 + cnt++] = k;
                     if (w.Lr[k] > imax) imax = w.Lr[k];
                 }
             }
             H[0] = cnt;
-            if (!skip_redundant || !redundant_row(Wq, w, r, j, B, s, tol)) {
+            if constexpr (lane) {
+                // a candidate for a redundant row, or an all-zero row: the scalar kernel's
+                if (div || (skip_redundant && (decide(s <= REDUNDANT_CANDIDATE * REDUNDANT_CANDIDATE, div) || div)) ||
+                    decide(s == 0.0, div) || div)
+                    return LQ_DIVERGED;
                 w.Pc[p] = 1;
-                if (!reflect(Wq, w, r, j, p, x0, s, imax, false)) return LQ_NONE;
+                // reflect(): reflector r of work row j, applied to rows j+1 … imax
+                const S nrm = vsqrt(s);
+                const S alpha = x0 >= 0.0 ? -nrm : nrm;
+                const S v0 = x0 - alpha;
+                v[p] = v0;
+                const S bj = 2.0 / (s - x0 * x0 + v0 * v0);
+                w.beta[r] = bj;
+                Wj[p] = alpha;
+                for (int t = 2; t <= cnt; ++t) Wj[H[t]] = S{};
+                for (int i = j + 1; i <= imax; ++i) {  // reflect_row_always
+                    S* X = Wq + static_cast<long>(i) * n;
+                    S d = S{};
+                    for (int t = 1; t <= cnt; ++t) d += X[H[t]] * v[H[t]];
+                    d *= bj;
+                    for (int t = 1; t <= cnt; ++t) X[H[t]] -= d * v[H[t]];
+                }
+                for (int t = 1; t <= cnt; ++t)
+                    if (imax > w.Lr[H[t]]) w.Lr[H[t]] = imax;
                 w.Kr[r++] = j;
                 continue;
+            } else {
+                if (!skip_redundant || !redundant_row(Wq, w, r, j, B, s, tol)) {
+                    w.Pc[p] = 1;
+                    if (!reflect(Wq, w, r, j, p, x0, s, imax, false)) return LQ_NONE;
+                    w.Kr[r++] = j;
+                    continue;
+                }
             }
+        } else if constexpr (lane) {
+            return LQ_DIVERGED;
         } else if (!skip_redundant || !redundant_row(Wq, w, r, j, B, 0.0, tol)) {
             return LQ_NONE;
         }
-        ++w.skipped;  // every column pivoted (s = 0), or a residual at round-off level
-        w.skip_f2 += s;
-        const double* Bj = B + static_cast<long>(j) * (n + 1);
-        for (int k = 0; k < n; ++k) w.skip_n2 += Bj[k] * Bj[k];
+        if constexpr (!lane) {
+            ++w.skipped;  // every column pivoted (s = 0), or a residual at round-off level
+            w.skip_f2 += s;
+            const double* Bj = B + static_cast<long>(j) * (n + 1);
+            for (int k = 0; k < n; ++k) w.skip_n2 += Bj[k] * Bj[k];
+        }
     }
     for (int a = 0; a < r; ++a) {  // the kept rows' L entries (columns 0 … a) to rows 0 … r − 1
         const int src = w.Kr[a];
@@ -331,27 +470,47 @@ int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* 
             for (int k = 0; k <= a; ++k) Wq[a * n + k] = Wq[static_cast<long>(src) * n + k];
     }
     m = r;
-    pivot_order(w, m, n);
-    double fl = 0.0, row2max = 0.0;  // ‖L‖_F², max_a ‖L_a‖²
+    {  // pivot_order: Pc, the reflectors' pivot columns in order, then the other columns
+        for (int i = 0; i < m; ++i) {
+            const int p = w.Hx[static_cast<long>(i) * (n + 1) + 1];
+            w.Pc[i] = p;
+            w.Lr[p] = -2;
+        }
+        int c = m;
+        for (int k = 0; k < n; ++k)
+            if (w.Lr[k] != -2) w.Pc[c++] = k;
+    }
+    S fl = S{}, row2max = S{};  // ‖L‖_F², max_a ‖L_a‖²
     for (int i = 0; i < m; ++i) {
-        double ri = 0.0;
+        S ri = S{};
         for (int k = 0; k <= i; ++k) {
-            const double x2 = Wq[i * n + k] * Wq[i * n + k];
+            const S x2 = Wq[i * n + k] * Wq[i * n + k];
             fl += x2;
             ri += x2;
         }
-        row2max = std::max(row2max, ri);
+        row2max = vmax(row2max, ri);
     }
     // reciprocal pivots: independent divisions, off the substitutions' dependency chains
     for (int i = 0; i < m; ++i) w.rp[i] = 1.0 / Wq[i * n + i];
-    const double margin = rtol <= QR_MARGIN_RTOL ? QR_MARGIN : 1.0;
-    if (w.skipped > 0 && !skipped_rows_small(w, rtol, margin, row2max)) return LQ_NONE;
+    const S margin = [&]() __attribute__((always_inline)) {
+        if constexpr (lane)
+            return S(rtol <= QR_MARGIN_RTOL ? bc<S>(QR_MARGIN) : bc<S>(1.0));  // per lane, its rtol's
+        else
+            return rtol <= QR_MARGIN_RTOL ? QR_MARGIN : 1.0;
+    }();
+    if constexpr (!lane) {
+        if (w.skipped > 0 && !skipped_rows_small(w, rtol, margin, row2max)) return LQ_NONE;
+    }
     // The certificate with f2 ≥ ‖L⁻¹‖_F²: without skipped rows ‖L‖_F ‖L⁻¹‖_F · margin · rtol < 1;
     // with them σ_min(L₁₁) ≥ 1/‖L⁻¹‖_F > margin · rtol · √(‖L‖_F² + Σ‖x_s‖²) + eF
-    auto certifies = [&](double f2) {
-        if (w.skipped == 0) return std::sqrt(fl) * std::sqrt(f2) * margin * rtol < 1.0;
-        const double bound = margin * rtol * std::sqrt(fl + w.skip_n2) + std::sqrt(w.skip_f2);
-        return bound * std::sqrt(f2) < 1.0;
+    auto certifies = [&](const S& f2) __attribute__((always_inline)) {
+        if constexpr (lane) {
+            return decide(vsqrt(fl) * vsqrt(f2) * margin * rtol < 1.0, div);
+        } else {
+            if (w.skipped == 0) return std::sqrt(fl) * std::sqrt(f2) * margin * rtol < 1.0;
+            const double bound = margin * rtol * std::sqrt(fl + w.skip_n2) + std::sqrt(w.skip_f2);
+            return bound * std::sqrt(f2) < 1.0;
+        }
     };
     bool proved = false;
     if (!inverse) {
@@ -360,56 +519,152 @@ int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* 
         // squares is at most its sum squared. One substitution (m²/2) instead of L⁻¹ (m³/6); the
         // exact norm below only when the bound does not prove the rank (near a singular
         // configuration): the decision is the exact test's. (1 + 1e-12: the bound's round-off.)
-        double* x = w.Cs.data();
-        double fb = 0.0;
+        S* x = w.Cs.data();
+        S fb = S{};
         for (int i = 0; i < m; ++i) {
-            const double* Wi = Wq + static_cast<long>(i) * n;
-            double s = 1.0;
-            for (int k = 0; k < i; ++k) s += std::fabs(Wi[k]) * x[k];
-            x[i] = s * std::fabs(w.rp[i]);
+            const S* Wi = Wq + static_cast<long>(i) * n;
+            S s = bc<S>(1.0);
+            for (int k = 0; k < i; ++k) s += vabs(Wi[k]) * x[k];
+            x[i] = s * vabs(w.rp[i]);
             fb += x[i] * x[i];
         }
         proved = certifies(fb * (1.0 + 1e-12));
     }
-    double* Li = w.Li.data();
-    if (!proved) {
-        // L⁻¹ row by row: row i = (e_i − Σ_{k<i} L_ik · row k) / L_ii (zero L_ik skipped)
-        double f0 = 0.0, f1 = 0.0;
-        for (int i = 0; i < m; ++i) {
-            double* Ri = Li + static_cast<long>(i) * ld;
-            for (int c = 0; c < i; ++c) Ri[c] = 0.0;
-            Ri[i] = 1.0;
-            for (int k = 0; k < i; ++k) {
-                const double a = Wq[i * n + k];
-                if (a != 0.0) {
-                    const double* Rk = Li + static_cast<long>(k) * ld;
-                    for (int c = 0; c <= k; ++c) Ri[c] -= a * Rk[c];
+    if constexpr (lane) {
+        if (div || !proved) return LQ_DIVERGED;  // (inverse: returned above)
+    } else {
+        double* Li = w.Li.data();
+        if (!proved) {
+            // L⁻¹ row by row: row i = (e_i − Σ_{k<i} L_ik · row k) / L_ii (zero L_ik skipped)
+            double f0 = 0.0, f1 = 0.0;
+            for (int i = 0; i < m; ++i) {
+                double* Ri = Li + static_cast<long>(i) * ld;
+                for (int c = 0; c < i; ++c) Ri[c] = 0.0;
+                Ri[i] = 1.0;
+                for (int k = 0; k < i; ++k) {
+                    const double a = Wq[i * n + k];
+                    if (a != 0.0) {
+                        const double* Rk = Li + static_cast<long>(k) * ld;
+                        for (int c = 0; c <= k; ++c) Ri[c] -= a * Rk[c];
+                    }
                 }
+                const double r = w.rp[i];
+                for (int c = 0; c <= i; ++c) Ri[c] *= r;
+                const int i2 = (i + 1) - (i + 1) % 2;  // ‖L⁻¹‖_F²: two interleaved partial sums
+                for (int c = 0; c < i2; c += 2) {
+                    f0 += Ri[c] * Ri[c];
+                    f1 += Ri[c + 1] * Ri[c + 1];
+                }
+                if (i2 <= i) f0 += Ri[i] * Ri[i];
             }
-            const double r = w.rp[i];
-            for (int c = 0; c <= i; ++c) Ri[c] *= r;
-            const int i2 = (i + 1) - (i + 1) % 2;  // ‖L⁻¹‖_F²: two interleaved partial sums
-            for (int c = 0; c < i2; c += 2) {
-                f0 += Ri[c] * Ri[c];
-                f1 += Ri[c + 1] * Ri[c + 1];
-            }
-            if (i2 <= i) f0 += Ri[i] * Ri[i];
+            if (!certifies(f0 + f1)) return LQ_NONE;
         }
-        if (!certifies(f0 + f1)) return LQ_NONE;
+        if (inverse) {
+            for (int i = 0; i < m; ++i) {  // cv = L⁻¹ (D b)[Ro]
+                const double* Ri = Li + static_cast<long>(i) * ld;
+                double s = 0.0;
+                for (int k = 0; k <= i; ++k) s += Ri[k] * B[static_cast<long>(w.Ro[k]) * (n + 1) + n];
+                cv[i] = s;
+            }
+            w.rank = m;
+            return LQ_INVERSE;
+        }
     }
-    if (inverse) {
-        for (int i = 0; i < m; ++i) {  // cv = L⁻¹ (D b)[Ro]
-            const double* Ri = Li + static_cast<long>(i) * ld;
-            double s = 0.0;
-            for (int k = 0; k <= i; ++k) s += Ri[k] * B[static_cast<long>(w.Ro[k]) * (n + 1) + n];
-            cv[i] = s;
-        }
-    } else {  // cv = L⁻¹ (D b)[Ro] by substitution
-        for (int i = 0; i < m; ++i) cv[i] = B[static_cast<long>(w.Ro[i]) * (n + 1) + n];
-        lq_lower_subst(w, m, cv);
+    // cv = L⁻¹ (D b)[Ro] by substitution (lq_lower_subst)
+    for (int i = 0; i < m; ++i) cv[i] = B[static_cast<long>(w.Ro[i]) * (n + 1) + n];
+    for (int i = 0; i < m; ++i) {
+        const S* Wi = Wq + static_cast<long>(i) * n;
+        S s = cv[i];
+        for (int k = 0; k < i; ++k) s -= Wi[k] * cv[k];
+        cv[i] = s * w.rp[i];
     }
     w.rank = m;
     return LQ_INVERSE;
+}
+
+}  // namespace
+
+int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* cv, bool skip_redundant,
+                 bool inverse) {
+    if (lanes::in_fiber()) return lq_certified_parked(B, m, n, rtol, w, cv, skip_redundant, inverse);
+    return lq_certified_scalar(B, m, n, rtol, w, cv, skip_redundant, inverse);
+}
+
+int lq_certified_scalar(const double* B, int m, int n, double rtol, LQWork& w, double* cv, bool skip_redundant,
+                        bool inverse) {
+    return lq_certified_t<double>(B, m, n, rtol, w, cv, skip_redundant, inverse);
+}
+
+namespace {
+
+// W calls in the lanes of S: gathered, evaluated by lq_certified_t<S>, each lane's outputs (the
+// entries its scalar call writes) scattered to its scratch and cv.
+template <int W, class S>
+__attribute__((always_inline)) inline int lq_lanes(const double* const* B, int m, int n, const double* rtol,
+                                                   LQWork* const* w, double* const* cv, bool skip_redundant,
+                                                   bool inverse) {
+    struct Scratch {
+        LaneLQ<S> L;
+        AVec<S> Bl, cl;
+    };
+    thread_local Scratch tls;
+    Scratch& X = tls;  // (one look-up of the thread's scratch)
+    LaneLQ<S>& L = X.L;
+    AVec<S>& Bl = X.Bl;
+    AVec<S>& cl = X.cl;
+    L.size(w[0]->m_max, n);
+    const int ld = n + 1;
+    if (static_cast<int>(Bl.size()) < m * ld) Bl.resize(static_cast<std::size_t>(m * ld));
+    if (static_cast<int>(cl.size()) < m) cl.resize(static_cast<std::size_t>(m));
+    for (int e = 0; e < m * ld; ++e)
+        for (int l = 0; l < W; ++l) Bl[e][l] = B[l][e];
+    S rl{};
+    for (int l = 0; l < W; ++l) rl[l] = rtol[l];
+    const int res = lq_certified_t<S>(Bl.data(), m, n, rl, L, cl.data(), skip_redundant, inverse);
+    if (res != LQ_INVERSE) return LQ_DIVERGED;
+    const int r = L.rank;
+    for (int l = 0; l < W; ++l) {
+        LQWork& o = *w[l];
+        for (int j = 0; j < r; ++j) {  // reflector j's [count, columns…]
+            const int* H = L.Hx.data() + static_cast<long>(j) * (n + 1);
+            std::copy(H, H + 1 + H[0], o.Hx.data() + static_cast<long>(j) * (n + 1));
+        }
+        std::copy(L.Ro.begin(), L.Ro.begin() + m, o.Ro.begin());
+        std::copy(L.Kr.begin(), L.Kr.begin() + r, o.Kr.begin());
+        std::copy(L.Pc.begin(), L.Pc.begin() + n, o.Pc.begin());
+        std::copy(L.Lr.begin(), L.Lr.begin() + n, o.Lr.begin());
+        for (int e = 0; e < m * n; ++e) o.Wq[static_cast<std::size_t>(e)] = L.Wq[static_cast<std::size_t>(e)][l];
+        for (int j = 0; j < r; ++j) {  // reflector j's vector: columns j … n − 1 written
+            const S* v = L.Hv.data() + static_cast<long>(j) * n;
+            double* vo = o.Hv.data() + static_cast<long>(j) * n;
+            for (int k = j; k < n; ++k) vo[k] = v[k][l];
+            o.beta[static_cast<std::size_t>(j)] = L.beta[static_cast<std::size_t>(j)][l];
+            o.rp[static_cast<std::size_t>(j)] = L.rp[static_cast<std::size_t>(j)][l];
+            o.Cs[static_cast<std::size_t>(j)] = L.Cs[static_cast<std::size_t>(j)][l];
+            cv[l][j] = cl[static_cast<std::size_t>(j)][l];
+        }
+        o.rank = r;
+        o.skipped = 0;
+        o.skip_f2 = 0.0;
+        o.skip_n2 = 0.0;
+    }
+    return LQ_INVERSE;
+}
+
+typedef double lane4 __attribute__((vector_size(32)));
+typedef double lane2 __attribute__((vector_size(16)));
+
+}  // namespace
+
+__attribute__((target("avx2"))) int lq_certified_lanes4(const double* const* B, int m, int n, const double* rtol,
+                                                         LQWork* const* w, double* const* cv, bool skip_redundant,
+                                                         bool inverse) {
+    return lq_lanes<4, lane4>(B, m, n, rtol, w, cv, skip_redundant, inverse);
+}
+
+int lq_certified_lanes2(const double* const* B, int m, int n, const double* rtol, LQWork* const* w, double* const* cv,
+                        bool skip_redundant, bool inverse) {
+    return lq_lanes<2, lane2>(B, m, n, rtol, w, cv, skip_redundant, inverse);
 }
 
 int lq_sparse(const double* B, int m, int n, double rtol, LQWork& w, double* cv) {

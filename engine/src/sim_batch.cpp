@@ -1,10 +1,12 @@
 // Many runs of the simulation loop in one call (nonmin/sim/batch.hpp).
 #include "nonmin/sim/batch.hpp"
 #include "nonmin/sim/events.hpp"
+#include "lanes.hpp"
 
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <memory>
@@ -246,7 +248,21 @@ int simulate_batch(const BatchInput& in, const BatchOutput& out) {
     nt = std::min(nt, in.k);
     if (!safe) nt = 1;
     std::atomic<int> next{0};
+    // lock-step lanes (lanes.hpp) for fixed-step RK4 without contact or controllers: each thread
+    // runs W runs at a time, one per fiber, each with its own loops (the scalar loop, unchanged)
+    const char* le = std::getenv("NONMIN_LANES");
+    const bool lanes_on = lanes::available() && !(le && le[0] == '0') && in.opt.method == Method::rk4 &&
+                          !in.contact && in.ctrl_protos.empty();
     auto worker = [&]() {
+        if (lanes_on) {
+            const int W = lanes::width();
+            std::vector<ThreadLoops> loops(static_cast<std::size_t>(W));
+            lanes::run_fibers(W, [&](int f) {
+                for (int i = next.fetch_add(1); i < in.k; i = next.fetch_add(1))
+                    run_one(in, out, i, loops[static_cast<std::size_t>(f)]);
+            });
+            return;
+        }
         ThreadLoops loops;
         for (int i = next.fetch_add(1); i < in.k; i = next.fetch_add(1)) run_one(in, out, i, loops);
     };
