@@ -10,6 +10,7 @@
 
 #include <new>
 #include <type_traits>
+#include <utility>
 #include <vector>
 
 namespace nonmin::linalg {
@@ -288,11 +289,30 @@ NONMIN_INLINE bool decide(const M& mask, bool& div) {
 NONMIN_INLINE double vsqrt(double x) { return std::sqrt(x); }
 NONMIN_INLINE double vabs(double x) { return std::fabs(x); }
 NONMIN_INLINE double vmax(double a, double b) { return std::max(a, b); }
+template <class S, std::size_t... I>
+NONMIN_INLINE S vsqrt_(const S& x, std::index_sequence<I...>) {
+    return S{std::sqrt(x[I])...};
+}
 template <class S>
 NONMIN_INLINE S vsqrt(const S& x) {  // std::sqrt per lane (correctly rounded: the same result)
-    S r = x;
-    for (int l = 0; l < static_cast<int>(sizeof(S) / sizeof(double)); ++l) r[l] = std::sqrt(x[l]);
-    return r;
+    return vsqrt_(x, std::make_index_sequence<sizeof(S) / sizeof(double)>{});
+}
+// lane l of the result: p[l][e] (the lanes built in registers, not through memory)
+template <class S, std::size_t... I>
+NONMIN_INLINE S gather_(const double* const* p, long e, std::index_sequence<I...>) {
+    return S{p[I][e]...};
+}
+template <class S>
+NONMIN_INLINE S gather(const double* const* p, long e) {
+    return gather_<S>(p, e, std::make_index_sequence<sizeof(S) / sizeof(double)>{});
+}
+template <class S, std::size_t... I>
+NONMIN_INLINE S load_(const double* a, std::index_sequence<I...>) {
+    return S{a[I]...};
+}
+template <class S>
+NONMIN_INLINE S load(const double* a) {  // lane l: a[l]
+    return load_<S>(a, std::make_index_sequence<sizeof(S) / sizeof(double)>{});
 }
 template <class S>
 NONMIN_INLINE S vmax(const S& a, const S& b) {
@@ -353,6 +373,47 @@ struct LaneLQ {
         Kr.assign(m, 0);
     }
 };
+
+// lq_rows_min_norm on the scalar S (double: the kernel; W lanes: each lane's operations its
+// scalar call's, a row the reflector does not touch (d = 0) kept as it is, lane by lane).
+template <class S, class Wk>
+NONMIN_INLINE void lq_rows_min_norm_t(const Wk& w, int m, int n, int first, int count, S* E, const S* cv, S* x) {
+    for (int i = 0; i < count; ++i) {
+        S* Ei = E + static_cast<long>(i) * n;
+        for (int k = 0; k < n; ++k) Ei[k] = S{};
+        Ei[w.Pc[first + i]] = bc<S>(1.0);
+    }
+    for (int i = 0; i < n; ++i) x[i] = S{};
+    for (int i = 0; i < m; ++i) x[w.Pc[i]] = cv[i];
+    for (int j = m - 1; j >= 0; --j) {  // independent chains side by side (lq_rows, lq_min_norm)
+        const S bj = w.beta[j];
+        const int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
+        const S* v = w.Hv.data() + static_cast<long>(j) * n;
+        const int cnt = H[0];
+        for (int i = 0; i < count; ++i) {  // reflect_row
+            S* X = E + static_cast<long>(i) * n;
+            S d = S{};
+            for (int t = 1; t <= cnt; ++t) d += X[H[t]] * v[H[t]];
+            if constexpr (is_lane<S>) {
+                const auto keep = d == 0.0;
+                const S db = d * bj;
+                for (int t = 1; t <= cnt; ++t) {
+                    const S nx = X[H[t]] - db * v[H[t]];
+                    X[H[t]] = keep ? X[H[t]] : nx;
+                }
+            } else {
+                if (d == 0.0) continue;
+                d *= bj;
+                for (int t = 1; t <= cnt; ++t) X[H[t]] -= d * v[H[t]];
+            }
+        }
+        S d = S{};
+        for (int t = 1; t <= cnt; ++t) d += v[H[t]] * x[H[t]];
+        d *= bj;
+        for (int t = 1; t <= cnt; ++t) x[H[t]] -= d * v[H[t]];
+    }
+    for (int i = 0; i < n; ++i) x[i] = -x[i];
+}
 
 // lq_certified (linalg.hpp) on the scalar S: S = double is the engine's kernel; S = W doubles
 // evaluates W calls of one shape in lock step, every lane's operations those of its scalar call
@@ -595,6 +656,20 @@ int lq_certified_scalar(const double* B, int m, int n, double rtol, LQWork& w, d
     return lq_certified_t<double>(B, m, n, rtol, w, cv, skip_redundant, inverse);
 }
 
+int lq_certified_z_scalar(const double* B, int m, int n, double rtol, LQWork& w, double* cv, double* E, double* x,
+                          bool* z) {
+    const int res = lq_certified_scalar(B, m, n, rtol, w, cv, true, false);
+    *z = res == LQ_INVERSE && n - w.rank <= w.rank;
+    if (*z) lq_rows_min_norm(w, w.rank, n, w.rank, n - w.rank, E, cv, x);
+    return res;
+}
+
+int lq_certified_z(const double* B, int m, int n, double rtol, LQWork& w, double* cv, double* E, double* x,
+                   bool* z) {
+    if (lanes::in_fiber()) return lq_certified_z_parked(B, m, n, rtol, w, cv, E, x, z);
+    return lq_certified_z_scalar(B, m, n, rtol, w, cv, E, x, z);
+}
+
 namespace {
 
 // W calls in the lanes of S: gathered, evaluated by lq_certified_t<S>, each lane's outputs (the
@@ -602,10 +677,10 @@ namespace {
 template <int W, class S>
 __attribute__((always_inline)) inline int lq_lanes(const double* const* B, int m, int n, const double* rtol,
                                                    LQWork* const* w, double* const* cv, bool skip_redundant,
-                                                   bool inverse) {
+                                                   bool inverse, double* const* E, double* const* x, bool* z) {
     struct Scratch {
         LaneLQ<S> L;
-        AVec<S> Bl, cl;
+        AVec<S> Bl, cl, E;
     };
     thread_local Scratch tls;
     Scratch& X = tls;  // (one look-up of the thread's scratch)
@@ -616,13 +691,18 @@ __attribute__((always_inline)) inline int lq_lanes(const double* const* B, int m
     const int ld = n + 1;
     if (static_cast<int>(Bl.size()) < m * ld) Bl.resize(static_cast<std::size_t>(m * ld));
     if (static_cast<int>(cl.size()) < m) cl.resize(static_cast<std::size_t>(m));
-    for (int e = 0; e < m * ld; ++e)
-        for (int l = 0; l < W; ++l) Bl[e][l] = B[l][e];
-    S rl{};
-    for (int l = 0; l < W; ++l) rl[l] = rtol[l];
+    for (int e = 0; e < m * ld; ++e) Bl[static_cast<std::size_t>(e)] = gather<S>(B, e);
+    const S rl = load<S>(rtol);
     const int res = lq_certified_t<S>(Bl.data(), m, n, rl, L, cl.data(), skip_redundant, inverse);
     if (res != LQ_INVERSE) return LQ_DIVERGED;
     const int r = L.rank;
+    const int k = n - r;
+    const bool zdo = E != nullptr && k <= r;  // the null-space basis and w in the same lanes
+    if (z) *z = zdo;
+    if (zdo) {
+        if (static_cast<int>(X.E.size()) < k * n + n) X.E.resize(static_cast<std::size_t>(k * n + n));
+        lq_rows_min_norm_t<S>(L, r, n, r, k, X.E.data(), cl.data(), X.E.data() + k * n);
+    }
     for (int l = 0; l < W; ++l) {
         LQWork& o = *w[l];
         for (int j = 0; j < r; ++j) {  // reflector j's [count, columns…]
@@ -643,6 +723,10 @@ __attribute__((always_inline)) inline int lq_lanes(const double* const* B, int m
             o.Cs[static_cast<std::size_t>(j)] = L.Cs[static_cast<std::size_t>(j)][l];
             cv[l][j] = cl[static_cast<std::size_t>(j)][l];
         }
+        if (zdo) {
+            for (int e = 0; e < k * n; ++e) E[l][e] = X.E[static_cast<std::size_t>(e)][l];
+            for (int j = 0; j < n; ++j) x[l][j] = X.E[static_cast<std::size_t>(k * n + j)][l];
+        }
         o.rank = r;
         o.skipped = 0;
         o.skip_f2 = 0.0;
@@ -658,13 +742,13 @@ typedef double lane2 __attribute__((vector_size(16)));
 
 __attribute__((target("avx2"))) int lq_certified_lanes4(const double* const* B, int m, int n, const double* rtol,
                                                          LQWork* const* w, double* const* cv, bool skip_redundant,
-                                                         bool inverse) {
-    return lq_lanes<4, lane4>(B, m, n, rtol, w, cv, skip_redundant, inverse);
+                                                         bool inverse, double* const* E, double* const* x, bool* z) {
+    return lq_lanes<4, lane4>(B, m, n, rtol, w, cv, skip_redundant, inverse, E, x, z);
 }
 
 int lq_certified_lanes2(const double* const* B, int m, int n, const double* rtol, LQWork* const* w, double* const* cv,
-                        bool skip_redundant, bool inverse) {
-    return lq_lanes<2, lane2>(B, m, n, rtol, w, cv, skip_redundant, inverse);
+                        bool skip_redundant, bool inverse, double* const* E, double* const* x, bool* z) {
+    return lq_lanes<2, lane2>(B, m, n, rtol, w, cv, skip_redundant, inverse, E, x, z);
 }
 
 int lq_sparse(const double* B, int m, int n, double rtol, LQWork& w, double* cv) {
@@ -836,24 +920,7 @@ void lq_rows(const LQWork& w, int m, int n, int first, int count, double* E) {
 
 void lq_rows_min_norm(const LQWork& w, int m, int n, int first, int count, double* E,
                       const double* cv, double* x) {
-    for (int i = 0; i < count; ++i) {
-        double* Ei = E + static_cast<long>(i) * n;
-        for (int k = 0; k < n; ++k) Ei[k] = 0.0;
-        Ei[w.Pc[first + i]] = 1.0;
-    }
-    for (int i = 0; i < n; ++i) x[i] = 0.0;
-    for (int i = 0; i < m; ++i) x[w.Pc[i]] = cv[i];
-    for (int j = m - 1; j >= 0; --j) {  // independent chains side by side (lq_rows, lq_min_norm)
-        const double bj = w.beta[j];
-        for (int i = 0; i < count; ++i) reflect_row(E + static_cast<long>(i) * n, w, j, bj);
-        const int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
-        const double* v = w.Hv.data() + static_cast<long>(j) * n;
-        double d = 0.0;
-        for (int t = 1; t <= H[0]; ++t) d += v[H[t]] * x[H[t]];
-        d *= bj;
-        for (int t = 1; t <= H[0]; ++t) x[H[t]] -= d * v[H[t]];
-    }
-    for (int i = 0; i < n; ++i) x[i] = -x[i];
+    lq_rows_min_norm_t<double>(w, m, n, first, count, E, cv, x);
 }
 
 void lq_min_norm(const LQWork& w, int m, int n, const double* cv, double* x) {

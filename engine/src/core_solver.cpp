@@ -131,12 +131,15 @@ struct Solver::Impl {
         m_live = m;
         if (m == 0) return 0;
         if (linalg::QR_MIN_ROWS <= m) {  // (m > n: at least m − n rows are skipped)
+            bool zw = false;  // Z and w made with the dense factorization (lq_certified_z)
             if (m > linalg::DENSE_INVERSE_MAX_ROWS) {
                 if (pst)
                     linalg::row_pattern_known(pst, pco, lrows.data(), m, n, lq.Ap.data());
                 else
                     linalg::row_pattern(B.data(), m, n, n + 1, lq.Ap.data());
                 lqmode = linalg::lq_sparse(B.data(), m, n, rtol, lq, cv.data());
+            } else if (with_w) {  // (with Z and w when n − r ≤ r: one call, lanes in a batch)
+                lqmode = linalg::lq_certified_z(B.data(), m, n, rtol, lq, cv.data(), Kt.data(), wv.data(), &zw);
             } else {
                 lqmode = linalg::lq_certified(B.data(), m, n, rtol, lq, cv.data(), true, false);
             }
@@ -144,7 +147,7 @@ struct Solver::Impl {
                 const int r = lq.rank;
                 zmode = n - r <= r;  // few degrees of freedom: the null-space basis Z
                 if (zmode && with_w) {
-                    linalg::lq_rows_min_norm(lq, r, n, r, n - r, Kt.data(), cv.data(), wv.data());
+                    if (!zw) linalg::lq_rows_min_norm(lq, r, n, r, n - r, Kt.data(), cv.data(), wv.data());
                     w_done = true;
                 } else if (zmode)
                     linalg::lq_rows(lq, r, n, r, n - r, Kt.data());

@@ -61,8 +61,17 @@ int lq_certified_scalar(const double* B, int m, int n, double rtol, LQWork& w, d
                         bool inverse);
 inline constexpr int LQ_DIVERGED = -1;
 // (rtol: each lane's; the margin and the certificate are decided per lane)
+// E, x (null: not asked): with a result of rank r and n − r ≤ r, also lq_rows_min_norm(w, r, n,
+// r, n − r, E, cv, x) per lane (*z set true), as lq_certified_z.
 int lq_certified_lanes4(const double* const* B, int m, int n, const double* rtol, LQWork* const* w,
-                        double* const* cv, bool skip_redundant, bool inverse);
+                        double* const* cv, bool skip_redundant, bool inverse, double* const* E = nullptr,
+                        double* const* x = nullptr, bool* z = nullptr);
 int lq_certified_lanes2(const double* const* B, int m, int n, const double* rtol, LQWork* const* w,
-                        double* const* cv, bool skip_redundant, bool inverse);
+                        double* const* cv, bool skip_redundant, bool inverse, double* const* E = nullptr,
+                        double* const* x = nullptr, bool* z = nullptr);
+// lq_certified_z's parked and scalar forms
+int lq_certified_z_parked(const double* B, int m, int n, double rtol, LQWork& w, double* cv, double* E, double* x,
+                          bool* z);
+int lq_certified_z_scalar(const double* B, int m, int n, double rtol, LQWork& w, double* cv, double* E, double* x,
+                          bool* z);
 }  // namespace nonmin::linalg

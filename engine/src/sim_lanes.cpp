@@ -64,7 +64,10 @@ struct LQCall {
     linalg::LQWork* w;
     double* cv;
     bool skip, inverse;
+    double* E;  // lq_certified_z: Z and w (null: lq_certified)
+    double* x;
     int result;
+    bool z;
 };
 
 struct Group;
@@ -86,6 +89,9 @@ struct Group {
     std::exception_ptr error;
     long long served = 0;  // groups of parked calls served (NONMIN_LANES_SCALAR_EVERY)
     long long scalar_every = 0;
+    std::vector<Fiber*> parked;  // serve()'s scratch (no allocation per round)
+    std::vector<char> taken;
+    std::vector<std::size_t> same;
 };
 
 thread_local Fiber* tl_fiber = nullptr;
@@ -133,36 +139,41 @@ void init_fiber(Fiber& f) {
 
 // Serve the parked calls: those of one shape W at a time in lanes, the rest alone.
 void serve(Group& g) {
-    std::vector<Fiber*> parked;
+    std::vector<Fiber*>& parked = g.parked;
+    parked.clear();
     for (Fiber& f : g.fibers)
         if (f.parked) parked.push_back(&f);
     if (parked.empty()) return;
     const bool scalar_now = g.scalar_every > 0 && (++g.served % g.scalar_every) == 0;
     const int W = width();
-    std::vector<char> taken(parked.size(), 0);
+    std::vector<char>& taken = g.taken;
+    taken.assign(parked.size(), 0);
     for (std::size_t a = 0; a < parked.size(); ++a) {
         if (taken[a]) continue;
         LQCall& c0 = parked[a]->call;
-        std::vector<std::size_t> same{a};
+        std::vector<std::size_t>& same = g.same;
+        same.assign(1, a);
         if (!scalar_now && !c0.inverse)
             for (std::size_t b = a + 1; b < parked.size() && static_cast<int>(same.size()) < W; ++b) {
                 const LQCall& c = parked[b]->call;
-                if (!taken[b] && c.m == c0.m && c.n == c0.n && c.skip == c0.skip &&
+                if (!taken[b] && c.m == c0.m && c.n == c0.n && c.skip == c0.skip && (c.E != nullptr) == (c0.E != nullptr) &&
                     c.inverse == c0.inverse && c.w->m_max == c0.w->m_max)
                     same.push_back(b);
             }
         for (std::size_t b : same) taken[b] = 1;
         int res = linalg::LQ_DIVERGED;
+        bool zres = false;
         if (same.size() >= 2 && c0.m <= linalg::DENSE_INVERSE_MAX_ROWS) {
             // lanes without a call of their own repeat the first call into spare scratch
             thread_local linalg::LQWork spare;
             thread_local std::vector<double> spare_cv;
             if (spare.m_max != c0.w->m_max || spare.n != c0.n) spare = linalg::LQWork(c0.w->m_max, c0.n);
-            if (spare_cv.size() < static_cast<std::size_t>(c0.m) + 1) spare_cv.resize(static_cast<std::size_t>(c0.m) + 1);
+            const std::size_t sz = static_cast<std::size_t>(c0.m + c0.n * (c0.n + 2) + 1);
+            if (spare_cv.size() < sz) spare_cv.resize(sz);
             const double* Bs[4];
             double rts[4];
             linalg::LQWork* ws[4];
-            double* cvs[4];
+            double *cvs[4], *Es[4], *xs[4];
             for (int l = 0; l < W; ++l) {
                 const bool own = l < static_cast<int>(same.size());
                 const LQCall& c = own ? parked[same[static_cast<std::size_t>(l)]]->call : c0;
@@ -170,9 +181,14 @@ void serve(Group& g) {
                 rts[l] = c.rtol;
                 ws[l] = own ? c.w : &spare;
                 cvs[l] = own ? c.cv : spare_cv.data();
+                Es[l] = own ? c.E : spare_cv.data() + c0.m;
+                xs[l] = own ? c.x : spare_cv.data() + c0.m + c0.n * (c0.n + 1);
             }
-            res = W == 4 ? linalg::lq_certified_lanes4(Bs, c0.m, c0.n, rts, ws, cvs, c0.skip, c0.inverse)
-                         : linalg::lq_certified_lanes2(Bs, c0.m, c0.n, rts, ws, cvs, c0.skip, c0.inverse);
+            const bool zc = c0.E != nullptr;
+            res = W == 4 ? linalg::lq_certified_lanes4(Bs, c0.m, c0.n, rts, ws, cvs, c0.skip, c0.inverse,
+                                                       zc ? Es : nullptr, zc ? xs : nullptr, &zres)
+                         : linalg::lq_certified_lanes2(Bs, c0.m, c0.n, rts, ws, cvs, c0.skip, c0.inverse,
+                                                       zc ? Es : nullptr, zc ? xs : nullptr, &zres);
             if (res == linalg::LQ_DIVERGED) {
                 g_stats.diverged.fetch_add(1, std::memory_order_relaxed);
             } else {
@@ -183,10 +199,12 @@ void serve(Group& g) {
         for (std::size_t b : same) {
             LQCall& c = parked[b]->call;
             if (res == linalg::LQ_DIVERGED) {
-                c.result = linalg::lq_certified_scalar(c.B, c.m, c.n, c.rtol, *c.w, c.cv, c.skip, c.inverse);
+                c.result = c.E ? linalg::lq_certified_z_scalar(c.B, c.m, c.n, c.rtol, *c.w, c.cv, c.E, c.x, &c.z)
+                               : linalg::lq_certified_scalar(c.B, c.m, c.n, c.rtol, *c.w, c.cv, c.skip, c.inverse);
                 g_stats.scalar_calls.fetch_add(1, std::memory_order_relaxed);
             } else {
                 c.result = res;
+                c.z = zres;
             }
             parked[b]->parked = false;
         }
@@ -249,12 +267,26 @@ int lq_certified_parked(const double* B, int m, int n, double rtol, LQWork& w, d
                         bool inverse) {
 #if NONMIN_LANES
     lanes::Fiber& f = *lanes::tl_fiber;
-    f.call = {B, m, n, rtol, &w, cv, skip_redundant, inverse, 0};
+    f.call = {B, m, n, rtol, &w, cv, skip_redundant, inverse, nullptr, nullptr, 0, false};
     f.parked = true;
     lanes::to_main(f);
     return f.call.result;
 #else
     return lq_certified_scalar(B, m, n, rtol, w, cv, skip_redundant, inverse);
+#endif
+}
+
+int lq_certified_z_parked(const double* B, int m, int n, double rtol, LQWork& w, double* cv, double* E, double* x,
+                          bool* z) {
+#if NONMIN_LANES
+    lanes::Fiber& f = *lanes::tl_fiber;
+    f.call = {B, m, n, rtol, &w, cv, true, false, E, x, 0, false};
+    f.parked = true;
+    lanes::to_main(f);
+    *z = f.call.z;
+    return f.call.result;
+#else
+    return lq_certified_z_scalar(B, m, n, rtol, w, cv, E, x, z);
 #endif
 }
 

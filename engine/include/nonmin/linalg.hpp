@@ -161,6 +161,13 @@ void row_pattern_known(const int* start, const int* cols, const int* rows, int m
 int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* cv,
                  bool skip_redundant = false, bool inverse = true);
 
+// The rank decision's dense step in one call: lq_certified(B, m, n, rtol, w, cv, true, false)
+// and, when it returns LQ_INVERSE with r = w.rank and n − r ≤ r, lq_rows_min_norm(w, r, n, r,
+// n − r, E, cv, x) (*z = true; else *z = false, E and x untouched). Bitwise the two calls; in a
+// batch's lanes (engine/src/lanes.hpp) one parked call.
+int lq_certified_z(const double* B, int m, int n, double rtol, LQWork& w, double* cv, double* E, double* x,
+                   bool* z);
+
 // cv ← L⁻¹ cv by forward substitution with the L that lq_certified left in w.Wq (m rows) and
 // its reciprocal pivots w.rp.
 void lq_lower_subst(const LQWork& w, int m, double* cv);
