@@ -272,19 +272,23 @@ int certify_profile(const double* B, int m, int n, double rtol, LQWork& w, doubl
 
 namespace {
 
-// The lanes' decisions (lanes.hpp): one bool for a scalar run; for W runs in lock step the
-// lanes' common value, or `div` set when they differ (the lane evaluation is abandoned).
+// The lanes' decisions (lanes.hpp): one bool for a scalar run. For W runs in lock step, lane 0's
+// value, and in `acc` (the mask type, zero at the start) the lanes that differ from lane 0: the
+// evaluation goes on with lane 0's decisions (indices stay valid) and is abandoned at its end
+// when diverged(acc).
 #define NONMIN_INLINE __attribute__((always_inline)) inline
 NONMIN_INLINE bool decide(bool b, bool&) { return b; }
 template <class M>
-NONMIN_INLINE bool decide(const M& mask, bool& div) {
-    bool all = true, any = false;
-    for (int l = 0; l < static_cast<int>(sizeof(M) / sizeof(mask[0])); ++l) {
-        all = all && mask[l] != 0;
-        any = any || mask[l] != 0;
-    }
-    div = div || all != any;
-    return all;
+NONMIN_INLINE bool decide(const M& mask, M& acc) {
+    acc |= mask ^ (M{} + mask[0]);
+    return mask[0] != 0;
+}
+NONMIN_INLINE bool diverged(bool) { return false; }
+template <class M>
+NONMIN_INLINE bool diverged(const M& acc) {
+    bool any = false;
+    for (int l = 1; l < static_cast<int>(sizeof(M) / sizeof(acc[0])); ++l) any = any || acc[l] != 0;
+    return any;
 }
 NONMIN_INLINE double vsqrt(double x) { return std::sqrt(x); }
 NONMIN_INLINE double vabs(double x) { return std::fabs(x); }
@@ -423,7 +427,7 @@ NONMIN_INLINE void lq_rows_min_norm_t(const Wk& w, int m, int n, int first, int 
 template <class S, class Wk>
 NONMIN_INLINE int lq_certified_t(const S* B, int m, int n, S rtol, Wk& w, S* cv, bool skip_redundant, bool inverse) {
     constexpr bool lane = is_lane<S>;
-    bool div = false;
+    std::conditional_t<lane, decltype(S{} < S{}), bool> div{};  // (lanes: those off lane 0's decisions)
     if constexpr (lane) {
         if (inverse) return LQ_DIVERGED;
     }
@@ -443,9 +447,6 @@ NONMIN_INLINE int lq_certified_t(const S* B, int m, int n, S rtol, Wk& w, S* cv,
             const int last = w.Lr[k];
             w.Lr[k] = decide(x != 0.0, div) ? i : last;  // (a select, not a branch: the pattern is irregular)
         }
-    }
-    if constexpr (lane) {
-        if (div) return LQ_DIVERGED;
     }
     // a row whose residual is at round-off level is skipped (skip_redundant; else never)
     const double tol = redundant_row_tol(m, n);
@@ -480,8 +481,8 @@ NONMIN_INLINE int lq_certified_t(const S* B, int m, int n, S rtol, Wk& w, S* cv,
             H[0] = cnt;
             if constexpr (lane) {
                 // a candidate for a redundant row, or an all-zero row: the scalar kernel's
-                if (div || (skip_redundant && (decide(s <= REDUNDANT_CANDIDATE * REDUNDANT_CANDIDATE, div) || div)) ||
-                    decide(s == 0.0, div) || div)
+                if ((skip_redundant && decide(s <= REDUNDANT_CANDIDATE * REDUNDANT_CANDIDATE, div)) ||
+                    decide(s == 0.0, div))
                     return LQ_DIVERGED;
                 w.Pc[p] = 1;
                 // reflect(): reflector r of work row j, applied to rows j+1 … imax
@@ -592,7 +593,7 @@ NONMIN_INLINE int lq_certified_t(const S* B, int m, int n, S rtol, Wk& w, S* cv,
         proved = certifies(fb * (1.0 + 1e-12));
     }
     if constexpr (lane) {
-        if (div || !proved) return LQ_DIVERGED;  // (inverse: returned above)
+        if (diverged(div) || !proved) return LQ_DIVERGED;  // (inverse: returned above)
     } else {
         double* Li = w.Li.data();
         if (!proved) {
