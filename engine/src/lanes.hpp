@@ -17,7 +17,8 @@
 // else of a run depends on its neighbours: runs at different places of their loops (another
 // step, a failed run, a projection with more iterations) only meet at the next kernel call.
 //
-// Switches: NONMIN_LANES=0 in the environment turns the lanes off (the scalar batch);
+// Switches: NONMIN_LANES=0 in the environment turns the lanes off (the scalar batch), =2 takes
+// the SSE2 lanes (W = 2) on an AVX2 machine;
 // NONMIN_LANES_SCALAR_EVERY=K makes every K-th group of parked calls scalar (tests: runs served
 // now by lanes, now alone, stay bitwise equal). Only on x86-64 (elsewhere: the scalar batch).
 #pragma once
@@ -39,7 +40,7 @@ struct Stats {
 };
 Stats& stats();
 
-// Runs body(fiber) in `fibers` fibers on this thread until each returns, serving their parked
+// Runs body(fiber) in `fibers` fibers on this thread (fibers = width(): one call per lane) until each returns, serving their parked
 // kernel calls in lanes. body must not throw past its end (its exceptions are caught, the first
 // rethrown here after every fiber ended).
 void run_fibers(int fibers, const std::function<void(int)>& body);

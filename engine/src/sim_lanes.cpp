@@ -89,6 +89,7 @@ struct Group {
     std::exception_ptr error;
     long long served = 0;  // groups of parked calls served (NONMIN_LANES_SCALAR_EVERY)
     long long scalar_every = 0;
+    int W = 4;                   // lanes per kernel call (= fibers)
     std::vector<Fiber*> parked;  // serve()'s scratch (no allocation per round)
     std::vector<char> taken;
     std::vector<std::size_t> same;
@@ -145,7 +146,7 @@ void serve(Group& g) {
         if (f.parked) parked.push_back(&f);
     if (parked.empty()) return;
     const bool scalar_now = g.scalar_every > 0 && (++g.served % g.scalar_every) == 0;
-    const int W = width();
+    const int W = g.W;
     std::vector<char>& taken = g.taken;
     taken.assign(parked.size(), 0);
     for (std::size_t a = 0; a < parked.size(); ++a) {
@@ -222,7 +223,10 @@ bool available() {
 #endif
 }
 
-int width() { return cpu_avx2() ? 4 : 2; }
+int width() {
+    const char* e = std::getenv("NONMIN_LANES");  // "2": the SSE2 lanes on an AVX2 machine (tests)
+    return cpu_avx2() && !(e && e[0] == '2') ? 4 : 2;
+}
 
 Stats& stats() { return g_stats; }
 
@@ -233,6 +237,7 @@ void run_fibers(int fibers, const std::function<void(int)>& body) {
     Group g;
     g.body = &body;
     if (const char* e = std::getenv("NONMIN_LANES_SCALAR_EVERY")) g.scalar_every = std::atoll(e);
+    g.W = fibers == 4 ? 4 : 2;
     g.fibers.resize(static_cast<std::size_t>(fibers));
     for (int i = 0; i < fibers; ++i) {
         Fiber& f = g.fibers[static_cast<std::size_t>(i)];

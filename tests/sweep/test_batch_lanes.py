@@ -88,6 +88,20 @@ def test_calls_forced_out_of_the_lanes_mid_run(bar, monkeypatch):
             _same(mixed, scalar, i)
 
 
+def test_sse2_lanes_equal_the_scalar_batch(bar, monkeypatch):
+    # NONMIN_LANES=2: two lanes per call (the build's SSE2 form, used where AVX2 is missing)
+    Q, V = _cfb_states(7, seed=9)
+    t = np.linspace(0.0, 0.3, 31)
+    before = _stats()
+    two = _batch(bar.model, 0.3, Q, V, t, monkeypatch, NONMIN_LANES="2")
+    after = _stats()
+    if after["available"]:
+        assert after["lane_calls"] > before["lane_calls"]
+    scalar = _batch(bar.model, 0.3, Q, V, t, monkeypatch, NONMIN_LANES="0")
+    for i in range(7):
+        _same(two, scalar, i)
+
+
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")  # (the failed run, made again by simulate())
 def test_a_failed_run_among_lanes_leaves_its_neighbours_unchanged(bar, monkeypatch):
     Q, V = _cfb_states(6, seed=3)
