@@ -9,6 +9,12 @@ machine where wall times are not::
     valgrind --tool=callgrind python benchmarks/batch_instructions.py one 1     # and 3
 
 The crossed four-bar over 2 s, RK4 dt = 1e-3, samples every 10 ms (sweep_bench.py's runs).
+
+The batch evaluates W = 4 runs in lock-step lanes (AVX2; engine/src/lanes.hpp): a group needs
+4 runs, so its per-run count is (8 runs − 4 runs) / 4; ``NONMIN_LANES=0`` gives the scalar batch
+on the same runs, and ``one 4`` / ``one 8`` the same runs one by one::
+
+    NONMIN_LANES=1 valgrind --tool=callgrind python benchmarks/batch_instructions.py batch 4   # and 8
 """
 
 from __future__ import annotations

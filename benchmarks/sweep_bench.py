@@ -344,6 +344,19 @@ def work_precision(args: Any) -> int:
     return 0
 
 
+def _no_lanes(fn: Any) -> Any:
+    """fn() with the batch's lock-step lanes off (the scalar batch: engine/src/lanes.hpp)."""
+    before = os.environ.get("NONMIN_LANES")
+    os.environ["NONMIN_LANES"] = "0"
+    try:
+        return fn()
+    finally:
+        if before is None:
+            del os.environ["NONMIN_LANES"]
+        else:
+            os.environ["NONMIN_LANES"] = before
+
+
 def batch_vs_single(args: Any) -> int:
     """Wall time per run of the batch on 1 thread and on the default thread count (threads=None:
     every core) against the same runs through ``simulate`` one by one; interleaved rounds, medians.
@@ -354,11 +367,12 @@ def batch_vs_single(args: Any) -> int:
         "nonmin simulate one by one": lambda: nonmin_single(th0[: args.single], om0[: args.single]),
         "nonmin batch, 1 thread": lambda: nonmin_batch(th0, om0, 1),
         f"nonmin batch, default threads ({os.cpu_count()} cores)": lambda: nonmin_batch(th0, om0, None),
+        "nonmin batch, 1 thread, no lanes (NONMIN_LANES=0)": lambda: _no_lanes(lambda: nonmin_batch(th0, om0, 1)),
     }
     per, outs, walls, cpu = _interleaved(paths, args)
     b1, bd = outs["nonmin batch, 1 thread"], outs[list(paths)[2]]
     same = bool(np.array_equal(b1.q[: args.single], outs["nonmin simulate one by one"]))
-    same_t = bool(np.array_equal(b1.q, bd.q))
+    same_t = bool(np.array_equal(b1.q, bd.q)) and bool(np.array_equal(b1.q, outs[list(paths)[3]].q))
     load1 = os.getloadavg()
     print(f"load average before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, after {load1[0]:.2f} {load1[1]:.2f} "
           f"{load1[2]:.2f}\n\n{args.runs} runs (batch) / {args.single} runs (one by one) of the crossed four-bar "
@@ -369,7 +383,7 @@ def batch_vs_single(args: Any) -> int:
     for k, v in per.items():
         print(f"| {k} | {v * 1e3:.3f} | {v / base:.3f} | {cpu[k] * 1e3:.3f} | {cpu[k] / cbase:.3f} |")
     print(f"\nbatch (1 thread) equals simulate bitwise on the {args.single} runs: {same}; "
-          f"batch 1 thread equals batch default threads bitwise: {same_t}; failed runs: "
+          f"batch 1 thread equals batch default threads and the batch without lanes bitwise: {same_t}; failed runs: "
           f"{int(np.count_nonzero(~b1.success))}")  # fmt: skip
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).with_name("sweep_bench_batch_vs_single.json").write_text(
