@@ -183,7 +183,8 @@ void bind_control(nb::module_& m) {
                const std::vector<std::array<int, 4>>& qblocks, CArr1 u_min, CArr1 u_max, double rtol,
                bool raise_infeasible, bool project_target, bool reject, bool mass_metric,
                const std::vector<int>& fixed, nb::object reference,
-               const std::vector<std::pair<int, nb::object>>& forces, nb::object other_active_set, double lambda, bool own_terms) {
+               const std::vector<std::pair<int, nb::object>>& forces, nb::object other_active_set, double lambda, bool own_terms, double sigma,
+               nb::object xi0) {
                 auto vec = [](CArr1 a) { return Vec(CVecMap(a.data(), static_cast<Eigen::Index>(a.shape(0)))); };
                 auto mat = [](CArr2 a) {
                     return Mat(CMatMap(a.data(), static_cast<Eigen::Index>(a.shape(0)),
@@ -207,6 +208,8 @@ void bind_control(nb::module_& m) {
                 s.fixed = fixed;
                 s.lambda = lambda;
                 s.own_terms = own_terms;
+                s.sigma = sigma;
+                if (!xi0.is_none()) s.xi0 = vec(nb::cast<CArr1>(xi0));
                 std::vector<nb::object> keep;
                 if (!reference.is_none()) {
                     s.reference = nb::cast<sim::Signal*>(reference);
@@ -234,7 +237,8 @@ void bind_control(nb::module_& m) {
             nb::arg("quaternion_blocks"), nb::arg("u_min"), nb::arg("u_max"), nb::arg("rtol"),
             nb::arg("raise_infeasible"), nb::arg("project_target"), nb::arg("reject"), nb::arg("mass_metric"),
             nb::arg("fixed"), nb::arg("reference").none(), nb::arg("forces"),
-            nb::arg("other_active_set").none() = nb::none(), nb::arg("lambda_") = 1.0, nb::arg("own_terms") = false)
+            nb::arg("other_active_set").none() = nb::none(), nb::arg("lambda_") = 1.0, nb::arg("own_terms") = false, nb::arg("sigma") = 0.0,
+            nb::arg("xi0").none() = nb::none())
         .def(
             "probe",
             [](SimControl& c, const Program& prog, double t, CArr1 q, CArr1 qd, const std::vector<int>& active) {

@@ -133,6 +133,8 @@ Projected::Projected(const Program& prog, ControlSpec spec)
         throw EngineError("controller: sizes do not match the program");
     if (s_.law == Law::regulator && s_.q_star.size() != n)
         throw EngineError("controller: the target must have the program's n entries");
+    if (!(std::isfinite(s_.sigma) && s_.sigma >= 0.0) || (s_.sigma > 0.0 && s_.xi0.size() != n))
+        throw EngineError("controller: σ must be ≥ 0, with ξ₀ of n entries when > 0");
     if (s_.law != Law::regulator && (!s_.reference || s_.reference->dim() != n))
         throw EngineError("controller: the tracker needs a reference of dimension n");
     if (s_.law == Law::passivity) {
@@ -615,10 +617,29 @@ Status Projected::law(double t, const double* q, const double* qd, const Terms& 
             if ((s = prog_->evaluate(t, q, zero_.data(), mask_.data(), NEED_H, Tg_, *ws_)) != Status::ok) return s;
             fg = &Tg_.h;
         }
-        for (int i = 0; i < n; ++i) {
-            double a = (*fg)[i];
-            for (int j = 0; j < n; ++j) a += s_.Kp(i, j) * (q[j] - qs_[j]) + s_.Kd(i, j) * qd[j];
-            w_[i] = a;
+        if (s_.sigma > 0.0) {  // spring = e + σ‖e‖η (Regulator.law), into e_
+            for (int i = 0; i < n; ++i) e_[i] = q[i] - qs_[i];
+            const double nv = norm2(qd, n);
+            if (nv > 0.0) {
+                for (int i = 0; i < n; ++i) x_[i] = qd[i] / nv;
+            } else {
+                project(s_.xi0.data(), x_.data());
+                const double npx = norm2(x_.data(), n);
+                for (int i = 0; i < n; ++i) x_[i] = npx > 0.0 ? x_[i] / npx : 0.0;
+            }
+            const double ke = s_.sigma * norm2(e_.data(), n);
+            for (int i = 0; i < n; ++i) e_[i] += ke * x_[i];
+            for (int i = 0; i < n; ++i) {
+                double a = (*fg)[i];
+                for (int j = 0; j < n; ++j) a += s_.Kp(i, j) * e_[j] + s_.Kd(i, j) * qd[j];
+                w_[i] = a;
+            }
+        } else {
+            for (int i = 0; i < n; ++i) {
+                double a = (*fg)[i];
+                for (int j = 0; j < n; ++j) a += s_.Kp(i, j) * (q[j] - qs_[j]) + s_.Kd(i, j) * qd[j];
+                w_[i] = a;
+            }
         }
         project(w_.data(), fpar_.data());
         for (int i = 0; i < n; ++i) fpar_[i] = -fpar_[i];

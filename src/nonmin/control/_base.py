@@ -157,7 +157,7 @@ class ProjectedController(Controller):
         return float(self.law(float(t), qv, v, ev, act).lyapunov)
 
     def engine_controller(self, model: Any, program: Any, active: frozenset[str]) -> Any | None:
-        """The engine's compiled form for the active set ``active`` (Regulator with σ = 0, the
+        """The engine's compiled form for the active set ``active`` (Regulator, the
         Tracker (computed torque; passivity on planar and robot programs), ForceControl over
         either; :mod:`nonmin.control._engine`), else None (called back). See :meth:`nonmin.control.Controller.engine_controller`."""
         from ._engine import compile_controller

@@ -3,12 +3,13 @@
 :func:`compile_controller` turns a controller value into the engine's ``SimControl`` for one
 active set, or returns None when it must be called back (a user controller, the Tracker's
 passivity law on a program without C and Ȧ in the engine — spatial, SymPy, function models —,
-a Regulator with σ > 0, a controller of a model of another layout or without a compiled
+a controller of a model of another layout or without a compiled
 program). A controller built on another model instance with the simulated model's layout is
 compiled on its own model's program and evaluates it at every call (``own_terms``), as the
 Python controller evaluates its own model. What compiles:
 
-* :class:`~nonmin.control.Regulator` (σ = 0): its target per active set (projected here once;
+* :class:`~nonmin.control.Regulator` (σ ≥ 0: the spring e + σ‖e‖η of its law): its target
+  per active set (projected here once;
   under an active rheonomic constraint the engine projects it at every time, as ``target_for``);
 * :class:`~nonmin.control.Tracker` with ``method="computed_torque"``, and with
   ``method="passivity"`` on planar models (constant M: C = 0, Ȧ from the program's tangent) and
@@ -144,8 +145,11 @@ def _compile(ctrl: Any, model: Model, program: Any, active: frozenset[str], othe
     n = model.n
     rheonomic = any(x.kind == "rheonomic" and x.name in active for x in model.constraints)
     reference = None
-    if _is(ctrl, "Regulator") and ctrl.sigma == 0.0:
+    sigma, xi0 = 0.0, None
+    if _is(ctrl, "Regulator"):
         law = 0
+        sigma = float(ctrl.sigma)
+        xi0 = _arr(c._xi0) if sigma > 0.0 else None
         project = rheonomic  # target_for projects at every time then
         q_star = c._q_star if project else c.target_for(active)
     elif _is(ctrl, "Tracker") and ctrl.method == "computed_torque":
@@ -165,7 +169,7 @@ def _compile(ctrl: Any, model: Model, program: Any, active: frozenset[str], othe
         program, law, _arr(q_star), _arr(c._Kp), _arr(c._Kd), [tuple(int(i) for i in b) for b in c._qblocks],
         _arr(o._lo), _arr(o._hi), -1.0 if o.rtol is None else float(o.rtol), o.on_infeasible == "raise",
         project, ctrl.target_policy == "reject", ctrl.metric == "mass", [int(i) for i in ctrl.fixed],
-        reference, forces, other, float(getattr(ctrl, "lambda_", 1.0)), own_terms,
+        reference, forces, other, float(getattr(ctrl, "lambda_", 1.0)), own_terms, sigma, xi0,
     )  # fmt: skip
 
 

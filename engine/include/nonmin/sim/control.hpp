@@ -104,6 +104,9 @@ struct ControlSpec {
     // constructor) at every call instead of reading the loop's terms, as the Python controller
     // evaluates its own model
     bool own_terms = false;
+    // regulator: spring e + σ‖e‖η (Regulator.sigma > 0), η = q̇/‖q̇‖, or Pξ₀/‖Pξ₀‖ at rest
+    double sigma = 0.0;
+    Vec xi0;
     // force control: (constraint index, desired force λ*(t) of its rows); borrowed signals
     std::vector<std::pair<int, Signal*>> forces;
     // evaluated instead of the compiled law when the loop's active set is no longer the one the
