@@ -532,16 +532,7 @@ NONMIN_INLINE int lq_certified_t(const S* B, int m, int n, S rtol, Wk& w, S* cv,
             for (int k = 0; k <= a; ++k) Wq[a * n + k] = Wq[static_cast<long>(src) * n + k];
     }
     m = r;
-    {  // pivot_order: Pc, the reflectors' pivot columns in order, then the other columns
-        for (int i = 0; i < m; ++i) {
-            const int p = w.Hx[static_cast<long>(i) * (n + 1) + 1];
-            w.Pc[i] = p;
-            w.Lr[p] = -2;
-        }
-        int c = m;
-        for (int k = 0; k < n; ++k)
-            if (w.Lr[k] != -2) w.Pc[c++] = k;
-    }
+    pivot_order(w, m, n);  // Pc: the reflectors' pivot columns in order, then the others
     S fl = S{}, row2max = S{};  // ‖L‖_F², max_a ‖L_a‖²
     for (int i = 0; i < m; ++i) {
         S ri = S{};

@@ -275,9 +275,11 @@ def test_force_control_feasible_takes_the_certified_lq(monkeypatch: pytest.Monke
     assert stats["fast_actuations"] > 0 and stats["svd_actuations"] == 0, stats
 
 
-def test_force_control_through_contact_and_switched() -> None:
-    """arm2r_wall: a computed-torque tracker reaches the wall, then commands 5 N on it; the
-    engine runs each active set with the compiled controller (events by the general driver)."""
+@pytest.mark.parametrize("method", ["computed_torque", "passivity"])
+def test_force_control_through_contact_and_switched(method: str) -> None:
+    """arm2r_wall: a tracker (computed torque, or passivity: Law::passivity) reaches the wall,
+    then commands 5 N on it; the engine runs each active set with the compiled controller
+    (events by the general driver)."""
     mech = library.get("arm2r_wall")
     m = mech.model
 
@@ -288,7 +290,7 @@ def test_force_control_through_contact_and_switched() -> None:
     ref = Reference.spline(ts, np.array([arm2r_configuration(path(t)) for t in ts]))
 
     def make() -> Any:
-        trk = Tracker(m, ref, Kp=400.0, Kd=40.0, method="computed_torque")
+        trk = Tracker(m, ref, Kp=400.0, Kd=40.0, lambda_=10.0, method=method)
         return Switched(m, {frozenset({"shoulder", "elbow"}): trk}, default=ForceControl(trk, {"wall": 5.0}))
 
     free = _compiled(make(), m, frozenset({"shoulder", "elbow"}))

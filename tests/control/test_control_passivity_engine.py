@@ -17,17 +17,15 @@ import numpy as np
 import pytest
 
 from nonmin import library
-from nonmin.control import ForceControl, Reference, Regulator, Switched, Tracker
+from nonmin.control import Reference, Regulator, Tracker
 from nonmin.core import use_backend
 from nonmin.model.planar import PlanarBuilder
 from nonmin.sim import _engine, simulate
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "examples"))
 from control_scenes import (
-    arm2r_configuration,
     crank_four_bar,
     crank_four_bar_configuration,
-    wall_tip_path,
 )
 
 FIELDS = ("q", "qd", "qdd", "f_c", "u")
@@ -245,36 +243,6 @@ def test_rheonomic_planar_passivity_per_call_and_run() -> None:
     a, b = _pair(model, make, t_span=(0.0, 0.3), q0=q0, dt=2e-3)
     _close(a, b)
     assert float(np.max(np.abs(a.u))) > 1.0
-
-
-def test_switched_wall_passivity_engine_equals_python() -> None:
-    """arm2r_wall: a passivity tracker reaches the wall, then force control over it commands 5 N
-    (Switched; each active set compiled, the contact event by the general driver)."""
-    mech = library.get("arm2r_wall")
-    m = mech.model
-
-    def path(t: float) -> np.ndarray:
-        return wall_tip_path(t, t_reach=0.6, t_settle=0.3, t_slide=1.0)
-
-    ts = np.linspace(0.0, 1.2, 61)
-    ref = Reference.spline(ts, np.array([arm2r_configuration(path(t)) for t in ts]))
-
-    def make() -> Any:
-        trk = Tracker(m, ref, Kp=400.0, Kd=40.0, lambda_=10.0)
-        return Switched(m, {frozenset({"shoulder", "elbow"}): trk}, default=ForceControl(trk, {"wall": 5.0}))
-
-    free = _compiled(make(), m, frozenset({"shoulder", "elbow"}))
-    touch = _compiled(make(), m, frozenset({"shoulder", "elbow", "wall"}))
-    assert type(free).__name__ == type(touch).__name__ == "SimControl"
-    a = simulate(mech, (0.0, 0.7), method="rk4", dt=4e-3, controller=make(), engine="engine", progress=False)
-    with use_backend("numpy"):
-        b = simulate(mech, (0.0, 0.7), method="rk4", dt=4e-3, controller=make(), engine="python", progress=False)
-    assert a.success and b.success
-    assert [e.name for e in a.events] == [e.name for e in b.events] and len(a.events) == 1
-    assert abs(a.events[0].t - b.events[0].t) < 1e-9
-    assert len(a) == len(b)
-    np.testing.assert_allclose(a.q, b.q, rtol=0, atol=1e-7)
-    np.testing.assert_allclose(a.u, b.u, rtol=0, atol=1e-5 * float(np.max(np.abs(b.u))))
 
 
 # ----------------------------------------------------------------------------- robots (TreeProgram)
