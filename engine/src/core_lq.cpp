@@ -159,8 +159,10 @@ bool reflect(double* X, LQWork& w, int j, int row, int p, double x0, double s, i
     return true;
 }
 
-// Pc: the reflectors' pivot columns in order, then the other columns (Lr is scratch).
-void pivot_order(LQWork& w, int m, int n) {
+// Pc: the reflectors' pivot columns in order, then the other columns (Lr is scratch); W is
+// LQWork or the lanes' workspace (the same integer bookkeeping).
+template <class W>
+void pivot_order(W& w, int m, int n) {
     for (int i = 0; i < m; ++i) {
         const int p = w.Hx[static_cast<long>(i) * (n + 1) + 1];
         w.Pc[i] = p;
