@@ -49,15 +49,21 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def _committed(store: Path) -> str:
-    """What an interrupted sweep's store holds, in words."""
-    from ._run import open_sweep
+    """What an interrupted sweep's store holds, in words: the runs of the blocks with a commit
+    record (a block's status is written before its record, so an interrupt between the two
+    leaves statuses of runs that are not committed and that the rerun computes again)."""
+    import zarr
+
+    from ._store import commit_records
 
     try:
-        status = open_sweep(store)["status"].values
+        group = zarr.open_group(str(store), mode="r")
+        runs = int(group["status"].shape[0])
+        records = commit_records(group)
     except Exception:  # nothing committed yet (no store), or a store being written
         return f"{store}: no run committed yet"
-    done = int(sum(str(x) != "pending" for x in status))
-    return f"{store}: {done} of {len(status)} runs committed"
+    done = sum(int(r["runs"][1]) - int(r["runs"][0]) for r in records if "runs" in r)
+    return f"{store}: {done} of {runs} runs committed"
 
 
 def cmd_plot_sweep(args: argparse.Namespace) -> int:

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["SweepStore"]
+__all__ = ["SweepStore", "commit_records"]
 
 FORMAT = "nonmin.sweep"
 FORMAT_VERSION = 1
@@ -40,6 +40,20 @@ SUMMARIES: dict[str, tuple[Any, Any]] = {
     "closure": ("float64", float("nan")),
     "wall_time": ("float64", float("nan")),
 }
+
+
+def commit_records(group: Any) -> list[dict[str, Any]]:
+    """The commit records of a sweep's Zarr group (one per committed block; an entry that is
+    empty or not a whole JSON record is not committed)."""
+    out = []
+    for text in (str(x) for x in np.asarray(group["commit"][:]).tolist()):
+        if not text:
+            continue
+        try:
+            out.append(json.loads(text))
+        except ValueError:
+            continue  # not a whole record: not committed
+    return out
 
 
 class SweepStore:
@@ -111,15 +125,7 @@ class SweepStore:
 
     def commits(self) -> list[dict[str, Any]]:
         """The commit records (one per committed block)."""
-        out = []
-        for text in (str(x) for x in np.asarray(self.group["commit"][:]).tolist()):
-            if not text:
-                continue
-            try:
-                out.append(json.loads(text))
-            except ValueError:
-                continue  # not a whole record: not committed
-        return out
+        return commit_records(self.group)
 
     def done(self) -> set[int]:
         """Blocks with a commit record."""
