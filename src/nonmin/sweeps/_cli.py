@@ -57,7 +57,7 @@ def _committed(store: Path) -> str:
     from ._store import commit_records
 
     try:
-        group = zarr.open_group(str(store), mode="r")
+        group: Any = zarr.open_group(str(store), mode="r")
         runs = int(group["status"].shape[0])
         records = commit_records(group)
     except Exception:  # nothing committed yet (no store), or a store being written
