@@ -120,9 +120,20 @@ def test_refresh_tool_rewrites_output_blocks(tmp_path: Path) -> None:
     assert "```text\nkept\n```" in new and "stale" not in new
 
 
-#: docs/contact.md's friction section: the claims its prose makes (the page's other claims are
-#: checked by tests/analysis/test_contact_doc.py).
+#: docs/contact.md: the claims its prose makes. Its first sections: reactions vs the closed
+#: form, undetermined redundant pins, an impact's impulses by the lever rule, a driven
+#: slider-crank vs its closed form, driver torque = inverse dynamics, redundant actuation; its
+#: friction section: slip and stick against the closed forms, Painlevé, a two-point rest.
 CONTACT_CLAIMS = [
+    "ground -> bar | force on the bar, bar frame: (1501, 2)",
+    "all determined: True",
+    "pivot determined: [False False  True]  pivot2: [False False  True]",
+    "engine program: True",
+    "all ok: True",
+    "ok=True fully_actuated=True dof=2 redundancy=2",
+    "floor_l on the bar [0.       1.461643] N s, determined: True",
+    "floor_r on the bar [0.       2.923286] N s, determined: True",
+    "lever rule: 1.461643 and 2.923286 N s",
     "mu = 0.3: slip, s(1 s) = -1.060220 m (closed form -1.060220)",
     "mu = 0.6: stick, s(1 s) = 0.000000 m",
     "stick:floor at t = 0.407747196738 s, v0/(3 mu g) = 0.407747196738 s",
@@ -132,18 +143,33 @@ CONTACT_CLAIMS = [
     "at rest: {'heel': ('stick', 5.886), 'toe': ('stick', 5.886)}",
     "stick:floor at t = 0.6371049949 s (v0/(mu g) = 0.6371049949)",
 ]
+#: docs/contact.md: printed residual -> the bound it must meet
+CONTACT_BOUNDS = {
+    r"max \|F - closed form\| = (\S+) N": 1e-8,
+    r"max \|x - closed form\| = (\S+) m": 1e-9,
+    r"max \|u_inverse - driver torque\| = (\S+) N m": 1e-7,
+    r"replayed q̈ error (\S+)": 1e-9,
+}
 
 
-def test_contact_page_output_is_current(tmp_path: Path) -> None:
-    """docs/contact.md (contact and friction tutorial): every shown output is what it prints."""
+def test_contact_page_runs_and_its_output_is_current(tmp_path: Path) -> None:
+    """docs/contact.md (contact, reactions and friction): its python blocks run in order, every
+    shown output is what they print, and the output carries the prose's claims and meets its
+    bounds. (One run of the page for all three: tests/analysis/test_contact_doc.py used to run it
+    a second time, as a script, for the claims of its first sections.)"""
     page = ROOT / "docs" / "contact.md"
+    assert len(python_blocks(page.read_text(encoding="utf-8"))) >= 5
     proc = run_checked(page, tmp_path)
     assert proc.returncode == 0, (
-        "docs/contact.md shows stale output (python docs/refresh_tutorials.py docs/contact.md):\n"
+        "docs/contact.md fails or shows stale output (python docs/refresh_tutorials.py docs/contact.md):\n"
         f"{proc.stdout[-3000:]}\n{proc.stderr[-5000:]}"
     )
     for phrase in CONTACT_CLAIMS:
-        assert phrase in proc.stdout, f"docs/contact.md: output lacks {phrase!r}"
+        assert phrase in proc.stdout, f"docs/contact.md: output lacks {phrase!r}:\n{proc.stdout}"
+    for pattern, bound in CONTACT_BOUNDS.items():
+        m = re.search(pattern, proc.stdout)
+        assert m is not None, f"docs/contact.md: output lacks {pattern!r}:\n{proc.stdout}"
+        assert float(m.group(1)) < bound, f"docs/contact.md: {pattern}: {m.group(1)} ≥ {bound}"
 
 
 def test_architecture_page_example_runs(tmp_path: Path) -> None:
