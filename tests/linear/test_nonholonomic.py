@@ -15,10 +15,9 @@ import pytest
 
 import nonmin
 
-sp = pytest.importorskip("sympy")
-
 
 def _sleigh(m=1.3, I=0.4, a=0.35):
+    sp = pytest.importorskip("sympy")  # here, not at collection (every xdist worker)
     from nonmin.model.symbolic import SymbolicConstraint, SymbolicModel
 
     x, y, th = sp.symbols("x y theta")

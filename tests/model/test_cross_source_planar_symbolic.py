@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import sympy as sp
 
 from nonmin.model.planar import PlanarBuilder
 from nonmin.model.symbolic import SymbolicConstraint, SymbolicModel
@@ -36,6 +35,7 @@ def _planar():
 
 
 def _symbolic():
+    import sympy as sp
     qs = sp.symbols("x1 y1 th1 x2 y2 th2 x3 y3 th3")
     vs = sp.symbols("x1d y1d th1d x2d y2d th2d x3d y3d th3d")
     T = 0

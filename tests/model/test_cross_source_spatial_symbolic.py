@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import sympy as sp
 
 from nonmin.library.top import top_model, top_state
 from nonmin.model.symbolic import SymbolicConstraint, SymbolicModel
@@ -15,6 +14,7 @@ AGREE = 1e-10
 
 
 def _sympy_top(mass, l, I1, I3, g) -> SymbolicModel:
+    import sympy as sp
     x, y, z, e0, e1, e2, e3 = q = sp.symbols("x y z e0 e1 e2 e3")
     qd = sp.symbols("xd yd zd e0d e1d e2d e3d")
     G = sp.Matrix([[-e1, e0, e3, -e2], [-e2, -e3, e0, e1], [-e3, e2, -e1, e0]])

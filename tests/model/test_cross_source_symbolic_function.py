@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import sympy as sp
 
 from nonmin.model import FunctionConstraint, FunctionModel
 from nonmin.model.symbolic import SymbolicConstraint, SymbolicModel
@@ -19,6 +18,7 @@ PARAMS = {"m1": 1.0, "m2": 2.0, "m3": 1.5, "l1": 1.0, "l2": 2.2, "l3": 1.6, "d":
 def _sympy_fourbar() -> SymbolicModel:
     """Absolute link angles θ1 (crank at the origin), θ2 (coupler), θ3 (rocker at (d, 0));
     uniform slender rods (I = m l²/12)."""
+    import sympy as sp
     t1, t2, t3 = sp.symbols("theta1 theta2 theta3")
     w1, w2, w3 = sp.symbols("omega1 omega2 omega3")
     m1, m2, m3, l1, l2, l3, d, g = sp.symbols("m1 m2 m3 l1 l2 l3 d g")

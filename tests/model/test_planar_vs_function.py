@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import sympy as sp
 
 from nonmin.library import crossed_four_bar
 from nonmin.model import FunctionConstraint, FunctionModel
@@ -15,6 +14,7 @@ G = 9.81
 
 
 def _function_four_bar() -> FunctionModel:
+    import sympy as sp
     q = sp.symbols("x1 y1 t1 x2 y2 t2 x3 y3 t3")
     qd = sp.symbols("xd1 yd1 td1 xd2 yd2 td2 xd3 yd3 td3")
     x1, y1, t1, x2, y2, t2, x3, y3, t3 = q
@@ -59,12 +59,15 @@ def _function_four_bar() -> FunctionModel:
     )
 
 
-FN = _function_four_bar()
-PL = crossed_four_bar().model
+@pytest.fixture(scope="module")
+def models():
+    # built when a test asks, not when the module is collected (by every xdist worker)
+    return crossed_four_bar().model, _function_four_bar()
 
 
 @pytest.mark.parametrize("seed", range(5))
-def test_planar_and_function_sources_agree(seed):
+def test_planar_and_function_sources_agree(seed, models):
+    PL, FN = models
     rng = np.random.default_rng(seed)
     q = rng.uniform(-2, 2, 9)
     qd = rng.standard_normal(9)

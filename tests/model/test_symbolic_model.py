@@ -7,7 +7,6 @@ import sys
 
 import numpy as np
 import pytest
-import sympy as sp
 
 from nonmin.errors import InputError, MissingDependencyError, ModelError, UnknownNameError
 from nonmin.model import Model
@@ -26,6 +25,7 @@ def slider_pendulum() -> SymbolicModel:
     """A cart (x) with a pendulum (θ), in (x, θ, xp, yp) with the bob's position as extra
     coordinates tied by two holonomic rows; a rheonomic drive of the cart, a nonholonomic
     row and a unilateral floor; a damper, an input and outputs."""
+    import sympy as sp
     x, th, xp, yp = sp.symbols("x theta xp yp")
     xd, thd, xpd, ypd = sp.symbols("xd thetad xpd ypd")
     t = sp.Symbol("t")
@@ -113,6 +113,7 @@ def test_constraint_derivatives_against_finite_differences(slider_pendulum: Symb
 
 @pytest.fixture(scope="module")
 def double_pendulum() -> SymbolicModel:
+    import sympy as sp
     a, b = sp.symbols("a b")
     ad, bd = sp.symbols("ad bd")
     m1, m2, l1, l2, g = sp.symbols("m1 m2 l1 l2 g")
@@ -144,6 +145,7 @@ def test_christoffel_and_gradient(double_pendulum: SymbolicModel) -> None:
 
 
 def test_replace_params_without_recompiling(double_pendulum: SymbolicModel) -> None:
+    import sympy as sp
     m = double_pendulum
     q = np.array([0.3, -0.2])
     m2 = m.replace(params={"m2": 4.0})
@@ -160,6 +162,7 @@ def test_replace_params_without_recompiling(double_pendulum: SymbolicModel) -> N
 
 
 def test_from_mass_matrix_agrees_with_from_energy(double_pendulum: SymbolicModel) -> None:
+    import sympy as sp
     a, b = sp.symbols("a b")
     m1, m2, l1, l2, g = sp.symbols("m1 m2 l1 l2 g")
     M = sp.Matrix(
@@ -183,6 +186,7 @@ def test_from_mass_matrix_agrees_with_from_energy(double_pendulum: SymbolicModel
 
 
 def test_bad_input() -> None:
+    import sympy as sp
     x, xd, k = sp.symbols("x xd k")
     with pytest.raises(ModelError, match="homogeneous quadratic"):
         SymbolicModel.from_energy("bad", q=[x], qd=[xd], T=xd**2 / 2 + xd, V=0)
@@ -207,6 +211,7 @@ def test_bad_input() -> None:
 
 
 def test_missing_sympy_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
+    import sympy as sp
     x, xd = sp.symbols("x xd")
     monkeypatch.setitem(sys.modules, "sympy", None)  # makes `import sympy` fail
     with pytest.raises(MissingDependencyError, match=r"nonmin\[sympy\]"):

@@ -14,7 +14,6 @@ import pickle
 
 import numpy as np
 import pytest
-import sympy as sp
 from program_check import check_terms, close
 from test_cross_source_planar_symbolic import _symbolic as planar_fourbar_sympy
 from test_cross_source_spatial_symbolic import _sympy_top
@@ -58,6 +57,7 @@ def _subsets(model: SymbolicModel, seed: int):
 def every_op_model() -> SymbolicModel:
     """Uses every instruction of the tape (functions that are not differentiated — Abs, sign,
     Min, Max — only in f_passive and B, whose expressions are not differentiated)."""
+    import sympy as sp
     x, y, z = sp.symbols("x y z")
     xd, yd, zd = sp.symbols("xd yd zd")
     t = sp.Symbol("t")
@@ -81,10 +81,14 @@ def every_op_model() -> SymbolicModel:
     )  # fmt: skip
 
 
-EVERY_OP = every_op_model()
+@pytest.fixture(scope="module")
+def every_op() -> SymbolicModel:
+    # built when a test asks, not when the module is collected (by every xdist worker)
+    return every_op_model()
 
 
-def test_every_instruction_is_used_and_matches_lambdify() -> None:
+def test_every_instruction_is_used_and_matches_lambdify(every_op: SymbolicModel) -> None:
+    EVERY_OP = every_op
     prog = EVERY_OP.engine_program()
     from nonmin.model.symbolic._model import _tape_of
 
@@ -130,7 +134,8 @@ def test_cross_source_models(build) -> None:
                 check(model, t, q, qd, active)
 
 
-def test_partial_needs_compute_what_is_asked() -> None:
+def test_partial_needs_compute_what_is_asked(every_op: SymbolicModel) -> None:
+    EVERY_OP = every_op
     prog = EVERY_OP.engine_program()
     mask = EVERY_OP.active_mask(frozenset(EVERY_OP.constraint_names))
     t, q, qd = next(_states(EVERY_OP, 9))
@@ -151,6 +156,7 @@ def test_partial_needs_compute_what_is_asked() -> None:
 
 
 def test_unsupported_function_falls_back_to_the_callback() -> None:
+    import sympy as sp
     x, xd = sp.symbols("x xd")
     model = SymbolicModel.from_energy("gamma_fn", q=[x], qd=[xd], T=xd**2 / 2, V=sp.gamma(2 + x**2))
     assert model.engine_program() is None
@@ -159,6 +165,7 @@ def test_unsupported_function_falls_back_to_the_callback() -> None:
 
 
 def test_non_finite_outputs_are_reported() -> None:
+    import sympy as sp
     x, xd = sp.symbols("x xd")
     model = SymbolicModel.from_energy("log", q=[x], qd=[xd], T=xd**2 / 2, V=sp.log(x))
     prog = model.engine_program()
