@@ -2,6 +2,7 @@
 
 import importlib.util
 import os
+import re
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -45,6 +46,31 @@ def pytest_cmdline_main(config: pytest.Config) -> None:
             config.option.numprocesses = 2
             if config.getoption("dist", "no") == "no":
                 config.option.dist = "worksteal"
+
+
+#: A test module marked slow as a whole (``pytestmark = pytest.mark.slow`` at its top level).
+_SLOW_MODULE = re.compile(r"^pytestmark\s*=\s*pytest\.mark\.slow\s*$", re.M)
+
+
+def pytest_ignore_collect(collection_path: Path, config: pytest.Config) -> bool | None:
+    """A run that deselects the slow tests with the default ``-m "not slow"`` (pyproject's
+    addopts) does not import a test module marked slow as a whole: all its tests would be
+    deselected, but the import ran in every xdist worker (tests/sweep/test_dask.py imported
+    distributed, dask, xarray, zarr, pandas and pyarrow at collection: 4.7 s of CPU per
+    worker). Such a module is left out instead of deselected; ``-m slow`` (or any other ``-m``)
+    and a module named on the command line collect it as before."""
+    if (
+        collection_path.suffix == ".py"
+        and collection_path.name.startswith("test_")
+        and config.getoption("markexpr", "") == "not slow"
+    ):
+        try:
+            text = collection_path.read_text(encoding="utf-8")
+        except OSError:
+            return None
+        if _SLOW_MODULE.search(text):
+            return True
+    return None
 
 
 #: The longest tests of a fresh clone, longest first (``--durations`` of the default suite on a

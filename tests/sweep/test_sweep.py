@@ -11,13 +11,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-xr = pytest.importorskip("xarray")
-pytest.importorskip("zarr")
+from nonmin import library, sweep
+from nonmin.errors import InputError
+from nonmin.sim import simulate
+from nonmin.sweeps import Grid, SweepSpec, Uniform, open_sweep, parse_vary, run_block
 
-from nonmin import library, sweep  # noqa: E402
-from nonmin.errors import InputError  # noqa: E402
-from nonmin.sim import simulate  # noqa: E402
-from nonmin.sweeps import Grid, SweepSpec, Uniform, open_sweep, parse_vary, run_block  # noqa: E402
+
+@pytest.fixture(autouse=True)
+def _sweep_extras() -> None:
+    """Skips without the sweep extra; imported by the tests that run, not at collection (every
+    xdist worker collects every module: xarray and zarr took 3.5 s of CPU to import)."""
+    pytest.importorskip("xarray")
+    pytest.importorskip("zarr")
 
 SCENARIO = """
 name = "crossed four-bar sweep"
