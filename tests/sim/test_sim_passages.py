@@ -7,6 +7,7 @@ method; σ_min from NumPy's SVD."""
 
 from __future__ import annotations
 
+import functools
 import itertools
 from typing import Any
 
@@ -277,14 +278,15 @@ def test_crossed_four_bar_issue_target() -> None:
     assert all(a > b for a, b in itertools.pairwise(errs)), errs
 
 
-def _cfb_change_points(n: int) -> list[float]:
+@functools.cache  # 2 s of reference solves (Brent on rtol 1e-13 runs): once, not once per test
+def _cfb_change_points(n: int) -> tuple[float, ...]:
     def ref(t: Any) -> dict[str, np.ndarray]:
         return crossed_four_bar_reference(t, rtol=1e-13, atol=1e-13)
 
     tt = np.linspace(0.0, 1.4, 701)
     s = np.sin(ref(tt)["theta"])
     idx = np.nonzero(np.sign(s[1:]) != np.sign(s[:-1]))[0][:n]
-    return [float(brentq(lambda t: float(np.sin(ref([t])["theta"][0])), tt[i], tt[i + 1], xtol=1e-15)) for i in idx]
+    return tuple(float(brentq(lambda t: float(np.sin(ref([t])["theta"][0])), tt[i], tt[i + 1], xtol=1e-15)) for i in idx)
 
 
 @pytest.mark.parametrize("engine", ["auto", "python"])
