@@ -129,6 +129,29 @@ def test_model_base_keys_and_pickling():
     np.testing.assert_array_equal(a["q"][1], ref.q)
 
 
+
+def test_dask_task_spec_is_sent_without_axes_and_unpickled_once_per_worker():
+    """The Dask path ships the spec once pickled, without its axes (a task gets its rows), and a
+    worker unpickles it once: its blocks share one model (and engine program); same results."""
+    pytest.importorskip("cloudpickle")
+    from nonmin.sweeps import _run
+
+    bar = library.get("crossed_four_bar")
+    states = [(bar.state.q, bar.state.qd * s) for s in np.linspace(0.5, 1.5, 40)]
+    spec = SweepSpec(bar.model, ((("q0", "qd0"), states),), t_span=0.02,
+                     options={"dt": 1e-3, "t_eval": np.linspace(0, 0.02, 3)})  # fmt: skip
+    token, blob = _run._pack(spec)
+    assert pickle.loads(blob).axes == () and len(blob) < len(pickle.dumps(spec)) - 40 * 72  # (40 qd0 arrays)
+    assert _run._pack(spec)[0] == token
+    rows = spec.table()
+    _run._SPECS.pop(token, None)
+    a = _run._remote_block(token, blob, rows[:3], 9, 3)
+    held = _run._SPECS[token]
+    b = _run._remote_block(token, blob, rows[3:6], 9, 3)
+    assert _run._SPECS[token] is held and held.axes == ()
+    np.testing.assert_array_equal(a["q"], run_block(spec, rows[:3], 9, 3)["q"])
+    np.testing.assert_array_equal(b["q"], run_block(spec, rows[3:6], 9, 3)["q"])
+
 def test_import_nonmin_does_not_import_the_sweep_extras():
     code = "import sys, nonmin; print(sorted(m for m in ('xarray', 'zarr', 'dask', 'distributed') if m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout

@@ -345,6 +345,39 @@ def sweep(
     return SweepResult(ds, None if st is None else st.path, runs, computed, skipped, failed)
 
 
+#: Sweep specs unpickled in this process (a Dask worker), by the digest of their pickle: the
+#: blocks of a sweep that land on one worker share one spec, hence one model and its engine
+#: program (built once per worker, not per task). Bounded; oldest dropped first.
+_SPECS: dict[str, SweepSpec] = {}
+_SPECS_MAX = 8
+
+
+def _pack(spec: SweepSpec) -> tuple[str, bytes]:
+    """The spec a worker needs, pickled once per sweep, and its digest. The axes are left out:
+    a task gets its runs' key values (``table[lo:hi]``), and the whole axes in every task would
+    make the data sent grow as runs² (a 1e4-run sweep of initial states: 2 MB per task)."""
+    import dataclasses
+    import hashlib
+
+    import cloudpickle  # (a dependency of dask.distributed: model sources defined in __main__)
+
+    blob = cloudpickle.dumps(dataclasses.replace(spec, axes=()), protocol=5)
+    return hashlib.blake2b(blob, digest_size=16).hexdigest(), blob
+
+
+def _remote_block(token: str, blob: bytes, rows: Sequence[Mapping[str, Any]], n: int, N: int) -> dict[str, Any]:
+    """A Dask task: :func:`run_block` of the spec ``blob`` (unpickled once per worker process)."""
+    spec = _SPECS.get(token)
+    if spec is None:
+        import pickle
+
+        spec = pickle.loads(blob)
+        if len(_SPECS) >= _SPECS_MAX:
+            _SPECS.pop(next(iter(_SPECS)))
+        _SPECS[token] = spec
+    return run_block(spec, rows, n, N, 1)
+
+
 def _execute(spec: SweepSpec, table: list[dict[str, Any]], todo: list[tuple[int, int, int]], n: int, N: int,
              scheduler: Any, workers: int | None) -> Iterator[tuple[int, int, int, dict[str, Any]]]:  # fmt: skip
     """Yield (b, lo, hi, results) as blocks finish."""
@@ -358,9 +391,10 @@ def _execute(spec: SweepSpec, table: list[dict[str, Any]], todo: list[tuple[int,
             from dask.distributed import as_completed
 
             tag = uuid.uuid4().hex
+            token, blob = _pack(spec)
             futs = {}
             for b, lo, hi in todo:
-                f = client.submit(run_block, spec, table[lo:hi], n, N, 1, pure=False,
+                f = client.submit(_remote_block, token, blob, table[lo:hi], n, N, pure=False,
                                   key=f"nonmin-sweep-{tag}-{b}")  # fmt: skip
                 futs[f] = (b, lo, hi)
             # results are gathered as each task ends (a worker that dies afterwards holds none)
