@@ -19,8 +19,9 @@ at dt = 1e-3, samples every 10 ms.
   samples; branch: the largest distance of the rocker angle from its anti-parallelogram value
   over every sample of every run.
 * parallel efficiency: ``nonmin.sweep`` of ``--sweep-runs`` runs with 1 and 2 local workers,
-  and on a ``dask.distributed.LocalCluster`` with 1 and 2 worker processes started here:
-  ``E = T1 / (2 T2)``.
+  and on a ``dask.distributed.LocalCluster`` of 2 worker processes started here (1 worker: the
+  sweep restricted to one of them): ``E = T1 / (2 T2)`` per round of 1, 2, 2, 1 workers; the
+  median and the minimum over ``--repeat`` rounds (see ``efficiency``).
 
 Usage::
 
@@ -201,6 +202,8 @@ def main() -> int:
     ap.add_argument("--sweep-runs", type=int, default=2000)
     ap.add_argument("--repeat", type=int, default=3, help="interleaved rounds (medians)")
     ap.add_argument("--skip-dask", action="store_true")
+    ap.add_argument("--dask-defaults", action="store_true",
+                    help="the efficiency's LocalCluster with Dask's default settings (profiler and monitors on)")
     ap.add_argument("--json", default=str(HERE / "results" / "sweep_bench.json"))
     ap.add_argument("--work-precision", action="store_true",
                     help="only the work-precision comparison with mujoco.rollout over a range of dt for both")
@@ -257,7 +260,7 @@ def main() -> int:
                 branch_distance_max=branch, batch_equals_single=same,
                 failed=int(np.count_nonzero(~bt.success)))  # fmt: skip
     # ---- parallel efficiency
-    eff = efficiency(args.sweep_runs, not args.skip_dask, args.repeat)
+    eff = efficiency(args.sweep_runs, not args.skip_dask, args.repeat, lean=not args.dask_defaults)
     rows["efficiency"] = eff
     rows["load_after"] = os.getloadavg()
     print(f"load average before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, after "
@@ -393,18 +396,52 @@ def batch_vs_single(args: Any) -> int:
     return 0
 
 
+#: The Dask settings of the benchmark's LocalCluster (unless ``--dask-defaults``): Dask's own
+#: background work off or slowed — the worker's statistical profiler (a thread sampling the
+#: task's stack every 10 ms), the event-loop tick (20 ms), the system monitor (0.5 s) and the
+#: nanny's memory monitor (0.1 s). With the defaults, these take ~5 % of a core in the client
+#: process (scheduler, nannies) and ~4–5 % in each worker process, measured in SWEEP.md: on a
+#: 2-core host the 2-worker sweep pays that out of its workers' cores, the 1-worker sweep not.
+LEAN_DASK: dict[str, Any] = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "5s",
+    "distributed.worker.memory.monitor-interval": "1s",
+}
+
+
 def _print_efficiency(eff: dict, runs: int) -> None:
-    """The Markdown table of target 2: seconds on 1 and 2 workers and the efficiency t1 / (2 t2)."""
-    print(f"| sweep, {runs} runs | 1 worker (s) | 2 workers (s) | efficiency |")
-    print("|---|---|---|---|")
-    for k, (a, b) in eff.items():
-        print(f"| {k} | {a:.2f} | {b:.2f} | {a / (2 * b):.2f} |")
+    """The Markdown tables of target 2: seconds on 1 and 2 workers (medians), the efficiency
+    t1 / (2 t2) of each round and its median and minimum; CPU seconds per sweep."""
+    print(f"| sweep, {runs} runs | 1 worker (s) | 2 workers (s) | efficiency per round | median | min |")
+    print("|---|---|---|---|---|---|")
+    for k, e in eff.items():
+        rounds = " ".join(f"{x:.2f}" for x in e["rounds"])
+        print(f"| {k} | {e['t1']:.2f} | {e['t2']:.2f} | {rounds} | **{e['median']:.2f}** | {e['min']:.2f} |")
+    print("\nCPU seconds per sweep (medians; local: this process; Dask: the client process — client,"
+          " scheduler, nannies — and the worker processes):\n")
+    print("| sweep | 1 worker: client / workers | 2 workers: client / workers |")
+    print("|---|---|---|")
+    for k, e in eff.items():
+        c1, c2 = e["cpu1"], e["cpu2"]
+        print(f"| {k} | {c1[0]:.2f} / {c1[1]:.2f} | {c2[0]:.2f} / {c2[1]:.2f} |")
 
 
-def efficiency(runs: int, dask: bool, repeat: int = 1) -> dict[str, tuple[float, float]]:
-    """Wall time of one sweep with 1 and 2 workers, locally (warmed up, then ``repeat``
-    interleaved rounds) and on a LocalCluster of 1, then of 2 worker processes started here
-    (each warmed up: imports, the model built on the workers; then ``repeat`` sweeps); medians."""
+def efficiency(runs: int, dask: bool, repeat: int = 1, lean: bool = True) -> dict[str, dict[str, Any]]:
+    """Parallel efficiency of one sweep from 1 to 2 workers, locally (threads) and on a Dask
+    LocalCluster of 2 worker processes (1 thread each) started here.
+
+    Method (the host's speed drifts by 10–20 % within a minute): every path is warmed up, then
+    ``repeat`` rounds, each timed as 1 worker, 2 workers, 2 workers, 1 worker (ABBA: a linear
+    drift cancels), the round's efficiency E = (t1 + t1') / (2 (t2 + t2')); the median and the
+    minimum over the rounds are reported. Dask: one cluster for both worker counts — the
+    1-worker sweeps are restricted to its first worker (``dask.annotate(workers=[...])``; the
+    other worker idles), so both are warmed up, set up and chunked alike and interleave (two
+    clusters alive in one process hung the sweep, 02:20 and 02:50 UTC). Cluster start-up is
+    outside the timings. ``lean``: the cluster runs with ``LEAN_DASK`` (Dask's profiler and
+    monitors), else with Dask's defaults."""
+    import psutil
+
     from nonmin import library, sweep
     from nonmin.library._planar import _cfb_coordinates
 
@@ -415,48 +452,77 @@ def efficiency(runs: int, dask: bool, repeat: int = 1) -> dict[str, tuple[float,
     t = np.linspace(0.0, T_FINAL, 201)
     kw: dict[str, Any] = {"t_span": T_FINAL, "dt": DT, "t_eval": t, "progress": False, "chunk": 50}
     failed: list[int] = []
+    me = psutil.Process()
 
-    def timed(**extra: Any) -> float:
-        w0 = time.perf_counter()
+    def cpu_of(procs: list[Any]) -> float:
+        out = 0.0
+        for p in procs:
+            try:
+                c = p.cpu_times()
+                out += c.user + c.system
+            except psutil.NoSuchProcess:
+                pass
+        return out
+
+    def timed(procs: list[Any], **extra: Any) -> tuple[float, float, float]:
+        """Wall seconds, this process's CPU seconds, the processes ``procs``' CPU seconds."""
+        k0, c0, w0 = cpu_of(procs), time.process_time(), time.perf_counter()
         res = sweep(bar.model, {("q0", "qd0"): states0}, **kw, **extra)
-        failed.append(res.failed)  # (seed 99: one run of the first 20 fails in simulate too)
-        return time.perf_counter() - w0
+        w, c = time.perf_counter() - w0, time.process_time() - c0
+        failed.append(res.failed)
+        return w, c, cpu_of(procs) - k0
 
-    # local: both warmed up, then interleaved rounds; Dask: one LocalCluster at a time (two
-    # clusters alive in one process hung the sweep, 02:20 and 02:50 UTC), warmed up, then rounds
-    times: dict[str, list[float]] = {"local threads 1": [], "local threads 2": []}
-    timed(workers=1), timed(workers=2)
-    for _ in range(max(repeat, 1)):
-        times["local threads 1"].append(timed(workers=1))
-        times["local threads 2"].append(timed(workers=2))
+    def rounds(one: Any, two: Any) -> dict[str, Any]:
+        one(), two()  # warm-up
+        r1: list[tuple[float, float, float]] = []
+        r2: list[tuple[float, float, float]] = []
+        es = []
+        for _ in range(max(repeat, 1)):
+            a, b, c, d = one(), two(), two(), one()
+            r1 += [a, d]
+            r2 += [b, c]
+            es.append((a[0] + d[0]) / (2 * (b[0] + c[0])))
+        med = statistics.median
+        return {"t1": med(x[0] for x in r1), "t2": med(x[0] for x in r2), "rounds": es, "median": med(es),
+                "min": min(es), "walls1": [x[0] for x in r1], "walls2": [x[0] for x in r2],
+                "cpu1": [med(x[1] for x in r1), med(x[2] for x in r1)],
+                "cpu2": [med(x[1] for x in r2), med(x[2] for x in r2)]}  # fmt: skip
+
+    out = {"local threads": rounds(lambda: timed([], workers=1), lambda: timed([], workers=2))}
     if dask:
+        import dask as dk
         from dask.distributed import Client, LocalCluster
 
-        for nw in (1, 2):
-            with LocalCluster(n_workers=nw, threads_per_worker=1, processes=True, dashboard_address=None) as lc, \
-                    Client(lc) as client:  # fmt: skip
-                timed(scheduler=client)  # warm-up (imports, model build on the workers)
-                times[f"dask LocalCluster processes {nw}"] = [timed(scheduler=client) for _ in range(max(repeat, 1))]
-    med = {k: statistics.median(v) for k, v in times.items()}
-    out = {"local threads": (med["local threads 1"], med["local threads 2"])}
-    if dask:
-        out["dask LocalCluster processes"] = (med["dask LocalCluster processes 1"], med["dask LocalCluster processes 2"])
-    print(f"failed runs in the sweeps: {sorted(set(failed))}; rounds: "
-          + "; ".join(f"{k} " + " ".join(f"{x:.2f}" for x in v) for k, v in times.items()))
+        with dk.config.set(LEAN_DASK if lean else {}), \
+                LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as lc, \
+                Client(lc) as client:  # fmt: skip
+            first = sorted(client.scheduler_info()["workers"])[0]
+            kids = me.children(recursive=True)
+
+            def one() -> tuple[float, float, float]:
+                with dk.annotate(workers=[first]):
+                    return timed(kids, scheduler=client)
+
+            timed(kids, scheduler=client)  # warm-up of both workers (imports, the model)
+            name = "dask LocalCluster processes" + ("" if lean else " (Dask's default settings)")
+            out[name] = rounds(one, lambda: timed(kids, scheduler=client))
+    print(f"failed runs in the sweeps: {sorted(set(failed))}; wall seconds (1 worker | 2 workers, ABBA order): "
+          + "; ".join(f"{k} " + " ".join(f"{x:.2f}" for x in v["walls1"]) + " | "
+                      + " ".join(f"{x:.2f}" for x in v["walls2"]) for k, v in out.items()))  # fmt: skip
     return out
 
 
 def efficiency_only(args: Any) -> int:
-    """Target 2 alone: ``efficiency`` over ``--sweep-runs`` runs, ``--repeat`` interleaved rounds."""
+    """Target 2 alone: ``efficiency`` over ``--sweep-runs`` runs, ``--repeat`` rounds."""
     load0 = os.getloadavg()
-    eff = efficiency(args.sweep_runs, not args.skip_dask, args.repeat)
+    eff = efficiency(args.sweep_runs, not args.skip_dask, args.repeat, lean=not args.dask_defaults)
     load1 = os.getloadavg()
     print(f"load average before {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}, after {load1[0]:.2f} {load1[1]:.2f} "
-          f"{load1[2]:.2f}; medians of {args.repeat} interleaved rounds after a warm-up\n")  # fmt: skip
+          f"{load1[2]:.2f}; {args.repeat} rounds (1, 2, 2, 1 workers) after a warm-up\n")  # fmt: skip
     _print_efficiency(eff, args.sweep_runs)
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).with_name("sweep_bench_efficiency.json").write_text(
-        json.dumps({"load": [load0, load1], "efficiency": eff}, indent=1), encoding="utf-8")
+        json.dumps({"load": [load0, load1], "runs": args.sweep_runs, "efficiency": eff}, indent=1), encoding="utf-8")
     return 0
 
 
