@@ -119,8 +119,8 @@ def test_five_bar_passivity_run_equals_python() -> None:
     # same number of steps, the samples to well within the method's tolerance
     _close(a, b, tol=1e-6, tol_acc=1e-5)
     assert float(np.max(np.abs(a.u))) > 1.0
-    # RK4 (fixed steps): the whole run to round-off
-    a, b = _pair(model, make, t_span=(0.0, 0.3), q0=q0, dt=2e-3)
+    # RK4 (fixed steps): the whole run to round-off (75 steps; 150 before)
+    a, b = _pair(model, make, t_span=(0.0, 0.15), q0=q0, dt=2e-3)
     _close(a, b)
 
 
@@ -155,7 +155,7 @@ def test_controller_of_another_model_instance() -> None:
     def make() -> Tracker:
         return _five_bar_tracker()[1]
 
-    a, b = _pair(off, make, t_span=(0.0, 0.3), dt=2e-3)
+    a, b = _pair(off, make, t_span=(0.0, 0.15), dt=2e-3)  # 75 steps (150 before)
     _close(a, b)
     plant, nominal = crank_four_bar(g=12.0), crank_four_bar()
     ts = np.linspace(0.0, 0.6, 13)
@@ -215,7 +215,7 @@ def test_rheonomic_planar_passivity_per_call_and_run() -> None:
         return Tracker(model, ref, Kp=50.0, Kd=10.0, lambda_=5.0)
 
     _per_call(make(), model, _states(model, q0, np.array([0.0, 0.05, 0.2]), np.random.default_rng(7)))
-    a, b = _pair(model, make, t_span=(0.0, 0.3), q0=q0, dt=2e-3)
+    a, b = _pair(model, make, t_span=(0.0, 0.15), q0=q0, dt=2e-3)  # 75 steps (150 before)
     _close(a, b)
     assert float(np.max(np.abs(a.u))) > 1.0
 
