@@ -56,9 +56,13 @@ MECHS = [("crossed_four_bar", {}), ("A02_n_four_bar", {"N": 2}), ("slider_crank"
 @pytest.mark.parametrize("sampled", [False, True])
 def test_rk4_projection_equals_general_driver(name: str, kw: dict[str, int], sampled: bool) -> None:
     mech = library.get(name, **kw)
-    te = np.linspace(0.0, 0.3, 31) if sampled else None
-    a, b = _pair(mech, t_span=(0.0, 0.3), dt=2e-3, t_eval=te)
-    assert len(a) == (31 if sampled else 151) and a.n_steps == 150
+    # 150 steps through the crossed four-bar's change point (0.204 s) and on A02; 75 on the
+    # smooth mechanisms (150 before: the general driver's runs are the test's cost)
+    steps = 150 if name in ("crossed_four_bar", "A02_n_four_bar") else 75
+    t1 = 0.3 if steps == 150 else 0.15
+    te = np.linspace(0.0, t1, steps // 5 + 1) if sampled else None
+    a, b = _pair(mech, t_span=(0.0, t1), dt=2e-3, t_eval=te)
+    assert len(a) == (steps // 5 + 1 if sampled else steps + 1) and a.n_steps == steps
     _close(a, b)
     assert float(np.max(a.phi_norm)) < 1e-13
 
