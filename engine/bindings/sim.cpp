@@ -292,6 +292,7 @@ void bind_sim(nb::module_& m) {
         .def_rw("spd_rtol", &sim::Options::spd_rtol)
         .def_rw("sym_rtol", &sim::Options::sym_rtol)
         .def_rw("t1", &sim::Options::t1)
+        .def_rw("t_grid", &sim::Options::t_grid)
         .def_rw("max_steps", &sim::Options::max_steps)
         .def_rw("passages", &sim::Options::passages)
         .def_rw("partial_samples", &sim::Options::partial_samples);

@@ -33,6 +33,24 @@ constexpr double inf = std::numeric_limits<double>::infinity();
 // instant ends by interpolation (run(): end_star).
 constexpr double PASSAGE_END_BAND = 0.05;
 
+// A fixed step that starts within this fraction of a step of the grid t_grid + k·dt is on it
+// (passage_align; _integrators.PASSAGE_ALIGN_RTOL).
+constexpr double PASSAGE_ALIGN_RTOL = 1e-6;
+
+// SingularPassages.align: a fixed step that the placement left at dt, with no predicted
+// instant ahead, ends on the grid t_grid + k·dt when its start is off it (a placed or widened
+// step before, or an event, moved the steps off the grid): the step to the next grid point
+// (≤ dt). Output samples on that grid (t_eval every dt, or a multiple of it) then fall on step
+// ends again instead of inside every step, where each costs a projection and an evaluation more.
+double passage_align(const Loop& L, double t, double h, double hp) {
+    if (!L.opt.passages || hp != h || !(h > 0.0) || !std::isfinite(L.opt.t_grid)) return hp;
+    if (L.pas.have_star && L.pas.t_star > t) return hp;
+    const double r = (t - L.opt.t_grid) / h;
+    const double k = std::floor(r);
+    if (r - k <= PASSAGE_ALIGN_RTOL || (k + 1.0) - r <= PASSAGE_ALIGN_RTOL) return hp;
+    return (L.opt.t_grid + (k + 1.0) * h) - t;
+}
+
 // The Solver's Known bits for a constant M (solver.hpp), by the checks its forward call makes:
 // every entry finite, max|M − Mᵀ| ≤ sym_rtol · max|M|; diagonal when every off-diagonal entry is
 // 0. An M that fails gets 0 (the solver checks it and reports the failure at each call).
@@ -909,7 +927,7 @@ Outcome run(Loop& L, long long max_steps) {
                 if ((s = stab_project(L, t_new, L.yq1.data())) != Status::ok) return fail(L, s);
             }
         } else {
-            const double hp = passage_place(L, L.t, L.opt.dt);
+            const double hp = passage_align(L, L.t, L.opt.dt, passage_place(L, L.t, L.opt.dt));
             h = clip(L.t, hp, t1);
             L.y0 = L.y;
             // the run ends at (within PASSAGE_END_BAND of a step from) a predicted singular

@@ -485,7 +485,7 @@ def simulate_batch(
     if why is None:
         opts = _engine.options(integ, stab, dt=h_init, t1=t1, h0=h_init, rank_rtol=rank_rtol,
                                drift_factor=S.DRIFT_RANK_FACTOR, project_initial=project_initial,
-                               max_steps=int(max_steps))  # fmt: skip
+                               max_steps=int(max_steps), t_grid=t0)  # fmt: skip
         flags = 0
         for r in rec:
             flags |= int(getattr(eng, "REC_" + ("FC" if r == "f_c" else r.upper())))

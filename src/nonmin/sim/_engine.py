@@ -247,9 +247,10 @@ def _projection_options(stab: Projection) -> Any:
 
 def options(
     integ: Any, stab: Any, *, dt: float, t1: float, h0: float, rank_rtol: float | None,
-    drift_factor: float, project_initial: bool, max_steps: int,
+    drift_factor: float, project_initial: bool, max_steps: int, t_grid: float | None = None,
 ) -> Any:  # fmt: skip
-    """The engine's settings of a run (:class:`nonmin._engine.SimOptions`)."""
+    """The engine's settings of a run (:class:`nonmin._engine.SimOptions`); ``t_grid``: the
+    origin of the fixed steps' grid (the run's ``t_span`` start; SingularPassages.align)."""
     eng = _engine()
     o = eng.SimOptions()
     if type(integ) is RK4:
@@ -289,6 +290,8 @@ def options(
     o.spd_rtol = float(SPD_RTOL)
     o.sym_rtol = float(SYMMETRY_RTOL)
     o.t1 = float(t1)
+    if t_grid is not None:
+        o.t_grid = float(t_grid)
     o.max_steps = int(max_steps)
     o.passages = bool(getattr(integ, "passages", True))
     o.partial_samples = bool(_integrators.ADAPTIVE_PARTIAL_SAMPLES)

@@ -198,6 +198,10 @@ PASSAGE_ZONE_STEP = 0.5
 #: first passage at rtol 1e-10).
 PASSAGE_NOISE = 100.0
 
+#: :meth:`SingularPassages.align`: a fixed step that starts within this fraction of a step of
+#: the grid ``origin + k·dt`` is on it.
+PASSAGE_ALIGN_RTOL = 1e-6
+
 #: RK4 projects its stage states (position and velocity, the stabilization's projection) in a
 #: step from which the predicted instant lies at most ``PASSAGE_STAGE_AHEAD`` steps ahead (this
 #: step or the next holds it), or that lies nearer to it (``τ = σ/|dσ/dt|``, either side) than
@@ -319,7 +323,9 @@ class SingularPassages:
     ``fractions`` of a step — the middle of the largest gaps between its stage nodes (RK4 and
     the implicit midpoint: 1/4 and 3/4; DOPRI5: 0.45–0.65, between its nodes 0.3 and 0.8) —
     either of this step or, with the nominal step, of the next one. At most one step per
-    passage is added. The engine loop implements the same rules (``sim_integrators.cpp``).
+    passage is added, and one more after it: fixed steps then return to their grid
+    (:meth:`align`). The engine loop implements the same rules (``sim_integrators.cpp``,
+    ``sim_loop.cpp``).
     """
 
     def __init__(self, fractions: tuple[float, ...], *, widen: bool = False) -> None:
@@ -332,6 +338,7 @@ class SingularPassages:
         self.sigma = math.inf  # the last indicator observed
         self._last: tuple[float, float] | None = None  # (t, σ) observed last, across passages
         self.rate = 0.0  # |dσ/dt| between the last two observations
+        self.origin: float | None = None  # fixed steps return to the grid origin + k·dt (align)
 
     def reset(self) -> None:
         """Forget the history (a new active set, or a state reached elsewhere)."""
@@ -384,6 +391,24 @@ class SingularPassages:
         if self.widen and self.rate > 0.0:
             H = min(max(h, PASSAGE_SIGMA / (self.fractions[0] * self.rate)), PASSAGE_WIDEN_MAX * h)
         return place_step(self.t_star, t, h, self.fractions, H)
+
+    def align(self, t: float, h: float, hp: float) -> float:
+        """The fixed step ``hp = place(t, h)``, or — when the placement left it at ``h`` and no
+        instant is predicted ahead — the step to the next point of the grid ``origin + k·h``
+        (the run's ``t_span`` start) if ``t`` is off it by more than
+        :data:`PASSAGE_ALIGN_RTOL` of a step: a placed or widened step (or an event) before
+        moved the steps off the grid, and output samples on it (``t_eval`` every ``h`` or a
+        multiple) would otherwise fall inside every later step, each costing a projection and
+        an evaluation more. The engine loop: ``passage_align``."""
+        if self.origin is None or hp != h or not h > 0.0:
+            return hp
+        if self.t_star is not None and self.t_star > t:
+            return hp
+        r = (t - self.origin) / h
+        k = float(math.floor(r))
+        if r - k <= PASSAGE_ALIGN_RTOL or (k + 1.0) - r <= PASSAGE_ALIGN_RTOL:
+            return hp
+        return (self.origin + (k + 1.0) * h) - t
 
     def stages(self, t: float, h: float, f: FloatArray) -> bool:
         """Whether the step of size ``h`` from ``t`` projects its stage states, ``f = F(t, y)``
@@ -575,7 +600,11 @@ def _fixed_step(
     with its stage states projected by ``project`` (the engine loop: ``rk4_advance`` with
     ``Loop::stage_proj``)."""
     t = state.t
-    h = _clip(t, state.h if place is None else place(t, state.h), t_bound)
+    if place is None:
+        h = _clip(t, state.h, t_bound)
+    else:
+        hp = place(t, state.h)
+        h = _clip(t, place.align(t, state.h, hp) if isinstance(place, SingularPassages) else hp, t_bound)
     f = state.f
     stages = False
     if project is not None and isinstance(place, SingularPassages) and isinstance(method, RK4):
@@ -602,7 +631,8 @@ class RK4(Integrator):
 
     With ``passages=True`` (default) the steps next to a predicted singular instant are placed
     so that it falls at 1/4 or 3/4 of a step (:class:`SingularPassages`): at most one step per
-    passage is shortened, the others keep ``dt``; the step that holds the instant is at least
+    passage is shortened, and the first step after it ends on the grid ``t0 + k·dt`` again
+    (:meth:`SingularPassages.align`), the others keep ``dt``; the step that holds the instant is at least
     :data:`PASSAGE_SIGMA` wide (in σ_min), and the steps near the instant project their stage
     states (:data:`PASSAGE_STAGE_WINDOW`). Measured (A02 N = 2, 10 s, samples every 0.01 s,
     engine loop, reference at rtol 1e-13): B0 error 2.0e-11 / 4.9e-11 / 9.9e-11 m and energy drift

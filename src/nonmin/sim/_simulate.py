@@ -817,6 +817,7 @@ def simulate(
             active = st0.active
     n, k = model.n, model.k
     t0, t1 = _t_span(t_span)
+    t_grid = t0  # (fixed steps: the grid of SingularPassages.align; a resumed run keeps it)
     prev = None
     if resume is not None:
         prev = _durable.resume_point(resume, model, t1)
@@ -909,6 +910,8 @@ def simulate(
     rec = _Recorder(model)
     passages = (SingularPassages(integ.passage_fractions, widen=not integ.adaptive and integ.widen_passages)
                  if getattr(integ, "passages", False) else None)  # fmt: skip
+    if passages is not None and not integ.adaptive:
+        passages.origin = t_grid  # (fixed steps: the grid t_grid + k·dt, SingularPassages.align)
     seed = _passage_history(prev, act, t_out)
     records: list[EventRecord] = []
     status = Status.SUCCESS
@@ -948,7 +951,7 @@ def simulate(
             opts = _engine.options(
                 integ, stab, dt=h_init, t1=t1, h0=h_init, rank_rtol=rank_rtol,
                 drift_factor=DRIFT_RANK_FACTOR, project_initial=project_initial,
-                max_steps=int(max_steps),
+                max_steps=int(max_steps), t_grid=t_grid,
             )  # fmt: skip
         er: _engine.EngineResult | None = None
         pending: _engine.EngineResult | None = None  # the engine's first run with contact guards (below)

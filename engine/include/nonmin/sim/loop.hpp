@@ -88,6 +88,9 @@ struct Options {
     double sym_rtol = 1e-9;
     // run
     double t1 = 1.0;
+    // fixed steps: the origin of the grid t_grid + k·dt that the steps return to after a placed
+    // step (SingularPassages.align; the run's t_span start); NaN: no grid
+    double t_grid = std::numeric_limits<double>::quiet_NaN();
     long long max_steps = 10000000;
     bool passages = true;  // singularity-aware step placement (the integrator's `passages`)
     // adaptive methods: samples inside a step from a partial step of the method (else from
