@@ -73,7 +73,7 @@ void actuation_projectors(const double* B, const double* P, int n, int k, double
         return;
     }
     const RowMat PB = Pm * Bm;
-    Eigen::JacobiSVD<RowMat> svd(PB, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    Svd svd(PB, Eigen::ComputeThinU | Eigen::ComputeThinV);
     const auto& s = svd.singularValues();
     double bscale = 0.0;  // largest column norm of B: the actuators' own scale
     for (int j = 0; j < k; ++j) bscale = std::max(bscale, Bm.col(j).squaredNorm());
@@ -102,7 +102,7 @@ void coriolis_bar(Solver& s, const double* M, const double* C, const double* A,
     RowMat Lam = RowMat::Zero(n, n);
     if (m > 0 && r > 0) {  // Λ = −A⁺Ȧ, A⁺ of A itself truncated to the rank of the policy
         CMap Am(A, m, n), Ad(Adot, m, n);
-        Eigen::JacobiSVD<RowMat> svd(Am, Eigen::ComputeThinU | Eigen::ComputeThinV);
+        Svd svd(Am, Eigen::ComputeThinU | Eigen::ComputeThinV);
         const auto& sv = svd.singularValues();
         Eigen::VectorXd inv = Eigen::VectorXd::Zero(sv.size());
         for (int a = 0; a < std::min<int>(r, static_cast<int>(sv.size())); ++a)

@@ -14,8 +14,8 @@ namespace nonmin {
 
 namespace {
 constexpr double TINY = std::numeric_limits<double>::min();
-// Above this many rows the rank is decided by Eigen's divide-and-conquer SVD instead of the
-// Jacobi sweeps (O(m² n) per sweep).
+// Above this many rows the rank is decided by the engine's SVD (svd.hpp: one-sided Jacobi on the
+// columns, O(n² m) per sweep) instead of the row sweeps of jacobi_rows (O(m² n) per sweep).
 constexpr int JACOBI_MAX_ROWS = 32;
 }  // namespace
 
@@ -23,7 +23,7 @@ struct Solver::Impl {
     int m_max, n;
     std::vector<double> B, d, sig, V, cv, Kt, Tt, Et, Ft, G, Ls, W, wv, u, g, dinv, cw;
     Mat big;                 // large-m SVD input (m_max × n)
-    Eigen::BDCSVD<Mat> svd;  // large-m SVD (thin U, full V: the null-space basis)
+    Svd svd;  // large-m SVD (thin U, full V: the null-space basis)
     linalg::LQWork lq;       // certified LQ scratch
     int lqmode = linalg::LQ_NONE;  // what the last rank decision used
     bool zmode = false;            // null-space form: Z (rows of Kt, k = n − r ≤ r) spans N(A)
@@ -73,7 +73,7 @@ struct Solver::Impl {
         cw.assign(n, 0.0);
         if (m_max > JACOBI_MAX_ROWS) {
             big = Mat::Zero(m_max, n);
-            svd = Eigen::BDCSVD<Mat>(m_max, n, Eigen::ComputeThinU | Eigen::ComputeFullV);
+            svd = Svd(m_max, n, Eigen::ComputeThinU | Eigen::ComputeFullV);
         }
         if (m_max >= linalg::QR_MIN_ROWS) lq = linalg::LQWork(m_max, n);
         Ui.assign(static_cast<long>(m_max) * m_max, 0.0);

@@ -150,8 +150,8 @@ Status forward_derivatives(const Program& p, DerivativeScratch& s, double t, con
         }
     }
     if (m > 0 && !certified) {
-        Eigen::JacobiSVD<Mat>& svd = s.svd;
-        svd.compute(Ae, Eigen::ComputeFullU | Eigen::ComputeFullV);
+        Svd& svd = s.svd;
+        svd.compute(Ae, Eigen::ComputeThinU | Eigen::ComputeFullV);
         const Vec& sv = svd.singularValues();
         const double smax = sv.size() ? sv[0] : 0.0;
         for (int i = 0; i < sv.size(); ++i)

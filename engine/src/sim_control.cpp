@@ -182,8 +182,8 @@ Projected::Projected(const Program& prog, ControlSpec spec)
     max_abs_u.assign(static_cast<std::size_t>(k), 0.0);
     mask_.assign(static_cast<std::size_t>(c), 0);
     if (k > 0) {
-        svd_pb_ = Eigen::JacobiSVD<Mat>(n, k, Eigen::ComputeThinU | Eigen::ComputeThinV);
-        svd_vals_ = Eigen::JacobiSVD<Mat>(n, k);
+        svd_pb_ = Svd(n, k, Eigen::ComputeThinU | Eigen::ComputeThinV);
+        svd_vals_ = Svd(n, k);
     }
 }
 
@@ -244,7 +244,7 @@ void Projected::attach(const Terms& T, const Mat& A, int m, const std::vector<in
         Gf_ = Mat::Zero(n + mf, std::max(k, 1));
         rhs_ = Vec::Zero(n + mf);
         lam_ = Vec::Zero(mf);
-        svd_g_ = Eigen::JacobiSVD<Mat>(n + mf, std::max(k, 1), Eigen::ComputeThinU | Eigen::ComputeThinV);
+        svd_g_ = Svd(n + mf, std::max(k, 1), Eigen::ComputeThinU | Eigen::ComputeThinV);
         Wf_ = Mat::Zero(n + mf, std::max(k, 1));
         Lf_ = Mat::Zero(n + mf, n + mf);
         rhsf_ = Vec::Zero(n + mf);
@@ -252,7 +252,7 @@ void Projected::attach(const Terms& T, const Mat& A, int m, const std::vector<in
     }
     if (m > 0) {
         Atrue_ = Mat::Zero(m, n);
-        svd_a_ = Eigen::JacobiSVD<Mat>(m, n, Eigen::ComputeThinU | Eigen::ComputeThinV);
+        svd_a_ = Svd(m, n, Eigen::ComputeThinU | Eigen::ComputeThinV);
     }
     if (s_.law == Law::passivity) {
         Apinv_ = Mat::Zero(n, mr);
@@ -415,7 +415,7 @@ Status Projected::min_norm_true(const Mat& A, int m, const double* b, double* x)
     // rank-deficient: the truncated SVD of A itself
     const int n = n_;
     for (int i = 0; i < m; ++i) Atrue_.row(i) = A.row(i);  // (m is the active set's row count)
-    Eigen::JacobiSVD<Mat>& svd = svd_a_;
+    Svd& svd = svd_a_;
     svd.compute(Atrue_);
     const auto& sv = svd.singularValues();
     const auto& U = svd.matrixU();

@@ -214,7 +214,7 @@ void set_guards(Loop& L, const std::vector<ContactGuard>& guards) {
         L.DA = Mat::Zero(L.m, L.n);
         L.lam_c = Vec::Zero(std::max(L.m, L.n));
         L.lam_tmp = Vec::Zero(std::max(L.m, L.n));
-        L.svd_a = Eigen::JacobiSVD<Mat>(L.m, L.n, Eigen::ComputeThinU | Eigen::ComputeThinV);
+        L.svd_a = Svd(L.m, L.n, Eigen::ComputeThinU | Eigen::ComputeThinV);
     }
     if (!L.evs && !guards.empty()) {
         auto E = std::make_shared<EventScratch>();

@@ -37,7 +37,7 @@ int active_row(const Loop& L, int ic) {
 void ensure_release(Loop& L) {
     if (L.m > 0 && L.DA.rows() != L.m) {
         L.DA = Mat::Zero(L.m, L.n);
-        L.svd_a = Eigen::JacobiSVD<Mat>(L.m, L.n, Eigen::ComputeThinU | Eigen::ComputeThinV);
+        L.svd_a = Svd(L.m, L.n, Eigen::ComputeThinU | Eigen::ComputeThinV);
     }
     const int sz = std::max(L.m, L.n);
     if (L.lam_c.size() < sz) {

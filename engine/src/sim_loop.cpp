@@ -273,7 +273,7 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
         p->q = p->qd = p->qdd = p->f_c = Vec::Zero(n);
         p->u = Vec::Zero(L.k);
     }
-    L.svd = Eigen::JacobiSVD<Mat>(n, n);  // singular values only
+    L.svd = Svd(n, n);  // singular values only
     L.t_out = t_out;
     L.every = every;
     L.rec.n = n;

@@ -17,7 +17,7 @@
 // The rank decision is the core's (rule of docs/theory.md: vanished rows, unit rows, singular
 // values ≤ rtol σ_max dropped): the certified LQ of the equilibrated rows when it proves that
 // the rule keeps every row (DA = L Q: G = Qᵀ L⁻¹, Z the LQ's remaining orthonormal rows; the
-// core's shortcut, linalg.hpp), else Eigen's JacobiSVD of the equilibrated rows.
+// core's shortcut, linalg.hpp), else the engine's SVD (svd.hpp) of the equilibrated rows.
 #pragma once
 #include <memory>
 #include <vector>
@@ -52,7 +52,7 @@ struct DerivativeScratch {
     Mat Ae, G, Gt, Z, Zt, ZtM, MG, Sm, C, T1, AQ, MAQ, RHS, DQDD, DFC, ZS, ZSB;  // (2n-direction ones: one row each)
     Vec d, ge, g, Gge, w1, w2;
     Eigen::LLT<Mat> llt;
-    Eigen::JacobiSVD<Mat> svd;
+    Svd svd;
     linalg::LQWork lq;      // the certified LQ of D A (full rank proved: no SVD)
     Mat Bq, E;              // m × (n + 1): [D A | D γ]; n × n: the LQ's orthogonal factor
     Vec cv;

@@ -35,7 +35,7 @@ struct SolveInfo {
     double mu = 0.0;  // virtual mass used
     double pivot_ratio = 0.0;  // smallest L_jj² / max M̄_jj when the SPD test failed on a pivot
     bool chol_failed = false;  // not_positive_definite because a pivot was ≤ 0
-    int method = 0;            // rank decision: 0 SVD (Jacobi / BDCSVD), 1 certified LQ with
+    int method = 0;            // rank decision: 0 SVD (Jacobi sweeps / svd.hpp), 1 certified LQ with
                                // L⁻¹ (few rows), 2 certified LQ over L's profile (many rows)
     bool null_space_form = false;  // q̈ through Z and S = Z M Zᵀ (k = n − r ≤ r)
 };

@@ -214,7 +214,7 @@ class Projected : public Controller {
     Vec zf_, y_, uraw_, us_;
     bool last_feasible_ = true;
     bool pb_valid_ = false;  // PB_ holds P B of the last law evaluation
-    Eigen::JacobiSVD<Mat> svd_pb_, svd_vals_, svd_a_, svd_g_;
+    Svd svd_pb_, svd_vals_, svd_a_, svd_g_;
     // force control
     Mat Mbar_L_, E_, Gf_, Atrue_, Wf_, Lf_;
     Vec rhsf_, yf_;

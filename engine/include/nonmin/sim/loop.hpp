@@ -331,7 +331,7 @@ struct Loop {
     Point p1, ps;
 
     // diagnostics: cond(M̄) from the singular values of L
-    Eigen::JacobiSVD<Mat> svd;
+    Svd svd;
 
     // contact guards (fixed active set: the release SVD has the active rows' size)
     std::vector<ContactGuard> guards;
@@ -342,7 +342,7 @@ struct Loop {
     std::vector<std::uint8_t> one_mask;
     Mat DA;
     Vec lam_c, lam_tmp;
-    Eigen::JacobiSVD<Mat> svd_a;
+    Svd svd_a;
 
     Samples rec;
     Passages pas;
