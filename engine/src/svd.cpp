@@ -106,7 +106,12 @@ Svd& Svd::compute(const Eigen::Ref<const Mat>& A, int options) {
         nrm_[i] = std::sqrt(dot(&X_[static_cast<std::size_t>(i) * len], &X_[static_cast<std::size_t>(i) * len], len));
         ord_[i] = i;
     }
-    std::stable_sort(ord_.begin(), ord_.end(), [&](int x, int y) { return nrm_[x] > nrm_[y]; });
+    for (int i = 1; i < k; ++i) {  // decreasing, ties in index order (insertion: no allocation)
+        const int o = ord_[i];
+        int j = i;
+        for (; j > 0 && nrm_[ord_[j - 1]] < nrm_[o]; --j) ord_[j] = ord_[j - 1];
+        ord_[j] = o;
+    }
     for (int a = 0; a < p; ++a) s_[a] = nrm_[ord_[a]] * scale;
     // the rows of X, normalized, are the columns of U (by_cols) or V; the rows of T those of V or U
     Mat& W = by_cols ? U_ : V_;
