@@ -31,7 +31,10 @@ of process CPU time per simulated second and their ratios to the first engine. T
 ``benchmarks/numba_baseline`` (needs ``pip install numba``): it runs from the engine's first
 sample to the end (its setup outside the timing; the engine's whole ``simulate`` call is timed):
 
-    python benchmarks/loop_bench.py --planar [--repeat 5] [--engines engine,numba]
+    python benchmarks/loop_bench.py --planar [--repeat 5] [--block 4] [--engines engine,numba]
+
+``--block K`` times K consecutive runs per sample; the engines alternate A B, B A, ... and the
+table adds the median and quartiles of the side-by-side CPU ratios of each repetition.
 """
 
 from __future__ import annotations
@@ -261,9 +264,16 @@ class _Ran:
         self.q, self.n_steps, self.metadata = q, n_steps, metadata
 
 
-def planar_rows(names: list[str], engines: list[str], repeat: int) -> list[dict[str, Any]]:
+def planar_rows(names: list[str], engines: list[str], repeat: int, block: int = 1) -> list[dict[str, Any]]:
     """Each planar case at each setting, the engines interleaved run by run (after one warm-up
-    run each): medians of wall and process CPU time per simulated second."""
+    run each): medians of wall and process CPU time per simulated second.
+
+    Each timed sample is ``block`` consecutive runs (short runs of a few ms are timed in blocks).
+    The engines' order alternates from one repetition to the next (A B, B A, ...), and each
+    repetition gives the CPU ratio of the first engine to each other one measured side by side
+    (``pair_cpu_ratios``): their median and quartiles are robust to the host's speed drifting
+    between repetitions, which the ratio of the medians is not (this host: ±15 % within a
+    minute, 2026-11-27 14:21)."""
     rows = []
     for name, N, T in PLANAR_CASES:
         if names and name not in names:
@@ -284,20 +294,22 @@ def planar_rows(names: list[str], engines: list[str], repeat: int) -> list[dict[
 
                 nprog = nb.program(mech.model, mech.state.active)
             for rep in range(repeat + 1):
-                for eng in engines:
+                for eng in (engines if rep % 2 == 0 else engines[::-1]):
                     if eng == "numba":
                         first = trajs[engines[0]]
                         tv = kw.get("t_eval")
                         w, c = time.perf_counter(), time.process_time()
-                        fr = nb.simulate(nprog, 0.0, T, dt, first.q[0], first.qd[0], tv)
-                        w, c = time.perf_counter() - w, time.process_time() - c
+                        for _ in range(block):
+                            fr = nb.simulate(nprog, 0.0, T, dt, first.q[0], first.qd[0], tv)
+                        w, c = (time.perf_counter() - w) / block, (time.process_time() - c) / block
                         qs = np.concatenate([first.q[:1]] + [b["q"] for b in fr.blocks])
                         tr = _Ran(qs, first.n_steps if fr.failed else fr.steps,
                                   {"engine": "numba" + (" (failed)" if fr.failed else "")})  # fmt: skip
                     else:
                         w, c = time.perf_counter(), time.process_time()
-                        tr = nonmin.simulate(mech, (0.0, T), engine=eng, progress=False, **kw)
-                        w, c = time.perf_counter() - w, time.process_time() - c
+                        for _ in range(block):
+                            tr = nonmin.simulate(mech, (0.0, T), engine=eng, progress=False, **kw)
+                        w, c = (time.perf_counter() - w) / block, (time.process_time() - c) / block
                     if rep:  # (the first run of each engine is the warm-up)
                         walls[eng].append(w)
                         cpus[eng].append(c)
@@ -308,6 +320,10 @@ def planar_rows(names: list[str], engines: list[str], repeat: int) -> list[dict[
                 res[eng] = {"wall_ms_per_s": 1e3 * statistics.median(walls[eng]) / T,
                             "cpu_ms_per_s": 1e3 * statistics.median(cpus[eng]) / T,
                             "ran": trajs[eng].metadata["engine"]}  # fmt: skip
+                if eng != engines[0]:
+                    pr = sorted(a / b for a, b in zip(cpus[engines[0]], cpus[eng], strict=True))
+                    q1, q2, q3 = statistics.quantiles(pr, n=4) if len(pr) > 1 else (pr[0],) * 3
+                    res[eng]["pair_cpu_ratios"] = {"median": q2, "q1": q1, "q3": q3, "max": pr[-1]}
                 if eng != engines[0] and np.shape(trajs[eng].q) == np.shape(trajs[engines[0]].q):
                     res[eng]["max_q_diff"] = float(np.max(np.abs(trajs[eng].q - trajs[engines[0]].q)))
             rows.append(res)
@@ -319,12 +335,16 @@ def planar_markdown(rows: list[dict[str, Any]], engines: list[str]) -> str:
     e0 = engines[0]
     head = ("| case | dt | samples | " + " | ".join(f"{e} wall / CPU (ms per s)" for e in engines)
             + " | " + " | ".join(f"{e0} / {e} wall, CPU" for e in engines[1:]) + " |")  # fmt: skip
-    lines = [head, "|" + "---|" * (3 + 2 * len(engines) - 1)]
+    if len(engines) > 1:
+        head += " " + " | ".join(f"{e0} / {e} CPU side by side: median (quartiles)" for e in engines[1:]) + " |"
+    lines = [head, "|" + "---|" * (3 + 2 * len(engines) - 1 + (len(engines) - 1 if len(engines) > 1 else 0))]
     for r in rows:
         cells = [f"{r[e]['wall_ms_per_s']:.2f} / {r[e]['cpu_ms_per_s']:.2f}" for e in engines]
         rat = [f"{r[e0]['wall_ms_per_s'] / r[e]['wall_ms_per_s']:.2f}, "
                f"{r[e0]['cpu_ms_per_s'] / r[e]['cpu_ms_per_s']:.2f}" for e in engines[1:]]  # fmt: skip
-        lines.append(f"| {r['case']} | {r['dt']:g} | {r['samples']} | " + " | ".join(cells + rat) + " |")
+        pair = [f"**{r[e]['pair_cpu_ratios']['median']:.2f}** ({r[e]['pair_cpu_ratios']['q1']:.2f}–"
+                f"{r[e]['pair_cpu_ratios']['q3']:.2f})" for e in engines[1:] if "pair_cpu_ratios" in r[e]]  # fmt: skip
+        lines.append(f"| {r['case']} | {r['dt']:g} | {r['samples']} | " + " | ".join(cells + rat + pair) + " |")
     return "\n".join(lines)
 
 
@@ -336,6 +356,7 @@ def main() -> None:
     ap.add_argument("--json", default="")
     ap.add_argument("--contact-overhead", action="store_true", help="the UR5 on the floor vs no contact")
     ap.add_argument("--planar", action="store_true", help="the planar settings of target 4")
+    ap.add_argument("--block", type=int, default=1, help="--planar: runs per timed sample (short runs)")
     a = ap.parse_args()
     if a.contact_overhead:
         res = contact_overhead(a.repeat)
@@ -346,13 +367,13 @@ def main() -> None:
         return
     engines = [e for e in a.engines.split(",") if e]
     if a.planar:
-        prow = planar_rows([c for c in a.cases.split(",") if c], engines, a.repeat)
+        prow = planar_rows([c for c in a.cases.split(",") if c], engines, a.repeat, max(a.block, 1))
         print(planar_markdown(prow, engines))
         if a.json:
             Path(a.json).write_text(json.dumps({"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
                                                 "planar": prow}, indent=1))  # fmt: skip
         return
-    rows = run([c for c in a.cases.split(",") if c], engines, a.repeat)
+    rows = run([c for c in a.cases.split(",") if c], engines, a.repeat, max(a.block, 1))
     print(markdown(rows, engines))
     if a.json:
         Path(a.json).write_text(json.dumps({"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
