@@ -110,22 +110,22 @@ int equilibrate(const double* A, int m, int n, const double* b, double rtol, dou
     return live;
 }
 
-void jacobi_rows(double* B, int m, int n, double* T) {
-    const int ld = n + 1;
+void jacobi_orthogonalize(double* X, int k, int ld, int len, int rot, double tol, double* T) {
     double frob2 = 0.0;
-    for (int i = 0; i < m; ++i)
-        for (int k = 0; k < n; ++k) frob2 += B[i * ld + k] * B[i * ld + k];
+    for (int i = 0; i < k; ++i)
+        for (int c = 0; c < len; ++c) frob2 += X[static_cast<long>(i) * ld + c] * X[static_cast<long>(i) * ld + c];
     const double noise2 = EPS * EPS * frob2;
     for (int sweep = 0; sweep < MAX_SWEEPS; ++sweep) {
         bool rotated = false;
-        for (int i = 0; i < m - 1; ++i) {
-            double* Bi = B + static_cast<long>(i) * ld;
-            for (int j = i + 1; j < m; ++j) {
-                double* Bj = B + static_cast<long>(j) * ld;
+        for (int i = 0; i < k - 1; ++i) {
+            double* Xi = X + static_cast<long>(i) * ld;
+            for (int j = i + 1; j < k; ++j) {
+                double* Xj = X + static_cast<long>(j) * ld;
+                // the three dot products over the first len entries, even and odd terms apart
                 double a0 = 0.0, a1 = 0.0, b0 = 0.0, b1 = 0.0, c0 = 0.0, c1 = 0.0;
-                const int n2 = n - n % 2;
-                for (int k = 0; k < n2; k += 2) {
-                    const double x = Bi[k], y = Bj[k], x1 = Bi[k + 1], y1 = Bj[k + 1];
+                const int l2 = len - len % 2;
+                for (int c = 0; c < l2; c += 2) {
+                    const double x = Xi[c], y = Xj[c], x1 = Xi[c + 1], y1 = Xj[c + 1];
                     a0 += x * x;
                     b0 += y * y;
                     c0 += x * y;
@@ -133,15 +133,14 @@ void jacobi_rows(double* B, int m, int n, double* T) {
                     b1 += y1 * y1;
                     c1 += x1 * y1;
                 }
-                if (n % 2) {
-                    const double x = Bi[n - 1], y = Bj[n - 1];
+                if (len % 2) {
+                    const double x = Xi[len - 1], y = Xj[len - 1];
                     a0 += x * x;
                     b0 += y * y;
                     c0 += x * y;
                 }
                 const double aa = a0 + a1, bb = b0 + b1, cc = c0 + c1;
-                if (aa <= noise2 || bb <= noise2 || std::fabs(cc) <= EPS * std::sqrt(aa * bb))
-                    continue;
+                if (aa <= noise2 || bb <= noise2 || std::fabs(cc) <= tol * std::sqrt(aa * bb)) continue;
                 rotated = true;
                 const double zeta = (bb - aa) / (2.0 * cc);
                 double t;
@@ -151,18 +150,18 @@ void jacobi_rows(double* B, int m, int n, double* T) {
                     t = std::copysign(1.0, zeta) / (std::fabs(zeta) + std::sqrt(1.0 + zeta * zeta));
                 const double cs = 1.0 / std::sqrt(1.0 + t * t);
                 const double sn = cs * t;
-                for (int k = 0; k <= n; ++k) {
-                    const double x = Bi[k], y = Bj[k];
-                    Bi[k] = cs * x - sn * y;
-                    Bj[k] = sn * x + cs * y;
+                for (int c = 0; c < rot; ++c) {
+                    const double x = Xi[c], y = Xj[c];
+                    Xi[c] = cs * x - sn * y;
+                    Xj[c] = sn * x + cs * y;
                 }
                 if (T) {
-                    double* Ti = T + static_cast<long>(i) * m;
-                    double* Tj = T + static_cast<long>(j) * m;
-                    for (int k = 0; k < m; ++k) {
-                        const double x = Ti[k], y = Tj[k];
-                        Ti[k] = cs * x - sn * y;
-                        Tj[k] = sn * x + cs * y;
+                    double* Ti = T + static_cast<long>(i) * k;
+                    double* Tj = T + static_cast<long>(j) * k;
+                    for (int c = 0; c < k; ++c) {
+                        const double x = Ti[c], y = Tj[c];
+                        Ti[c] = cs * x - sn * y;
+                        Tj[c] = sn * x + cs * y;
                     }
                 }
             }
@@ -170,6 +169,8 @@ void jacobi_rows(double* B, int m, int n, double* T) {
         if (!rotated) break;
     }
 }
+
+void jacobi_rows(double* B, int m, int n, double* T) { jacobi_orthogonalize(B, m, n + 1, n, n + 1, EPS, T); }
 
 int keep_rows(const double* B, int m, int n, double rtol, double* V, double* cv, double* sig) {
     const int ld = n + 1;

@@ -4,6 +4,8 @@
 // X = A, so T A has orthogonal rows: U = Tᵀ, V's columns the normalized rows of X.
 #include "nonmin/svd.hpp"
 
+#include "nonmin/linalg.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -13,7 +15,6 @@ namespace nonmin {
 namespace {
 
 constexpr double EPS = std::numeric_limits<double>::epsilon();
-constexpr int MAX_SWEEPS = 60;
 
 double dot(const double* x, const double* y, int len) {
     double s0 = 0.0, s1 = 0.0;
@@ -26,43 +27,10 @@ double dot(const double* x, const double* y, int len) {
     return s0 + s1;
 }
 
-void rotate(double* x, double* y, int len, double cs, double sn) {
-    for (int k = 0; k < len; ++k) {
-        const double a = x[k], b = y[k];
-        x[k] = cs * a - sn * b;
-        y[k] = sn * a + cs * b;
-    }
-}
-
 // Cyclic one-sided Jacobi on the k rows of X (k × len): pairs are rotated until every pair is
-// orthogonal to |x·y| ≤ √len ε ‖x‖‖y‖ (LAPACK dgesvj's test). Rows of squared norm ≤ ε² ‖X‖²_F
-// are round-off and not rotated. T (k × k, may be null) receives the same rotations.
+// orthogonal to |x·y| ≤ √len ε ‖x‖‖y‖ (LAPACK dgesvj's test); linalg::jacobi_orthogonalize.
 void orthogonalize(double* X, int k, int len, double* T) {
-    double frob2 = 0.0;
-    for (long i = 0; i < static_cast<long>(k) * len; ++i) frob2 += X[i] * X[i];
-    const double noise2 = EPS * EPS * frob2;
-    const double tol = EPS * std::sqrt(static_cast<double>(std::max(len, 1)));
-    for (int sweep = 0; sweep < MAX_SWEEPS; ++sweep) {
-        bool rotated = false;
-        for (int i = 0; i < k - 1; ++i) {
-            double* Xi = X + static_cast<long>(i) * len;
-            for (int j = i + 1; j < k; ++j) {
-                double* Xj = X + static_cast<long>(j) * len;
-                const double a = dot(Xi, Xi, len), b = dot(Xj, Xj, len), c = dot(Xi, Xj, len);
-                if (a <= noise2 || b <= noise2 || std::fabs(c) <= tol * std::sqrt(a * b)) continue;
-                rotated = true;
-                const double zeta = (b - a) / (2.0 * c);
-                const double t = std::fabs(zeta) > 1e150
-                                     ? 0.5 / zeta
-                                     : std::copysign(1.0, zeta) / (std::fabs(zeta) + std::sqrt(1.0 + zeta * zeta));
-                const double cs = 1.0 / std::sqrt(1.0 + t * t);
-                const double sn = cs * t;
-                rotate(Xi, Xj, len, cs, sn);
-                if (T) rotate(T + static_cast<long>(i) * k, T + static_cast<long>(j) * k, k, cs, sn);
-            }
-        }
-        if (!rotated) break;
-    }
+    linalg::jacobi_orthogonalize(X, k, len, len, len, EPS * std::sqrt(static_cast<double>(std::max(len, 1))), T);
 }
 
 }  // namespace

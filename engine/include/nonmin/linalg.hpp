@@ -54,6 +54,13 @@ int equilibrate_pattern(const double* A, int m, int n, const int* start, const i
 // T (m × m, may be null) accumulates the rotation (T ← R T), for warm starts.
 void jacobi_rows(double* B, int m, int n, double* T);
 
+// The cyclic one-sided Jacobi behind jacobi_rows and the engine's SVD (svd.cpp), on the k rows
+// of X (leading dimension ld): a pair whose first len entries are not orthogonal to
+// |x·y| ≤ tol ‖x‖‖y‖ is rotated over its first rot ≥ len entries (the rest ride along, e.g. an
+// augmented right-hand side). Rows of squared norm ≤ eps² ‖X[:, :len]‖_F² are round-off and not
+// rotated. T (k × k, may be null) accumulates the rotations (T ← R T). At most 60 sweeps.
+void jacobi_orthogonalize(double* X, int k, int ld, int len, int rot, double tol, double* T);
+
 // The SVD rule on the rows left by jacobi_rows: σ_i = ‖B[i, :n]‖, kept if σ_i > rtol · σ_max.
 // Writes the kept unit rows into V (r × n, leading dimension n), cv_k = (u_kᵀ D b)/σ_k and
 // sig (m, the row norms). Returns r.
