@@ -641,7 +641,7 @@ NONMIN_INLINE int lq_certified_t(const S* B, int m, int n, S rtol, Wk& w, S* cv,
 
 int lq_certified(const double* B, int m, int n, double rtol, LQWork& w, double* cv, bool skip_redundant,
                  bool inverse) {
-    if (lanes::in_fiber()) return lq_certified_parked(B, m, n, rtol, w, cv, skip_redundant, inverse);
+    if (lanes::maybe_in_fiber()) return lq_certified_parked(B, m, n, rtol, w, cv, skip_redundant, inverse);
     return lq_certified_scalar(B, m, n, rtol, w, cv, skip_redundant, inverse);
 }
 
@@ -660,7 +660,7 @@ int lq_certified_z_scalar(const double* B, int m, int n, double rtol, LQWork& w,
 
 int lq_certified_z(const double* B, int m, int n, double rtol, LQWork& w, double* cv, double* E, double* x,
                    bool* z) {
-    if (lanes::in_fiber()) return lq_certified_z_parked(B, m, n, rtol, w, cv, E, x, z);
+    if (lanes::maybe_in_fiber()) return lq_certified_z_parked(B, m, n, rtol, w, cv, E, x, z);
     return lq_certified_z_scalar(B, m, n, rtol, w, cv, E, x, z);
 }
 

@@ -48,6 +48,12 @@ void run_fibers(int fibers, const std::function<void(int)>& body);
 // Inside a fiber of run_fibers on this thread.
 bool in_fiber();
 
+// Groups of fibers running in this process (run_fibers). The kernels with a lane form ask
+// maybe_in_fiber() on every call: outside a batch with lanes (every simulate()) that is one
+// relaxed load, not the call and thread-local lookup of in_fiber().
+inline std::atomic<int> groups_live{0};
+inline bool maybe_in_fiber() { return groups_live.load(std::memory_order_relaxed) != 0 && in_fiber(); }
+
 }  // namespace nonmin::lanes
 
 namespace nonmin::linalg {

@@ -115,6 +115,16 @@ void to_main(Fiber& f) {
     tl_fiber = &f;
 }
 
+// The running fiber parks its kernel call c and returns to the group, which serves it (in lanes
+// or alone); the served call, its result written, once the fiber resumes.
+const LQCall& park(const LQCall& c) {
+    Fiber& f = *tl_fiber;
+    f.call = c;
+    f.parked = true;
+    to_main(f);
+    return f.call;
+}
+
 [[noreturn]] void fiber_entry() {
     Fiber& f = *tl_fiber;
     try {
@@ -234,6 +244,10 @@ bool in_fiber() { return tl_fiber != nullptr; }
 
 void run_fibers(int fibers, const std::function<void(int)>& body) {
 #if NONMIN_LANES
+    struct Live {  // groups_live counts this group while it runs (maybe_in_fiber)
+        Live() { groups_live.fetch_add(1, std::memory_order_relaxed); }
+        ~Live() { groups_live.fetch_sub(1, std::memory_order_relaxed); }
+    } live_group;
     Group g;
     g.body = &body;
     if (const char* e = std::getenv("NONMIN_LANES_SCALAR_EVERY")) g.scalar_every = std::atoll(e);
@@ -271,11 +285,7 @@ namespace nonmin::linalg {
 int lq_certified_parked(const double* B, int m, int n, double rtol, LQWork& w, double* cv, bool skip_redundant,
                         bool inverse) {
 #if NONMIN_LANES
-    lanes::Fiber& f = *lanes::tl_fiber;
-    f.call = {B, m, n, rtol, &w, cv, skip_redundant, inverse, nullptr, nullptr, 0, false};
-    f.parked = true;
-    lanes::to_main(f);
-    return f.call.result;
+    return lanes::park({B, m, n, rtol, &w, cv, skip_redundant, inverse, nullptr, nullptr, 0, false}).result;
 #else
     return lq_certified_scalar(B, m, n, rtol, w, cv, skip_redundant, inverse);
 #endif
@@ -284,12 +294,9 @@ int lq_certified_parked(const double* B, int m, int n, double rtol, LQWork& w, d
 int lq_certified_z_parked(const double* B, int m, int n, double rtol, LQWork& w, double* cv, double* E, double* x,
                           bool* z) {
 #if NONMIN_LANES
-    lanes::Fiber& f = *lanes::tl_fiber;
-    f.call = {B, m, n, rtol, &w, cv, true, false, E, x, 0, false};
-    f.parked = true;
-    lanes::to_main(f);
-    *z = f.call.z;
-    return f.call.result;
+    const lanes::LQCall& c = lanes::park({B, m, n, rtol, &w, cv, true, false, E, x, 0, false});
+    *z = c.z;
+    return c.result;
 #else
     return lq_certified_z_scalar(B, m, n, rtol, w, cv, E, x, z);
 #endif
