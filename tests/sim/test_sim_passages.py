@@ -168,6 +168,21 @@ def test_engine_and_general_driver_place_the_same_steps() -> None:
     assert np.min(np.diff(a.t)) < 2e-3 * 0.9  # a step was placed before the passage at 0.714 s
 
 
+@functools.cache
+def _cfb_change_points() -> tuple[float, ...]:
+    """The crossed four-bar's change points (θ ≡ 0 mod π) in [0, 1.4 s]: Brent on reference
+    solves at rtol 1e-13 (2.5 s of CPU: once per process for the tests that need them; the
+    sample test below located them again at rtol 1e-12, 6e-14 s from these)."""
+
+    def ref(t: Any) -> dict[str, np.ndarray]:
+        return crossed_four_bar_reference(t, rtol=1e-13, atol=1e-13)
+
+    tt = np.linspace(0.0, 1.4, 701)
+    s = np.sin(ref(tt)["theta"])
+    idx = np.nonzero(np.sign(s[1:]) != np.sign(s[:-1]))[0]
+    return tuple(float(brentq(lambda t: float(np.sin(ref([t])["theta"][0])), tt[i], tt[i + 1], xtol=1e-15)) for i in idx)
+
+
 def test_samples_at_change_points_are_as_accurate_as_the_others() -> None:
     """t_eval containing the crossed four-bar's change points (θ ≡ 0 mod π): the samples there
     come from the Hermite interpolant and the projection, as accurate as a regular sample
@@ -175,14 +190,7 @@ def test_samples_at_change_points_are_as_accurate_as_the_others() -> None:
     round-off amplified by 1/σ_min: with dt = 2.5e-4 · (1 + ε), ε = ±1e-13, 3e-13, 1e-12, it
     ranged over 1e-11 … 1.8e-8 on main at 02e103f (and 2.8e-11 … 1.2e-8 after the certified LQ's
     substitution), hence 5e-8."""
-    tt = np.linspace(0.0, 1.4, 701)
-    s = np.sin(crossed_four_bar_reference(tt)["theta"])
-    idx = np.nonzero(np.sign(s[1:]) != np.sign(s[:-1]))[0]
-
-    def f(t: float) -> float:
-        return float(np.sin(crossed_four_bar_reference([t])["theta"][0]))
-
-    stars = [float(brentq(f, tt[i], tt[i + 1], xtol=1e-15)) for i in idx]
+    stars = list(_cfb_change_points())
     assert len(stars) >= 2
     regular = [0.5 * (stars[0] + stars[1])]
     te = np.sort(np.array([0.0, *stars, *regular, stars[-1] + 0.05]))
@@ -278,15 +286,6 @@ def test_crossed_four_bar_issue_target() -> None:
     assert all(a > b for a, b in itertools.pairwise(errs)), errs
 
 
-@functools.cache  # 2 s of reference solves (Brent on rtol 1e-13 runs): once, not once per test
-def _cfb_change_points(n: int) -> tuple[float, ...]:
-    def ref(t: Any) -> dict[str, np.ndarray]:
-        return crossed_four_bar_reference(t, rtol=1e-13, atol=1e-13)
-
-    tt = np.linspace(0.0, 1.4, 701)
-    s = np.sin(ref(tt)["theta"])
-    idx = np.nonzero(np.sign(s[1:]) != np.sign(s[:-1]))[0][:n]
-    return tuple(float(brentq(lambda t: float(np.sin(ref([t])["theta"][0])), tt[i], tt[i + 1], xtol=1e-15)) for i in idx)
 
 
 @pytest.mark.parametrize("engine", ["auto", "python"])
@@ -298,7 +297,7 @@ def test_a_run_that_ends_at_a_change_point_ends_on_the_branch(dt: float, engine:
     dt 1e-3, 2.3 m/s at 2.5e-4; now ≤ 4.7e-9 m/s), in both drivers (the general driver's
     _end_at_passage; before it, engine="python" ended 0.23 … 5.1 m/s off)."""
     mech = crossed_four_bar()
-    for ts in _cfb_change_points(2):
+    for ts in _cfb_change_points()[:2]:
         tr = simulate(mech, (0.0, ts), method=RK4(dt), progress=False, engine=engine)
         ref = crossed_four_bar_reference([ts], rtol=1e-13, atol=1e-13)
         assert tr.t[-1] == ts
