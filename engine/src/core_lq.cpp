@@ -818,34 +818,27 @@ int lq_sparse(const double* B, int m, int n, double rtol, LQWork& w, double* cv)
         double* v = w.Hv.data() + static_cast<long>(r) * n;
         int* H = w.Hx.data() + r * ldp;
         const int c = R[0];
-        int p = -1;
-        for (int t = 0; t < c; ++t) {  // the pivot: first unpivoted nonzero column
+        // the unpivoted nonzero columns, increasing (one pass, insertion into H[1…]): the
+        // pivot is the first of them, H[1]
+        int cnt = 0;
+        for (int t = 0; t < c; ++t) {
             const int k = R[1 + t];
-            if (w.Pc[k] == 0 && Wj[k] != 0.0 && (p < 0 || k < p)) p = k;
+            if (w.Pc[k] == 0 && Wj[k] != 0.0) {
+                int a = 1 + cnt;
+                while (a > 1 && H[a - 1] > k) {
+                    H[a] = H[a - 1];
+                    --a;
+                }
+                H[a] = k;
+                ++cnt;
+            }
         }
+        const int p = cnt > 0 ? H[1] : -1;
         double s = 0.0;
         if (p >= 0) {
             const double x0 = Wj[p];
-            v[p] = x0;
-            H[1] = p;
+            for (int t = 1; t <= cnt; ++t) v[H[t]] = Wj[H[t]];
             w.Pc[p] = 1;
-            int cnt = 1;
-            for (int t = 0; t < c; ++t) {  // the other unpivoted nonzero columns, increasing
-                const int k = R[1 + t];
-                if (w.Pc[k] == 0) {
-                    const double x = Wj[k];
-                    if (x != 0.0) {
-                        v[k] = x;
-                        int a = 1 + cnt;
-                        while (a > 2 && H[a - 1] > k) {
-                            H[a] = H[a - 1];
-                            --a;
-                        }
-                        H[a] = k;
-                        ++cnt;
-                    }
-                }
-            }
             s = x0 * x0;
             int imax = w.Lr[p];
             for (int t = 2; t <= cnt; ++t) {

@@ -822,8 +822,12 @@ double singular_indicator(Loop& L, const Mat& A, int m) {
         P.first[static_cast<std::size_t>(r)] = fc;
         P.order[static_cast<std::size_t>(r)] = r;
     }
-    std::stable_sort(P.order.begin(), P.order.begin() + k,
-                     [&P](int a, int b) { return P.first[static_cast<std::size_t>(a)] < P.first[static_cast<std::size_t>(b)]; });
+    bool in_order = true;  // (the rows mostly come by first column: the stable sort is then the identity)
+    for (int r = 1; r < k && in_order; ++r)
+        in_order = !(P.first[static_cast<std::size_t>(r)] < P.first[static_cast<std::size_t>(r) - 1]);
+    if (!in_order)
+        std::stable_sort(P.order.begin(), P.order.begin() + k,
+                         [&P](int a, int b) { return P.first[static_cast<std::size_t>(a)] < P.first[static_cast<std::size_t>(b)]; });
     // column lists (permuted row positions, increasing)
     std::fill(P.col_ptr.begin(), P.col_ptr.end(), 0);
     auto each_nonzero = [&](int r, auto&& f) {  // f(j) for the nonzero entries of B's row r, j increasing
