@@ -230,14 +230,22 @@ int certify_profile(const double* B, int m, int n, double rtol, LQWork& w, doubl
     for (int i = 0; i < m; ++i) cv[i] = 0.0;
     for (int i = 0; i < m; ++i) {  // T = L Lᵀ over the profile, |T| row sums
         const int fi = w.Lf[i];
-        for (int j = fi; j <= i; ++j) {
+        const double* Lii = Li + static_cast<long>(i) * ld;
+        double* Gi = G + static_cast<long>(i) * ld;
+        double ci = 0.0;  // cv[i]: 0 until row i (later rows add to it), so summed here in order
+        for (int j = fi; j < i; ++j) {
+            const double* Lj = Li + static_cast<long>(j) * ld;
             double s = 0.0;
-            for (int k = std::max(fi, w.Lf[j]); k <= j; ++k) s += Li[i * ld + k] * Li[j * ld + k];
-            G[i * ld + j] = s;
+            for (int k = std::max(fi, w.Lf[j]); k <= j; ++k) s += Lii[k] * Lj[k];
+            Gi[j] = s;
             const double a = std::fabs(s);
-            cv[i] += a;
-            if (j < i) cv[j] += a;
+            ci += a;
+            cv[j] += a;
         }
+        double s = 0.0;
+        for (int k = fi; k <= i; ++k) s += Lii[k] * Lii[k];
+        Gi[i] = s;
+        cv[i] = ci + std::fabs(s);
     }
     double tnorm = 0.0;
     for (int i = 0; i < m; ++i) tnorm = std::max(tnorm, cv[i]);
