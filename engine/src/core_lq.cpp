@@ -114,25 +114,11 @@ inline void reflect_row_always(double* X, const LQWork& w, int j, double bj) {
     reflect_row_impl<false>(X, w, j, bj);
 }
 
-// Add reflector j's columns to row i's column list (lq_sparse).
-inline void merge_columns(LQWork& w, int i, int j) {
-    const int n = w.n;
-    const int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
-    int* R = w.Rl.data() + static_cast<long>(i) * (n + 1);
-    std::uint8_t* mark = w.In.data() + static_cast<long>(i) * n;
-    for (int t = 1; t <= H[0]; ++t) {
-        const int k = H[t];
-        if (!mark[k]) {
-            mark[k] = 1;
-            R[1 + R[0]] = k;
-            ++R[0];
-        }
-    }
-}
-
 // Finish reflector j (pivot p, x0 its entry, s the sum of squares over its columns) of row `row`
 // of the work matrix X (Wq or Wz) and apply it to rows row+1 … imax. Returns false for an
-// all-zero row.
+// all-zero row. (The reflector's columns, vector and the column lists' storage are held in
+// locals: the column lists' byte marks could alias w's members, which the compiler otherwise
+// reloads for every row; the same arithmetic as reflect_row.)
 bool reflect(double* X, LQWork& w, int j, int row, int p, double x0, double s, int imax, bool track) {
     const int n = w.n;
     int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
@@ -149,8 +135,28 @@ bool reflect(double* X, LQWork& w, int j, int row, int p, double x0, double s, i
     Xj[p] = alpha;
     for (int t = 2; t <= cnt; ++t) Xj[H[t]] = 0.0;
     if (track) {
-        for (int i = row + 1; i <= imax; ++i)
-            if (reflect_row(X + static_cast<long>(i) * n, w, j, bj)) merge_columns(w, i, j);
+        const int* Hc = H + 1;
+        int* Rl = w.Rl.data();
+        std::uint8_t* In = w.In.data();
+        for (int i = row + 1; i <= imax; ++i) {
+            double* Xi = X + static_cast<long>(i) * n;
+            double d = 0.0;
+            for (int t = 0; t < cnt; ++t) d += Xi[Hc[t]] * v[Hc[t]];
+            if (d == 0.0) continue;  // (a row the reflector does not touch)
+            d *= bj;
+            for (int t = 0; t < cnt; ++t) Xi[Hc[t]] -= d * v[Hc[t]];
+            int* R = Rl + static_cast<long>(i) * (n + 1);  // merge_columns
+            std::uint8_t* mark = In + static_cast<long>(i) * n;
+            int rc = R[0];
+            for (int t = 0; t < cnt; ++t) {
+                const int k = Hc[t];
+                if (!mark[k]) {
+                    mark[k] = 1;
+                    R[1 + rc++] = k;
+                }
+            }
+            R[0] = rc;
+        }
     } else {
         for (int i = row + 1; i <= imax; ++i) reflect_row_always(X + static_cast<long>(i) * n, w, j, bj);
     }
@@ -795,23 +801,30 @@ int lq_sparse(const double* B, int m, int n, double rtol, LQWork& w, double* cv)
         w.Lr[k] = -1;
     }
     double* Wz = w.Wz.data();
-    for (int i = 0; i < m; ++i) {  // the rows in that order, with their column lists
-        const int src = w.order[i];
-        w.Ro[i] = src;
-        const int* P = w.Ap.data() + src * ldp;
-        int* R = w.Rl.data() + i * ldp;
-        int c = 0;
-        for (int t = 0; t < P[0]; ++t) {
-            const int k = P[1 + t];
-            const double x = B[src * ldp + k];
-            if (x != 0.0) {
-                Wz[static_cast<long>(i) * n + k] = x;
-                w.In[static_cast<long>(i) * n + k] = 1;
-                R[1 + c++] = k;
-                w.Lr[k] = i;
+    {  // (w's storage in locals: the byte marks' stores could alias w's members)
+        std::uint8_t* In = w.In.data();
+        int* Lr = w.Lr.data();
+        int* Rl = w.Rl.data();
+        const int* Ap = w.Ap.data();
+        for (int i = 0; i < m; ++i) {  // the rows in that order, with their column lists
+            const int src = w.order[i];
+            w.Ro[i] = src;
+            const int* P = Ap + src * ldp;
+            int* R = Rl + i * ldp;
+            const int e = P[0];
+            int c = 0;
+            for (int t = 0; t < e; ++t) {
+                const int k = P[1 + t];
+                const double x = B[src * ldp + k];
+                if (x != 0.0) {
+                    Wz[static_cast<long>(i) * n + k] = x;
+                    In[static_cast<long>(i) * n + k] = 1;
+                    R[1 + c++] = k;
+                    Lr[k] = i;
+                }
             }
+            R[0] = c;
         }
-        R[0] = c;
     }
     int res = LQ_NONE;
     bool ok = true;
@@ -893,11 +906,16 @@ int lq_sparse(const double* B, int m, int n, double rtol, LQWork& w, double* cv)
         }
         res = certify_profile(B, r, n, rtol, w, cv);
     }
-    for (int i = 0; i < m; ++i) {  // Wz and In back to zero
-        const int* R = w.Rl.data() + i * ldp;
-        for (int t = 0; t < R[0]; ++t) {
-            Wz[static_cast<long>(i) * n + R[1 + t]] = 0.0;
-            w.In[static_cast<long>(i) * n + R[1 + t]] = 0;
+    {
+        std::uint8_t* In = w.In.data();
+        const int* Rl = w.Rl.data();
+        for (int i = 0; i < m; ++i) {  // Wz and In back to zero
+            const int* R = Rl + i * ldp;
+            const int e = R[0];
+            for (int t = 0; t < e; ++t) {
+                Wz[static_cast<long>(i) * n + R[1 + t]] = 0.0;
+                In[static_cast<long>(i) * n + R[1 + t]] = 0;
+            }
         }
     }
     return res;
