@@ -86,39 +86,48 @@ void lq_lower_subst(const LQWork& w, int m, double* cv) {
 
 namespace {
 
-// Row i of X (leading dimension n) times reflector j (I − β_j v vᵀ over its columns Hx[j]);
-// returns whether the row changed. TestZero = false skips the test d = 0 (a row the reflector
-// does not touch: X − 0·v, the same values; for the dense path, where that branch is
-// mispredicted).
+// Row X (its entries at the reflector's cnt columns Hc, increasing) times the reflector
+// I − β v vᵀ; returns whether the row changed. TestZero = false skips the test d = 0 (a row the
+// reflector does not touch: X − 0·v, the same values; for the dense path, where that branch is
+// mispredicted). The callers pass the reflector's storage as locals (see reflect).
 template <bool TestZero>
-inline bool reflect_row_impl(double* X, const LQWork& w, int j, double bj) {
-    const int n = w.n;
-    const int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
-    const double* v = w.Hv.data() + static_cast<long>(j) * n;
-    const int cnt = H[0];
+inline bool reflect_row_at(double* X, const int* Hc, const double* v, int cnt, double bj) {
     double d = 0.0;
-    for (int t = 1; t <= cnt; ++t) d += X[H[t]] * v[H[t]];
+    for (int t = 0; t < cnt; ++t) d += X[Hc[t]] * v[Hc[t]];
     if constexpr (TestZero) {
         if (d == 0.0) return false;
     }
     d *= bj;
-    for (int t = 1; t <= cnt; ++t) X[H[t]] -= d * v[H[t]];
+    for (int t = 0; t < cnt; ++t) X[Hc[t]] -= d * v[Hc[t]];
     return true;
 }
 
+// Row i of X (leading dimension n) times reflector j (its columns Hx[j], its vector Hv[j]).
 inline bool reflect_row(double* X, const LQWork& w, int j, double bj) {
-    return reflect_row_impl<true>(X, w, j, bj);
+    const int n = w.n;
+    const int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
+    return reflect_row_at<true>(X, H + 1, w.Hv.data() + static_cast<long>(j) * n, H[0], bj);
 }
 
-inline void reflect_row_always(double* X, const LQWork& w, int j, double bj) {
-    reflect_row_impl<false>(X, w, j, bj);
+// Add a reflector's cnt columns Hc to a row's column list R ([count, columns…]) and its byte
+// marks (lq_sparse).
+inline void merge_columns(int* R, std::uint8_t* mark, const int* Hc, int cnt) {
+    int rc = R[0];
+    for (int t = 0; t < cnt; ++t) {
+        const int k = Hc[t];
+        if (!mark[k]) {
+            mark[k] = 1;
+            R[1 + rc++] = k;
+        }
+    }
+    R[0] = rc;
 }
 
 // Finish reflector j (pivot p, x0 its entry, s the sum of squares over its columns) of row `row`
 // of the work matrix X (Wq or Wz) and apply it to rows row+1 … imax. Returns false for an
 // all-zero row. (The reflector's columns, vector and the column lists' storage are held in
 // locals: the column lists' byte marks could alias w's members, which the compiler otherwise
-// reloads for every row; the same arithmetic as reflect_row.)
+// reloads for every row.)
 bool reflect(double* X, LQWork& w, int j, int row, int p, double x0, double s, int imax, bool track) {
     const int n = w.n;
     int* H = w.Hx.data() + static_cast<long>(j) * (n + 1);
@@ -134,31 +143,15 @@ bool reflect(double* X, LQWork& w, int j, int row, int p, double x0, double s, i
     double* Xj = X + static_cast<long>(row) * n;
     Xj[p] = alpha;
     for (int t = 2; t <= cnt; ++t) Xj[H[t]] = 0.0;
+    const int* Hc = H + 1;
     if (track) {
-        const int* Hc = H + 1;
         int* Rl = w.Rl.data();
         std::uint8_t* In = w.In.data();
-        for (int i = row + 1; i <= imax; ++i) {
-            double* Xi = X + static_cast<long>(i) * n;
-            double d = 0.0;
-            for (int t = 0; t < cnt; ++t) d += Xi[Hc[t]] * v[Hc[t]];
-            if (d == 0.0) continue;  // (a row the reflector does not touch)
-            d *= bj;
-            for (int t = 0; t < cnt; ++t) Xi[Hc[t]] -= d * v[Hc[t]];
-            int* R = Rl + static_cast<long>(i) * (n + 1);  // merge_columns
-            std::uint8_t* mark = In + static_cast<long>(i) * n;
-            int rc = R[0];
-            for (int t = 0; t < cnt; ++t) {
-                const int k = Hc[t];
-                if (!mark[k]) {
-                    mark[k] = 1;
-                    R[1 + rc++] = k;
-                }
-            }
-            R[0] = rc;
-        }
+        for (int i = row + 1; i <= imax; ++i)
+            if (reflect_row_at<true>(X + static_cast<long>(i) * n, Hc, v, cnt, bj))
+                merge_columns(Rl + static_cast<long>(i) * (n + 1), In + static_cast<long>(i) * n, Hc, cnt);
     } else {
-        for (int i = row + 1; i <= imax; ++i) reflect_row_always(X + static_cast<long>(i) * n, w, j, bj);
+        for (int i = row + 1; i <= imax; ++i) reflect_row_at<false>(X + static_cast<long>(i) * n, Hc, v, cnt, bj);
     }
     for (int t = 1; t <= cnt; ++t)  // those rows may now be nonzero in all its columns
         if (imax > w.Lr[H[t]]) w.Lr[H[t]] = imax;
@@ -510,7 +503,7 @@ NONMIN_INLINE int lq_certified_t(const S* B, int m, int n, S rtol, Wk& w, S* cv,
                 w.beta[r] = bj;
                 Wj[p] = alpha;
                 for (int t = 2; t <= cnt; ++t) Wj[H[t]] = S{};
-                for (int i = j + 1; i <= imax; ++i) {  // reflect_row_always
+                for (int i = j + 1; i <= imax; ++i) {  // reflect_row_at<false>
                     S* X = Wq + static_cast<long>(i) * n;
                     S d = S{};
                     for (int t = 1; t <= cnt; ++t) d += X[H[t]] * v[H[t]];

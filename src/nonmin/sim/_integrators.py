@@ -359,8 +359,9 @@ class SingularPassages:
         return PASSAGE_NOISE * float(np.finfo(float).eps) / self.sigma
 
     def __call__(self, t: float, h: float) -> float:
-        """:meth:`place` (the object is the ``place`` argument of :meth:`Integrator.step`)."""
-        return self.place(t, h)
+        """:meth:`place`, then :meth:`align` (the object is the ``place`` argument of
+        :meth:`Integrator.step`; adaptive methods have no grid, ``origin`` None)."""
+        return self.align(t, h, self.place(t, h))
 
     def observe(self, t: float, A: FloatArray) -> None:
         """Record the indicator at a projected step end ``t`` with the active rows ``A``."""
@@ -600,11 +601,7 @@ def _fixed_step(
     with its stage states projected by ``project`` (the engine loop: ``rk4_advance`` with
     ``Loop::stage_proj``)."""
     t = state.t
-    if place is None:
-        h = _clip(t, state.h, t_bound)
-    else:
-        hp = place(t, state.h)
-        h = _clip(t, place.align(t, state.h, hp) if isinstance(place, SingularPassages) else hp, t_bound)
+    h = _clip(t, state.h if place is None else place(t, state.h), t_bound)
     f = state.f
     stages = False
     if project is not None and isinstance(place, SingularPassages) and isinstance(method, RK4):
