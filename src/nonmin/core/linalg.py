@@ -250,6 +250,16 @@ def cho_solve(L: FloatArray, b: FloatArray) -> FloatArray:
     Single and batched calls run the same substitution, so they agree bitwise.
     """
     n = L.shape[-1]
+    # One state: the same sums (the same einsum over the same slices) without the batch's
+    # broadcasting and ellipsis indexing, which took half the time of a call at n ≤ 15.
+    if L.ndim == 2 and b.ndim == 1:
+        y1 = np.empty(n)
+        for i in range(n):
+            y1[i] = (b[i] - np.einsum("j,j->", L[i, :i], y1[:i])) / L[i, i]
+        x1 = np.empty(n)
+        for i in range(n - 1, -1, -1):
+            x1[i] = (y1[i] - np.einsum("j,j->", L[i + 1 :, i], x1[i + 1 :])) / L[i, i]
+        return x1
     shape = np.broadcast_shapes(L.shape[:-2], b.shape[:-1])
     L = np.broadcast_to(L, (*shape, n, n))
     y = np.empty((*shape, n))
