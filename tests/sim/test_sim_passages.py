@@ -184,6 +184,19 @@ def _cfb_change_points() -> tuple[float, ...]:
 
 
 @functools.cache
+def _cfb_state_before(ts: float) -> tuple[np.ndarray, np.ndarray]:
+    """The reference state PASSAGE_LEAD before a change point (rtol 1e-13, once per process)."""
+    ref = crossed_four_bar_reference([ts - PASSAGE_LEAD], rtol=1e-13, atol=1e-13)
+    return ref["q"][0], ref["qd"][0]
+
+
+#: Runs that end at a change point start this long before it, from the reference state: at
+#: dt 2.5e-4 200 steps (enough history for the passage predictor) instead of the 818 + 3039
+#: steps from t = 0 (8.3 s of the general driver's CPU, the longest test of the default run)
+PASSAGE_LEAD = 0.05
+
+
+@functools.cache
 def _cfb_qd_at(ts: float) -> np.ndarray:
     """The reference q̇ at a change point (rtol 1e-13; 0.24 s of CPU, once per process instead
     of once per parametrization)."""
@@ -302,11 +315,19 @@ def test_a_run_that_ends_at_a_change_point_ends_on_the_branch(dt: float, engine:
     the step placed past the instant (Hermite interpolant, projected as a sample), not from a
     step whose last stage is the singular configuration (measured before: q̇ off by 5.1 m/s at
     dt 1e-3, 2.3 m/s at 2.5e-4; now ≤ 4.7e-9 m/s), in both drivers (the general driver's
-    _end_at_passage; before it, engine="python" ended 0.23 … 5.1 m/s off)."""
+    _end_at_passage; before it, engine="python" ended 0.23 … 5.1 m/s off).
+
+    Each run starts PASSAGE_LEAD before its change point from the reference state (it started
+    at t = 0 before: 4.7 s of the general driver's CPU at dt 2.5e-4 for the same end). Measured
+    with _end_at_passage disabled, the general driver ends 3e4 … 5e5 m/s off from both starts
+    (from t = 0 at dt 2.5e-4, the second change point: only 1.6e-4 m/s): the shorter runs still
+    catch the failure; with it: ≤ 8.3e-9 m/s (both drivers, both dt)."""
     mech = crossed_four_bar()
     for ts in _cfb_change_points()[:2]:
-        tr = simulate(mech, (0.0, ts), method=RK4(dt), progress=False, engine=engine)
-        assert tr.t[-1] == ts
+        q0, qd0 = _cfb_state_before(ts)
+        tr = simulate(mech, (ts - PASSAGE_LEAD, ts), q0, qd0, method=RK4(dt), progress=False, engine=engine)
+        assert tr.t[-1] == ts and len(tr) > round(PASSAGE_LEAD / dt)  # (the steps up to the instant)
+        assert np.diff(tr.t)[-1] < dt  # (the end: a step placed at the instant)
         assert np.abs(tr.qd[-1] - _cfb_qd_at(ts)).max() < 1e-7
         assert abs(tr.energy[-1] - tr.energy[0]) < 1e-7
 
