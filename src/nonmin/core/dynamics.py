@@ -73,6 +73,10 @@ def _mbar(M: FloatArray, P: FloatArray, mu: FloatArray) -> FloatArray:
 
 def _optimal_mu(PMP: FloatArray, M: FloatArray, rank: ArrayLike) -> FloatArray:
     n = M.shape[-1]
+    if PMP.ndim == 2 and n:  # one state: the same quotients without the batch's masks and errstate
+        dof1 = n - int(np.asarray(rank))
+        mu1 = np.trace(PMP) / dof1 if dof1 > 0 else np.trace(M) / n
+        return np.asarray(mu1 if mu1 > 0 else 1.0)
     dof = n - np.asarray(rank)
     tr_pmp = np.trace(PMP, axis1=-2, axis2=-1)
     tr_m = np.trace(M, axis1=-2, axis2=-1)
