@@ -6,6 +6,7 @@
 #include "nonmin/sim/loop.hpp"
 #include "nonmin/sim/events.hpp"
 #include "nonmin/linalg.hpp"
+#include "nonmin/planar.hpp"
 #include "sim_detail.hpp"
 
 #include <algorithm>
@@ -270,7 +271,9 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
     reused(L.Ah, got.Ah, mr, n);
     reused(L.Alin, got.Alin, mr, n);
     for (Vec* v : {&L.gam, &L.phi, &L.vel, &L.phih, &L.bias, &L.floor_, &L.rnorm}) *v = Vec::Zero(mr);
-    for (Vec* v : {&L.g, &L.qdd, &L.fc, &L.zero_n, &L.aq, &L.dq, &L.vq}) *v = Vec::Zero(n);
+    for (Vec* v : {&L.g, &L.qdd, &L.fc, &L.zero_n, &L.aq, &L.dq, &L.vq, &L.ev_q}) *v = Vec::Zero(n);
+    // (a planar program writes A only when asked, and its other terms without it)
+    L.ev_strip = dynamic_cast<const PlanarProgram*>(&prog) != nullptr;
     L.u = Vec::Zero(L.k);
     reused(L.Mq, got.Mq, n, n);  // (assigned in full by the projection: M or I)
     zeroed(L.L, got.L, n, n);
@@ -334,13 +337,28 @@ Loop::~Loop() {
 
 Status evaluate(Loop& L, double t, const double* q, const double* qd, unsigned need) {
     const std::uint8_t* mask = L.fric.empty() ? L.active.data() : L.eval_mask.data();  // + slipping rows
-    const Status s = L.prog->evaluate(t, q, qd, mask, L.m_held ? need & ~NEED_M : need, L.T, *L.ws);
-    if (s != Status::ok) return s;
+    const int n = L.n;
+    // A and φ gathered at this very (t, q) for these rows (Loop::ev_ok): kept, bitwise the same
+    bool same = false;
+    if (L.ev_ok && (need & (NEED_A | NEED_PHI)) && t == L.ev_t && L.ev_gen == L.gather_gen && !L.ctrl &&
+        L.fric.empty() && L.gathered == L.rows) {
+        same = true;
+        for (int i = 0; i < n && same; ++i) same = q[i] == L.ev_q[i];
+    }
+    unsigned pneed = L.m_held ? need & ~NEED_M : need;
+    if (same) {
+        need &= ~(NEED_A | NEED_PHI);
+        if (L.ev_strip) pneed &= ~(NEED_A | NEED_PHI);
+    }
+    const Status s = L.prog->evaluate(t, q, qd, mask, pneed, L.T, *L.ws);
+    if (s != Status::ok) {
+        L.ev_ok = false;
+        return s;
+    }
     if ((need & NEED_M) && !L.m_held && L.prog->constant_mass()) {  // a constant M: kept, validated once
         L.m_held = true;
         L.m_known = mass_known(L.T.M, L.opt.sym_rtol);
     }
-    const int n = L.n;
     const RowPattern& pat = L.prog->a_pattern();
     // A: the pattern's entries only, once the rows were gathered in full for this active set
     const bool sparse = (need & NEED_A) && pat.known() && L.gathered == L.rows;
@@ -364,6 +382,7 @@ Status evaluate(Loop& L, double t, const double* q, const double* qd, unsigned n
         }
     }
     const double* TA = L.T.A.data();
+    const bool ah = L.m_hol != L.m;  // (every row holonomic: Ah's rows are Ac's, hol_rows)
     int ih = 0;
     for (int i = 0; i < L.m; ++i) {
         const int r = L.rows[i];
@@ -373,13 +392,13 @@ Status evaluate(Loop& L, double t, const double* q, const double* qd, unsigned n
             double* Aci = L.Ac.data() + static_cast<std::ptrdiff_t>(i) * n;
             const double* Ar = TA + static_cast<std::ptrdiff_t>(r) * n;
             for (int t = 0; t < e; ++t) Aci[cols[t]] = Ar[cols[t]];
-            if (L.hol[i]) {
+            if (ah && L.hol[i]) {
                 double* Ahi = L.Ah.data() + static_cast<std::ptrdiff_t>(ih) * n;
                 for (int t = 0; t < e; ++t) Ahi[cols[t]] = Ar[cols[t]];
             }
         } else if (need & NEED_A) {
             L.Ac.row(i) = L.T.A.row(r);
-            if (L.hol[i]) L.Ah.row(ih) = L.T.A.row(r);
+            if (ah && L.hol[i]) L.Ah.row(ih) = L.T.A.row(r);
         }
         if (need & NEED_GAMMA) L.gam[i] = L.T.gamma[r];
         if (need & NEED_PHI) L.phi[i] = L.T.phi[r];
@@ -389,12 +408,23 @@ Status evaluate(Loop& L, double t, const double* q, const double* qd, unsigned n
             ++ih;
         }
     }
+    if ((need & NEED_A) && (need & NEED_PHI)) {  // A and φ at (t, q) now
+        L.ev_ok = true;
+        L.ev_t = t;
+        L.ev_gen = L.gather_gen;
+        for (int i = 0; i < n; ++i) L.ev_q[i] = q[i];
+    } else if (need & (NEED_A | NEED_PHI)) {  // one of them at another (t, q)
+        L.ev_ok = false;
+    }
     return Status::ok;
 }
 
 namespace {
 // Whether Ah (and Ac) hold the gathered rows of the current active set with their pattern
 bool hol_pattern(const Loop& L) { return !L.gathered.empty() && L.gathered == L.rows; }
+// The m_hol position-level rows of A: Ah, or Ac itself when every active row is holonomic
+// (evaluate() then gathers Ac alone; the same rows in the same order)
+const Mat& hol_rows(const Loop& L) { return L.m_hol == L.m ? L.Ac : L.Ah; }
 }  // namespace
 
 // _simulate.drift_rank_rtol over the gathered A and φ (position-level rows)
@@ -403,12 +433,13 @@ double drift_rank_rtol(Loop& L) {
     if (L.m == 0 || L.m_hol == 0) return base;
     double big = 0.0;
     const bool pat = hol_pattern(L);
+    const Mat& Ah = hol_rows(L);
     for (int i = 0; i < L.m_hol; ++i) {
         double s = 0.0;
         if (pat)  // the pattern's entries, in the same order (the others add zeros)
-            for (int t = L.ph_start[i]; t < L.ph_start[i + 1]; ++t) s += L.Ah(i, L.ph_cols[t]) * L.Ah(i, L.ph_cols[t]);
+            for (int t = L.ph_start[i]; t < L.ph_start[i + 1]; ++t) s += Ah(i, L.ph_cols[t]) * Ah(i, L.ph_cols[t]);
         else
-            for (int j = 0; j < L.n; ++j) s += L.Ah(i, j) * L.Ah(i, j);
+            for (int j = 0; j < L.n; ++j) s += Ah(i, j) * Ah(i, j);
         const double nr = std::sqrt(s);
         L.rnorm[i] = nr;
         big = std::max(big, nr);
@@ -658,13 +689,14 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
             if (err <= po.tol || err == 0.0) break;  // converged
             bool at_floor = true;
             const bool pat = hol_pattern(L);
+            const Mat& Ah = hol_rows(L);
             for (int i = 0; i < mh; ++i) {
                 double sa = 0.0;
                 if (pat)  // the pattern's entries, in the same order (the others add zeros)
                     for (int t = L.ph_start[i]; t < L.ph_start[i + 1]; ++t)
-                        sa += std::abs(L.Ah(i, L.ph_cols[t])) * L.aq[L.ph_cols[t]];
+                        sa += std::abs(Ah(i, L.ph_cols[t])) * L.aq[L.ph_cols[t]];
                 else
-                    for (int j = 0; j < n; ++j) sa += std::abs(L.Ah(i, j)) * L.aq[j];
+                    for (int j = 0; j < n; ++j) sa += std::abs(Ah(i, j)) * L.aq[j];
                 L.floor_[i] = ROUNDOFF_FLOOR * (1.0 + sa);
                 if (!(std::abs(L.phih[i]) <= L.floor_[i])) at_floor = false;
             }
@@ -685,9 +717,9 @@ Status project(Loop& L, double t, double* y, const ProjectionOptions& po) {
                 if (hol_pattern(L) && L.alin_gen == L.gather_gen) {  // the pattern's entries (the others 0)
                     for (int i = 0; i < mh; ++i)
                         for (int t = L.ph_start[i]; t < L.ph_start[i + 1]; ++t)
-                            L.Alin(i, L.ph_cols[t]) = L.Ah(i, L.ph_cols[t]);
+                            L.Alin(i, L.ph_cols[t]) = Ah(i, L.ph_cols[t]);
                 } else {
-                    L.Alin.topRows(mh) = L.Ah.topRows(mh);
+                    L.Alin.topRows(mh) = Ah.topRows(mh);
                     L.alin_gen = hol_pattern(L) ? L.gather_gen : ~0ull;
                 }
                 have_lin = true;

@@ -274,6 +274,15 @@ struct Loop {
     // Counts the full gatherings; Alin holds rows copied in full at gathering alin_gen (later
     // copies of the same rows take the pattern's entries only)
     unsigned long long gather_gen = 0, alin_gen = ~0ull;
+    // The (t, q) at which Ac, Ah and φ (phi, phih) were last gathered (ev_ok; at gathering
+    // ev_gen of the same rows): evaluate() at that very (t, q) does not gather them again, and a
+    // planar program (ev_strip) is not asked for A and φ again (the numba loop's `same`; e.g.
+    // the point right after a projection, whose velocity correction left q as it was). Without
+    // a controller or friction (whose evaluations read the program's terms themselves).
+    bool ev_ok = false, ev_strip = false;
+    double ev_t = 0.0;
+    unsigned long long ev_gen = 0;
+    Vec ev_q;
     Vec gam, phi, vel, phih, bias, floor_, rnorm;
     Vec g, u, qdd, fc, zero_n, aq, dq;
     Mat Mq, L;  // the projection's metric (n × n), Cholesky factor of M̄
