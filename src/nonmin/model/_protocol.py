@@ -25,10 +25,11 @@ Velocity residual: ``A qd + φ_t``; position residual: ``φ`` (zero rows for non
 from __future__ import annotations
 
 import dataclasses
+import functools
 from abc import ABC, abstractmethod
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Literal, NamedTuple, get_args
+from typing import Any, ClassVar, Literal, NamedTuple, TypeVar, get_args
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -237,6 +238,36 @@ def _as_vector(x: ArrayLike, name: str, n: int) -> FloatArray:
     return arr
 
 
+#: Active sets whose row slices and engine masks a model keeps (cleared when exceeded; a run
+#: uses a handful).
+_MAX_ACTIVE_SETS = 256
+
+_T = TypeVar("_T")
+
+
+class _ConstraintIndex:
+    """A model's constraints by name, derived once per model (a model is immutable): the names
+    in row order, their set, and per validated active set its row slices and engine mask."""
+
+    __slots__ = ("masks", "name_set", "names", "slices")
+
+    def __init__(self, constraints: tuple[ConstraintSpec, ...]) -> None:
+        self.names = tuple(c.name for c in constraints)
+        self.name_set = frozenset(self.names)
+        self.slices: dict[frozenset[str], dict[str, slice]] = {}
+        self.masks: dict[frozenset[str], NDArray[np.uint8]] = {}
+
+
+def _kept(cache: dict[frozenset[str], _T], active: frozenset[str], build: Callable[[], _T]) -> _T:
+    """``cache[active]``, built on the first request (the cache is cleared when full)."""
+    hit = cache.get(active)
+    if hit is None:
+        if len(cache) >= _MAX_ACTIVE_SETS:
+            cache.clear()
+        hit = cache[active] = build()
+    return hit
+
+
 class Model(ABC):
     """Abstract base of every model source (planar, spatial, SymPy, functions, Pinocchio, MuJoCo).
 
@@ -274,10 +305,15 @@ class Model(ABC):
         """Number of actuators (columns of B)."""
         return len(self.actuator_names)
 
+    @functools.cached_property
+    def _constraint_index(self) -> _ConstraintIndex:
+        """The constraints by name (built on first use, kept with the model)."""
+        return _ConstraintIndex(tuple(self.constraints))
+
     @property
     def constraint_names(self) -> tuple[str, ...]:
         """Names of all constraints, in row order."""
-        return tuple(c.name for c in self.constraints)
+        return self._constraint_index.names
 
     def constraint(self, name: str) -> ConstraintSpec:
         """The :class:`ConstraintSpec` called ``name``."""
@@ -306,8 +342,9 @@ class Model(ABC):
         if isinstance(active, str):
             active = (active,)
         names = frozenset(active)
-        unknown = names.difference(self.constraint_names)
-        if unknown:
+        known = self._constraint_index.name_set
+        if not names <= known:
+            unknown = names - known
             raise UnknownNameError(
                 f"active: unknown constraint name(s) {sorted(unknown)} for model {self.name!r}; "
                 f"known: {list(self.constraint_names)}"
@@ -317,19 +354,25 @@ class Model(ABC):
     def row_slices(self, active: Iterable[str] | None = None) -> dict[str, slice]:
         """Row range of each active constraint in the stacked arrays."""
         act = self.resolve_active(active)
-        out: dict[str, slice] = {}
-        i = 0
-        for c in self.constraints:
-            if c.name in act:
-                out[c.name] = slice(i, i + c.dim)
-                i += c.dim
-        return out
+
+        def build() -> dict[str, slice]:
+            out: dict[str, slice] = {}
+            i = 0
+            for c in self.constraints:
+                if c.name in act:
+                    out[c.name] = slice(i, i + c.dim)
+                    i += c.dim
+            return out
+
+        rows = _kept(self._constraint_index.slices, act, build)
+        return dict(rows)  # (a copy: the caller's to change)
 
     def active_mask(self, active: Iterable[str] | str | None = None) -> NDArray[np.uint8]:
         """The active set as the engine's mask: 1 for each active constraint, in
         :attr:`constraints` order, shape (number of constraints,)."""
         act = self.resolve_active(active)
-        return np.array([c.name in act for c in self.constraints], dtype=np.uint8)
+        return _kept(self._constraint_index.masks, act,
+                     lambda: np.array([c.name in act for c in self.constraints], dtype=np.uint8)).copy()  # fmt: skip
 
     def num_rows(self, active: Iterable[str] | None = None) -> int:
         """Number of stacked constraint rows m for an active set."""
@@ -606,7 +649,15 @@ class Model(ABC):
         return State(t=float(t), q=qv, qd=v, active=self.resolve_active(active))
 
     def describe(self) -> Mapping[str, Any]:
-        """A plain summary (sizes, names, constraints) for printing and metadata."""
+        """A plain summary (sizes, names, constraints) for printing and metadata.
+
+        Built once per model (a model is immutable) and shared with every caller (and with the
+        ``metadata["model"]`` of its trajectories): read it, do not modify it.
+        """
+        return self._description
+
+    @functools.cached_property
+    def _description(self) -> Mapping[str, Any]:
         return {
             "name": self.name,
             "type": type(self).__name__,

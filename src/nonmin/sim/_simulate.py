@@ -43,7 +43,7 @@ import math
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from functools import partial
+from functools import cached_property, lru_cache, partial
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -293,11 +293,11 @@ class _System:
     #: the powers of W at the right-hand-side evaluations of the step being taken (rhs)
     powers: list[float] = field(default_factory=list)
     power_t: list[float] = field(default_factory=list)  #: (their times)
-    #: a rheonomic or nonholonomic constraint: the constraint forces work (_power)
-    working_constraints: bool = False
 
-    def __post_init__(self) -> None:
-        self.working_constraints = any(c.kind in ("rheonomic", "nonholonomic") for c in self.model.constraints)
+    @cached_property
+    def working_constraints(self) -> bool:
+        """A rheonomic or nonholonomic constraint: the constraint forces work (_power)."""
+        return any(c.kind in ("rheonomic", "nonholonomic") for c in self.model.constraints)
 
     def rtol_at(self, ct: ConstraintTerms) -> float:
         """Rank tolerance at a (possibly off-manifold) state: see :func:`drift_rank_rtol`."""
@@ -871,7 +871,9 @@ def simulate(
               if hasattr(controller, "initial_state") else None)
     unilateral = tuple(c.name for c in model.constraints if c.kind == "unilateral") if contact else ()
     system = _System(model, controller, stab, rank_rtol, n, k, act, cstate, unilateral=unilateral)
-    contact_opts = ([_restitution_of(restitution, c.name) for c in model.constraints], v_thresh)
+    # the engine's event layer (restitution per constraint): only its contact guards read it
+    contact_opts = ([_restitution_of(restitution, c.name) for c in model.constraints], v_thresh) \
+        if unilateral else None  # fmt: skip
     use_engine = False
     why: str | None = None
     fcs = model.friction_contacts if contact else ()
@@ -901,7 +903,7 @@ def simulate(
             "rank_rtol": rank_rtol,
             "engine": engine,
         },
-        "initial_state": {"t": t0, "q": q.tolist(), "qd": qd.tolist(), "active": sorted(act)},
+        "initial_state": {"t": t0, "q": q.tolist(), "qd": qd.tolist(), "active": list(_sorted_names(act))},
         "engine": "engine" if use_engine else "python",
     }
     if isinstance(stab, Projection) and stab.energy:
@@ -965,7 +967,7 @@ def simulate(
                 er = _engine.run(eng_prog, opts=opts, active_mask=model_mask(model, act), t_out=t_out,
                                  sink=rec.extend, progress=bar, start=(t0, q, qd), controller=ccb,
                                  passage_seed=seed, compiled=creg, guards=guards,
-                                 contact=contact_opts if unilateral else None)  # fmt: skip
+                                 contact=contact_opts)  # fmt: skip
             finally:
                 if ccb is not None:
                     system.cstate = ccb.state
@@ -1482,10 +1484,18 @@ def _kick_check(result: Trajectory) -> Trajectory:
 
 def model_mask(model: Model, active: frozenset[str]) -> NDArray[np.uint8]:
     """The active set as the engine's mask (one entry per constraint, declaration order)."""
-    return np.array([c.name in active for c in model.constraints], dtype=np.uint8)
+    return model.active_mask(active)
+
+
+@lru_cache(maxsize=64)
+def _sorted_names(active: frozenset[str]) -> tuple[str, ...]:
+    """An active set's names in sorted order (the metadata's; a run starts from one of a few)."""
+    return tuple(sorted(active))
 
 
 def _describe(model: Model) -> dict[str, Any]:
+    """The model's description for a result's metadata (its top level a copy; the rest the
+    model's own, shared by its runs: :meth:`Model.describe`)."""
     try:
         return dict(model.describe())
     except Exception:  # describe() is informative only
@@ -1537,6 +1547,8 @@ def _engine_guards(
 ) -> tuple[list[int], list[tuple[bool, int, int, float]]]:
     """The contact watches as the engine's guards ``(release, constraint index, first active row,
     value)`` and their indices in ``watches``."""
+    if all(w.kind == "user" for w in watches):
+        return [], []
     model = system.model
     index = {c.name: i for i, c in enumerate(model.constraints)}
     rows = model.row_slices(system.active)

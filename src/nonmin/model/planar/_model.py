@@ -124,6 +124,7 @@ class PlanarModel(Model):
     _plan: _vectorized.Plan = field(init=False, repr=False, compare=False)
     _layouts: dict[frozenset[str], _vectorized.Layout] = field(init=False, repr=False, compare=False)
     _constraints: tuple[ConstraintSpec, ...] = field(init=False, repr=False, compare=False)
+    _friction_contacts: tuple[FrictionContact, ...] = field(init=False, repr=False, compare=False)
     _coordinate_names: tuple[str, ...] = field(init=False, repr=False, compare=False)
     _M: FloatArray = field(init=False, repr=False, compare=False)
     _fg: FloatArray = field(init=False, repr=False, compare=False)
@@ -250,6 +251,9 @@ class PlanarModel(Model):
             else:
                 check_point(act.point, f"actuator {act.name!r}")
         s(self, "_constraints", tuple(ConstraintSpec(j.name, j.kind, j.dim, j.describe()) for j in self.joints))
+        s(self, "_friction_contacts", tuple(
+            FrictionContact(j.normal, j.name, j.mu) for j in self.joints if isinstance(j, ContactTangent)
+        ))  # fmt: skip
         cnames: list[str] = []
         for b in self.bodies:
             cnames += [f"{b.name}.x", f"{b.name}.y"]
@@ -293,10 +297,6 @@ class PlanarModel(Model):
         return self._constraints
 
     @property
-    def constraint_names(self) -> tuple[str, ...]:
-        return tuple(j.name for j in self.joints)
-
-    @property
     def actuator_names(self) -> tuple[str, ...]:  # type: ignore[override]
         return tuple(a.name for a in self.actuators)
 
@@ -308,9 +308,7 @@ class PlanarModel(Model):
     def friction_contacts(self) -> tuple[FrictionContact, ...]:
         """The frictional contacts (:meth:`PlanarBuilder.contact`): one per
         :class:`ContactTangent` joint."""
-        return tuple(
-            FrictionContact(j.normal, j.name, j.mu) for j in self.joints if isinstance(j, ContactTangent)
-        )
+        return self._friction_contacts
 
     @property
     def has_outputs(self) -> bool:  # type: ignore[override]
