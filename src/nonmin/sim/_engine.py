@@ -42,6 +42,7 @@ as it is.
 from __future__ import annotations
 
 import functools
+import math
 import time
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -250,7 +251,20 @@ def options(
     drift_factor: float, project_initial: bool, max_steps: int, t_grid: float | None = None,
 ) -> Any:  # fmt: skip
     """The engine's settings of a run (:class:`nonmin._engine.SimOptions`); ``t_grid``: the
-    origin of the fixed steps' grid (the run's ``t_span`` start; SingularPassages.align)."""
+    origin of the fixed steps' grid (the run's ``t_span`` start; SingularPassages.align).
+
+    Built once per distinct settings and shared (the integrator and stabilization are frozen
+    values, the engine copies the settings into its loop, and nothing changes them after):
+    repeated runs skip the ~30 attribute writes."""
+    signs = tuple(math.copysign(1.0, x) for x in (t1, 0.0 if t_grid is None else t_grid))  # (-0.0 == 0.0)
+    return _options(integ, stab, dt, t1, h0, rank_rtol, drift_factor, project_initial, max_steps, t_grid, signs)
+
+
+@functools.lru_cache(maxsize=64)
+def _options(
+    integ: Any, stab: Any, dt: float, t1: float, h0: float, rank_rtol: float | None, drift_factor: float,
+    project_initial: bool, max_steps: int, t_grid: float | None, signs: tuple[float, ...],
+) -> Any:  # fmt: skip
     eng = _engine()
     o = eng.SimOptions()
     if type(integ) is RK4:

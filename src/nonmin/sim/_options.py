@@ -372,8 +372,8 @@ def resolve_options(
         A flat keyword that is unknown, or that contradicts a value given explicitly, or a
         value of the wrong type.
     """
-    unknown = sorted(set(flat) - set(SHORTHANDS))
-    if unknown:
+    if not flat.keys() <= SHORTHANDS.keys():
+        unknown = sorted(set(flat) - set(SHORTHANDS))
         raise InputError(
             f"simulate: unknown keyword argument(s) {unknown}; known: the values solver=, "
             f"stabilization=, events=, output= and the shorthands {sorted(SHORTHANDS)}"

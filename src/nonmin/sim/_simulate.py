@@ -622,6 +622,23 @@ def _positive(x: Any, name: str) -> float:
 
 
 def _t_span(t_span: Any) -> tuple[float, float]:
+    """``(t0, t1)`` from ``(t0, t1)`` or a final time, validated."""
+    # (plain numbers, the usual call: NumPy's values, without NumPy)
+    if type(t_span) in (float, int):
+        pair = (0.0, float(t_span))
+    elif type(t_span) in (tuple, list) and len(t_span) == 2 and all(type(v) in (float, int) for v in t_span):
+        pair = (float(t_span[0]), float(t_span[1]))
+    else:
+        pair = _t_span_array(t_span)
+    if not all(math.isfinite(v) for v in pair):
+        raise NonFiniteError(f"t_span must be finite, got {pair}")
+    if not pair[1] > pair[0]:
+        raise InputError(f"t_span must be increasing (t0 < t1), got {pair}")
+    return pair
+
+
+def _t_span_array(t_span: Any) -> tuple[float, float]:
+    """``(t0, t1)`` from a NumPy scalar or array (text and booleans refused)."""
     if isinstance(t_span, bool | str | bytes) or (
             isinstance(t_span, tuple | list) and any(isinstance(v, bool | str | bytes) for v in t_span)):
         raise InputError(f"t_span must be (t0, t1) or a final time in seconds, got {t_span!r}")
@@ -637,10 +654,6 @@ def _t_span(t_span: Any) -> tuple[float, float]:
         if arr.shape != (2,):
             raise ShapeError(f"t_span must be (t0, t1) or a final time, got shape {arr.shape}")
         pair = (float(arr[0]), float(arr[1]))
-    if not all(math.isfinite(v) for v in pair):
-        raise NonFiniteError(f"t_span must be finite, got {pair}")
-    if not pair[1] > pair[0]:
-        raise InputError(f"t_span must be increasing (t0 < t1), got {pair}")
     return pair
 
 
@@ -856,7 +869,7 @@ def simulate(
             raise NonFiniteError(f"t_eval must be finite, got NaN/inf at index {int(np.argmax(~np.isfinite(t_out)))}")
         if prev is not None:
             t_out = t_out[t_out > t0]
-        if t_out.size and (np.any(np.diff(t_out) < 0) or t_out[0] < t0 or t_out[-1] > t1):
+        if t_out.size and (bool((t_out[1:] < t_out[:-1]).any()) or t_out[0] < t0 or t_out[-1] > t1):
             raise InputError(f"t_eval must be non-decreasing and inside t_span {(t0, t1)}")
     if controller is not None and not callable(controller):
         raise InputError(f"controller must be callable, got {type(controller).__name__}")

@@ -49,6 +49,7 @@ _ARRAYS = (
 #: the other arrays, optional on load (files written before them get zeros; ``work``: NaN, the
 #: marker of "not recorded", with which :func:`nonmin.viz.energy_balance` computes W itself).
 _BALANCE = ("friction_work", "impact_loss", "work")
+_FIELDS = (*_ARRAYS, *_BALANCE)
 
 
 class Status(enum.Enum):
@@ -150,11 +151,11 @@ class Trajectory:
     work: FloatArray | None = None
 
     def __post_init__(self) -> None:
-        N = int(np.shape(self.t)[0]) if np.ndim(self.t) else 0
         for name in _BALANCE:  # not recorded (an old file): zeros (work: NaN)
             if getattr(self, name) is None:
+                N = int(np.shape(self.t)[0]) if np.ndim(self.t) else 0
                 object.__setattr__(self, name, np.full(N, np.nan) if name == "work" else np.zeros(N))
-        for name in (*_ARRAYS, *_BALANCE):
+        for name in _FIELDS:
             arr = getattr(self, name)
             if isinstance(arr, np.ndarray):
                 arr.setflags(write=False)
@@ -263,7 +264,7 @@ class Trajectory:
         OutputError
             The file cannot be written (the message names it).
         """
-        arrays = {name: np.asarray(getattr(self, name)) for name in (*_ARRAYS, *_BALANCE)}
+        arrays = {name: np.asarray(getattr(self, name)) for name in _FIELDS}
         for i, r in enumerate(self.reactions.values()):
             arrays.update(r.to_arrays(f"reaction{i}."))
         arrays["__metadata__"] = np.array(self._metadata_json())
