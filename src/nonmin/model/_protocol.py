@@ -238,8 +238,8 @@ def _as_vector(x: ArrayLike, name: str, n: int) -> FloatArray:
     return arr
 
 
-#: Active sets whose row slices and engine masks a model keeps (cleared when exceeded; a run
-#: uses a handful).
+#: Active sets a model keeps validated, and their row slices and engine masks (each cleared
+#: when exceeded; a run uses a handful).
 _MAX_ACTIVE_SETS = 256
 
 _T = TypeVar("_T")
@@ -247,13 +247,15 @@ _T = TypeVar("_T")
 
 class _ConstraintIndex:
     """A model's constraints by name, derived once per model (a model is immutable): the names
-    in row order, their set, and per validated active set its row slices and engine mask."""
+    in row order, their set, the active sets validated so far, and per validated active set its
+    row slices and engine mask."""
 
-    __slots__ = ("masks", "name_set", "names", "slices")
+    __slots__ = ("masks", "name_set", "names", "slices", "valid")
 
     def __init__(self, constraints: tuple[ConstraintSpec, ...]) -> None:
         self.names = tuple(c.name for c in constraints)
         self.name_set = frozenset(self.names)
+        self.valid: set[frozenset[str]] = set()
         self.slices: dict[frozenset[str], dict[str, slice]] = {}
         self.masks: dict[frozenset[str], NDArray[np.uint8]] = {}
 
@@ -339,16 +341,21 @@ class Model(ABC):
         """
         if active is None:
             return frozenset(self.default_active)
+        index = self._constraint_index
+        if type(active) is frozenset and active in index.valid:  # (validated before)
+            return active
         if isinstance(active, str):
             active = (active,)
         names = frozenset(active)
-        known = self._constraint_index.name_set
-        if not names <= known:
-            unknown = names - known
+        if not names <= index.name_set:
+            unknown = names - index.name_set
             raise UnknownNameError(
                 f"active: unknown constraint name(s) {sorted(unknown)} for model {self.name!r}; "
                 f"known: {list(self.constraint_names)}"
             )
+        if len(index.valid) >= _MAX_ACTIVE_SETS:
+            index.valid.clear()
+        index.valid.add(names)
         return names
 
     def row_slices(self, active: Iterable[str] | None = None) -> dict[str, slice]:

@@ -554,15 +554,15 @@ class _Recorder:
 
 
 def _resolve_method(method: Integrator | str, dt: float | None, rtol: float, atol: float) -> Integrator:
-    if isinstance(method, Integrator):
-        return method
-    if isinstance(method, str):
+    if isinstance(method, str):  # (before the ABC's isinstance, the slower test)
         if method not in METHODS:
             raise UnknownNameError(f"method: unknown integrator {method!r}; known: {sorted(METHODS)}")
         cls = METHODS[method]
         if cls.adaptive:
             return cls(rtol=rtol, atol=atol)  # type: ignore[call-arg]
         return cls(dt=dt)  # type: ignore[call-arg]
+    if isinstance(method, Integrator):
+        return method
     raise InputError(
         f"method must be an Integrator object or one of {sorted(METHODS)}, got {type(method).__name__}"
     )

@@ -389,9 +389,7 @@ def resolve_stabilization(spec: Stabilization | str | None) -> Stabilization:
 
     if spec is None:
         return NoStabilization()
-    if isinstance(spec, Stabilization):
-        return spec
-    if isinstance(spec, str):
+    if isinstance(spec, str):  # (before the ABC's isinstance, the slower test)
         if spec not in STABILIZATIONS:
             raise UnknownNameError(
                 f"stabilization: unknown name {spec!r}; known: {sorted(STABILIZATIONS)}"
@@ -404,6 +402,8 @@ def resolve_stabilization(spec: Stabilization | str | None) -> Stabilization:
         if hit is None or type(hit) is not cls:  # frozen values: one default instance per name
             hit = _BY_NAME[spec] = cls()
         return hit
+    if isinstance(spec, Stabilization):
+        return spec
     raise InputError(
         f"stabilization must be a Stabilization object or one of {sorted(STABILIZATIONS)}, "
         f"got {type(spec).__name__}"

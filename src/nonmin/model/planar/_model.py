@@ -581,13 +581,6 @@ class PlanarModel(Model):
             r += j.dim
         return ConstraintTerms(A, gamma, phi, A @ kin.qd + phit, np.ones(m, dtype=bool)), Ad
 
-    def resolve_active(self, active: Iterable[str] | str | None) -> frozenset[str]:
-        if active is None:
-            return self.default_active
-        if type(active) is frozenset and active in self._layouts:
-            return active
-        return super().resolve_active(active)
-
     def _layout(self, active: Iterable[str] | None) -> _vectorized.Layout:
         """The compiled row layout of an active set (cached per frozenset)."""
         key = self.default_active if active is None else active
