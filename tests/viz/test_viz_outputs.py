@@ -34,6 +34,26 @@ def test_3d_animation_snapshot_and_plot(tmp_path, top_traj):
     _nonblank(save_figure(fig, tmp_path / "traj.png"))
 
 
+def test_save_figure_lays_out_once_with_the_same_pixels(tmp_path, top_traj):
+    """save_figure runs a PNG's constrained layout once (savefig would run it twice): the
+    image is the one savefig writes, pixel for pixel (2-D axes with a twin and outside
+    legends, and a 3-D snapshot)."""
+    from PIL import Image
+
+    from nonmin.viz._mpl import pyplot
+
+    mech, traj = top_traj
+    for name, make in (("traj", lambda: plot_trajectory(traj, mech.model)),
+                       ("snap", lambda: plot_snapshot(mech.model, traj.q[::40]))):
+        ref = make()
+        assert ref.get_layout_engine() is not None
+        ref.savefig(tmp_path / f"{name}_ref.png", dpi=110)
+        pyplot().close(ref)
+        save_figure(make(), tmp_path / f"{name}.png", dpi=110)
+        with Image.open(tmp_path / f"{name}_ref.png") as a, Image.open(tmp_path / f"{name}.png") as b:
+            assert np.array_equal(np.asarray(a), np.asarray(b)), name
+
+
 def test_2d_mp4(tmp_path):
     pytest.importorskip("imageio_ffmpeg")
     mech = library.get("A01_pendulum")
