@@ -36,19 +36,29 @@ def test_3d_animation_snapshot_and_plot(tmp_path, top_traj):
 
 def test_save_figure_lays_out_once_with_the_same_pixels(tmp_path, top_traj):
     """save_figure runs a PNG's constrained layout once (savefig would run it twice): the
-    image is the one savefig writes, pixel for pixel (2-D axes with a twin and outside
-    legends, and a 3-D snapshot)."""
+    image is the one savefig writes, pixel for pixel (shared axes, a twin, a log axis and a
+    legend outside the axes, as in plot_trajectory; and a 3-D snapshot)."""
     from PIL import Image
 
     from nonmin.viz._mpl import pyplot
 
+    plt = pyplot()
     mech, traj = top_traj
-    for name, make in (("traj", lambda: plot_trajectory(traj, mech.model)),
-                       ("snap", lambda: plot_snapshot(mech.model, traj.q[::40]))):
+
+    def panels():
+        fig, axes = plt.subplots(2, 1, figsize=(5, 4), sharex=True, constrained_layout=True)
+        axes[0].plot(traj.t, traj.q[:, :3], lw=1)
+        axes[0].legend(["a [m]", "b [m]", "c [m]"], loc="upper left", bbox_to_anchor=(1.01, 1.0))
+        axes[1].twinx().semilogy(traj.t, np.abs(traj.qd[:, 0]) + 1e-12)
+        axes[1].set_ylabel("rank\nof A")
+        fig.suptitle("panels")
+        return fig
+
+    for name, make in (("panels", panels), ("snap", lambda: plot_snapshot(mech.model, traj.q[::40]))):
         ref = make()
         assert ref.get_layout_engine() is not None
         ref.savefig(tmp_path / f"{name}_ref.png", dpi=110)
-        pyplot().close(ref)
+        plt.close(ref)
         save_figure(make(), tmp_path / f"{name}.png", dpi=110)
         with Image.open(tmp_path / f"{name}_ref.png") as a, Image.open(tmp_path / f"{name}.png") as b:
             assert np.array_equal(np.asarray(a), np.asarray(b)), name
