@@ -87,13 +87,13 @@ _FIRST = (
     "tests/viz/test_view.py::test_browser_",
     "tests/docs/test_api_docs.py::",
     "tests/docs/test_tutorials.py::test_tutorial_runs[03",
-    "tests/cli/test_cli_e2e.py::test_demo_quick",
+    "tests/cli/test_cli_e2e.py::test_demo_",  # the demo's tests share one run (module fixture)
     "tests/control/test_control_hybrid.py::test_passivity_set_point_lyapunov_non_increasing",
     "tests/docs/test_tutorials.py::test_tutorial_runs[02",
     "tests/sim/test_sim_passages.py::test_a_run_that_ends_at_a_change_point_ends_on_the_branch[0.00025-python]",
     "tests/sim/test_energy_bookkeeping.py::test_work_of_a_sinusoidal_push_is_half_m_v_squared[dop853-1e-08-python]",
     "tests/sim/test_sim_engine.py::test_events_located_by_the_general_driver_between_engine_steps[kw0]",
-    "tests/cli/test_cli_e2e.py::test_run_writes_all_outputs",
+    "tests/cli/test_cli_e2e.py::test_run_",  # idem, one `nonmin run` of the crossed four-bar
     "tests/control/test_control_hybrid.py::test_tracker_follows_crank_trajectory[passivity]",
     "tests/docs/test_tutorials.py::test_tutorial_runs[04",
     "tests/docs/test_tutorials.py::test_tutorial_runs[01",

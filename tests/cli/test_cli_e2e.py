@@ -23,9 +23,35 @@ def _png_ok(path: Path) -> None:
     assert arr.std() > 5.0, f"{path} looks blank"
 
 
-def test_run_writes_all_outputs(tmp_path, capsys):
-    out = tmp_path / "run"
-    code = main(["run", str(SCENARIOS / "crossed_four_bar.toml"), "--out", str(out), "--t-final", "0.4", "--no-progress"])
+def _main_printed(argv: list[str]) -> tuple[int, str]:
+    import contextlib
+    import io
+
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        code = main(argv)
+    return code, buf.getvalue()
+
+
+@pytest.fixture(scope="module")
+def crossed_run(tmp_path_factory):
+    """One `nonmin run` of the crossed four-bar (0.4 s), shared by the tests that read it."""
+    out = tmp_path_factory.mktemp("crossed") / "run"
+    code, printed = _main_printed(["run", str(SCENARIOS / "crossed_four_bar.toml"), "--out", str(out),
+                                   "--t-final", "0.4", "--no-progress"])
+    return code, printed, out
+
+
+@pytest.fixture(scope="module")
+def demo_run(tmp_path_factory):
+    """One `nonmin demo` (0.3 s of each scenario), shared by the tests that read it."""
+    out = tmp_path_factory.mktemp("demo")
+    code, printed = _main_printed(["demo", "--out", str(out), "--t-final", "0.3", "--no-progress"])
+    return code, printed, out
+
+
+def test_run_writes_all_outputs(crossed_run, tmp_path):
+    code, printed, out = crossed_run
     assert code == EXIT_OK
     traj = load_trajectory(out / "trajectory.npz")
     assert traj.t[-1] == pytest.approx(0.4)
@@ -38,7 +64,6 @@ def test_run_writes_all_outputs(tmp_path, capsys):
     _png_ok(out / "trajectory.png")
     gif = out / "animation.gif"
     assert gif.exists() and gif.stat().st_size > 10_000
-    printed = capsys.readouterr().out
     assert "crossed four-bar" in printed and "success" in printed
 
     # plot and animate read the saved result
@@ -49,17 +74,61 @@ def test_run_writes_all_outputs(tmp_path, capsys):
     assert (tmp_path / "a.gif").stat().st_size > 10_000
 
 
-def test_demo_quick(tmp_path, capsys):
-    code = main(["demo", "--out", str(tmp_path), "--t-final", "0.3", "--no-progress"])
+def test_run_and_animate_make_the_same_frames_and_default_paths(crossed_run, tmp_path):
+    """(Moved from tests/viz/test_exports_cli.py, where it made a run of its own.)"""
+    from PIL import Image
+
+    code, printed, out = crossed_run
     assert code == EXIT_OK
-    printed = capsys.readouterr().out
+    assert "sim[s]" in printed and "render[s]" in printed and "wall" not in printed
+    with Image.open(out / "animation.gif") as im:
+        run_frames = im.n_frames
+    result = tmp_path / "trajectory.npz"
+    shutil.copy(out / "trajectory.npz", result)
+    # animate without -o writes RESULT.gif, with the run's frame rate
+    assert main(["animate", str(result), "--model", "crossed_four_bar", "--no-progress"]) == EXIT_OK
+    with Image.open(tmp_path / "trajectory.gif") as im:
+        assert im.n_frames == run_frames
+    # plot without -o writes RESULT.png; export without -o writes RESULT.csv and its sidecar
+    assert main(["plot", str(result)]) == EXIT_OK
+    assert (tmp_path / "trajectory.png").stat().st_size > 10_000
+    assert main(["export", str(result)]) == EXIT_OK
+    assert (tmp_path / "trajectory.csv").exists() and (tmp_path / "trajectory.csv.json").exists()
+
+
+def test_demo_quick(demo_run):
+    code, printed, out = demo_run
+    assert code == EXIT_OK
     for name in DEMO_SCENARIOS:
-        assert (tmp_path / name / "trajectory.npz").exists()
-        _png_ok(tmp_path / name / "trajectory.png")
+        assert (out / name / "trajectory.npz").exists()
+        _png_ok(out / name / "trajectory.png")
         assert name in printed
-    assert (tmp_path / "summary.txt").read_text().count("success") + (tmp_path / "summary.txt").read_text().count(
-        "event_terminated"
-    ) == len(DEMO_SCENARIOS)
+    summary = (out / "summary.txt").read_text()
+    assert summary.count("success") + summary.count("event_terminated") == len(DEMO_SCENARIOS)
+
+
+def test_demo_summary_separates_simulation_from_rendering(demo_run):
+    """(Moved from tests/viz/test_exports_cli.py, where it ran `demo --only arm_wall` again.)"""
+    code, printed, out = demo_run
+    assert code == EXIT_OK
+    head = (out / "summary.txt").read_text().splitlines()[0]
+    assert "sim[s]" in head and "render[s]" in head and "wall" not in head.lower()
+    assert "drift[J]" in head and "W_fr[J]" in head and "L_imp[J]" in head
+    assert "simulated 0.3 s in" in printed and "in all" in printed
+
+
+def test_demo_only_runs_the_named_scenarios(tmp_path, capsys, monkeypatch):
+    """`demo --only NAME ...` runs those scenarios alone (their files: test_demo_quick)."""
+    import nonmin.io
+
+    monkeypatch.setattr(nonmin.io, "write_outputs", lambda res, out, progress=None: {})
+    assert main(["demo", "--out", str(tmp_path), "--t-final", "0.05", "--no-progress",
+                 "--only", "arm_wall"]) == EXIT_OK
+    printed = capsys.readouterr().out
+    assert "simulated 0.05 s in" in printed
+    first = [ln.split()[0] for ln in (tmp_path / "summary.txt").read_text().splitlines() if ln.strip()]
+    assert [w for w in first if w in DEMO_SCENARIOS] == ["arm_wall"]
+    assert "[nonmin demo]" in printed and printed.count("[nonmin demo]") == 1
 
 
 def test_check_library_model(capsys):

@@ -62,31 +62,6 @@ def test_parquet_and_xarray_carry_units(tmp_path, slider_traj):
     assert nc.stat().st_size > 1000
 
 
-def test_run_and_animate_make_the_same_frames_and_default_paths(tmp_path, capsys):
-    from PIL import Image
-
-    from nonmin.cli import _scenario_dir
-
-    out = tmp_path / "run"
-    assert main(["run", str(_scenario_dir() / "crossed_four_bar.toml"), "--out", str(out),
-                 "--t-final", "0.5", "--no-progress"]) == 0
-    printed = capsys.readouterr().out
-    assert "sim[s]" in printed and "render[s]" in printed and "wall" not in printed
-    with Image.open(out / "animation.gif") as im:
-        run_frames = im.n_frames
-    # animate without -o writes RESULT.gif, with the run's frame rate
-    target = out / "trajectory.gif"
-    assert main(["animate", str(out / "trajectory.npz"), "--model", "crossed_four_bar",
-                 "--no-progress"]) == 0
-    with Image.open(target) as im:
-        assert im.n_frames == run_frames
-    # plot without -o writes RESULT.png; export without -o writes RESULT.csv and its sidecar
-    assert main(["plot", str(out / "trajectory.npz")]) == 0
-    assert (out / "trajectory.png").stat().st_size > 10_000
-    assert main(["export", str(out / "trajectory.npz")]) == 0
-    assert (out / "trajectory.csv").exists() and (out / "trajectory.csv.json").exists()
-
-
 def test_list_names_match_the_api_and_describe(capsys):
     assert main(["list"]) == 0
     out = capsys.readouterr().out
@@ -96,17 +71,6 @@ def test_list_names_match_the_api_and_describe(capsys):
     assert ":class:" not in out and "``" not in out  # plain text, not reST
     for name in DEMO_SCENARIOS:
         assert name in out
-
-
-def test_demo_summary_separates_simulation_from_rendering(tmp_path, capsys):
-    assert main(["demo", "--out", str(tmp_path), "--t-final", "0.2", "--no-progress",
-                 "--only", "arm_wall"]) == 0
-    out = capsys.readouterr().out
-    summary = (tmp_path / "summary.txt").read_text()
-    head = summary.splitlines()[0]
-    assert "sim[s]" in head and "render[s]" in head and "wall" not in head.lower()
-    assert "drift[J]" in head and "W_fr[J]" in head and "L_imp[J]" in head
-    assert "simulated 0.2 s in" in out and "in all" in out
 
 
 def test_view_verb_serves_a_saved_trajectory(tmp_path, capsys, monkeypatch):
