@@ -176,7 +176,7 @@ def row_norms(A: FloatArray) -> FloatArray:
     sq = np.einsum("...ij,...ij->...i", A, A)
     norms = np.sqrt(sq)
     risky = (sq > ROW_NORM_BIG) | (sq < ROW_NORM_SMALL)
-    if np.any(risky):
+    if risky.any():
         with np.errstate(invalid="ignore", over="ignore"):
             scale = np.max(np.abs(A), axis=-1, initial=0.0)
             safe = np.where(scale > 0.0, scale, 1.0)
@@ -233,6 +233,8 @@ def cholesky(Mbar: FloatArray, name: str = "Mbar") -> FloatArray:
             "definite on the null space N(A) of the active constraints (a coordinate with no "
             "inertia that no constraint fixes, e.g. a quaternion without its norm constraint)"
         ) from None
+    if L.ndim == 2 and L.size and (L.diagonal() ** 2).min() > SPD_RTOL * Mbar.diagonal().max():
+        return L  # one state (the common call): the same test on its two extremes
     piv = np.diagonal(L, axis1=-2, axis2=-1) ** 2
     scale = np.max(np.diagonal(Mbar, axis1=-2, axis2=-1), axis=-1)
     if np.any(np.min(piv, axis=-1) <= SPD_RTOL * scale):
