@@ -245,15 +245,17 @@ def drift_rank_rtol(ct: ConstraintTerms, rtol: float | None) -> float:
     (after projection, ‖φ‖ ~ 1e-15) it is the plain ``rtol``.
     """
     base = DEFAULT_RTOL if rtol is None else float(rtol)
-    hol = ct.holonomic
-    if ct.A.shape[0] == 0 or not np.any(hol):
+    hol = np.asarray(ct.holonomic)
+    if ct.A.shape[0] == 0 or not hol.any():
         return base
-    A = ct.A[hol]
+    A, phi = (ct.A, ct.phi) if hol.all() else (ct.A[hol], ct.phi[hol])  # (all rows: no copies)
     norms = row_norms(A)
-    live = norms > base * float(np.max(norms))
-    if not np.any(live):
-        return base
-    drift = float(np.max(np.abs(ct.phi[hol][live]) / norms[live]))
+    live = norms > base * float(norms.max())
+    if not live.all():
+        if not live.any():
+            return base
+        phi, norms = phi[live], norms[live]
+    drift = float((np.abs(phi) / norms).max())
     return min(max(base, DRIFT_RANK_FACTOR * drift), 1e-2)
 
 
