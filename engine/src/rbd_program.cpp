@@ -928,7 +928,9 @@ void TreeProgram::quat_dynamics(const ResidualQuery& rq, TreeWorkspace& ws) cons
     }
 }
 
-void TreeProgram::quat_rows(const ResidualQuery& rq, TreeWorkspace& ws) const {
+// inline (also frame_tangents, add_wrench_tangents): called only by row_tangents, which is flattened, so no
+// out-of-line copy is compiled (build time, #17 target 7).
+inline void TreeProgram::quat_rows(const ResidualQuery& rq, TreeWorkspace& ws) const {
     const int nq = d_.model.nq, nv = d_.model.nv, nlam = rq.nlam;
     if (ws.Cq.rows() != nq || ws.Cq.cols() != m_all_) {
         ws.Cq.resize(nq, m_all_);
@@ -1009,7 +1011,7 @@ bool TreeProgram::rows_analytic(const std::uint8_t* active) const {
     return true;
 }
 
-void TreeProgram::frame_tangents(const Frame& f, const TreeWorkspace& ws, FrameTangent* tq, FrameTangent* tv) const {
+inline void TreeProgram::frame_tangents(const Frame& f, const TreeWorkspace& ws, FrameTangent* tq, FrameTangent* tv) const {
     const TreeModel& model = d_.model;
     const TreeData& D = ws.data;
     for (int k = 0; k < model.nv; ++k) {
@@ -1066,7 +1068,7 @@ void TreeProgram::frame_tangents(const Frame& f, const TreeWorkspace& ws, FrameT
     }
 }
 
-void TreeProgram::add_wrench_tangents(const Frame& f, const Force& F, const Force* dF, int l, TreeWorkspace& ws) const {
+inline void TreeProgram::add_wrench_tangents(const Frame& f, const Force& F, const Force* dF, int l, TreeWorkspace& ws) const {
     if (f.joint < 0) return;
     const TreeModel& model = d_.model;
     const TreeData& D = ws.data;
