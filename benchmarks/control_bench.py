@@ -10,8 +10,12 @@ controller and with each built-in controller, all compiled into the engine's loo
   (``Reference.spline``) through the uncontrolled run sampled every 0.05 s (the engine evaluates
   the spline and projects it onto the manifold at every new time);
 * ``passivity``: the same reference with the default ``Tracker`` law (``method="passivity"``,
-  Slotine–Li on the projected dynamics, λ = 10; compiled as ``Law::passivity``: C and Ȧ from the
-  program);
+  Slotine–Li on the projected dynamics, λ = 10, Kp = 100, Kd = 10; compiled as ``Law::passivity``:
+  C and Ȧ from the program). Its gains are torques, applied through M̄⁻¹: with the computed-torque
+  gains (Kp 400, Kd 40) the dual-arm grasp, whose wrists have M_ii = 0.0038, is a stiffness of
+  ~1e4 1/s that RK4 at dt 1e-3 cannot follow (measured: |q̇| past 20 rad/s at t = 0.011 s, 337
+  rad/s by 0.15 s, then NotPositiveDefiniteError; bounded at dt 2.5e-4); with Kp 100, Kd 10 every
+  case runs to its end (2026-11-27 19:45);
 * ``force``: ``ForceControl(regulator, {constraint: value})``, the force of one loop closure
   commanded (``on_infeasible="least_squares"`` where the actuators cannot reach it: the cost is
   the same);
@@ -87,7 +91,7 @@ def controllers(model: Any, q0: np.ndarray, qd0: np.ndarray, closure: str, pytho
                   on_infeasible="least_squares")  # fmt: skip
     dim = model.constraint(closure).dim
     force = ForceControl(reg, {closure: np.full(dim, 1.0)}, on_infeasible="least_squares")
-    pas = Tracker(model, ref, Kp=400.0, Kd=40.0, lambda_=10.0, quaternion_blocks=qb, on_infeasible="least_squares")
+    pas = Tracker(model, ref, Kp=100.0, Kd=10.0, lambda_=10.0, quaternion_blocks=qb, on_infeasible="least_squares")
     out: dict[str, Any] = {"none": None, "regulator": reg, "tracker": trk, "passivity": pas, "force": force}
     if python:
         def user(t: float, q: Any, qd: Any, state: Any = None, *, active: Any = None) -> Any:
