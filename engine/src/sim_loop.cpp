@@ -6,7 +6,6 @@
 #include "nonmin/sim/loop.hpp"
 #include "nonmin/sim/events.hpp"
 #include "nonmin/linalg.hpp"
-#include "nonmin/planar.hpp"
 #include "sim_detail.hpp"
 
 #include <algorithm>
@@ -272,8 +271,7 @@ std::unique_ptr<Loop> make_loop(const Program& prog, const std::uint8_t* active,
     reused(L.Alin, got.Alin, mr, n);
     for (Vec* v : {&L.gam, &L.phi, &L.vel, &L.phih, &L.bias, &L.floor_, &L.rnorm}) *v = Vec::Zero(mr);
     for (Vec* v : {&L.g, &L.qdd, &L.fc, &L.zero_n, &L.aq, &L.dq, &L.vq, &L.ev_q}) *v = Vec::Zero(n);
-    // (a planar program writes A only when asked, and its other terms without it)
-    L.ev_strip = dynamic_cast<const PlanarProgram*>(&prog) != nullptr;
+    L.ev_strip = prog.constraint_terms_on_request();
     L.u = Vec::Zero(L.k);
     reused(L.Mq, got.Mq, n, n);  // (assigned in full by the projection: M or I)
     zeroed(L.L, got.L, n, n);

@@ -135,6 +135,7 @@ class PlanarProgram final : public Program {
     Status residual_tangents(const ResidualQuery& rq, Workspace& ws) const override;
     std::unique_ptr<Workspace> make_workspace() const override;
     bool constant_mass() const override { return true; }
+    bool constraint_terms_on_request() const override { return true; }
     bool thread_safe() const override { return thread_safe_; }
 
     const PlanarDescription& description() const { return d_; }

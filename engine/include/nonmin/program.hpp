@@ -179,6 +179,11 @@ class Program {
     // factor it once.
     virtual bool constant_mass() const { return false; }
 
+    // True when evaluate() asked without NEED_A / NEED_PHI skips their work and writes the other
+    // terms all the same (planar programs): the loop then does not ask again for the A and φ it
+    // keeps at an unchanged (t, q) (Loop::ev_ok). Otherwise it asks for the full terms.
+    virtual bool constraint_terms_on_request() const { return false; }
+
     // Whether the Program may be evaluated from several threads at once (false for Python
     // callbacks, which hold the GIL).
     virtual bool thread_safe() const { return true; }

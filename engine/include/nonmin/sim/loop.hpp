@@ -276,7 +276,8 @@ struct Loop {
     unsigned long long gather_gen = 0, alin_gen = ~0ull;
     // The (t, q) at which Ac, Ah and φ (phi, phih) were last gathered (ev_ok; at gathering
     // ev_gen of the same rows): evaluate() at that very (t, q) does not gather them again, and a
-    // planar program (ev_strip) is not asked for A and φ again (the numba loop's `same`; e.g.
+    // program whose terms come on request (ev_strip: Program::constraint_terms_on_request, the
+    // planar programs) is not asked for A and φ again (the numba loop's `same`; e.g.
     // the point right after a projection, whose velocity correction left q as it was). Without
     // a controller or friction (whose evaluations read the program's terms themselves).
     bool ev_ok = false, ev_strip = false;
