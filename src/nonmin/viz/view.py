@@ -27,6 +27,7 @@ from viser until :func:`view` is called.
 
 from __future__ import annotations
 
+import functools
 import os
 import threading
 import time
@@ -146,23 +147,20 @@ class Viewer:
 #: (another trajectory, another viewer in the same session) reuses them. Each viewer draws a
 #: copy. Reading the UR5's seven Collada meshes took 0.3-0.45 s of CPU per viewer.
 _MESHES: dict[tuple[str, int, int], Any] = {}
-#: Pinocchio's mesh loader for the visual geometry, one per process: it keeps the meshes it
-#: read (and reads a file again when it changed), so a robot's second viewer does not parse its
-#: meshes again (the UR5's buildGeomFromUrdf: 0.43 s of CPU, then 0.001 s).
-_PIN_MESH_LOADER: list[Any] = []
-
-
+@functools.cache
 def _mesh_loader() -> Any:
-    if not _PIN_MESH_LOADER:
+    """Pinocchio's mesh loader for the visual geometry, one per process (None without coal or
+    hpp-fcl): it keeps the meshes it read (and reads a file again when it changed), so a robot's
+    second viewer does not parse its meshes again (the UR5's buildGeomFromUrdf: 0.43 s of CPU,
+    then 0.001 s)."""
+    try:
+        import coal as fcl
+    except ImportError:
         try:
-            import coal as fcl
+            import hppfcl as fcl
         except ImportError:
-            try:
-                import hppfcl as fcl
-            except ImportError:
-                return None
-        _PIN_MESH_LOADER.append(fcl.CachedMeshLoader())
-    return _PIN_MESH_LOADER[0]
+            return None
+    return fcl.CachedMeshLoader()
 
 
 def _load_mesh(trimesh: Any, path: str) -> Any:
